@@ -1,0 +1,38 @@
+# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.flexreg-installed
+DEMO   ?= demo-output
+
+.PHONY: install demo test lint bench clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml scripts/ensure-system-libs.sh
+	@bash scripts/ensure-system-libs.sh
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	@bash scripts/ensure-system-libs.sh
+	$(BIN)/flexreg info data/laserscan/laserscan.ptx
+	$(BIN)/flexreg project data/laserscan/laserscan.ptx --out $(DEMO)/laserscan-range.png
+	@echo "demo results written to $(DEMO)/"
+
+test: $(STAMP)
+	@bash scripts/ensure-system-libs.sh
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check flexreg tests benchmarks
+	$(BIN)/ruff format --check flexreg tests benchmarks
+	$(BIN)/mypy
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/io.py
+
+clean:
+	rm -rf $(VENV) $(DEMO) .pytest_cache .ruff_cache .mypy_cache

@@ -1,0 +1,173 @@
+"""`flexreg info` and `flexreg project`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from . import app
+from ._common import console, stage
+
+PinholeOpt = typer.Option(
+    None,
+    "--pinhole",
+    help="Depth PNG intrinsics FX FY CX CY in pixels (size from the image).",
+    metavar="FX FY CX CY",
+)
+EquirectOpt = typer.Option(
+    None,
+    "--equirect",
+    help="Range PNG polar range THETA_MIN THETA_MAX in radians (azimuth: 360°).",
+    metavar="THETA_MIN THETA_MAX",
+)
+DepthKindOpt = typer.Option(
+    None, "--depth-kind", help="Depth PNG values: z (orthographic) or range."
+)
+DepthScaleOpt = typer.Option(None, "--depth-scale", help="Depth PNG metres per stored unit.")
+
+
+def read_input(
+    path: Path,
+    *,
+    pinhole: tuple[float, float, float, float] | None = None,
+    equirect: tuple[float, float] | None = None,
+    depth_kind: str | None = None,
+    depth_scale: float | None = None,
+    all_scans: bool = False,
+) -> list[Any]:
+    """Read the scans of an input file, building a camera for depth PNGs from the options."""
+    from ..errors import InputError
+    from ..io import detect_format, read_scans
+    from ..io.depth import camera_for_image
+
+    _, fmt = detect_format(path)
+    opts: dict[str, Any] = {}
+    if fmt == "depth":
+        if not path.is_file():
+            raise InputError(path, "no such file")
+        opts["camera"] = camera_for_image(path, pinhole=pinhole, equirect=equirect)
+        if depth_kind is not None:
+            if depth_kind not in ("z", "range"):
+                raise InputError("--depth-kind", f"must be z or range, got {depth_kind!r}")
+            opts["depth_kind"] = depth_kind
+        if depth_scale is not None:
+            opts["depth_scale"] = depth_scale
+    elif pinhole or equirect or depth_kind or depth_scale is not None:
+        raise InputError(
+            path, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
+        )
+    scans = read_scans(path, **opts)
+    return scans if all_scans else scans[:1]
+
+
+@app.command("info")
+def info(
+    scan: Path = typer.Argument(
+        ...,
+        help="Scan file (PTX, E57, PLY, PCD, LAS/LAZ, KITTI .bin, 3DTK .3d, npy/npz, depth PNG).",
+    ),
+    pinhole: tuple[float, float, float, float] | None = PinholeOpt,
+    equirect: tuple[float, float] | None = EquirectOpt,
+    depth_kind: str | None = DepthKindOpt,
+    depth_scale: float | None = DepthScaleOpt,
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Describe a scan file: format, points, grid, field of view, ranges, pose."""
+    import json
+
+    from ..report import scan_summary
+
+    with stage(f"Reading {scan.name}"):
+        scans = read_input(
+            scan,
+            pinhole=pinhole,
+            equirect=equirect,
+            depth_kind=depth_kind,
+            depth_scale=depth_scale,
+            all_scans=True,
+        )
+    summaries = [scan_summary(s) for s in scans]
+    if as_json:
+        console.print_json(json.dumps(summaries))
+        return
+    from ..report import render_scan_summary
+
+    for s in summaries:
+        console.print(render_scan_summary(s))
+
+
+@app.command("project")
+def project(
+    scan: Path = typer.Argument(..., help="Scan file (any readable format)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output 16-bit range PNG (a float32 .npz is written beside it)."
+    ),
+    index: int = typer.Option(0, "--index", help="Which scan of a multi-scan file (PTX, E57)."),
+    resample: bool = typer.Option(
+        False, "--resample", help="Z-buffer project even if the scan has a native grid."
+    ),
+    resolution_deg: float | None = typer.Option(
+        None,
+        "--resolution-deg",
+        help="Pixel pitch in degrees of the automatic equirectangular image.",
+    ),
+    scale: float | None = typer.Option(
+        None,
+        "--png-scale",
+        help="Metres per PNG unit (default: the finest of 0.1, 0.2, 0.5, 1, 2 ... mm that fits).",
+    ),
+    pinhole: tuple[float, float, float, float] | None = PinholeOpt,
+    equirect: tuple[float, float] | None = EquirectOpt,
+    depth_kind: str | None = DepthKindOpt,
+    depth_scale: float | None = DepthScaleOpt,
+) -> None:
+    """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
+    import math
+
+    from ..errors import InputError
+    from ..projection import range_image
+    from ..report import write_range_image
+
+    if out.suffix.lower() != ".png":
+        raise InputError(out, "output must be a .png file")
+    if resolution_deg is not None and not resolution_deg > 0:
+        raise InputError("--resolution-deg", f"must be positive, got {resolution_deg}")
+    with stage(f"Reading {scan.name}"):
+        scans = read_input(
+            scan,
+            pinhole=pinhole,
+            equirect=equirect,
+            depth_kind=depth_kind,
+            depth_scale=depth_scale,
+            all_scans=True,
+        )
+    if not -len(scans) <= index < len(scans):
+        raise InputError(scan, f"scan index {index} out of range: the file holds {len(scans)}")
+    s = scans[index]
+    with stage("Building range image"):
+        if resample or not s.has_grid:
+            from ..projection import auto_spherical_camera
+            from ..projection import project as zproject
+
+            if len(s) == 0:
+                raise InputError(scan, "scan has no points")
+            res = None if resolution_deg is None else math.radians(resolution_deg)
+            cam = (
+                s.camera
+                if (s.camera is not None and res is None)
+                else auto_spherical_camera(s.points, angular_resolution_rad=res)
+            )
+            img = zproject(s, cam)
+        else:
+            img = range_image(s)
+    with stage(f"Writing {out.name}"):
+        written = write_range_image(out, img, png_scale_m=scale)
+    console.print(
+        f"{img.height} x {img.width} range image, {img.n_valid:,} valid pixels "
+        f"({100 * img.n_valid / max(1, img.height * img.width):.1f} %), "
+        f"{written['png_scale_m'] * 1000:g} mm per PNG unit"
+    )
+    for p in written["files"]:
+        console.print(f"wrote {p}")

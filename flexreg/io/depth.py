@@ -1,0 +1,186 @@
+"""16-bit depth / range PNG images with a camera (TUM: 5000 units per metre; Kinect: mm)."""
+
+from __future__ import annotations
+
+import json
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import Camera, DepthKind, PinholeCamera, SphericalCamera
+from ..errors import InputError
+from ..scan import Scan
+
+TUM_DEPTH_SCALE = 1.0 / 5000.0  # metres per unit of TUM RGB-D depth PNGs
+MM_DEPTH_SCALE = 1.0e-3
+
+
+def read_depth_png(
+    path: str | PathLike[str], *, depth_scale: float = 1.0, invalid_values: tuple[int, ...] = (0,)
+) -> NDArray[np.float64]:
+    """Read a single-channel 8/16-bit depth PNG into metres.
+
+    Parameters
+    ----------
+    path : path-like
+    depth_scale : float
+        Metres per stored unit (1/5000 for TUM, 0.001 for millimetres).
+    invalid_values : tuple of int
+        Stored values meaning "no reading" (0 always; 7-Scenes also uses 65535).
+
+    Returns
+    -------
+    (H, W) float64, metres; NaN where there is no reading.
+    """
+    import cv2
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "no such file")
+    if not (np.isfinite(depth_scale) and depth_scale > 0):
+        raise InputError(
+            p, f"depth scale must be a positive number of metres per unit, got {depth_scale}"
+        )
+    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if raw is None:
+        raise InputError(p, "not a readable PNG image")
+    if raw.ndim != 2:
+        raise InputError(p, f"depth image must have one channel, got {raw.shape[2]}")
+    if raw.dtype not in (np.uint16, np.uint8):
+        raise InputError(p, f"depth image must be 8 or 16 bit, got {raw.dtype}")
+    d = raw.astype(np.float64) * depth_scale
+    bad = np.isin(raw, np.asarray((*invalid_values, 0), dtype=raw.dtype))
+    d[bad] = np.nan
+    return d
+
+
+def sidecar_path(path: Path) -> Path:
+    """The camera sidecar of a depth image: ``<stem>.camera.json`` beside it."""
+    return path.with_name(path.stem + ".camera.json")
+
+
+def read_sidecar(path: Path) -> dict[str, Any]:
+    """Read a depth image's camera sidecar.
+
+    The JSON holds ``camera`` (``PinholeCamera``/``SphericalCamera.to_dict()``) and optionally
+    ``depth_scale`` (metres per unit), ``depth_kind`` (``"z"``/``"range"``) and
+    ``invalid_values`` (stored values meaning no return).
+
+    Returns
+    -------
+    dict
+        Keyword arguments for :func:`read`: ``camera`` and whichever of the others are given.
+    """
+    from ..camera import camera_from_dict
+
+    side = sidecar_path(path)
+    try:
+        doc = json.loads(side.read_text())
+        opts: dict[str, Any] = {"camera": camera_from_dict(doc["camera"])}
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise InputError(side, f"not a valid camera sidecar ({e})") from None
+    for key in ("depth_scale", "depth_kind"):
+        if key in doc:
+            opts[key] = doc[key]
+    if "invalid_values" in doc:
+        opts["invalid_values"] = tuple(int(v) for v in doc["invalid_values"])
+    return opts
+
+
+def read(
+    path: Path,
+    *,
+    camera: Camera | None = None,
+    depth_scale: float | None = None,
+    depth_kind: DepthKind | None = None,
+    invalid_values: tuple[int, ...] | None = None,
+) -> list[Scan]:
+    """Read a depth/range PNG as a gridded :class:`Scan` (``read_scan`` entry point).
+
+    Parameters
+    ----------
+    camera : PinholeCamera or SphericalCamera, optional
+        A depth image is not a point cloud without its intrinsics: when not given they come
+        from the sidecar ``<stem>.camera.json`` (see :func:`read_sidecar`), whose other
+        settings then serve as defaults. The image size must match the camera's.
+    depth_scale : float
+        Metres per stored unit (default 1, or the sidecar's).
+    depth_kind : {"z", "range"}, optional
+        Default ``"z"`` for pinhole, ``"range"`` for equirectangular.
+    invalid_values : tuple of int
+        Stored values meaning no return (0 always).
+    """
+    from ..projection import from_depth, to_scan
+
+    if camera is None:
+        if not sidecar_path(path).is_file():
+            raise InputError(
+                path,
+                "a depth image needs its camera intrinsics (--pinhole or --equirect, or a "
+                f"{sidecar_path(path).name} sidecar)",
+            )
+        side = read_sidecar(path)
+        camera = side["camera"]
+        depth_scale = side.get("depth_scale", 1.0) if depth_scale is None else depth_scale
+        depth_kind = side.get("depth_kind") if depth_kind is None else depth_kind
+        if invalid_values is None:
+            invalid_values = side.get("invalid_values", (0,))
+    depth_scale = 1.0 if depth_scale is None else depth_scale
+    invalid_values = (0,) if invalid_values is None else invalid_values
+    assert camera is not None
+    d = read_depth_png(path, depth_scale=depth_scale, invalid_values=invalid_values)
+    if d.shape != camera.shape:
+        raise InputError(
+            path,
+            f"image is {d.shape[1]}x{d.shape[0]} but the intrinsics are for "
+            f"{camera.width}x{camera.height}",
+        )
+    if isinstance(camera, SphericalCamera) and depth_kind == "z":
+        raise InputError(
+            path, "an equirectangular image stores range; depth kind 'z' is pinhole-only"
+        )
+    if isinstance(camera, PinholeCamera) and depth_kind not in (None, "z", "range"):
+        raise InputError(path, f"depth kind must be 'z' or 'range', got {depth_kind!r}")
+    img = from_depth(d, camera, depth_kind=depth_kind)
+    return [to_scan(img, path=path, name=path.stem)]
+
+
+def camera_for_image(
+    path: str | PathLike[str],
+    *,
+    pinhole: tuple[float, float, float, float] | None = None,
+    equirect: tuple[float, float] | None = None,
+) -> Camera | None:
+    """Camera for a depth image from command-line style intrinsics; size from the image.
+
+    Parameters
+    ----------
+    path : path-like
+        The PNG (only its header is needed for the size).
+    pinhole : (fx, fy, cx, cy), optional
+        Pixels.
+    equirect : (theta_min, theta_max), optional
+        Polar range in radians; the azimuth spans a full turn (reference convention).
+
+    Returns
+    -------
+    PinholeCamera, SphericalCamera or None (neither given).
+    """
+    import cv2
+
+    if pinhole is not None and equirect is not None:
+        raise InputError(path, "give either pinhole or equirectangular intrinsics, not both")
+    if pinhole is None and equirect is None:
+        return None
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(path, "not a readable PNG image")
+    h, w = img.shape[:2]
+    if pinhole is not None:
+        fx, fy, cx, cy = (float(x) for x in pinhole)
+        return PinholeCamera(fx, fy, cx, cy, w, h)
+    assert equirect is not None
+    return SphericalCamera.from_reference(w, h, float(equirect[0]), float(equirect[1]))

@@ -1,0 +1,117 @@
+"""NumPy ``.npy`` / ``.npz`` scans.
+
+flexreg's own ``.npz`` layout (written by :func:`write`, read back exactly): ``points`` (N, 3)
+float64, ``T_world_scanner`` (4, 4), optional ``intensity`` (N,), ``colors`` (N, 3) uint8,
+``grid_shape`` (2,) and ``grid_index`` (N, 2), ``camera`` (JSON text) and ``name``. Several
+scans in one file carry the prefix ``scan<i>/`` on every key.
+
+Foreign arrays are accepted too: an ``.npy`` (or a single-array ``.npz``) holding (N, 3) or
+(N, 4+) points (fourth column = intensity) or an organised (H, W, 3) grid with NaN or zeros for
+no return.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import camera_from_dict
+from ..errors import InputError
+from ..scan import Scan
+
+FORMAT_VERSION = 1
+
+
+def _from_array(path: Path, a: NDArray[Any], name: str) -> Scan:
+    if not np.issubdtype(a.dtype, np.number):
+        raise InputError(path, f"array {name!r} is not numeric ({a.dtype})")
+    if a.ndim == 3 and a.shape[2] == 3:
+        return Scan.from_organized(a.astype(np.float64), path=path, name=path.stem)
+    if a.ndim == 2 and a.shape[1] >= 3:
+        if len(a) == 0:
+            raise InputError(path, "array holds no points")
+        return Scan(
+            points=a[:, :3],
+            intensity=a[:, 3] if a.shape[1] >= 4 else None,
+            path=path,
+            name=path.stem,
+        )
+    raise InputError(path, f"array {name!r} of shape {a.shape} is neither (N, 3+) nor (H, W, 3)")
+
+
+def read(path: Path, **_: Any) -> list[Scan]:
+    """Read scans from ``.npy`` / ``.npz`` (see the module docstring for the layouts)."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
+        raise InputError(path, f"not a readable NumPy file ({e})") from None
+    if isinstance(data, np.ndarray):
+        return [_from_array(path, data, "array")]
+    with data:
+        keys = set(data.files)
+        prefixes = sorted(
+            {k.split("/", 1)[0] + "/" for k in keys if "/" in k and k.endswith("/points")},
+            key=lambda p: int(p[4:-1]) if p[4:-1].isdigit() else 0,
+        )
+        if "points" in keys:
+            prefixes = [""]
+        if not prefixes:
+            if len(keys) == 1:
+                (k,) = keys
+                return [_from_array(path, data[k], k)]
+            raise InputError(path, f"no 'points' array (keys: {', '.join(sorted(keys))})")
+        try:
+            return [_scan_from_npz(path, data, p) for p in prefixes]
+        except (KeyError, ValueError, TypeError) as e:
+            if isinstance(e, InputError):
+                raise
+            raise InputError(path, f"inconsistent flexreg npz ({e})") from None
+
+
+def _scan_from_npz(path: Path, data: Any, p: str) -> Scan:
+    keys = set(data.files)
+
+    def get(k: str) -> Any:
+        return data[p + k] if p + k in keys else None
+
+    grid_shape = get("grid_shape")
+    camera = get("camera")
+    name = get("name")
+    pose = get("T_world_scanner")
+    return Scan(
+        points=data[p + "points"],
+        intensity=get("intensity"),
+        colors=get("colors"),
+        grid_shape=None if grid_shape is None else (int(grid_shape[0]), int(grid_shape[1])),
+        grid_index=get("grid_index"),
+        T_world_scanner=np.eye(4) if pose is None else pose,
+        camera=None if camera is None else camera_from_dict(json.loads(str(camera))),
+        path=path,
+        name=str(name) if name is not None else path.stem,
+    )
+
+
+def write(path: Path, scans: list[Scan], *, compress: bool = True, **_: Any) -> None:
+    """Write scans in flexreg's ``.npz`` layout (compressed unless ``compress=False``)."""
+    arrays: dict[str, Any] = {"format_version": np.array(FORMAT_VERSION)}
+    for i, s in enumerate(scans):
+        p = "" if len(scans) == 1 else f"scan{i}/"
+        arrays[p + "points"] = s.points
+        arrays[p + "T_world_scanner"] = s.T_world_scanner
+        arrays[p + "name"] = np.array(s.name)
+        if s.intensity is not None:
+            arrays[p + "intensity"] = s.intensity
+        if s.colors is not None:
+            arrays[p + "colors"] = s.colors
+        if s.grid_shape is not None:
+            arrays[p + "grid_shape"] = np.array(s.grid_shape, dtype=np.int64)
+            arrays[p + "grid_index"] = s.grid_index
+        if s.camera is not None:
+            arrays[p + "camera"] = np.array(json.dumps(s.camera.to_dict()))
+    with open(path, "wb") as f:
+        (np.savez_compressed if compress else np.savez)(f, **arrays)

@@ -1,0 +1,406 @@
+"""Leica PTX (ASCII) reader and writer.
+
+Layout of one cloud (a file may hold several, one after another)::
+
+    COLS
+    ROWS
+    sx sy sz                 scanner position in the registered frame
+    ax ay az                 scanner x axis  (3 lines: the axes as rows)
+    bx by bz                 scanner y axis
+    cx cy cz                 scanner z axis
+    m00 m10 m20 m30          the 4x4 transform written TRANSPOSED:
+    m01 m11 m21 m31          translation on the 4th line
+    m02 m12 m22 m32
+    m03 m13 m23 m33
+    x y z i [r g b]          COLS*ROWS lines, column by column (all rows of column 0 first)
+
+Points are in the scanner's own frame; ``0 0 0`` marks a cell with no return, which is not a
+point. The parser is a parallel numba kernel over the raw bytes (tens of millions of points per
+second), validating every line: a wrong value count, a non-number, NaN/Inf or a truncated cloud
+raises :class:`~flexreg.errors.InputError` naming the file and the line.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numba
+import numpy as np
+from numba import prange
+from numpy.typing import NDArray
+
+from ..errors import InputError
+from ..scan import Scan
+from ..transforms import is_rigid
+
+log = logging.getLogger(__name__)
+
+_HEADER_LINES = 10
+_MAX_VALUES = 7
+_POW10 = np.array([10.0**i for i in range(23)])
+
+# error codes of the line parser
+_OK, _BAD_NUMBER, _TOO_MANY = 0, 1, 2
+
+
+# ------------------------------------------------------------------------------ parsing kernels
+
+
+@numba.njit(cache=True, inline="always")
+def _is_space(b: np.uint8) -> bool:
+    return b == 32 or b == 9 or b == 13 or b == 10
+
+
+@numba.njit(cache=True)
+def _parse_line(
+    buf: NDArray[np.uint8], lo: int, hi: int, out: NDArray[np.float64], pow10: NDArray[np.float64]
+) -> tuple[int, int]:
+    """Parse whitespace-separated decimal numbers of ``buf[lo:hi]`` into ``out``.
+
+    Returns ``(count, error)``. Numbers: optional sign, digits, optional fraction, optional
+    exponent. Up to 18 significant digits are exact; with at most 15 digits and a decimal
+    exponent within +-22 the result is correctly rounded (exact integer / exact power of ten).
+    """
+    i = lo
+    count = 0
+    while True:
+        while i < hi and _is_space(buf[i]):
+            i += 1
+        if i >= hi:
+            return count, _OK
+        if count >= out.shape[0]:
+            return count, _TOO_MANY
+        neg = False
+        if buf[i] == 45 or buf[i] == 43:  # - +
+            neg = buf[i] == 45
+            i += 1
+        mant = 0
+        exp10 = 0
+        ndig = 0  # significant digits kept in mant
+        digits = 0  # digits seen at all
+        while i < hi and 48 <= buf[i] <= 57:
+            if ndig < 18:
+                mant = mant * 10 + (buf[i] - 48)
+                if mant > 0:
+                    ndig += 1
+            else:
+                exp10 += 1
+            digits += 1
+            i += 1
+        if i < hi and buf[i] == 46:  # .
+            i += 1
+            while i < hi and 48 <= buf[i] <= 57:
+                if ndig < 18:
+                    mant = mant * 10 + (buf[i] - 48)
+                    exp10 -= 1
+                    if mant > 0:
+                        ndig += 1
+                digits += 1
+                i += 1
+        if digits == 0:
+            return count, _BAD_NUMBER
+        if i < hi and (buf[i] == 101 or buf[i] == 69):  # e E
+            i += 1
+            eneg = False
+            if i < hi and (buf[i] == 45 or buf[i] == 43):
+                eneg = buf[i] == 45
+                i += 1
+            e = 0
+            ed = 0
+            while i < hi and 48 <= buf[i] <= 57:
+                if e < 100000:
+                    e = e * 10 + (buf[i] - 48)
+                i += 1
+                ed += 1
+            if ed == 0:
+                return count, _BAD_NUMBER
+            exp10 += -e if eneg else e
+        if i < hi and not _is_space(buf[i]):
+            return count, _BAD_NUMBER
+        v = float(mant)
+        if exp10 < 0:
+            if exp10 >= -22:
+                v = v / pow10[-exp10]
+            else:
+                v = v * 10.0**exp10
+        elif exp10 > 0:
+            if exp10 <= 22:
+                v = v * pow10[exp10]
+            else:
+                v = v * 10.0**exp10
+        if not np.isfinite(v):
+            return count, _BAD_NUMBER
+        out[count] = -v if neg else v
+        count += 1
+
+
+@numba.njit(cache=True, parallel=True)
+def _parse_all(
+    buf: NDArray[np.uint8], n_chunks: int, pow10: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]:
+    """Parse every line of ``buf`` in one parallel pass.
+
+    The buffer is cut into ``n_chunks`` byte ranges; a first pass counts the newlines of each,
+    so every chunk knows the number of the first line that starts inside it and parses the lines
+    starting in its range straight into their rows.
+
+    Returns
+    -------
+    head : (L, 4) float64
+        First four values of each line.
+    tail : (L, 3) float32
+        Values 5-7 (PTX colour).
+    counts : (L,) int8
+        Number of values on each line.
+    errors : (L,) int8
+        0 ok, 1 not a number, 2 more than 7 values.
+    """
+    n = buf.shape[0]
+    size = (n + n_chunks - 1) // n_chunks
+    nl = np.zeros(n_chunks + 1, dtype=np.int64)
+    for c in prange(n_chunks):
+        k = 0
+        for i in range(c * size, min(n, (c + 1) * size)):
+            k += buf[i] == 10
+        nl[c + 1] = k
+    for c in range(n_chunks):
+        nl[c + 1] += nl[c]
+    n_lines = nl[n_chunks] + (1 if n > 0 and buf[n - 1] != 10 else 0)
+    head = np.zeros((n_lines, 4), dtype=np.float64)
+    tail = np.zeros((n_lines, 3), dtype=np.float32)
+    counts = np.zeros(n_lines, dtype=np.int8)
+    errors = np.zeros(n_lines, dtype=np.int8)
+    for c in prange(n_chunks):
+        lo, hi = c * size, min(n, (c + 1) * size)
+        s = lo
+        li = nl[c]
+        if lo > 0 and buf[lo - 1] != 10:  # the line holding `lo` belongs to an earlier chunk
+            while s < n and buf[s] != 10:
+                s += 1
+            s += 1
+            li += 1
+        vals = np.empty(_MAX_VALUES, dtype=np.float64)
+        while s < hi:
+            e = s
+            while e < n and buf[e] != 10:
+                e += 1
+            cnt, err = _parse_line(buf, s, e, vals, pow10)
+            for j in range(min(cnt, 4)):
+                head[li, j] = vals[j]
+            for j in range(4, cnt):
+                tail[li, j - 4] = vals[j]
+            counts[li] = cnt
+            errors[li] = err
+            li += 1
+            s = e + 1
+    return head, tail, counts, errors
+
+
+# ------------------------------------------------------------------------------ reader
+
+_HEADER_COUNTS = [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]
+
+
+def read(path: Path, **_: object) -> list[Scan]:
+    """Read every cloud of a PTX file.
+
+    Returns
+    -------
+    list of Scan
+        One per cloud: valid points (N, 3) float64 in the scanner frame, intensity (N,)
+        float32, colours (N, 3) uint8 when the file has RGB, grid ``(rows, cols)`` with
+        ``grid_index`` in file order (line ``k`` of a cloud is row ``k % rows`` of column
+        ``k // rows``), and ``T_world_scanner`` = the file's (transposed-back) 4x4 matrix.
+    """
+    buf = np.fromfile(path, dtype=np.uint8)
+    n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
+    head, tail, counts, errors = _parse_all(buf, n_chunks, _POW10)
+    del buf
+    n_lines = len(counts)
+    scans: list[Scan] = []
+    line = 0
+    while line < n_lines:
+        if counts[line] == 0 and errors[line] == 0:  # blank line between clouds
+            line += 1
+            continue
+        cloud = len(scans)
+        if line + _HEADER_LINES > n_lines:
+            raise InputError(path, f"cloud {cloud}: truncated header at line {line + 1}")
+        hl = slice(line, line + _HEADER_LINES)
+        if errors[hl].any() or counts[hl].tolist() != _HEADER_COUNTS:
+            raise InputError(
+                path,
+                f"cloud {cloud}: malformed header at lines {line + 1}-{line + _HEADER_LINES} "
+                "(expected COLS, ROWS, position, 3 axes, transposed 4x4 transform)",
+            )
+        cols_f, rows_f = head[line, 0], head[line + 1, 0]
+        if cols_f != int(cols_f) or rows_f != int(rows_f) or cols_f <= 0 or rows_f <= 0:
+            raise InputError(path, f"cloud {cloud}: grid size {cols_f:g} x {rows_f:g} is not valid")
+        cols, rows = int(cols_f), int(rows_f)
+        M = head[line + 6 : line + 10].T.copy()
+        n = cols * rows
+        first = line + _HEADER_LINES
+        if first + n > n_lines:
+            raise InputError(
+                path,
+                f"cloud {cloud}: header announces {cols} x {rows} = {n} points but only "
+                f"{max(0, n_lines - first)} lines follow (truncated file?)",
+            )
+        block = slice(first, first + n)
+        bad = np.flatnonzero(errors[block])
+        if len(bad):
+            k = first + int(bad[0])
+            what = "more than 7 values" if errors[k] == _TOO_MANY else "not a valid number"
+            raise InputError(path, f"line {k + 1}: {what}")
+        ncol = int(counts[first])
+        if ncol not in (3, 4, 7):
+            raise InputError(path, f"line {first + 1}: expected 3, 4 or 7 values, got {ncol}")
+        wrong = np.flatnonzero(counts[block] != ncol)
+        if len(wrong):
+            k = first + int(wrong[0])
+            raise InputError(
+                path,
+                f"line {k + 1}: expected {ncol} values like the cloud's first point, got "
+                f"{int(counts[k])} (header {cols} x {rows} does not match the data?)",
+            )
+        xyz = head[block, :3]
+        valid = (xyz != 0.0).any(axis=1)
+        k_valid = np.flatnonzero(valid)
+        grid_index = np.empty((len(k_valid), 2), dtype=np.int32)
+        grid_index[:, 0] = k_valid % rows
+        grid_index[:, 1] = k_valid // rows
+        if not is_rigid(M):
+            log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, cloud)
+        try:
+            scan = Scan(
+                points=xyz[valid],
+                intensity=head[block, 3][valid] if ncol >= 4 else None,
+                colors=np.clip(tail[block][valid], 0, 255).astype(np.uint8) if ncol == 7 else None,
+                grid_shape=(rows, cols),
+                grid_index=grid_index,
+                T_world_scanner=M,
+                path=path,
+                name=path.stem if cloud == 0 else f"{path.stem}#{cloud}",
+            )
+        except InputError as e:
+            raise InputError(path, f"cloud {cloud}: {e.problem}") from None
+        scans.append(scan)
+        line = first + n
+    if not scans:
+        raise InputError(path, "no cloud in file")
+    return scans
+
+
+# ------------------------------------------------------------------------------ writer
+
+
+@numba.njit(cache=True, inline="always")
+def _fmt_len(v: float, decimals: int, scale: float) -> int:
+    q = np.int64(np.floor(abs(v) * scale + 0.5))
+    ip = q // np.int64(scale)
+    n = 1
+    while ip >= 10:
+        ip //= 10
+        n += 1
+    neg = 1 if (v < 0 and q != 0) else 0
+    return neg + n + (1 + decimals if decimals > 0 else 0)
+
+
+@numba.njit(cache=True, inline="always")
+def _fmt_write(out: NDArray[np.uint8], pos: int, v: float, decimals: int, scale: float) -> int:
+    q = np.int64(np.floor(abs(v) * scale + 0.5))
+    p10 = np.int64(scale)
+    ip = q // p10
+    fp = q % p10
+    if v < 0 and q != 0:
+        out[pos] = 45
+        pos += 1
+    n = 1
+    t = ip
+    while t >= 10:
+        t //= 10
+        n += 1
+    for j in range(n - 1, -1, -1):
+        out[pos + j] = 48 + ip % 10
+        ip //= 10
+    pos += n
+    if decimals > 0:
+        out[pos] = 46
+        pos += 1
+        for j in range(decimals - 1, -1, -1):
+            out[pos + j] = 48 + fp % 10
+            fp //= 10
+        pos += decimals
+    return pos
+
+
+@numba.njit(cache=True, parallel=True)
+def _format_lines(vals: NDArray[np.float64], decimals: NDArray[np.int64]) -> NDArray[np.uint8]:
+    """Format rows of ``vals`` as space-separated fixed-point text lines."""
+    n, m = vals.shape
+    scales = np.empty(m)
+    for j in range(m):
+        scales[j] = 10.0 ** decimals[j]
+    lens = np.empty(n, dtype=np.int64)
+    for i in prange(n):
+        s = m  # separators and the newline
+        for j in range(m):
+            s += _fmt_len(vals[i, j], decimals[j], scales[j])
+        lens[i] = s
+    offs = np.empty(n + 1, dtype=np.int64)
+    offs[0] = 0
+    for i in range(n):
+        offs[i + 1] = offs[i] + lens[i]
+    out = np.empty(offs[n], dtype=np.uint8)
+    for i in prange(n):
+        pos = offs[i]
+        for j in range(m):
+            pos = _fmt_write(out, pos, vals[i, j], decimals[j], scales[j])
+            out[pos] = 32 if j < m - 1 else 10
+            pos += 1
+    return out
+
+
+def _header(cols: int, rows: int, T: NDArray[np.float64]) -> str:
+    def row(v: NDArray[np.float64]) -> str:
+        return " ".join(repr(float(x)) for x in v)
+
+    lines = [str(cols), str(rows), row(T[:3, 3])]
+    lines += [row(T[:3, k]) for k in range(3)]  # the scanner axes as rows
+    lines += [row(T[:, k]) for k in range(4)]  # the matrix, transposed
+    return "\n".join(lines) + "\n"
+
+
+def write(path: Path, scans: list[Scan], *, decimals: int = 6, **_: object) -> None:
+    """Write scans as PTX clouds, column by column, ``0 0 0 0.5`` for empty cells.
+
+    Parameters
+    ----------
+    path : Path
+    scans : list of Scan
+        A gridded scan keeps its grid; a scan without a grid becomes one column of N rows.
+    decimals : int
+        Digits after the decimal point for coordinates and intensity (6 = micrometres).
+    """
+    if not 0 <= decimals <= 12:
+        raise InputError(path, f"decimals must be 0..12, got {decimals}")
+    with open(path, "wb") as f:
+        for scan in scans:
+            if scan.grid_shape is not None and scan.grid_index is not None:
+                rows, cols = scan.grid_shape
+                lin = scan.grid_index[:, 1].astype(np.int64) * rows + scan.grid_index[:, 0]
+            else:
+                rows, cols = len(scan), 1
+                lin = np.arange(len(scan), dtype=np.int64)
+            has_color = scan.colors is not None
+            m = 7 if has_color else 4
+            vals = np.zeros((rows * cols, m))
+            vals[:, 3] = 0.5  # the intensity Leica writes for no-return cells
+            vals[lin, :3] = scan.points
+            vals[lin, 3] = scan.intensity if scan.intensity is not None else 0.5
+            if has_color:
+                vals[lin, 4:7] = scan.colors
+            dec = np.array([decimals] * 4 + [0] * (m - 4), dtype=np.int64)
+            f.write(_header(cols, rows, scan.T_world_scanner).encode("ascii"))
+            f.write(_format_lines(vals, dec).tobytes())

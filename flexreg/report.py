@@ -1,0 +1,212 @@
+"""Summaries and file outputs: one place that renders results as dicts, tables and files."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .camera import PinholeCamera, SphericalCamera
+from .errors import InputError
+from .projection import RangeImage, azimuth_polar_extent
+from .scan import Scan
+from .transforms import is_rigid, rotation_error_deg
+
+PNG_SCALES_M = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1)
+
+
+def field_of_view_deg(scan: Scan) -> dict[str, Any]:
+    """Field of view in degrees: from the camera when known, else from the points' directions.
+
+    Returns ``{"model": ..., "horizontal_deg": ..., "vertical_deg": ...}`` plus the azimuth and
+    polar bounds for spherical views.
+    """
+    cam = scan.camera
+    if isinstance(cam, PinholeCamera):
+        return {
+            "model": "pinhole",
+            "horizontal_deg": math.degrees(2 * math.atan2(cam.width / 2, cam.fx)),
+            "vertical_deg": math.degrees(2 * math.atan2(cam.height / 2, cam.fy)),
+        }
+    if isinstance(cam, SphericalCamera):
+        pmin, pmax, tmin, tmax = cam.phi_min, cam.phi_max, cam.theta_min, cam.theta_max
+        model = "spherical (camera)"
+    else:
+        pmin, pmax, tmin, tmax, _ = azimuth_polar_extent(scan.points)
+        model = "spherical (from points)"
+    return {
+        "model": model,
+        "horizontal_deg": math.degrees(pmax - pmin),
+        "vertical_deg": math.degrees(tmax - tmin),
+        "azimuth_deg": [math.degrees(pmin), math.degrees(pmax)],
+        "polar_deg": [math.degrees(tmin), math.degrees(tmax)],
+    }
+
+
+def scan_summary(scan: Scan) -> dict[str, Any]:
+    """JSON-ready facts about a scan (what ``flexreg info`` shows)."""
+    from .io import detect_format
+
+    r = np.linalg.norm(scan.points, axis=1)
+    d: dict[str, Any] = {
+        "path": None if scan.path is None else str(scan.path),
+        "name": scan.name,
+        "format": None if scan.path is None else detect_format(scan.path)[1],
+        "points": len(scan),
+        "grid": None,
+        "field_of_view": field_of_view_deg(scan) if len(scan) else None,
+        "range_m": None,
+        "intensity": None,
+        "colors": scan.colors is not None,
+        "camera": None if scan.camera is None else scan.camera.to_dict(),
+    }
+    if scan.grid_shape is not None:
+        rows, cols = scan.grid_shape
+        d["grid"] = {
+            "rows": rows,
+            "cols": cols,
+            "valid_cells": len(scan),
+            "valid_fraction": len(scan) / (rows * cols),
+        }
+    if len(scan):
+        q = np.percentile(r, [0, 1, 50, 99, 100])
+        d["range_m"] = {"min": q[0], "p1": q[1], "median": q[2], "p99": q[3], "max": q[4]}
+    if scan.intensity is not None and len(scan):
+        d["intensity"] = {"min": float(scan.intensity.min()), "max": float(scan.intensity.max())}
+    T = scan.T_world_scanner
+    d["pose"] = {
+        "T_world_scanner": T.tolist(),
+        "position_m": T[:3, 3].tolist(),
+        "rotation_deg": rotation_error_deg(T, np.eye(4)) if is_rigid(T) else None,
+        "rigid": is_rigid(T),
+    }
+    return json.loads(json.dumps(d, default=float))
+
+
+def render_scan_summary(d: dict[str, Any]) -> Any:
+    """A rich table of :func:`scan_summary` output."""
+    from rich.table import Table
+
+    t = Table(title=f"{d['name']}  ({d['format']})", show_header=False, title_justify="left")
+    t.add_column(style="bold")
+    t.add_column()
+    t.add_row("file", str(d["path"]))
+    t.add_row("points", f"{d['points']:,}")
+    g = d["grid"]
+    t.add_row(
+        "grid",
+        "none (unstructured)"
+        if g is None
+        else f"{g['rows']} rows x {g['cols']} cols, {g['valid_cells']:,} valid "
+        f"({100 * g['valid_fraction']:.1f} %)",
+    )
+    fov = d["field_of_view"]
+    if fov:
+        extra = ""
+        if "azimuth_deg" in fov:
+            extra = (
+                f"  (azimuth {fov['azimuth_deg'][0]:.2f}..{fov['azimuth_deg'][1]:.2f}°, "
+                f"polar {fov['polar_deg'][0]:.2f}..{fov['polar_deg'][1]:.2f}°)"
+            )
+        t.add_row(
+            "field of view",
+            f"{fov['horizontal_deg']:.2f}° x {fov['vertical_deg']:.2f}° [{fov['model']}]{extra}",
+        )
+    r = d["range_m"]
+    if r:
+        t.add_row(
+            "range",
+            f"min {r['min']:.3f} m, median {r['median']:.3f} m, "
+            f"p99 {r['p99']:.3f} m, max {r['max']:.3f} m",
+        )
+    if d["intensity"]:
+        t.add_row("intensity", f"{d['intensity']['min']:.4g} .. {d['intensity']['max']:.4g}")
+    t.add_row("colour", "yes" if d["colors"] else "no")
+    p = d["pose"]
+    rot = "non-rigid (affine)" if not p["rigid"] else f"rotated {p['rotation_deg']:.3f}°"
+    t.add_row("pose", f"position ({', '.join(f'{v:.3f}' for v in p['position_m'])}) m, {rot}")
+    if d["camera"]:
+        t.add_row("camera", json.dumps(d["camera"]))
+    return t
+
+
+def choose_png_scale(max_range_m: float) -> float:
+    """Finest metres-per-unit from :data:`PNG_SCALES_M` that fits ``max_range_m`` in 16 bits."""
+    for s in PNG_SCALES_M:
+        if max_range_m <= 65535 * s:
+            return s
+    raise InputError("range image", f"ranges up to {max_range_m:.1f} m do not fit a 16-bit PNG")
+
+
+def write_range_image(
+    out: Path, image: RangeImage, *, png_scale_m: float | None = None
+) -> dict[str, Any]:
+    """Write a range image as 16-bit PNG (0 = no return), float32 npz and camera sidecar.
+
+    Parameters
+    ----------
+    out : Path
+        ``.png`` path; ``<stem>.npz`` (range, xyz, valid, intensity, camera) and, when the
+        camera is known, ``<stem>.camera.json`` (so ``read_scan(out)`` reads it back) go
+        beside it.
+    image : RangeImage
+    png_scale_m : float, optional
+        Metres per PNG unit; chosen by :func:`choose_png_scale` when not given.
+
+    Returns
+    -------
+    dict
+        ``{"png_scale_m": float, "files": [paths written]}``.
+    """
+    import cv2
+
+    from .io import atomic_write
+
+    rng = image.range
+    if image.n_valid == 0:
+        raise InputError(out, "range image has no valid pixel; nothing to write")
+    rmax = float(np.nanmax(rng))
+    if png_scale_m is None:
+        png_scale_m = choose_png_scale(rmax)
+    elif not png_scale_m > 0:
+        raise InputError("--png-scale", f"must be positive, got {png_scale_m}")
+    elif rmax > 65535 * png_scale_m:
+        raise InputError(
+            out, f"max range {rmax:.2f} m does not fit 16 bits at {png_scale_m} m per unit"
+        )
+    png = np.zeros(rng.shape, dtype=np.uint16)
+    v = image.valid
+    png[v] = np.clip(np.rint(rng[v] / png_scale_m), 1, 65535).astype(np.uint16)
+    out = Path(out)
+    npz = out.with_suffix(".npz")
+    files = [out, npz]
+    arrays: dict[str, Any] = {
+        "range": rng,
+        "xyz": image.xyz.astype(np.float32),
+        "valid": image.valid,
+        "png_scale_m": np.float64(png_scale_m),
+        "camera": np.array(json.dumps(None if image.camera is None else image.camera.to_dict())),
+    }
+    if image.intensity is not None:
+        arrays["intensity"] = image.intensity
+
+    def write_png(tmp: Path) -> None:
+        if not cv2.imwrite(str(tmp), png):
+            raise InputError(out, "could not write PNG")
+
+    atomic_write(npz, lambda tmp: np.savez_compressed(tmp, **arrays))
+    atomic_write(out, write_png)
+    if image.camera is not None:
+        side = out.with_name(out.stem + ".camera.json")
+        doc = {
+            "camera": image.camera.to_dict(),
+            "depth_scale": png_scale_m,
+            "depth_kind": "range",
+            "invalid_values": [0],
+        }
+        atomic_write(side, lambda tmp: tmp.write_text(json.dumps(doc, indent=2) + "\n"))
+        files.append(side)
+    return {"png_scale_m": png_scale_m, "files": [str(f) for f in files]}

@@ -239,19 +239,17 @@ def auto_spherical_camera(
         step = float(angular_resolution_rad)
         if not step > 0:
             raise InputError("angular_resolution_rad", f"must be positive, got {step}")
-    W = max(1, math.ceil(span_phi / step))
-    H = max(1, math.ceil(span_th / step) + 1)
+    H = math.floor(span_th / step + 0.5) + 1
+    th_lo = th_min
+    if th_lo + H * step > np.pi:  # keep the polar range inside [0, pi]
+        th_lo = max(0.0, np.pi - H * step)
+    th_hi = min(np.pi, th_lo + H * step)
     if full:
-        return SphericalCamera(W, H, -np.pi, np.pi, th_min, min(np.pi, th_min + H * step))
-    # half a pixel of margin on each side so the extreme points land inside
-    return SphericalCamera(
-        W + 1,
-        H,
-        phi_min - step / 2,
-        phi_min - step / 2 + (W + 1) * step,
-        th_min,
-        min(np.pi, th_min + H * step),
-    )
+        W = max(1, math.ceil(2 * np.pi / step))
+        return SphericalCamera(W, H, -np.pi, np.pi, th_lo, th_hi)
+    # pixel 0 is centred on the first azimuth, the last pixel on (or just past) the last one
+    W = math.floor(span_phi / step + 0.5) + 1
+    return SphericalCamera(W, H, phi_min, phi_min + W * step, th_lo, th_hi)
 
 
 def range_image(

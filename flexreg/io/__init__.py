@@ -113,6 +113,8 @@ def read_scans(
     scans: list[Scan] = _module(mod).read(p, **options)
     if not scans:
         raise InputError(p, "file holds no scan")
+    if all(len(s) == 0 for s in scans):
+        raise InputError(p, "file holds no valid point (every cell is a no-return)")
     return scans
 
 

@@ -1,0 +1,132 @@
+"""Range images: native grid, z-buffer projection, depth images."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexreg import Scan
+from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.errors import InputError
+from flexreg.projection import (
+    auto_spherical_camera,
+    from_depth,
+    from_grid,
+    project,
+    range_image,
+    to_scan,
+)
+
+
+def _plane_points(distance: float, n: int, rng) -> np.ndarray:
+    """Points of the plane x = distance, inside +-45 deg of the +X axis."""
+    y = rng.uniform(-distance * 0.9, distance * 0.9, n)
+    z = rng.uniform(-distance * 0.9, distance * 0.9, n)
+    return np.column_stack([np.full(n, distance), y, z])
+
+
+def test_plane_at_known_distance_spherical(rng):
+    d = 4.25
+    scan = Scan(points=_plane_points(d, 200_000, rng))
+    img = range_image(scan)  # unstructured -> automatic equirectangular camera
+    assert isinstance(img.camera, SphericalCamera)
+    r = img.range
+    # the range image holds the original points: r = d / cos(angle to the plane normal)
+    xyz = img.xyz[img.valid]
+    np.testing.assert_allclose(xyz[:, 0], d, atol=1e-12)
+    np.testing.assert_allclose(r[img.valid], np.linalg.norm(xyz, axis=1), rtol=1e-6)
+    # the pixels facing the plane see it at distance d (within the pixel footprint)
+    u, v, _ = img.camera.project(np.array([[1.0, 0.0, 0.0]]))
+    iu, iv = round(u[0]), round(v[0])
+    window = r[iv - 2 : iv + 3, iu - 2 : iu + 3]
+    assert np.isfinite(window).sum() >= 5
+    step = max(img.camera.dphi, img.camera.dtheta)
+    np.testing.assert_allclose(window[np.isfinite(window)], d, atol=d * (1 / np.cos(4 * step) - 1))
+    # everywhere: range = d / cos(angle between the ray and the plane normal)
+    ray = xyz / np.linalg.norm(xyz, axis=1, keepdims=True)
+    np.testing.assert_allclose(r[img.valid], d / ray[:, 0], rtol=1e-6)
+
+
+def test_plane_at_known_distance_pinhole():
+    cam = PinholeCamera(300.0, 300.0, 159.5, 119.5, 320, 240)
+    z = np.full(cam.shape, 2.0)
+    img = from_depth(z, cam, depth_kind="z")
+    np.testing.assert_allclose(img.xyz[..., 2], 2.0)
+    np.testing.assert_allclose(img.depth_z(), 2.0)
+    # Euclidean range grows off-axis exactly as r = z sqrt(1 + x^2 + y^2)
+    v, u = np.mgrid[0:240, 0:320]
+    np.testing.assert_allclose(img.range, cam.z_to_range(u, v, z), rtol=1e-6)
+
+
+def test_zbuffer_keeps_nearest_return():
+    cam = SphericalCamera(36, 18, -np.pi, np.pi, 0.0, np.pi)
+    ray = cam.backproject(10.0, 9.0, 1.0)
+    pts = np.stack([ray * 5.0, ray * 2.0, ray * 3.0])
+    img = project(Scan(points=pts), cam)
+    assert img.valid.sum() == 1
+    assert img.range[9, 10] == pytest.approx(2.0)
+    assert img.index[9, 10] == 1
+
+
+def test_native_grid_without_resampling():
+    xyz = np.full((3, 4, 3), np.nan)
+    xyz[0, 1] = [1.0, 2.0, 3.0]
+    xyz[2, 3] = [4.0, 5.0, 6.0]
+    scan = Scan.from_organized(xyz, intensity=np.arange(12.0).reshape(3, 4))
+    assert scan.grid_shape == (3, 4) and len(scan) == 2
+    img = from_grid(scan)
+    assert img.valid.tolist() == [[False, True, False, False], [False] * 4, [False] * 3 + [True]]
+    np.testing.assert_array_equal(img.xyz[0, 1], [1.0, 2.0, 3.0])
+    assert img.intensity[2, 3] == 11.0
+    assert img.index[2, 3] == 1
+    assert range_image(scan).n_valid == 2  # the one call picks the native grid
+
+
+def test_depth_image_round_trip_through_scan(rng):
+    cam = SphericalCamera.from_reference(200, 80, 0.6, 2.5)
+    depth = rng.uniform(1, 30, cam.shape)
+    depth[rng.random(cam.shape) < 0.2] = 0.0
+    img = from_depth(depth, cam)
+    scan = to_scan(img)
+    back = project(scan, cam)
+    np.testing.assert_array_equal(back.valid, depth > 0)
+    np.testing.assert_allclose(back.range[back.valid], depth[depth > 0], rtol=1e-6)
+
+
+def test_auto_camera_matches_native_resolution():
+    cam = SphericalCamera.from_reference(720, 240, 0.5, 2.6)
+    img = from_depth(np.full(cam.shape, 10.0), cam)
+    auto = auto_spherical_camera(to_scan(img).points)
+    assert auto.wraps
+    assert abs(auto.width - 720) <= 7 and abs(auto.height - 240) <= 3  # within 1 %
+    filled = project(to_scan(img), auto).n_valid / (auto.width * auto.height)
+    assert filled > 0.9
+
+
+def test_auto_camera_partial_window_across_cut(rng):
+    # a 60 deg wide window centred on azimuth 180 deg (crossing the -pi/pi cut)
+    phi = np.radians(rng.uniform(150, 210, 20000))
+    theta = np.radians(rng.uniform(60, 120, 20000))
+    pts = 5 * np.column_stack(
+        [np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+    )
+    cam = auto_spherical_camera(pts)
+    assert not cam.wraps
+    assert np.degrees(cam.phi_max - cam.phi_min) == pytest.approx(60, abs=2)
+    img = project(Scan(points=pts), cam)
+    assert img.n_valid > 0.6 * 20000
+
+
+def test_depth_size_mismatch_raises():
+    cam = PinholeCamera(300.0, 300.0, 10.0, 10.0, 20, 20)
+    with pytest.raises(InputError, match="does not match"):
+        from_depth(np.ones((10, 20)), cam)
+
+
+def test_gather_and_empty_scan():
+    scan = Scan(points=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+    img = range_image(scan, angular_resolution_rad=np.radians(5))
+    vals = img.gather(np.array([7.0, 9.0]))
+    assert sorted(vals[img.valid].tolist()) == [7.0, 9.0]
+    with pytest.raises(InputError, match="no points"):
+        range_image(Scan(points=np.zeros((0, 3))))

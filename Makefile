@@ -18,8 +18,8 @@ $(STAMP): pyproject.toml scripts/ensure-system-libs.sh
 
 demo: $(STAMP)
 	@bash scripts/ensure-system-libs.sh
-	$(BIN)/flexreg info data/laserscan/laserscan.ptx
-	$(BIN)/flexreg project data/laserscan/laserscan.ptx --out $(DEMO)/laserscan-range.png
+	$(BIN)/flexreg info data/laserscan/laserscan-depth.png
+	$(BIN)/flexreg project data/laserscan/laserscan-depth.png --out $(DEMO)/laserscan-range.png
 	@echo "demo results written to $(DEMO)/"
 
 test: $(STAMP)

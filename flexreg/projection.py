@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 from dataclasses import dataclass
 
 import numba
@@ -318,7 +319,7 @@ def from_depth(
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera)
 
 
-def to_scan(image: RangeImage, **kwargs: object) -> Scan:
+def to_scan(image: RangeImage, **kwargs: Any) -> Scan:
     """The valid pixels of a range image as a gridded :class:`Scan` (row-major point order)."""
     return Scan.from_organized(
         image.xyz, image.valid, intensity=image.intensity, camera=image.camera, **kwargs

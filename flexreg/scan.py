@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -97,7 +97,7 @@ class Scan:
         *,
         intensity: NDArray[np.floating] | None = None,
         colors: NDArray[np.uint8] | None = None,
-        **kwargs: object,
+        **kwargs: Any,
     ) -> Scan:
         """Build a scan from an organised (H, W, 3) array.
 
@@ -115,7 +115,7 @@ class Scan:
         xyz = np.asarray(xyz)
         if xyz.ndim != 3 or xyz.shape[2] != 3:
             raise InputError(
-                kwargs.get("path"), f"organised xyz must be (H, W, 3), got {xyz.shape}"
+                str(kwargs.get("path", "scan")), f"organised xyz must be (H, W, 3), got {xyz.shape}"
             )
         ok = np.isfinite(xyz).all(axis=2) & np.any(xyz != 0, axis=2)
         if valid is not None:
@@ -128,7 +128,7 @@ class Scan:
             colors=None if colors is None else np.asarray(colors)[ok],
             grid_shape=(xyz.shape[0], xyz.shape[1]),
             grid_index=gi,
-            **kwargs,  # type: ignore[arg-type]
+            **kwargs,
         )
 
     # ------------------------------------------------------------------ views

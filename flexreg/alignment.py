@@ -246,7 +246,7 @@ def ransac_rigid(
             if w >= 1.0:
                 needed = 0
             elif w > 0:
-                needed = int(math.ceil(math.log(1 - confidence) / math.log(1 - w**3)))
+                needed = math.ceil(math.log(1 - confidence) / math.log(1 - w**3))
     if best_T is None:
         raise DegenerateGeometryError(
             f"no valid 3-point sample among {n} correspondences (all too close or inconsistent)"

@@ -1,0 +1,220 @@
+"""2D keypoints and descriptors on feature images (OpenCV detectors).
+
+``detect_and_describe`` wraps SIFT, ORB, AKAZE, KAZE, BRISK (and SURF where the installed OpenCV
+is a nonfree build), looking each up in ``cv2`` and then ``cv2.xfeatures2d`` so a user's own
+OpenCV build works too. Invalid pixels are masked (with a margin, so the artificial edge between
+data and no-return is not described), and on full-turn panoramas keypoints near the seam are
+found on a horizontally wrapped copy and mapped back.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import ConfigError, InputError
+
+log = logging.getLogger(__name__)
+
+METHODS = ("sift", "orb", "akaze", "kaze", "brisk", "surf")
+_FACTORIES = {
+    "sift": "SIFT_create",
+    "orb": "ORB_create",
+    "akaze": "AKAZE_create",
+    "kaze": "KAZE_create",
+    "brisk": "BRISK_create",
+    "surf": "SURF_create",
+}
+#: descriptor norm per method: binary descriptors use Hamming distance
+BINARY = {"orb", "akaze", "brisk"}
+
+
+@dataclass(eq=False)
+class Features:
+    """Keypoints and descriptors of one image.
+
+    Attributes
+    ----------
+    xy : (K, 2) float64, pixels
+        Sub-pixel keypoint positions ``(u, v)`` = (column, row), in the unpadded image.
+    descriptors : (K, D) uint8 (binary methods) or float32
+    response : (K,) float32
+        Detector response (strength).
+    size : (K,) float32, pixels
+        Keypoint diameter.
+    angle : (K,) float32, degrees
+        Keypoint orientation (-1 if the method has none).
+    method : str
+    """
+
+    xy: NDArray[np.float64]
+    descriptors: NDArray[Any]
+    response: NDArray[np.float32]
+    size: NDArray[np.float32]
+    angle: NDArray[np.float32]
+    method: str
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    @property
+    def binary(self) -> bool:
+        """True for binary descriptors (Hamming norm)."""
+        return self.method in BINARY
+
+
+def create_detector(method: str, *, max_features: int | None = None) -> Any:
+    """OpenCV ``Feature2D`` for a method name, from ``cv2`` or ``cv2.xfeatures2d``.
+
+    Raises
+    ------
+    ConfigError
+        Unknown method, or a method this OpenCV build lacks (SURF needs a nonfree build: use
+        ``kaze``, whose descriptor is SURF-like).
+    """
+    import cv2
+
+    m = method.lower()
+    if m not in _FACTORIES:
+        raise ConfigError(f"unknown feature method {method!r}; choose from {', '.join(METHODS)}")
+    name = _FACTORIES[m]
+    factory = getattr(cv2, name, None)
+    if factory is None and hasattr(cv2, "xfeatures2d"):
+        factory = getattr(cv2.xfeatures2d, name, None)
+    if factory is None:
+        hint = (
+            " (it needs an OpenCV built with nonfree modules; try 'kaze', whose descriptor"
+            " is SURF-like)"
+            if m == "surf"
+            else ""
+        )
+        raise ConfigError(f"this OpenCV ({cv2.__version__}) has no {method.upper()}{hint}")
+    kw: dict[str, Any] = {}
+    if max_features is not None and m in ("sift", "orb"):
+        kw["nfeatures"] = int(max_features)
+    try:
+        return factory(**kw)
+    except cv2.error as e:  # e.g. SURF present but disabled in a non-free-less build
+        hint = "; try 'kaze', whose descriptor is SURF-like" if m == "surf" else ""
+        raise ConfigError(f"OpenCV cannot create {method.upper()}: {e.err}{hint}") from None
+
+
+def to_uint8(image: NDArray[Any]) -> NDArray[np.uint8]:
+    """A feature image as 8-bit: uint8 as is, uint16 scaled by 1/257, float in [0, 1] by 255
+    (NaN -> 0)."""
+    a = np.asarray(image)
+    if a.ndim != 2:
+        raise InputError("image", f"feature image must be 2D, got shape {a.shape}")
+    if a.dtype == np.uint8:
+        return a
+    if a.dtype == np.uint16:
+        return ((a.astype(np.uint32) + 128) // 257).astype(np.uint8)
+    if np.issubdtype(a.dtype, np.floating):
+        return np.clip(np.rint(np.nan_to_num(a, nan=0.0) * 255.0), 0, 255).astype(np.uint8)
+    raise InputError("image", f"unsupported feature image dtype {a.dtype}")
+
+
+def detect_and_describe(
+    image: NDArray[Any],
+    method: str = "sift",
+    mask: NDArray[np.bool_] | None = None,
+    *,
+    max_features: int | None = None,
+    border_px: int = 3,
+    support: float = 0.5,
+    wrap: bool = False,
+    detector: Any = None,
+) -> Features:
+    """Detect keypoints and compute descriptors on a feature image.
+
+    Parameters
+    ----------
+    image : (H, W) uint8, uint16 or float in [0, 1]
+        Feature image (Flexion, Bearing Angle, intensity...); NaN counts as invalid.
+    method : {"sift", "orb", "akaze", "kaze", "brisk", "surf"}
+    mask : (H, W) bool, optional
+        Valid pixels. Keypoints closer than ``border_px`` to an invalid pixel are discarded,
+        so the artificial contrast at no-return holes yields no features.
+    max_features : int, optional
+        Keep at most this many, strongest response first.
+    border_px : int
+        Safety margin around invalid pixels, pixels.
+    support : float
+        Also discard keypoints closer to an invalid pixel than ``support`` times their size
+        (diameter): a large-scale descriptor centred near a hole would describe the hole.
+    wrap : bool
+        The image is a full-turn panorama: detect on a copy padded with the opposite side's
+        columns so the seam loses no features, then map the keypoints back (``u mod W``) and
+        drop the duplicates found twice.
+    detector : cv2.Feature2D, optional
+        A pre-built detector (overrides ``method``'s default parameters).
+
+    Returns
+    -------
+    Features
+    """
+    import cv2
+
+    img = to_uint8(image)
+    H, W = img.shape
+    valid = np.ones((H, W), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if valid.shape != (H, W):
+        raise InputError("mask", f"mask shape {valid.shape} differs from the image's {(H, W)}")
+    if np.issubdtype(np.asarray(image).dtype, np.floating):
+        valid = valid & np.isfinite(image)
+    det = detector if detector is not None else create_detector(method, max_features=None)
+    pad = 0
+    if wrap:
+        pad = min(W, 64)
+        img = np.concatenate([img[:, -pad:], img, img[:, :pad]], axis=1)
+        valid = np.concatenate([valid[:, -pad:], valid, valid[:, :pad]], axis=1)
+    keep = valid
+    if border_px > 0:
+        k = 2 * border_px + 1
+        keep = cv2.erode(valid.astype(np.uint8), np.ones((k, k), np.uint8), borderValue=0) > 0
+    kps, desc = det.detectAndCompute(img, (keep * 255).astype(np.uint8))
+    if desc is None or not kps:
+        return _empty(method, det)
+    xy = np.array([kp.pt for kp in kps], dtype=np.float64)
+    resp = np.array([kp.response for kp in kps], dtype=np.float32)
+    size = np.array([kp.size for kp in kps], dtype=np.float32)
+    angle = np.array([kp.angle for kp in kps], dtype=np.float32)
+    # OpenCV may drop keypoints in compute(); kps and desc stay aligned
+    sel = np.ones(len(xy), dtype=bool)
+    if support > 0 and not valid.all():
+        dist = cv2.distanceTransform(valid.astype(np.uint8), cv2.DIST_L2, 5)
+        r = np.clip(np.rint(xy[:, 1]).astype(np.int64), 0, dist.shape[0] - 1)
+        c = np.clip(np.rint(xy[:, 0]).astype(np.int64), 0, dist.shape[1] - 1)
+        sel &= dist[r, c] >= support * size
+    if wrap:
+        sel = (xy[:, 0] >= pad - 0.5) & (xy[:, 0] < pad + W - 0.5)
+        xy[:, 0] = np.mod(xy[:, 0] - pad, W)
+    ok = np.flatnonzero(sel)
+    order = ok[np.argsort(-resp[ok], kind="stable")]
+    if max_features is not None:
+        order = order[: int(max_features)]
+    return Features(
+        xy=xy[order],
+        descriptors=desc[order],
+        response=resp[order],
+        size=size[order],
+        angle=angle[order],
+        method=method.lower(),
+    )
+
+
+def _empty(method: str, det: Any) -> Features:
+    binary = method.lower() in BINARY
+    d = int(det.descriptorSize()) if hasattr(det, "descriptorSize") else 0
+    return Features(
+        xy=np.zeros((0, 2)),
+        descriptors=np.zeros((0, d), dtype=np.uint8 if binary else np.float32),
+        response=np.zeros(0, np.float32),
+        size=np.zeros(0, np.float32),
+        angle=np.zeros(0, np.float32),
+        method=method.lower(),
+    )

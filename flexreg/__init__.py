@@ -8,6 +8,13 @@ Public API (see the user guide in ``docs/``)::
 """
 
 import logging
+import os
+
+import numba
+
+# open3d ships an older TBB than numba's TBB layer accepts; prefer OpenMP, then workqueue.
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
 from ._version import __version__
 from .camera import PinholeCamera, SphericalCamera

@@ -150,11 +150,19 @@ def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: An
 
 
 def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
-    """Call ``write(tmp)`` on a temporary sibling of ``path``, then rename it into place."""
+    """Call ``write(tmp)`` on a temporary sibling of ``path``, then rename it into place.
+
+    An :class:`InputError` the writer raises about the temporary file is re-raised naming
+    ``path``, the file the caller asked for.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
     try:
         write(tmp)
         tmp.replace(path)
+    except InputError as e:
+        if e.source == str(tmp):
+            raise InputError(path, e.problem) from None
+        raise
     finally:
         tmp.unlink(missing_ok=True)

@@ -14,7 +14,7 @@ import numba
 
 # open3d ships an older TBB than numba's TBB layer accepts; prefer OpenMP, then workqueue.
 if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+    numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]
 
 from ._version import __version__
 from .camera import PinholeCamera, SphericalCamera

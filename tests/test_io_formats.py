@@ -788,3 +788,14 @@ def test_unknown_option_is_an_input_error(
     else:
         p.write_bytes(np.ones((4, 4), dtype="<f4").tobytes())
     _raises_naming(p, lambda: read_scans(p, colour_space="srgb"), match="colour_space")
+
+
+def test_e57_same_scans_give_identical_bytes(tmp_path):
+    rng = np.random.default_rng(3)
+    scans = [Scan(points=rng.random((50, 3)), name=f"s{i}") for i in range(2)]
+    write_scan(tmp_path / "a.e57", scans)
+    write_scan(tmp_path / "b.e57", scans)
+    assert (tmp_path / "a.e57").read_bytes() == (tmp_path / "b.e57").read_bytes()
+    scans[1].points[0, 0] += 1.0  # different content -> different file GUIDs
+    write_scan(tmp_path / "c.e57", scans)
+    assert (tmp_path / "c.e57").read_bytes() != (tmp_path / "a.e57").read_bytes()

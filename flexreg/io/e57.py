@@ -11,6 +11,7 @@ kept as stored so that writing and reading back is exact.
 
 from __future__ import annotations
 
+import hashlib
 import uuid
 from pathlib import Path
 from typing import Any
@@ -242,7 +243,6 @@ def write(path: Path, scans: list[Scan], **options: Any) -> None:
         or a libE57 failure.
     """
     _no_options(path, options)
-    import pye57
     from pye57 import libe57
 
     if not scans:
@@ -253,23 +253,58 @@ def write(path: Path, scans: list[Scan], **options: Any) -> None:
         if s.grid_shape is not None and max(s.grid_shape) > np.iinfo(np.uint16).max + 1:
             raise InputError(path, f"scan {i}: grid {s.grid_shape} exceeds 65536 rows/columns")
     try:
-        e57 = pye57.E57(str(path), mode="w")
+        imf = libe57.ImageFile(str(path), "w")
     except Exception as exc:
         raise InputError(path, f"cannot create E57 file: {_e57_message(exc)}") from None
     try:
+        data3d = _write_header(imf, libe57, _guid(b"file", *(_digest(s) for s in scans)))
         for i, s in enumerate(scans):
-            _write_one(e57, libe57, s, i)
+            _write_one(imf, data3d, libe57, s, i)
     except libe57.E57Exception as exc:
         raise InputError(path, f"E57 write failed: {_e57_message(exc)}") from None
     finally:
-        e57.close()
+        imf.close()
 
 
-def _write_one(e57: Any, libe57: Any, scan: Scan, i: int) -> None:
-    imf = e57.image_file
+def _digest(scan: Scan) -> bytes:
+    """Content hash of a scan (points, grid, pose, attributes, name)."""
+    h = hashlib.sha256()
+    for a in (scan.points, scan.grid_index, scan.intensity, scan.colors, scan.T_world_scanner):
+        h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    h.update(scan.name.encode())
+    return h.digest()
+
+
+def _guid(*parts: bytes) -> str:
+    """A GUID derived from content, so the same scans give byte-identical files."""
+    digest = hashlib.sha256(b"".join(parts)).hexdigest()
+    return f"{{{uuid.uuid5(uuid.NAMESPACE_OID, digest)}}}"
+
+
+def _write_header(imf: Any, libe57: Any, guid: str) -> Any:
+    """The E57 root elements (ASTM E2807 section 8.4.1); returns the data3D vector node."""
+    root = imf.root()
+    imf.extensionsAdd("", libe57.E57_V1_0_URI)
+    root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+    root.set("guid", libe57.StringNode(imf, guid))
+    root.set("versionMajor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MAJOR))
+    root.set("versionMinor", libe57.IntegerNode(imf, libe57.E57_FORMAT_MINOR))
+    root.set("e57LibraryVersion", libe57.StringNode(imf, libe57.E57_LIBRARY_ID))
+    root.set("coordinateMetadata", libe57.StringNode(imf, ""))
+    created = libe57.StructureNode(imf)
+    created.set("dateTimeValue", libe57.FloatNode(imf, 0.0))
+    created.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+    root.set("creationDateTime", created)
+    data3d = libe57.VectorNode(imf, True)
+    root.set("data3D", data3d)
+    root.set("images2D", libe57.VectorNode(imf, True))
+    return data3d
+
+
+def _write_one(imf: Any, data3d: Any, libe57: Any, scan: Scan, i: int) -> None:
     n = len(scan)
     node = libe57.StructureNode(imf)
-    node.set("guid", libe57.StringNode(imf, f"{{{uuid.uuid4()}}}"))
+    node.set("guid", libe57.StringNode(imf, _guid(b"scan", str(i).encode(), _digest(scan))))
     node.set("name", libe57.StringNode(imf, scan.name or f"scan {i}"))
     node.set("description", libe57.StringNode(imf, "written by flexreg"))
 
@@ -338,7 +373,7 @@ def _write_one(e57: Any, libe57: Any, scan: Scan, i: int) -> None:
 
     points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
     node.set("points", points)
-    e57.data3d.append(node)  # the points must hang in the tree before they can be written
+    data3d.append(node)  # the points must hang in the tree before they can be written
 
     buffers = libe57.VectorSourceDestBuffer()
     for name, arr in columns.items():

@@ -1,0 +1,92 @@
+"""Synthetic scanner: seeded procedural scenes and simulated sensors with exact ground truth.
+
+>>> from flexreg.synth import station_pair
+>>> target, source, T_target_source = station_pair("room", seed=3)  # doctest: +SKIP
+
+Scenes (:func:`make_scene`: ``room``, ``courtyard``, ``hall``; :func:`scene_from_mesh`) are
+triangle meshes with a reflectance and colour per triangle. Sensors ray-cast them:
+:func:`scan_tls` (equirectangular TLS station), :func:`scan_lidar` (spinning lidar),
+:func:`render_rgbd` (pinhole depth + image). :func:`place_stations` finds stations with a
+guaranteed mutual overlap and inter-station distance; :func:`synthesize` writes a whole data set
+(what ``flexreg synth`` runs). Ground truth: ``T_target_source = inv(T_world_target) @
+T_world_source``; scans hold points in the scanner frame with ``T_world_scanner`` as pose.
+"""
+
+from .dataset import (
+    SynthConfig,
+    SynthResult,
+    camera_trajectory,
+    lidar_trajectory,
+    smooth_path,
+    synthesize,
+)
+from .mesh import Material, MeshBuilder
+from .placement import (
+    FreeMap,
+    StationPair,
+    free_map,
+    place_stations,
+    station_overlap,
+    station_pair,
+    stream,
+    visible_fraction,
+)
+from .scene import RayHits, Scene, read_scene
+from .scenes import (
+    SCENE_KINDS,
+    add_mesh_objects,
+    courtyard,
+    hall,
+    make_scene,
+    room,
+    scene_from_mesh,
+)
+from .sensors import (
+    RGBDConfig,
+    RGBDFrame,
+    TLSConfig,
+    lidar_config,
+    look_at,
+    render_rgbd,
+    scan_lidar,
+    scan_tls,
+    write_tum_sequence,
+)
+
+__all__ = [
+    "SCENE_KINDS",
+    "FreeMap",
+    "Material",
+    "MeshBuilder",
+    "RGBDConfig",
+    "RGBDFrame",
+    "RayHits",
+    "Scene",
+    "StationPair",
+    "SynthConfig",
+    "SynthResult",
+    "TLSConfig",
+    "add_mesh_objects",
+    "camera_trajectory",
+    "courtyard",
+    "free_map",
+    "hall",
+    "lidar_config",
+    "lidar_trajectory",
+    "look_at",
+    "make_scene",
+    "place_stations",
+    "read_scene",
+    "render_rgbd",
+    "room",
+    "scan_lidar",
+    "scan_tls",
+    "scene_from_mesh",
+    "smooth_path",
+    "station_overlap",
+    "station_pair",
+    "stream",
+    "synthesize",
+    "visible_fraction",
+    "write_tum_sequence",
+]

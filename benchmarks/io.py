@@ -65,9 +65,11 @@ def main() -> None:
         if not args.skip_loadtxt:
             t_lt = best_of(lambda: np.loadtxt(path, skiprows=10), 1)
             rows.append(("numpy.loadtxt (values only)", t_lt))
-    print(f"PTX station {args.cols} x {args.rows} = {n:,} cells, {size_mb:.0f} MB, "
-          f"{len(scan):,} valid points; {os.cpu_count()} cores, {platform.python_version()}, "
-          f"numpy {np.__version__}")
+    print(
+        f"PTX station {args.cols} x {args.rows} = {n:,} cells, {size_mb:.0f} MB, "
+        f"{len(scan):,} valid points; {os.cpu_count()} cores, {platform.python_version()}, "
+        f"numpy {np.__version__}"
+    )
     print()
     print("| operation | time (s) | points/s | MB/s |")
     print("|---|---:|---:|---:|")

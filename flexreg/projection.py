@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np

@@ -54,8 +54,7 @@ def _root(
 
 
 # command modules register themselves on `app`
-from . import scan_commands  # noqa: E402,F401
-from . import synth  # noqa: E402,F401
+from . import convert, scan_commands, synth  # noqa: E402,F401
 
 
 def run(argv: list[str] | None = None) -> int:

@@ -1,0 +1,322 @@
+"""`flexreg convert`: the issue's exact commands against the authors' references, folders,
+--keep-float, and bad input (one error line, exit 1, no file written)."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from flexreg import images as I
+from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.cli import run
+from flexreg.io.depth import read_depth_png
+from flexreg.projection import from_depth
+
+LASER_ARGS = ["--equirect", "0.87", "2.27", "--depth-kind", "range"]
+KINECT_ARGS = ["--pinhole", "519.226", "479.462", "522.23", "272.737", "--depth-kind", "z"]
+
+
+@pytest.fixture(scope="module")
+def conv(shared_data) -> Path:
+    return shared_data / "conversions"
+
+
+def _read(path: Path) -> np.ndarray:
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert img is not None, path
+    return img
+
+
+def _valid3x3(depth_png: Path) -> np.ndarray:
+    """Pixels whose whole 3x3 neighbourhood has a depth reading (border excluded)."""
+    v = _read(depth_png) > 0
+    out = np.zeros_like(v)
+    H, W = v.shape
+    out[1:-1, 1:-1] = np.logical_and.reduce(
+        [v[1 + di : H - 1 + di, 1 + dj : W - 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1)]
+    )
+    return out
+
+
+def _max_lsb(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> int:
+    return int(np.abs(a.astype(np.int64) - b.astype(np.int64))[mask].max())
+
+
+def _no_outputs(folder: Path) -> bool:
+    return not any(p.suffix in (".png", ".npz") for p in folder.rglob("*"))
+
+
+# ------------------------------------------------------------------ the issue's exact commands
+
+
+def test_exact_command_bearing_diagonal_kinect(conv, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = [
+        "convert",
+        str(conv / "data0-depth.png"),
+        *KINECT_ARGS,
+        "--kind",
+        "bearing-diagonal",
+        "--bits",
+        "16",
+        "--out",
+        "b.png",
+    ]
+    assert run(argv) == 0
+    out = _read(tmp_path / "b.png")
+    ref = _read(conv / "bearing-diagonal.png")
+    assert out.dtype == np.uint16 and out.shape == ref.shape
+    assert _max_lsb(out, ref, _valid3x3(conv / "data0-depth.png")) <= 2
+
+
+def test_exact_command_flexion_laserscan(conv, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    depth = conv / "laserscan-depth.png"
+    argv = [
+        "convert",
+        str(depth),
+        *LASER_ARGS,
+        "--kind",
+        "flexion",
+        "--bits",
+        "16",
+        "--out",
+        "f.png",
+    ]
+    assert run(argv) == 0
+    out = _read(tmp_path / "f.png")
+    ref = _read(conv / "flexion-laserscan-reference.png")
+    mask = _valid3x3(depth)
+    assert out.dtype == np.uint16 and out.shape == ref.shape
+    # the command is the library on the README's camera, bit for bit
+    d = read_depth_png(depth)
+    cam = SphericalCamera.from_reference(d.shape[1], d.shape[0], 0.87, 2.27)
+    expected, _ = I.quantize(I.convert(from_depth(d, cam), "flexion"), 16)
+    np.testing.assert_array_equal(out, expected)
+    # laser_intrinsic.txt rounds the polar range to "0.87 2.27"; the reference PNG was made
+    # with exactly 50 and 130 degrees. The 0.3% shorter polar step changes the shape of every
+    # neighbourhood slightly: measured 207 LSB at worst (0.3% of full scale), 42 on average.
+    diff = np.abs(out.astype(np.int64) - ref)[mask]
+    assert diff.max() <= 230 and diff.mean() < 60
+    # with the exact angles the same command reproduces the reference within 2 LSB
+    exact = [str(math.radians(50.0)), str(math.radians(130.0))]
+    argv = [
+        "convert",
+        str(depth),
+        "--equirect",
+        *exact,
+        "--depth-kind",
+        "range",
+        "--kind",
+        "flexion",
+        "--bits",
+        "16",
+        "--out",
+        "f_exact.png",
+    ]
+    assert run(argv) == 0
+    assert _max_lsb(_read(tmp_path / "f_exact.png"), ref, mask) <= 2
+
+
+@pytest.mark.parametrize(
+    ("kind", "bits", "name", "tol"),
+    [
+        ("flexion", 16, "flexion-reference.png", 2),
+        ("bearing-vertical", 8, "bearing-vertical.png", 1),
+        ("bearing-antidiagonal", 8, "bearing-antidiagonal.png", 2),  # see test_images.py
+    ],
+)
+def test_kinect_references_through_cli(conv, tmp_path, kind, bits, name, tol):
+    out = tmp_path / f"{kind}.png"
+    argv = [
+        "convert",
+        str(conv / "data0-depth.png"),
+        *KINECT_ARGS,
+        "--kind",
+        kind,
+        "--bits",
+        str(bits),
+        "--out",
+        str(out),
+    ]
+    assert run(argv) == 0
+    img, ref = _read(out), _read(conv / name)
+    assert img.dtype == ref.dtype
+    assert _max_lsb(img, ref, _valid3x3(conv / "data0-depth.png")) <= tol
+
+
+# ------------------------------------------------------------------ options and folders
+
+
+def test_keep_float_median_and_other_kinds(conv, tmp_path):
+    out = tmp_path / "deep" / "k.png"
+    argv = [
+        "convert",
+        str(conv / "data0-depth.png"),
+        "--pinhole",
+        "519.226",
+        "479.462",
+        "522.23",
+        "272.737",
+        "--depth-scale",
+        "0.001",
+        "--kind",
+        "flexion-angle",
+        "--n",
+        "5",
+        "--median",
+        "3",
+        "--keep-float",
+        "--out",
+        str(out),
+    ]
+    assert run(argv) == 0
+    png = _read(out)
+    assert png.dtype == np.uint8 and png.shape == (540, 960)
+    with np.load(out.with_suffix(".npz")) as z:
+        image, valid = z["image"], z["valid"]
+        assert str(z["kind"]) == "flexion-angle" and int(z["n"]) == 5 and int(z["median"]) == 3
+    assert image.dtype == np.float32 and image.shape == (540, 960)
+    d = read_depth_png(conv / "data0-depth.png", depth_scale=0.001)
+    rimg = from_depth(d, PinholeCamera(519.226, 479.462, 522.23, 272.737, 960, 540))
+    np.testing.assert_array_equal(image, I.convert(rimg, "flexion-angle", n=5, median=3))
+    np.testing.assert_array_equal(valid, np.isfinite(image))
+    np.testing.assert_array_equal(png, I.quantize(image, 8)[0])
+    for kind in ("range", "curvature-mean", "bearing-horizontal"):
+        o = tmp_path / f"{kind}.png"
+        assert (
+            run(
+                [
+                    "convert",
+                    str(conv / "laserscan-depth.png"),
+                    "--equirect",
+                    "0.87",
+                    "2.27",
+                    "--kind",
+                    kind,
+                    "--stretch",
+                    "clahe",
+                    "--out",
+                    str(o),
+                ]
+            )
+            == 0
+        )
+        assert _read(o).shape == (397, 1799)
+
+
+def test_folder_input(conv, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(conv / "laserscan-depth.png", src / "a.png")
+    shutil.copy(conv / "laserscan-depth.png", src / "b.png")
+    (src / "notes.txt").write_text("not a scan")
+    out = tmp_path / "out"
+    argv = [
+        "convert",
+        str(src),
+        *LASER_ARGS,
+        "--kind",
+        "flexion",
+        "--bits",
+        "16",
+        "--keep-float",
+        "--out",
+        str(out),
+    ]
+    assert run(argv) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["a.npz", "a.png", "b.npz", "b.png"]
+    single = tmp_path / "single.png"
+    assert (
+        run(
+            [
+                "convert",
+                str(src / "a.png"),
+                *LASER_ARGS,
+                "--kind",
+                "flexion",
+                "--bits",
+                "16",
+                "--out",
+                str(single),
+            ]
+        )
+        == 0
+    )
+    np.testing.assert_array_equal(_read(out / "a.png"), _read(single))
+    np.testing.assert_array_equal(_read(out / "b.png"), _read(single))
+
+
+def test_folder_with_a_bad_file(conv, tmp_path, capsys):
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(conv / "laserscan-depth.png", src / "good.png")
+    (src / "broken.png").write_bytes(b"\x89PNG not really")
+    out = tmp_path / "out"
+    argv = ["convert", str(src), *LASER_ARGS, "--kind", "flexion", "--out", str(out)]
+    assert run(argv) == 1
+    assert [p.name for p in out.iterdir()] == ["good.png"]
+    err = capsys.readouterr().err
+    assert f"error: {src / 'broken.png'}: " in err
+
+
+# ------------------------------------------------------------------ bad input
+
+
+@pytest.mark.parametrize(
+    ("args", "culprit"),
+    [
+        (["missing.png", *LASER_ARGS, "--kind", "flexion"], "missing.png"),
+        (["{laser}", "--kind", "flexion"], "laserscan-depth.png"),  # no intrinsics
+        (["{laser}", *LASER_ARGS, "--kind", "sobel"], "--kind"),
+        (["{laser}", *LASER_ARGS, "--kind", "flexion", "--n", "4"], "--n"),
+        (["{laser}", *LASER_ARGS, "--kind", "flexion", "--median", "4"], "--median"),
+        (["{laser}", *LASER_ARGS, "--kind", "flexion", "--bits", "12"], "--bits"),
+        (
+            ["{laser}", "--equirect", "0.87", "2.27", "--depth-kind", "z", "--kind", "flexion"],
+            "--depth-kind",
+        ),
+        (["{laser}", *LASER_ARGS, *KINECT_ARGS[:5], "--kind", "flexion"], "--pinhole/--equirect"),
+        (["{laser}", "--equirect", "2.27", "0.87", "--kind", "flexion"], "--equirect"),
+        (["{laser}", "--pinhole", "-5", "5", "1", "1", "--kind", "flexion"], "--pinhole"),
+        (["{rgb}", "--pinhole", "5", "5", "1", "1", "--kind", "flexion"], "rgb.png"),
+        (["{broken}", *LASER_ARGS, "--kind", "flexion"], "broken.png"),
+    ],
+)
+def test_bad_input_exits_1_and_writes_nothing(conv, tmp_path, capsys, args, culprit):
+    rgb = tmp_path / "rgb.png"
+    cv2.imwrite(str(rgb), np.zeros((4, 5, 3), np.uint8))
+    broken = tmp_path / "broken.png"
+    broken.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    subs = {
+        "{laser}": str(conv / "laserscan-depth.png"),
+        "{rgb}": str(rgb),
+        "{broken}": str(broken),
+    }
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    argv = ["convert", *[subs.get(a, a) for a in args], "--out", str(out_dir / "o.png")]
+    assert run(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and culprit in err[0], err
+    assert not any(out_dir.iterdir())
+
+
+def test_bad_output_name(conv, tmp_path, capsys):
+    argv = [
+        "convert",
+        str(conv / "laserscan-depth.png"),
+        *LASER_ARGS,
+        "--kind",
+        "flexion",
+        "--out",
+        str(tmp_path / "o.jpg"),
+    ]
+    assert run(argv) == 1
+    assert "o.jpg: output must be a .png file" in capsys.readouterr().err
+    assert _no_outputs(tmp_path) and not (tmp_path / "o.jpg").exists()

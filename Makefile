@@ -20,6 +20,7 @@ demo: $(STAMP)
 	@bash scripts/ensure-system-libs.sh
 	$(BIN)/flexreg info data/laserscan/laserscan-depth.png
 	$(BIN)/flexreg project data/laserscan/laserscan-depth.png --out $(DEMO)/laserscan-range.png
+	$(BIN)/flexreg convert data/laserscan/laserscan-depth.png --kind flexion --n 5 --bits 8 --out $(DEMO)/laserscan-flexion5.png
 	$(BIN)/flexreg synth --scene room --stations 2 --resolution 1024x512 --seed 0 --out $(DEMO)/synth-room
 	$(BIN)/flexreg info $(DEMO)/synth-room/station_00.ptx
 	@echo "demo results written to $(DEMO)/"

@@ -320,3 +320,37 @@ def test_bad_output_name(conv, tmp_path, capsys):
     assert run(argv) == 1
     assert "o.jpg: output must be a .png file" in capsys.readouterr().err
     assert _no_outputs(tmp_path) and not (tmp_path / "o.jpg").exists()
+
+
+def test_convert_uses_camera_sidecar(tmp_path):
+    """A depth PNG with a ``<stem>.camera.json`` needs no intrinsics options (the demo data)."""
+    from conftest import REPO
+
+    from flexreg.images import convert
+    from flexreg.io import read_scan
+    from flexreg.projection import range_image
+
+    src = REPO / "data" / "laserscan" / "laserscan-depth.png"
+    out = tmp_path / "f.png"
+    assert (
+        run(
+            [
+                "convert",
+                str(src),
+                "--kind",
+                "flexion",
+                "--n",
+                "5",
+                "--bits",
+                "16",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    expect = convert(range_image(read_scan(src)), "flexion", n=5)
+    got = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+    valid = np.isfinite(expect)
+    np.testing.assert_array_equal(got[~valid], 0)
+    assert np.abs(got[valid].astype(np.int64) - np.rint(expect[valid] * 65535)).max() <= 1

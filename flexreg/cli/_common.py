@@ -5,6 +5,8 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.progress import (
@@ -46,3 +48,42 @@ def progress_bar() -> Progress:
         TimeElapsedColumn(),
         console=err_console,
     )
+
+
+def read_input(
+    path: Path,
+    *,
+    pinhole: tuple[float, float, float, float] | None = None,
+    equirect: tuple[float, float] | None = None,
+    depth_kind: str | None = None,
+    depth_scale: float | None = None,
+    all_scans: bool = False,
+) -> list[Any]:
+    """Read the scans of an input file, building a camera for depth PNGs from the options."""
+    from ..errors import InputError
+    from ..io import detect_format, read_scans
+    from ..io.depth import camera_for_image
+
+    _, fmt = detect_format(path)
+    opts: dict[str, Any] = {}
+    if fmt == "depth":
+        if not path.is_file():
+            raise InputError(path, "no such file")
+        try:
+            opts["camera"] = camera_for_image(path, pinhole=pinhole, equirect=equirect)
+        except InputError as e:
+            if e.source in ("pinhole camera", "spherical camera"):  # name the option at fault
+                raise InputError("--pinhole" if pinhole else "--equirect", e.problem) from None
+            raise
+        if depth_kind is not None:
+            if depth_kind not in ("z", "range"):
+                raise InputError("--depth-kind", f"must be z or range, got {depth_kind!r}")
+            opts["depth_kind"] = depth_kind
+        if depth_scale is not None:
+            opts["depth_scale"] = depth_scale
+    elif pinhole or equirect or depth_kind or depth_scale is not None:
+        raise InputError(
+            path, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
+        )
+    scans = read_scans(path, **opts)
+    return scans if all_scans else scans[:1]

@@ -9,7 +9,7 @@ import typer
 
 from ..errors import FlexregError, InputError
 from . import app
-from ._common import console, err_console, progress_bar
+from ._common import console, err_console, progress_bar, read_input
 
 if TYPE_CHECKING:
     from ..projection import RangeImage
@@ -30,7 +30,7 @@ def _check_options(
     pinhole: tuple[float, float, float, float] | None,
     equirect: tuple[float, float] | None,
     depth_kind: str | None,
-    depth_scale: float,
+    depth_scale: float | None,
     out: Path,
     folder: bool,
 ) -> None:
@@ -53,7 +53,7 @@ def _check_options(
         raise InputError("--depth-kind", f"must be z or range, got {depth_kind!r}")
     if equirect is not None and depth_kind == "z":
         raise InputError("--depth-kind", "an equirectangular image stores range, not z")
-    if not depth_scale > 0:
+    if depth_scale is not None and not depth_scale > 0:
         raise InputError(
             "--depth-scale", f"must be a positive number of metres per unit, got {depth_scale}"
         )
@@ -70,40 +70,16 @@ def load_range_image(
     pinhole: tuple[float, float, float, float] | None = None,
     equirect: tuple[float, float] | None = None,
     depth_kind: str | None = None,
-    depth_scale: float = 1.0,
+    depth_scale: float | None = None,
 ) -> RangeImage:
-    """Read a scan (any ``read_scan`` format) or a depth/range PNG with its intrinsics."""
-    from ..camera import PinholeCamera, SphericalCamera
-    from ..io import read_scan
-    from ..projection import from_depth, range_image
+    """Range image of the first scan of any ``read_scan`` input (depth PNGs: intrinsics from
+    the options or the ``<stem>.camera.json`` sidecar)."""
+    from ..projection import range_image
 
-    if path.suffix.lower() != ".png":
-        if pinhole is not None or equirect is not None:
-            raise InputError(path, "--pinhole/--equirect apply to depth PNG images only")
-        return range_image(read_scan(path))
-
-    from ..io.depth import read_depth_png
-
-    if pinhole is None and equirect is None:
-        raise InputError(
-            path,
-            "a depth image needs its intrinsics: --pinhole FX FY CX CY or "
-            "--equirect THETA_MIN THETA_MAX",
-        )
-    depth = read_depth_png(path, depth_scale=depth_scale)
-    H, W = depth.shape
-    camera: PinholeCamera | SphericalCamera
-    try:
-        if pinhole is not None:
-            fx, fy, cx, cy = pinhole
-            camera = PinholeCamera(fx, fy, cx, cy, W, H)
-        else:
-            assert equirect is not None
-            camera = SphericalCamera.from_reference(W, H, equirect[0], equirect[1])
-    except InputError as e:
-        raise InputError("--pinhole" if pinhole is not None else "--equirect", e.problem) from e
-    kind = depth_kind or ("z" if pinhole is not None else "range")
-    return from_depth(depth, camera, depth_kind=kind)  # type: ignore[arg-type]
+    (scan,) = read_input(
+        path, pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
+    )
+    return range_image(scan)
 
 
 def _convert_one(
@@ -196,7 +172,9 @@ def convert_command(
     depth_kind: str | None = typer.Option(
         None, "--depth-kind", help="z or range (default: z for --pinhole, range for --equirect)."
     ),
-    depth_scale: float = typer.Option(1.0, "--depth-scale", help="Metres per PNG unit."),
+    depth_scale: float | None = typer.Option(
+        None, "--depth-scale", help="Metres per PNG unit (default 1, or the camera sidecar's)."
+    ),
     stretch: str = typer.Option(
         "none", "--stretch", help="Contrast stretch for feature detection: none, percentile, clahe."
     ),

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import typer
 
 from . import app
-from ._common import console, stage
+from ._common import console, read_input, stage
 
 PinholeOpt = typer.Option(
     None,
@@ -26,40 +25,6 @@ DepthKindOpt = typer.Option(
     None, "--depth-kind", help="Depth PNG values: z (orthographic) or range."
 )
 DepthScaleOpt = typer.Option(None, "--depth-scale", help="Depth PNG metres per stored unit.")
-
-
-def read_input(
-    path: Path,
-    *,
-    pinhole: tuple[float, float, float, float] | None = None,
-    equirect: tuple[float, float] | None = None,
-    depth_kind: str | None = None,
-    depth_scale: float | None = None,
-    all_scans: bool = False,
-) -> list[Any]:
-    """Read the scans of an input file, building a camera for depth PNGs from the options."""
-    from ..errors import InputError
-    from ..io import detect_format, read_scans
-    from ..io.depth import camera_for_image
-
-    _, fmt = detect_format(path)
-    opts: dict[str, Any] = {}
-    if fmt == "depth":
-        if not path.is_file():
-            raise InputError(path, "no such file")
-        opts["camera"] = camera_for_image(path, pinhole=pinhole, equirect=equirect)
-        if depth_kind is not None:
-            if depth_kind not in ("z", "range"):
-                raise InputError("--depth-kind", f"must be z or range, got {depth_kind!r}")
-            opts["depth_kind"] = depth_kind
-        if depth_scale is not None:
-            opts["depth_scale"] = depth_scale
-    elif pinhole or equirect or depth_kind or depth_scale is not None:
-        raise InputError(
-            path, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
-        )
-    scans = read_scans(path, **opts)
-    return scans if all_scans else scans[:1]
 
 
 @app.command("info")

@@ -252,12 +252,12 @@ def ransac_rigid(
             f"no valid 3-point sample among {n} correspondences (all too close or inconsistent)"
         )
     T = best_T
-    inl = _residual2(T, Q, P) < th2
+    inl = squared_residuals(T, Q, P) < th2
     for _ in range(2):
         if inl.sum() < 3:
             break
         T = kabsch(Q[inl], P[inl])
-        inl = _residual2(T, Q, P) < th2
+        inl = squared_residuals(T, Q, P) < th2
     if inl.sum() < max(3, min_inliers):
         raise DegenerateGeometryError(
             f"only {int(inl.sum())} inliers of {n} correspondences within {threshold_m:.4g} m "
@@ -265,7 +265,7 @@ def ransac_rigid(
         )
     if spread_ratio(P[inl]) < COLLINEAR_RATIO:
         raise DegenerateGeometryError(f"the {int(inl.sum())} inliers are collinear")
-    rmse = float(np.sqrt(_residual2(T, Q, P)[inl].mean()))
+    rmse = float(np.sqrt(squared_residuals(T, Q, P)[inl].mean()))
     log.debug("RANSAC: %d hypotheses, %d/%d inliers, rmse %.4g m", it, inl.sum(), n, rmse)
     return RansacResult(T_target_source=T, inliers=inl, iterations=it, rmse_m=rmse)
 
@@ -273,14 +273,14 @@ def ransac_rigid(
 def _sample_triplets(gen: np.random.Generator, n: int, b: int) -> NDArray[np.int64]:
     """``b`` triplets of distinct indices in ``[0, n)`` (resampling the few collisions)."""
     idx = gen.integers(0, n, size=(b, 3))
-    bad = (idx[:, 0] == idx[:, 1]) | (idx[:, 1] == idx[:, 2]) | (idx[:, 0] == idx[:, 2])
-    while bad.any():
-        idx[bad] = gen.integers(0, n, size=(int(bad.sum()), 3))
+    while True:
         bad = (idx[:, 0] == idx[:, 1]) | (idx[:, 1] == idx[:, 2]) | (idx[:, 0] == idx[:, 2])
-    return idx
+        if not bad.any():
+            return idx
+        idx[bad] = gen.integers(0, n, size=(int(bad.sum()), 3))
 
 
-def _residual2(
+def squared_residuals(
     T: NDArray[np.float64], Q: NDArray[np.float64], P: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     r = P @ T[:3, :3].T + T[:3, 3] - Q

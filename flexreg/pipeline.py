@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .alignment import consistent_subset, ransac_rigid
+from .alignment import consistent_subset, ransac_rigid, squared_residuals
 from .correspondences import lift
 from .errors import DegenerateGeometryError, RegistrationError
 from .features import Features, detect_and_describe
@@ -325,10 +325,10 @@ def register(
         except DegenerateGeometryError as e:
             raise RegistrationError(f"{e} ({len(pairs)} matches)") from None
         T = rr.T_target_source
-        r = ps @ T[:3, :3].T + T[:3, 3] - pt
-        inl = np.einsum("ij,ij->i", r, r) < thr * thr
+        d2 = squared_residuals(T, pt, ps)
+        inl = d2 < thr * thr
     T_coarse = T.copy()
-    rmse = float(np.sqrt(np.mean(np.einsum("ij,ij->i", r[inl], r[inl]))))
+    rmse = float(np.sqrt(d2[inl].mean()))
     fitness, denom = float(inl.sum() / len(pairs)), "lifted matches"
     info = _information_from_points(pt[inl])
     if config.refine:

@@ -238,3 +238,43 @@ def test_failed_write_leaves_no_file(tmp_path):
     with pytest.raises(InputError, match="cannot write"):
         write_scan(tmp_path / "out.xyz", scan)
     assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- more real data
+
+
+def test_ouster_destaggered_frames(shared_data):
+    path = shared_data / "lidar_ouster_os1_128_3scans" / "derived_destaggered_3scans.npz"
+    scans = read_scans(path)
+    with np.load(path) as z:
+        xyz = z["xyz_m"]
+    assert len(scans) == 3
+    for i, s in enumerate(scans):
+        assert s.grid_shape == (128, 1024) and s.intensity is not None
+        valid = np.any(xyz[i] != 0, axis=2)
+        assert len(s) == int(valid.sum())  # (0, 0, 0) no-returns are not points
+        np.testing.assert_array_equal(s.points, xyz[i][valid])
+
+
+def test_bunny_grids_and_ground_truth(shared_data):
+    from scipy.spatial import cKDTree
+
+    a, b = read_scans(shared_data / "bunny_range_scans_gt" / "derived_bunny_grids_and_gt.npz")
+    assert (a.name, a.grid_shape, len(a)) == ("bun000", (400, 512), 40256)
+    assert (b.name, b.grid_shape, len(b)) == ("bun045", (400, 512), 40097)
+    # the poses put bun045 onto bun000 (README: 91 % of points within 1 mm)
+    d, _ = cKDTree(a.points_world()).query(b.points_world())
+    assert np.mean(d < 0.001) > 0.85
+
+
+def test_7scenes_depth_frames(shared_data):
+    folder = shared_data / "rgbd_7scenes_redkitchen"
+    K = np.loadtxt(folder / "camera-intrinsics.txt")
+    cam = PinholeCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], 640, 480)
+    png = sorted(folder.glob("frame-*.depth.png"))[0]
+    raw = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+    s = read_scan(png, camera=cam, depth_scale=0.001, invalid_values=(65535,))
+    valid = (raw > 0) & (raw < 65535)
+    assert s.grid_shape == (480, 640) and len(s) == int(valid.sum())
+    np.testing.assert_allclose(np.sort(s.points[:, 2]), np.sort(raw[valid] / 1000.0))
+    assert 0.3 < np.median(s.points[:, 2]) < 4.0  # a kitchen seen from arm's length

@@ -5,9 +5,15 @@ float64, ``T_world_scanner`` (4, 4), optional ``intensity`` (N,), ``colors`` (N,
 ``grid_shape`` (2,) and ``grid_index`` (N, 2), ``camera`` (JSON text) and ``name``. Several
 scans in one file carry the prefix ``scan<i>/`` on every key.
 
-Foreign arrays are accepted too: an ``.npy`` (or a single-array ``.npz``) holding (N, 3) or
-(N, 4+) points (fourth column = intensity) or an organised (H, W, 3) grid with NaN or zeros for
-no return.
+Foreign layouts are accepted too:
+
+- an ``.npy`` (or a single-array ``.npz``) holding (N, 3) or (N, 4+) points (fourth column =
+  intensity) or an organised (H, W, 3) grid with NaN or zeros for no return;
+- an ``.npz`` with one organised ``xyz*`` array, (H, W, 3) or a stack (F, H, W, 3) of frames
+  (e.g. destaggered lidar sweeps), with an optional same-shaped ``intensity*`` /
+  ``reflectivity*`` array;
+- an ``.npz`` with ``<name>_vertices`` (N, 3) and ``<name>_grid_index`` (H, W) int (-1 = empty)
+  pairs, one scan each, posed by an optional ``<name>_T_world_scan`` (4, 4).
 """
 
 from __future__ import annotations
@@ -64,13 +70,78 @@ def read(path: Path, **_: Any) -> list[Scan]:
             if len(keys) == 1:
                 (k,) = keys
                 return [_from_array(path, data[k], k)]
-            raise InputError(path, f"no 'points' array (keys: {', '.join(sorted(keys))})")
+            foreign = _foreign_npz(path, data)
+            if foreign is not None:
+                return foreign
+            raise InputError(
+                path,
+                f"no 'points', organised 'xyz' or '<name>_vertices' + '<name>_grid_index' arrays "
+                f"(keys: {', '.join(sorted(keys))})",
+            )
         try:
             return [_scan_from_npz(path, data, p) for p in prefixes]
         except (KeyError, ValueError, TypeError) as e:
             if isinstance(e, InputError):
                 raise
             raise InputError(path, f"inconsistent flexreg npz ({e})") from None
+
+
+def _foreign_npz(path: Path, data: Any) -> list[Scan] | None:
+    """Organised ``xyz`` stacks and ``vertices`` + ``grid_index`` pairs (module docstring)."""
+    keys = sorted(data.files)
+    names = [k[: -len("_vertices")] for k in keys if k.endswith("_vertices")]
+    names = [n for n in names if f"{n}_grid_index" in keys]
+    if names:
+        scans = []
+        for n in names:
+            v = np.asarray(data[f"{n}_vertices"], dtype=np.float64)
+            g = np.asarray(data[f"{n}_grid_index"])
+            if (
+                v.ndim != 2
+                or v.shape[1] != 3
+                or g.ndim != 2
+                or not np.issubdtype(g.dtype, np.integer)
+            ):
+                raise InputError(path, f"{n}: vertices must be (N, 3) and grid_index (H, W) int")
+            if g.max() >= len(v):
+                raise InputError(path, f"{n}: grid index {g.max()} beyond {len(v)} vertices")
+            rows, cols = np.nonzero(g >= 0)
+            pose = data[f"{n}_T_world_scan"] if f"{n}_T_world_scan" in keys else np.eye(4)
+            scans.append(
+                Scan(
+                    points=v[g[rows, cols]],
+                    grid_shape=g.shape,
+                    grid_index=np.stack([rows, cols], axis=1),
+                    T_world_scanner=pose,
+                    path=path,
+                    name=n,
+                )
+            )
+        return scans
+    xyz_keys = [
+        k
+        for k in keys
+        if k.lower().startswith("xyz") and data[k].ndim in (3, 4) and data[k].shape[-1] == 3
+    ]
+    if len(xyz_keys) != 1:
+        return None
+    xyz = np.asarray(data[xyz_keys[0]], dtype=np.float64)
+    frames = xyz[None] if xyz.ndim == 3 else xyz
+    inten = None
+    for k in keys:
+        if k.lower().startswith(("intensity", "reflectivity")) and data[k].shape == xyz.shape[:-1]:
+            inten = np.asarray(data[k], dtype=np.float32)
+            inten = inten[None] if xyz.ndim == 3 else inten
+            break
+    return [
+        Scan.from_organized(
+            f,
+            intensity=None if inten is None else inten[i],
+            path=path,
+            name=path.stem if len(frames) == 1 else f"{path.stem}#{i}",
+        )
+        for i, f in enumerate(frames)
+    ]
 
 
 def _scan_from_npz(path: Path, data: Any, p: str) -> Scan:

@@ -1,4 +1,4 @@
-"""`flexreg convert`: the issue's exact commands against the authors' references, folders,
+"""`flexreg convert`: the documented commands against the authors' references, folders,
 --keep-float, and bad input (one error line, exit 1, no file written)."""
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def _no_outputs(folder: Path) -> bool:
     return not any(p.suffix in (".png", ".npz") for p in folder.rglob("*"))
 
 
-# ------------------------------------------------------------------ the issue's exact commands
+# ------------------------------------------------------------------ the documented commands
 
 
 def test_exact_command_bearing_diagonal_kinect(conv, tmp_path, monkeypatch):

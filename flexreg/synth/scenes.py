@@ -445,19 +445,7 @@ def room(
             _put(b, obj, *spot)
 
     _exterior(b, rng, -wt, -wt, Lx + wt, Ly + wt)
-    V, T, refl, rgb = b.arrays()
-    return Scene(
-        V,
-        T,
-        refl,
-        rgb,
-        kind="room",
-        seed=seed,
-        floor_z=0.0,
-        region=(0.3, 0.3, Lx - 0.3, Ly - 0.3),
-        objects=b.counts,
-        name=f"room-{seed}" if seed is not None else "room",
-    )
+    return _finish(b, "room", seed, Lx, Ly, margin_m=0.3)
 
 
 def _door(
@@ -682,19 +670,7 @@ def courtyard(
                 )
             x += rng.uniform(5.2, 7.5)
 
-    V, T, refl, rgb = b.arrays()
-    return Scene(
-        V,
-        T,
-        refl,
-        rgb,
-        kind="courtyard",
-        seed=seed,
-        floor_z=0.0,
-        region=(0.5, 0.5, Lx - 0.5, Ly - 0.5),
-        objects=b.counts,
-        name=f"courtyard-{seed}" if seed is not None else "courtyard",
-    )
+    return _finish(b, "courtyard", seed, Lx, Ly, margin_m=0.5)
 
 
 def _building(
@@ -1126,19 +1102,7 @@ def hall(
             )
             _put(b, obj, *spot)
 
-    V, T, refl, rgb = b.arrays()
-    return Scene(
-        V,
-        T,
-        refl,
-        rgb,
-        kind="hall",
-        seed=seed,
-        floor_z=0.0,
-        region=(0.8, 0.8, Lx - 0.8, Ly - 0.8),
-        objects=b.counts,
-        name=f"hall-{seed}" if seed is not None else "hall",
-    )
+    return _finish(b, "hall", seed, Lx, Ly, margin_m=0.8)
 
 
 def i_beam_z(
@@ -1423,4 +1387,24 @@ def add_mesh_objects(
         region=scene.region,
         objects=objects,
         name=scene.name,
+    )
+
+
+def _finish(
+    b: MeshBuilder, kind: str, seed: int | None, Lx: float, Ly: float, *, margin_m: float
+) -> Scene:
+    """The built mesh as a :class:`Scene` on floor z = 0, with stations allowed inside the
+    ``Lx`` x ``Ly`` footprint less ``margin_m``."""
+    V, T, refl, rgb = b.arrays()
+    return Scene(
+        V,
+        T,
+        refl,
+        rgb,
+        kind=kind,
+        seed=seed,
+        floor_z=0.0,
+        region=(margin_m, margin_m, Lx - margin_m, Ly - margin_m),
+        objects=b.counts,
+        name=f"{kind}-{seed}" if seed is not None else kind,
     )

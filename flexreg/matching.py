@@ -60,3 +60,95 @@ def match(
             nn[b.queryIdx] = b.trainIdx
         out = out[nn[out[:, 0]] == out[:, 1]]
     return out[np.argsort(out[:, 1], kind="stable")]
+
+
+def descriptor_distances(
+    target: Features, source: Features, ti: NDArray[np.int64], si: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """Descriptor distance of the pairs ``(target[ti[k]], source[si[k]])``: L2 for float
+    descriptors, Hamming (bits) for binary ones."""
+    out = np.empty(len(ti), dtype=np.float64)
+    step = 65536
+    for a in range(0, len(ti), step):
+        dt = target.descriptors[ti[a : a + step]]
+        ds = source.descriptors[si[a : a + step]]
+        if source.binary:
+            out[a : a + step] = np.unpackbits(np.bitwise_xor(dt, ds), axis=1).sum(axis=1)
+        else:
+            d = dt.astype(np.float32) - ds.astype(np.float32)
+            out[a : a + step] = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return out
+
+
+def match_guided(
+    target: Features,
+    source: Features,
+    target_xyz: NDArray[np.float64],
+    source_xyz: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    *,
+    radius_m: float = 0.2,
+    radius_per_m: float = 0.0,
+    ratio: float = 0.9,
+) -> NDArray[np.int64]:
+    """Match features near where a transform predicts them (guided matching).
+
+    Each source keypoint's 3D point is mapped into the target frame by ``T_target_source``;
+    the candidates are the target keypoints within ``radius_m + radius_per_m * range`` of that
+    prediction, and the one with the nearest descriptor wins if it passes the ratio test
+    against the second-nearest candidate (a single candidate passes). Geometry does the
+    pruning that the ratio test over all keypoints cannot do among repetitive structure, so
+    far more true matches survive than with :func:`match`.
+
+    Parameters
+    ----------
+    target, source : Features
+    target_xyz, source_xyz : (Kt, 3), (Ks, 3) float64, metres
+        The keypoints' 3D points in their scan frames (NaN: not liftable, never matched).
+    T_target_source : (4, 4) float64
+        Prior transform.
+    radius_m : float, metres
+        Search radius around each prediction.
+    radius_per_m : float
+        Extra radius per metre of predicted range (angular uncertainty of the prior).
+    ratio : float
+        Ratio test among the candidates; 1 disables it.
+
+    Returns
+    -------
+    (Q, 2) int64
+        ``[target index, source index]`` per match, sorted by source index; each target
+        keypoint used at most once (the pair with the best descriptor distance keeps it).
+    """
+    from scipy.spatial import cKDTree
+
+    okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
+    oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
+    if len(okt) == 0 or len(oks) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    T = np.asarray(T_target_source, dtype=np.float64)
+    q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
+    r = radius_m + radius_per_m * np.linalg.norm(q, axis=1)
+    tree = cKDTree(target_xyz[okt])
+    cand = tree.query_ball_point(q, r)
+    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))
+    if lens.sum() == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    si = np.repeat(oks, lens)
+    ti = okt[np.fromiter((j for c in cand for j in c), dtype=np.int64, count=int(lens.sum()))]
+    d = descriptor_distances(target, source, ti, si)
+    order = np.lexsort((ti, d, si))  # per source: nearest descriptor first (ties: lower index)
+    si, ti, d = si[order], ti[order], d[order]
+    first = np.r_[True, si[1:] != si[:-1]]
+    starts = np.flatnonzero(first)
+    counts = np.diff(np.r_[starts, len(si)])
+    best_t, best_s, best_d = ti[starts], si[starts], d[starts]
+    second = np.where(counts > 1, d[np.minimum(starts + 1, len(d) - 1)], np.inf)
+    keep = best_d < ratio * second if ratio < 1 else np.ones(len(starts), dtype=bool)
+    best_t, best_s, best_d = best_t[keep], best_s[keep], best_d[keep]
+    # one source per target keypoint: the nearest descriptor keeps it
+    o = np.lexsort((best_s, best_d, best_t))
+    uniq = np.r_[True, best_t[o][1:] != best_t[o][:-1]]
+    o = o[uniq]
+    out = np.column_stack([best_t[o], best_s[o]]).astype(np.int64)
+    return out[np.argsort(out[:, 1], kind="stable")]

@@ -10,6 +10,7 @@ Stages (each public and usable alone): range image (:mod:`flexreg.projection`) -
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -20,12 +21,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .alignment import consistent_subset, ransac_rigid, squared_residuals
+from .camera import PinholeCamera
 from .correspondences import lift
-from .errors import DegenerateGeometryError, RegistrationError
+from .errors import ConfigError, DegenerateGeometryError, RegistrationError
 from .features import Features, detect_and_describe
 from .matching import match
 from .projection import RangeImage, range_image
 from .scan import Scan
+from .transforms import invert, rotation_about_axis
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +73,25 @@ class RegistrationConfig:
         ICP voxel; derived from point spacing when None.
     seed : int
         Randomness (RANSAC sampling); same seed, same transform.
+    fill_holes : bool
+        Fill isolated no-return pixels before the conversion
+        (:func:`flexreg.projection.fill_holes`).
+    upright : {"auto", "on", "off"}
+        Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
+        (:mod:`flexreg.topview`) and use the best overlays to guide matching. ``"auto"`` uses it
+        when both scans are panoramas or native grids that look levelled, ``"on"`` requires it.
+    max_tilt_rad : float, radians
+        Largest tilt of a scan still treated as levelled.
+    plan_cell_m : float, metres
+        Plan-view cell size.
+    plan_hypotheses : int
+        Plan overlays tried (best first).
+    guided_radius_m, guided_radius_per_m : float
+        Guided matching search radius around a prior's prediction: metres plus metres per
+        metre of range.
+    min_overlap : float
+        Smallest share of the source's points the result must explain (see
+        :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
     """
 
     image: str = "flexion"
@@ -90,6 +112,14 @@ class RegistrationConfig:
     icp: str = "point-to-plane"
     voxel_m: float | None = None
     seed: int = 0
+    fill_holes: bool = True
+    upright: str = "auto"
+    max_tilt_rad: float = math.radians(10.0)
+    plan_cell_m: float = 0.25
+    plan_hypotheses: int = 3
+    guided_radius_m: float = 0.25
+    guided_radius_per_m: float = 0.02
+    min_overlap: float = 0.1
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -128,6 +158,9 @@ class RegistrationResult:
     inlier_mask : (Q,) bool
     keypoints : tuple of (K, 2) arrays
         Target and source keypoint positions of the lifted matches (for drawing).
+    prior : str
+        Which prior led to the estimate: ``"plan"`` (plan-view overlay) or ``"descriptors"``
+        (global descriptor matching).
     """
 
     T_target_source: NDArray[np.float64]
@@ -144,6 +177,7 @@ class RegistrationResult:
     correspondences: NDArray[np.float64] = field(repr=False)
     inlier_mask: NDArray[np.bool_] = field(repr=False)
     keypoints: tuple[NDArray[np.float64], NDArray[np.float64]] = field(repr=False)
+    prior: str = "descriptors"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no per-match arrays)."""
@@ -158,6 +192,7 @@ class RegistrationResult:
             "information": self.information.tolist(),
             "threshold_m": self.threshold_m,
             "timings_s": self.timings_s,
+            "prior": self.prior,
             "seed": self.config.seed,
             "config": self.config.to_dict(),
         }
@@ -238,6 +273,218 @@ def _information_from_points(points: NDArray[np.float64]) -> NDArray[np.float64]
     return info
 
 
+def derive_threshold(
+    target: RangeImage,
+    source: RangeImage,
+    xy_target: NDArray[np.float64],
+    xy_source: NDArray[np.float64],
+    *,
+    threshold_px: float = 3.0,
+) -> float:
+    """Inlier distance from the scans' resolution: ``threshold_px`` times the median metric
+    footprint of the pixels under the keypoints (at least 5 mm), metres."""
+    f = []
+    for img, xy in ((target, xy_target), (source, xy_source)):
+        if len(xy) == 0:
+            continue
+        fp = pixel_footprint(img)
+        c = np.clip(np.rint(xy).astype(np.int64), 0, [img.width - 1, img.height - 1])
+        f.append(fp[c[:, 1], c[:, 0]])
+    fa = np.concatenate(f) if f else np.zeros(0)
+    thr = float(threshold_px * np.nanmedian(fa)) if np.isfinite(fa).any() else 0.05
+    return max(thr, 0.005)
+
+
+def upright_priors(
+    target: RangeImage, source: RangeImage, config: RegistrationConfig = RegistrationConfig()
+) -> list[NDArray[np.float64]]:
+    """``T_target_source`` candidates of two levelled scans from their plan views, best first.
+
+    Each scan's vertical is estimated from its surfaces, the plans of the levelled scans are
+    overlaid by FFT correlation over yaw and the height offset is read from their horizontal
+    surfaces (:mod:`flexreg.topview`). Accurate to about a plan cell and a degree: a prior for
+    guided matching, not a result.
+
+    Raises
+    ------
+    DegenerateGeometryError
+        A scan is not levelled (tilt above ``config.max_tilt_rad``) or shows too little
+        horizontal or vertical surface.
+    """
+    from . import topview
+
+    views = []
+    for img in (target, source):
+        stride = max(1, math.ceil(math.sqrt(img.height * img.width / 1.0e6)))
+        pts, nrm, area = topview.surface_normals(img, k=2, stride=stride)
+        lev = topview.estimate_up(nrm, area, max_tilt_rad=config.max_tilt_rad)
+        views.append(
+            (
+                lev,
+                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m),
+                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m / 4),
+            )
+        )
+    (lt, vt, vtf), (ls, vs, vsf) = views
+    plans = topview.match_top_views(
+        vt, vs, yaw_step_rad=math.radians(2.0), top_k=config.plan_hypotheses
+    )
+    plans = [topview.refine_plan_match(vtf, vsf, m) for m in plans]
+    dz = topview.height_offset(vt, vs)
+    out = []
+    for m in plans:
+        M = np.eye(4)
+        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
+        M[:3, 3] = (m.t_xy[0], m.t_xy[1], dz)
+        Lt, Ls = np.eye(4), np.eye(4)
+        Lt[:3, :3], Ls[:3, :3] = lt.R_level, ls.R_level
+        out.append(invert(Lt) @ M @ Ls)
+    log.info(
+        "plan overlays: %s (tilts %.2f / %.2f deg, dz %.3f m)",
+        ", ".join(f"{math.degrees(m.yaw_rad):.1f} deg score {m.score:.0f}" for m in plans),
+        math.degrees(lt.tilt_rad),
+        math.degrees(ls.tilt_rad),
+        dz,
+    )
+    return out
+
+
+def overlap_score(
+    target: RangeImage,
+    source: RangeImage,
+    T_target_source: NDArray[np.float64],
+    *,
+    tolerance_m: float = 0.05,
+    tolerance_rel: float = 0.01,
+    samples: int = 20000,
+) -> tuple[float, float]:
+    """How well a transform explains the target's view of the source: a dense check.
+
+    A regular sample of the source's points is mapped into the target frame and looked up in
+    the target's range image. A point is *consistent* when the target saw a surface at the
+    same range (within ``tolerance_m + tolerance_rel * range``) and *in conflict* when it
+    lies clearly in front of what the target saw: the target looked through the place where
+    the transform puts it, so a wrong transform collects conflicts while a right one only
+    collects consistent and occluded points. Native grids without a camera model fall back
+    to nearest-neighbour distances (no conflicts).
+
+    Returns
+    -------
+    consistent, conflicting : float
+        Fractions of the sampled source points.
+    """
+    _, ok, bad = _overlap(target, source, T_target_source, tolerance_m, tolerance_rel, samples)
+    return (float(ok.mean()), float(bad.mean())) if len(ok) else (0.0, 0.0)
+
+
+def _overlap(
+    target: RangeImage,
+    source: RangeImage,
+    T_target_source: NDArray[np.float64],
+    tolerance_m: float,
+    tolerance_rel: float,
+    samples: int,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
+    ps = source.xyz[source.valid]
+    if len(ps) == 0:
+        return np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, bool)
+    step = max(1, len(ps) // samples)
+    ps = ps[::step]
+    T = np.asarray(T_target_source, dtype=np.float64)
+    q = ps @ T[:3, :3].T + T[:3, 3]
+    cam = target.camera
+    if cam is None:
+        from scipy.spatial import cKDTree
+
+        pt = target.xyz[target.valid]
+        pt = pt[:: max(1, len(pt) // 200_000)]
+        d, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
+        ok = d < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
+        return q, ok, np.zeros(len(q), dtype=bool)
+    u, v, d = cam.project(q)
+    with np.errstate(invalid="ignore"):
+        iu = np.floor(u + 0.5)
+        iv = np.floor(v + 0.5)
+        inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
+        inside &= (iu >= 0) & (iu < target.width) & (iv >= 0) & (iv < target.height)
+    ref = target.depth_z() if isinstance(cam, PinholeCamera) else target.range
+    r = np.full(len(q), np.nan)
+    r[inside] = ref[iv[inside].astype(np.int64), iu[inside].astype(np.int64)]
+    tol = tolerance_m + tolerance_rel * np.abs(d)
+    with np.errstate(invalid="ignore"):
+        consistent = np.abs(d - r) < tol
+        conflict = d < r - tol
+    return q, consistent, conflict
+
+
+@dataclass(eq=False)
+class _Estimate:
+    T: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+    inliers: NDArray[np.bool_]
+    origin: str
+
+
+def _guided_estimate(
+    ft: Features,
+    fs: Features,
+    xt: NDArray[np.float64],
+    xs: NDArray[np.float64],
+    T0: NDArray[np.float64],
+    thr: float,
+    config: RegistrationConfig,
+    origin: str,
+) -> _Estimate | None:
+    """Guided matching around a prior, then least squares with a shrinking inlier radius.
+
+    The prior is trusted to within the guided search radius; starting from it, correspondences
+    within the current radius are fitted (Kabsch) and the radius halves down to ``thr``, so
+    the estimate cannot jump to an unrelated model the way RANSAC on the same matches can.
+    A second, tight guided round around the result collects the final matches.
+    """
+    from .alignment import kabsch
+    from .matching import match_guided
+
+    def shrink(T: NDArray[np.float64], pairs: NDArray[np.int64], r0: float) -> Any:
+        pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
+        rng_s = np.linalg.norm(ps, axis=1)
+        radius = r0
+        inl = np.zeros(len(pairs), dtype=bool)
+        while True:
+            lim = np.maximum(radius, thr) if radius > thr else thr
+            extra = config.guided_radius_per_m * rng_s * (radius / r0) if radius > thr else 0.0
+            inl = squared_residuals(T, pt, ps) < (lim + extra) ** 2
+            if inl.sum() < 3 or spread_ratio(ps[inl]) < 1e-3:
+                return None, inl
+            T = kabsch(pt[inl], ps[inl])
+            if radius <= thr:
+                break
+            radius = max(radius / 2, thr)
+        for _ in range(2):
+            inl = squared_residuals(T, pt, ps) < thr * thr
+            if inl.sum() < 3 or spread_ratio(ps[inl]) < 1e-3:
+                return None, inl
+            T = kabsch(pt[inl], ps[inl])
+        return T, squared_residuals(T, pt, ps) < thr * thr
+
+    from .alignment import spread_ratio
+
+    r0 = max(config.guided_radius_m, 2 * thr)
+    pairs = match_guided(ft, fs, xt, xs, T0, radius_m=r0, radius_per_m=config.guided_radius_per_m)
+    if len(pairs) < 3:
+        return None
+    T, _ = shrink(T0, pairs, r0)
+    if T is None:
+        return None
+    pairs = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)
+    if len(pairs) < 3:
+        return None
+    T, inl = shrink(T, pairs, 2 * thr)
+    if T is None:
+        return None
+    return _Estimate(T, pairs, inl, origin)
+
+
 def register(
     target: Scan | RangeImage,
     source: Scan | RangeImage,
@@ -246,6 +493,12 @@ def register(
     progress: Callable[[str], None] | None = None,
 ) -> RegistrationResult:
     """Register ``source`` onto ``target``: returns ``T_target_source``.
+
+    Priors come from two independent routes: global descriptor matching (ratio test, mutual
+    check, pairwise-consistency pruning, RANSAC) and, for levelled scanners, plan-view overlays
+    (:func:`upright_priors`). Each prior guides a second matching of all keypoints near its
+    predictions (:func:`flexreg.matching.match_guided`), followed by RANSAC and a least-squares
+    fit on the inliers; the estimate with the most inliers wins and is refined by ICP.
 
     Parameters
     ----------
@@ -261,6 +514,12 @@ def register(
         Too few matches or inliers, degenerate (collinear) inliers, or ICP without overlap;
         the message gives the counts. No transform is returned then.
     """
+    from .alignment import spread_ratio
+    from .matching import match_guided
+    from .projection import fill_holes
+
+    if config.upright not in ("auto", "on", "off"):
+        raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.upright!r}")
     timings: dict[str, float] = {}
 
     def stage(name: str) -> Any:
@@ -270,6 +529,8 @@ def register(
 
     with stage("range images"):
         ti, si = _as_image(target), _as_image(source)
+        if config.fill_holes:
+            ti, si = fill_holes(ti), fill_holes(si)
     with stage("feature images"):
         fti, mt = feature_image(ti, config)
         fsi, ms = feature_image(si, config)
@@ -280,57 +541,125 @@ def register(
         fs = detect_and_describe(
             fsi, config.features, ms, max_features=config.max_features, wrap=si.wraps
         )
-    with stage("matching"):
-        pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
     with stage("lifting"):
-        pt, okt = lift(ti, ft.xy[pairs[:, 0]])
-        ps, oks = lift(si, fs.xy[pairs[:, 1]])
-        ok = okt & oks
-        pt, ps, pairs = pt[ok], ps[ok], pairs[ok]
-    log.info("%d/%d keypoints, %d matches lifted", len(ft), len(fs), len(pairs))
-    if len(pairs) < max(3, config.min_inliers):
+        xt, _ = lift(ti, ft.xy)
+        xs, _ = lift(si, fs.xy)
+    n_lt = int(np.isfinite(xt).all(1).sum())
+    n_ls = int(np.isfinite(xs).all(1).sum())
+    log.info("%d/%d keypoints, %d/%d lifted", len(ft), len(fs), n_lt, n_ls)
+    if n_lt < 3 or n_ls < 3:
         raise RegistrationError(
-            f"only {len(pairs)} lifted matches ({len(ft)} target / {len(fs)} source keypoints); "
-            f"need at least {max(3, config.min_inliers)}"
+            f"too few keypoints on valid surface: {n_lt} target / {n_ls} source "
+            f"(of {len(ft)} / {len(fs)} detected)"
         )
+    thr = (
+        float(config.threshold_m)
+        if config.threshold_m is not None
+        else derive_threshold(
+            ti,
+            si,
+            ft.xy[np.isfinite(xt).all(1)],
+            fs.xy[np.isfinite(xs).all(1)],
+            threshold_px=config.threshold_px,
+        )
+    )
+    priors: list[tuple[str, NDArray[np.float64]]] = []
+    notes: list[str] = []
+    panoramic = not isinstance(ti.camera, PinholeCamera) and not isinstance(
+        si.camera, PinholeCamera
+    )
+    if config.upright == "on" or (config.upright == "auto" and panoramic):
+        with stage("plan views"):
+            try:
+                priors += [("plan", T) for T in upright_priors(ti, si, config)]
+            except DegenerateGeometryError as e:
+                if config.upright == "on":
+                    raise RegistrationError(f"upright prior impossible: {e}") from None
+                notes.append(f"no plan prior ({e})")
+                log.info("no plan prior: %s", e)
+    with stage("matching"):
+        lt_ok = np.asarray(np.isfinite(xt).all(1), dtype=bool)
+        ls_ok = np.asarray(np.isfinite(xs).all(1), dtype=bool)
+        pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
+        pairs = pairs[lt_ok[pairs[:, 0]] & ls_ok[pairs[:, 1]]]
     with stage("estimation"):
-        if config.threshold_m is not None:
-            thr = float(config.threshold_m)
-        else:
-            fp_t = pixel_footprint(ti)
-            fp_s = pixel_footprint(si)
-            xt = np.clip(np.rint(ft.xy[pairs[:, 0]]).astype(int), 0, [ti.width - 1, ti.height - 1])
-            xs = np.clip(np.rint(fs.xy[pairs[:, 1]]).astype(int), 0, [si.width - 1, si.height - 1])
-            f = np.r_[fp_t[xt[:, 1], xt[:, 0]], fp_s[xs[:, 1], xs[:, 0]]]
-            thr = float(config.threshold_px * np.nanmedian(f)) if np.isfinite(f).any() else 0.05
-            thr = max(thr, 0.005)
-        idx = np.arange(len(pairs))
-        if config.consistency:
-            idx = consistent_subset(pt, ps, threshold_m=2 * thr, relative=0.01)
-            if len(idx) < max(3, config.min_inliers):
-                raise RegistrationError(
-                    f"only {len(idx)} of {len(pairs)} matches are mutually consistent "
-                    f"(threshold {thr:.3g} m); need {max(3, config.min_inliers)}"
+        if len(pairs) >= 3:
+            pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
+            idx = np.arange(len(pairs))
+            if config.consistency:
+                idx = consistent_subset(pt, ps, threshold_m=2 * thr, relative=0.01)
+            try:
+                rr = ransac_rigid(
+                    pt[idx],
+                    ps[idx],
+                    threshold_m=thr,
+                    confidence=config.confidence,
+                    max_iterations=config.max_iterations,
+                    min_inliers=3,
+                    rng=config.seed,
                 )
-        try:
-            rr = ransac_rigid(
-                pt[idx],
-                ps[idx],
-                threshold_m=thr,
-                confidence=config.confidence,
-                max_iterations=config.max_iterations,
-                min_inliers=config.min_inliers,
-                rng=config.seed,
+                priors.append(("descriptors", rr.T_target_source))
+            except DegenerateGeometryError as e:
+                notes.append(f"global matching: {e}")
+        else:
+            notes.append(f"global matching: {len(pairs)} matches")
+        # every prior and its keypoint-refined version compete on the dense overlap check:
+        # first the best prior family at a coarse tolerance (a wrong model puts the source
+        # in the target's free space), then the more precise member at a fine tolerance
+        families: list[list[tuple[str, NDArray[np.float64]]]] = []
+        for origin, T0 in priors:
+            fam = [(origin, T0)] if origin == "plan" else []
+            est = _guided_estimate(ft, fs, xt, xs, T0, thr, config, origin)
+            if est is not None and est.inliers.sum() >= max(3, config.min_inliers):
+                fam.append((f"{origin}+keypoints", est.T))
+            if fam:
+                families.append(fam)
+        best_fam, best_score, best_fit = -1, -np.inf, (0.0, 0.0)
+        for i, fam in enumerate(families):
+            for origin, T in fam:
+                ok, bad = overlap_score(ti, si, T)
+                log.info("%s: overlap %.3f, conflict %.3f", origin, ok, bad)
+                if ok - 3 * bad > best_score:
+                    best_fam, best_score, best_fit = i, ok - 3 * bad, (ok, bad)
+        if best_fam < 0:
+            raise RegistrationError(
+                f"no transform found: {len(ft)}/{len(fs)} keypoints, {len(pairs)} descriptor "
+                f"matches, {len(priors)} priors" + (f"; {'; '.join(notes)}" if notes else "")
             )
-        except DegenerateGeometryError as e:
-            raise RegistrationError(f"{e} ({len(pairs)} matches)") from None
-        T = rr.T_target_source
+        if best_fit[0] < config.min_overlap or best_fit[1] > 0.5 * best_fit[0]:
+            raise RegistrationError(
+                f"no overlap: the best transform explains {100 * best_fit[0]:.1f}% of the "
+                f"source's sampled points and contradicts {100 * best_fit[1]:.1f}% (need "
+                f"{100 * config.min_overlap:.0f}%); {len(ft)}/{len(fs)} keypoints, "
+                f"{len(pairs)} descriptor matches"
+            )
+        fine_tol = max(thr / 2, 0.01)
+        origin, T = max(
+            families[best_fam],
+            key=lambda c: (lambda f: f[0] - 3 * f[1])(
+                overlap_score(ti, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002)
+            ),
+        )
+        fin = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)
+        pt, ps = xt[fin[:, 0]], xs[fin[:, 1]]
         d2 = squared_residuals(T, pt, ps)
         inl = d2 < thr * thr
+    log.info("coarse estimate from %s: %d/%d keypoint inliers", origin, inl.sum(), len(inl))
+    if "plan" not in origin:
+        if inl.sum() < max(3, config.min_inliers):
+            raise RegistrationError(
+                f"only {int(inl.sum())} inliers within {thr:.3g} m (need "
+                f"{max(3, config.min_inliers)}); {len(ft)}/{len(fs)} keypoints, "
+                f"{len(pairs)} descriptor matches"
+            )
+        if spread_ratio(ps[inl]) < 1e-3:
+            raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
-    rmse = float(np.sqrt(d2[inl].mean()))
-    fitness, denom = float(inl.sum() / len(pairs)), "lifted matches"
-    info = _information_from_points(pt[inl])
+    rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")
+    q, cons, _ = _overlap(ti, si, T, fine_tol, 0.002, 20000)
+    fitness = float(cons.mean())
+    denom = f"sampled source points within {fine_tol:.3g} m + 0.2% of range of the target's view"
+    info = _information_from_points(q[cons])
     if config.refine:
         from .refine import refine_icp
 
@@ -352,7 +681,7 @@ def register(
     return RegistrationResult(
         T_target_source=T,
         T_coarse=T_coarse,
-        matches=len(pairs),
+        matches=len(fin),
         inliers=int(inl.sum()),
         inlier_rmse_m=rmse,
         fitness=fitness,
@@ -363,7 +692,8 @@ def register(
         config=config,
         correspondences=np.stack([pt, ps], axis=1),
         inlier_mask=inl,
-        keypoints=(ft.xy[pairs[:, 0]], fs.xy[pairs[:, 1]]),
+        keypoints=(ft.xy[fin[:, 0]], fs.xy[fin[:, 1]]),
+        prior=origin,
     )
 
 
@@ -372,6 +702,8 @@ __all__ = [
     "RegistrationConfig",
     "RegistrationResult",
     "feature_image",
+    "overlap_score",
     "pixel_footprint",
     "register",
+    "upright_priors",
 ]

@@ -54,7 +54,20 @@ def _root(
 
 
 # command modules register themselves on `app`
-from . import convert, scan_commands, synth  # noqa: E402,F401
+from . import convert, register, scan_commands, synth  # noqa: E402,F401
+
+
+def _click_classes(name: str) -> tuple[type[BaseException], ...]:
+    """Click's exception class ``name`` and typer's own copy of it (recent typer releases
+    ship their own click), so usage errors from either are caught."""
+    classes: list[type[BaseException]] = [getattr(click.exceptions, name)]
+    try:
+        from typer._click import exceptions as tce
+
+        classes.append(getattr(tce, name))
+    except (ImportError, AttributeError):
+        pass
+    return tuple(classes)
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -64,12 +77,12 @@ def run(argv: list[str] | None = None) -> int:
     except FlexregError as e:
         err_console.print(f"error: {e}", markup=False, highlight=False, soft_wrap=True)
         return 1
-    except click.exceptions.Abort:
+    except _click_classes("Abort"):
         err_console.print("aborted", markup=False)
         return 130
-    except click.ClickException as e:
-        e.show()
-        return e.exit_code
+    except _click_classes("ClickException") as e:
+        e.show()  # type: ignore[attr-defined]
+        return int(e.exit_code)  # type: ignore[attr-defined]
     except KeyboardInterrupt:
         return 130
     return rv if isinstance(rv, int) else 0

@@ -1,0 +1,309 @@
+"""`flexreg register`: two scans -> ``T_target_source`` as JSON (+ 4x4 text, match image, merged
+cloud)."""
+
+from __future__ import annotations
+
+import math
+from contextlib import AbstractContextManager
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+import typer
+
+from ..errors import ConfigError, InputError
+from . import app
+from ._common import console, read_input, stage
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from ..pipeline import RegistrationConfig, RegistrationResult
+    from ..scan import Scan
+
+ICP_METHODS = ("point-to-plane", "gicp", "point-to-point")
+#: colours of the merged cloud (Okabe-Ito orange and blue, distinguishable when colour-blind)
+TARGET_RGB = (230, 159, 0)
+SOURCE_RGB = (0, 114, 178)
+
+
+def _check_options(
+    *,
+    image: str,
+    n: int,
+    features: str,
+    icp: str,
+    voxel: float | None,
+    threshold: float | None,
+    seed: int,
+    inputs: tuple[Path, Path],
+    out: Path,
+    txt: Path | None,
+    matches: Path | None,
+    merged: Path | None,
+) -> None:
+    """Validate everything that does not need the input files, before anything is read."""
+    from ..features import METHODS
+    from ..images import KINDS
+
+    kinds = (*KINDS, "intensity")
+    if image not in kinds:
+        raise ConfigError(f"--image: unknown feature image {image!r}; known: {', '.join(kinds)}")
+    if n < 3 or n % 2 == 0:
+        raise ConfigError(f"--n: must be an odd grid size 3, 5, 7, ..., got {n}")
+    if features not in METHODS:
+        raise ConfigError(f"--features: unknown method {features!r}; known: {', '.join(METHODS)}")
+    if icp not in ICP_METHODS:
+        raise ConfigError(f"--icp: unknown method {icp!r}; known: {', '.join(ICP_METHODS)}")
+    for option, value in (("--voxel", voxel), ("--threshold", threshold)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ConfigError(f"{option}: must be a positive number of metres, got {value}")
+    if seed < 0:
+        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
+    suffixes = (
+        ("--out", out, ".json"),
+        ("--matches", matches, ".png"),
+        ("--merged", merged, ".ply"),
+    )
+    for option, path, suffix in suffixes:
+        if path is not None and path.suffix.lower() != suffix:
+            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
+    named = (("--out", out), ("--txt", txt), ("--matches", matches), ("--merged", merged))
+    outputs = [(option, path) for option, path in named if path is not None]
+    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
+    for option, path in outputs:
+        if path.is_dir():
+            raise ConfigError(f"{option}: {path}: is a folder, not a file")
+        key = path.resolve()
+        if key in seen:
+            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
+        seen[key] = option
+
+
+class _StageSpinners(AbstractContextManager["_StageSpinners"]):
+    """``register(progress=...)`` reports each stage as it starts; show each with :func:`stage`
+    until the next one starts (or the call returns)."""
+
+    def __init__(self) -> None:
+        self._current: AbstractContextManager[None] | None = None
+
+    def __call__(self, name: str) -> None:
+        self._close(None, None, None)
+        cm = stage(name[:1].upper() + name[1:])
+        cm.__enter__()
+        self._current = cm
+
+    def _close(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        cm, self._current = self._current, None
+        if cm is not None:
+            cm.__exit__(exc_type, exc, tb)
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._close(exc_type, exc, tb)
+
+
+def _match_png(target: Scan, source: Scan, result: RegistrationResult) -> NDArray[np.uint8]:
+    """Both feature images (target on top) with the RANSAC inliers drawn as lines."""
+    from ..pipeline import feature_image
+    from ..projection import range_image
+    from ..report import match_image
+
+    ft, _ = feature_image(range_image(target), result.config)
+    fs, _ = feature_image(range_image(source), result.config)
+    kt, ks = result.keypoints
+    inl = result.inlier_mask
+    return match_image(ft, fs, kt[inl], ks[inl])
+
+
+def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
+    """Both clouds in the target frame, target and source each in one colour."""
+    import numpy as np
+
+    from ..scan import Scan
+    from ..transforms import apply
+
+    colors = np.empty((len(target) + len(source), 3), dtype=np.uint8)
+    colors[: len(target)] = TARGET_RGB
+    colors[len(target) :] = SOURCE_RGB
+    points = np.concatenate([target.points, apply(T, source.points)])
+    return Scan(points=points, colors=colors, name="merged")
+
+
+def _write_all(writers: list[tuple[Path, Any]]) -> None:
+    """Run each ``(path, write)``; if one fails, remove the files already written here."""
+    done: list[Path] = []
+    try:
+        for path, write in writers:
+            try:
+                write()
+            except OSError as e:
+                raise InputError(path, f"cannot write: {e.strerror or e}") from e
+            done.append(path)
+    except BaseException:
+        for p in done:
+            p.unlink(missing_ok=True)
+        raise
+
+
+@app.command("register")
+def register_command(
+    target: Path = typer.Argument(
+        ...,
+        metavar="TARGET",
+        help="Target scan: any readable scan file, or a depth PNG with its camera sidecar. "
+        "Points are used in the scanner frame; a pose stored in the file is ignored.",
+    ),
+    source: Path = typer.Argument(
+        ..., metavar="SOURCE", help="Source scan, mapped onto TARGET by T_target_source."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", help="Output .json: T_target_source with inliers, RMSE, timings, config."
+    ),
+    txt: Path | None = typer.Option(
+        None, "--txt", help="Also write the 4x4 matrix as text (CloudCompare style)."
+    ),
+    image: str = typer.Option(
+        "flexion", "--image", help="Feature image: flexion, bearing-*, range, ... or intensity."
+    ),
+    n: int = typer.Option(5, "--n", help="Odd grid size n of Flexion n x n."),
+    features: str = typer.Option(
+        "sift", "--features", help="Detector/descriptor: sift, orb, akaze, kaze, brisk, surf."
+    ),
+    refine: bool = typer.Option(
+        True, "--refine/--no-refine", help="Refine the RANSAC transform with ICP."
+    ),
+    icp: str = typer.Option(
+        "point-to-plane", "--icp", help="ICP variant: point-to-plane, gicp or point-to-point."
+    ),
+    voxel: float | None = typer.Option(
+        None, "--voxel", metavar="METRES", help="ICP voxel size, metres (default: from spacing)."
+    ),
+    threshold: float | None = typer.Option(
+        None,
+        "--threshold",
+        metavar="METRES",
+        help="RANSAC inlier distance, metres (default: from the scans' pixel footprint).",
+    ),
+    matches: Path | None = typer.Option(
+        None, "--matches", help="Write a .png of both feature images with the inlier matches."
+    ),
+    merged: Path | None = typer.Option(
+        None,
+        "--merged",
+        help="Write a .ply of both clouds in the target frame (target orange, source blue).",
+    ),
+    seed: int = typer.Option(0, "--seed", help="Random seed; the same seed gives the same T."),
+) -> None:
+    """Register SOURCE onto TARGET through feature images; write T_target_source.
+
+    Nothing is written unless registration succeeds.
+    """
+    from .._version import __version__
+    from ..io import atomic_write, write_scan, write_transform_json, write_transform_txt
+    from ..pipeline import RegistrationConfig, register
+
+    _check_options(
+        image=image,
+        n=n,
+        features=features,
+        icp=icp,
+        voxel=voxel,
+        threshold=threshold,
+        seed=seed,
+        inputs=(target, source),
+        out=out,
+        txt=txt,
+        matches=matches,
+        merged=merged,
+    )
+    config = RegistrationConfig(
+        image=image,
+        n=n,
+        features=features,
+        refine=refine,
+        icp=icp,
+        voxel_m=voxel,
+        threshold_m=threshold,
+        seed=seed,
+    )
+    scans = []
+    for path in (target, source):
+        with stage(f"Reading {path.name}"):
+            (scan,) = read_input(path)
+        scans.append(scan)
+    tscan, sscan = scans
+    with _StageSpinners() as spinners:
+        result = register(tscan, sscan, config, progress=spinners)
+
+    # everything is computed before the first file is written
+    T = result.T_target_source
+    writers: list[tuple[Path, Any]] = []
+    if merged is not None:
+        with stage("Merging clouds"):
+            cloud = _merged_scan(tscan, sscan, T)
+        writers.append((merged, lambda: write_scan(merged, cloud)))
+    if matches is not None:
+        with stage("Drawing matches"):
+            png = _match_png(tscan, sscan, result)
+        writers.append((matches, lambda: atomic_write(matches, lambda tmp: _imwrite(tmp, png))))
+    if txt is not None:
+        writers.append((txt, lambda: write_transform_txt(txt, T)))
+    meta = result.to_dict()
+    meta.pop("T_target_source", None)
+    meta = {"target": str(target), "source": str(source), **meta, "flexreg_version": __version__}
+    writers.append((out, lambda: write_transform_json(out, T, **meta)))
+    _write_all(writers)
+    _print_summary(result, config)
+    for path, _ in writers:
+        console.print(f"wrote {path}", markup=False)
+
+
+def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:
+    import cv2
+
+    if not cv2.imwrite(str(path), image):
+        raise InputError(path, "cannot write the PNG file")
+
+
+def _print_summary(result: RegistrationResult, config: RegistrationConfig) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    from ..transforms import rotation_error_deg, translation_error_m
+
+    def motion(T: NDArray[np.float64]) -> str:
+        rot, dist = rotation_error_deg(T, np.eye(4)), float(np.linalg.norm(T[:3, 3]))
+        return f"rotation {rot:.3f}°, translation {dist:.3f} m"
+
+    r = result
+    final = "ICP " + config.icp if config.refine else "RANSAC, not refined"
+    t = Table(title="T_target_source", show_header=False, title_justify="left")
+    t.add_column(style="bold")
+    t.add_column()
+    share = 100 * r.inliers / r.matches if r.matches else 0.0
+    t.add_row("matches", f"{r.matches:,} lifted 2D matches ({config.features} on {config.image})")
+    t.add_row("inliers", f"{r.inliers:,} ({share:.1f} %) within {1000 * r.threshold_m:.1f} mm")
+    t.add_row("inlier RMSE", f"{1000 * r.inlier_rmse_m:.2f} mm ({final})")
+    t.add_row("fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
+    t.add_row("coarse (RANSAC)", motion(r.T_coarse))
+    t.add_row("final", motion(r.T_target_source))
+    if config.refine:
+        dr = rotation_error_deg(r.T_target_source, r.T_coarse)
+        dt = translation_error_m(r.T_target_source, r.T_coarse)
+        t.add_row("refinement moved", f"{dr:.3f}°, {1000 * dt:.1f} mm")
+    timings = ", ".join(f"{k} {v:.2f}" for k, v in r.timings_s.items())
+    t.add_row("timings s", f"{timings}; total {sum(r.timings_s.values()):.2f}")
+    console.print(t)
+    with np.printoptions(precision=6, suppress=True):
+        console.print(str(r.T_target_source), markup=False)

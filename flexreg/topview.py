@@ -1,0 +1,465 @@
+"""Levelling and top-view (plan) images: a yaw-and-translation prior for levelled scanners.
+
+Terrestrial scanners stand levelled (their dual-axis compensators keep the tilt within a few
+degrees), so two stations differ mostly by a rotation about the vertical and a translation.
+Seen from above, walls, pillars and furniture draw the same plan in both scans, whatever the
+stations' distance: an orthographic projection onto the ground plane removes the perspective
+that makes panoramic feature matching fail across wide baselines. This module
+
+- estimates each scan's vertical from its own surfaces (:func:`estimate_up`: floors and
+  ceilings are perpendicular to it, walls parallel),
+- rasterises the vertical surfaces of the levelled scan into a plan image whose cells hold
+  the metres of vertical surface they contain (:func:`top_view`), and
+- finds the yaw and horizontal offset that best overlay two plans by exhaustive FFT
+  cross-correlation over yaw (:func:`match_top_views`); the height offset comes from the 1D
+  correlation of the heights of horizontal surfaces (floor, tables, ceiling).
+
+The result, :func:`upright_hypotheses`, is a short list of ``T_target_source`` candidates,
+best first; the registration pipeline uses them to guide feature matching and verifies them
+against the data (:mod:`flexreg.pipeline`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import DegenerateGeometryError
+from .projection import RangeImage
+
+log = logging.getLogger(__name__)
+
+
+def surface_normals(
+    image: RangeImage, *, k: int = 2, stride: int = 1
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Unit normals of an organised scan from central differences at pixel offset ``k``.
+
+    Parameters
+    ----------
+    image : RangeImage
+    k : int
+        Pixel offset of the neighbours (larger is smoother on noisy surfaces).
+    stride : int
+        Use every ``stride``-th row and column (speed on very large images).
+
+    Returns
+    -------
+    points : (M, 3) float64, metres
+        The pixels' points (only pixels whose four neighbours are valid and continuous).
+    normals : (M, 3) float64
+        Unit normals, oriented towards the scanner.
+    area : (M,) float64, square metres
+        Surface area each pixel covers (product of its neighbour spacings), so that sums over
+        pixels measure surface independently of the distance to the scanner.
+    """
+    xyz = image.xyz[::stride, ::stride]
+    wrap = image.wraps
+    H, W = xyz.shape[:2]
+    if H <= 2 * k or W <= 2 * k:
+        z = np.zeros((0, 3))
+        return z, z, np.zeros(0)
+    if wrap:
+        left, right = np.roll(xyz, k, axis=1), np.roll(xyz, -k, axis=1)
+    else:
+        pad = np.full((H, k, 3), np.nan)
+        left = np.concatenate([pad, xyz[:, :-k]], axis=1)
+        right = np.concatenate([xyz[:, k:], pad], axis=1)
+    padv = np.full((k, W, 3), np.nan)
+    up = np.concatenate([padv, xyz[:-k]], axis=0)
+    down = np.concatenate([xyz[k:], padv], axis=0)
+    dh = right - left
+    dv = down - up
+    n = np.cross(dh, dv)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.linalg.norm(xyz, axis=2)
+        lh, lv = np.linalg.norm(dh, axis=2), np.linalg.norm(dv, axis=2)
+        # continuity: both neighbour spans short compared with the range (no depth jump)
+        ok = np.isfinite(n).all(axis=2) & (lh < 0.2 * r) & (lv < 0.2 * r)
+        nn = np.linalg.norm(n, axis=2)
+        ok &= nn > 0
+    pts = xyz[ok]
+    nrm = n[ok] / nn[ok][:, None]
+    flip = np.einsum("ij,ij->i", nrm, pts) > 0
+    nrm[flip] *= -1
+    area = lh[ok] * lv[ok] / float(4 * k * k) * float(stride * stride)
+    return pts, nrm, area
+
+
+def _rotation_onto_z(u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Smallest rotation taking the unit vector ``u`` onto +Z (keeps the heading)."""
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(u, z)
+    s, c = float(np.linalg.norm(v)), float(u @ z)
+    if s < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
+    a = math.atan2(s, c)
+    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
+
+
+@dataclass(eq=False)
+class Levelling:
+    """A scan's estimated vertical.
+
+    Attributes
+    ----------
+    up : (3,) float64
+        Unit vertical in the scanner frame.
+    R_level : (3, 3) float64
+        Rotation taking scanner-frame vectors into the levelled frame (``up`` -> +Z; the
+        heading is kept).
+    tilt_rad : float, radians
+        Angle between ``up`` and the scanner's Z axis.
+    horizontal_area_m2, vertical_area_m2 : float, square metres
+        Surface that supported the estimate (floors/ceilings, walls).
+    """
+
+    up: NDArray[np.float64]
+    R_level: NDArray[np.float64]
+    tilt_rad: float
+    horizontal_area_m2: float
+    vertical_area_m2: float
+
+
+def estimate_up(
+    normals: NDArray[np.float64],
+    area: NDArray[np.float64],
+    *,
+    max_tilt_rad: float = math.radians(15.0),
+) -> Levelling:
+    """Estimate the vertical of a levelled scan from its surface normals.
+
+    Starting from the scanner's Z axis, surfaces whose normals lie within a shrinking cone
+    (20°, 10°, 5°, 3°) of the current vertical count as horizontal (floors, ceilings, tables),
+    those within the same angle of the horizontal plane as vertical (walls); the new vertical
+    is the unit vector that best aligns with the first and best stands perpendicular to the
+    second: the leading eigenvector of ``sum_h a n n^T / A_h - sum_v a n n^T / A_v``.
+
+    Parameters
+    ----------
+    normals : (M, 3) float64
+        Unit normals in the scanner frame (:func:`surface_normals`).
+    area : (M,) float64, square metres
+        Surface per normal (weights).
+    max_tilt_rad : float, radians
+        Largest plausible tilt of a levelled scanner.
+
+    Raises
+    ------
+    DegenerateGeometryError
+        Not enough horizontal or vertical surface to tell the vertical, or a vertical more
+        than ``max_tilt_rad`` from the scanner's Z axis (the scan is not levelled).
+    """
+    u = np.array([0.0, 0.0, 1.0])
+    ah = av = 0.0
+    for cone in (20.0, 10.0, 5.0, 3.0):
+        c = np.abs(normals @ u)
+        s = math.sin(math.radians(cone))
+        hz = c > math.cos(math.radians(cone))
+        vt = c < s
+        ah, av = float(area[hz].sum()), float(area[vt].sum())
+        if ah <= 0.0 and av <= 0.0:
+            break
+        M = np.zeros((3, 3))
+        if ah > 0:
+            nh = normals[hz]
+            M += (nh * area[hz, None]).T @ nh / ah
+        if av > 0:
+            nv = normals[vt]
+            M -= (nv * area[vt, None]).T @ nv / av
+        w, V = np.linalg.eigh(M)
+        u = V[:, int(np.argmax(w))]
+        if u[2] < 0:
+            u = -u
+    total = float(area.sum())
+    if total <= 0 or (ah < 0.02 * total and av < 0.05 * total):
+        raise DegenerateGeometryError(
+            f"cannot tell the vertical: {ah:.3g} m² horizontal and {av:.3g} m² vertical "
+            f"surface of {total:.3g} m²"
+        )
+    tilt = math.acos(min(1.0, float(u[2])))
+    if tilt > max_tilt_rad:
+        raise DegenerateGeometryError(
+            f"the scan is not levelled: its vertical is {math.degrees(tilt):.1f}° from the "
+            f"scanner's Z axis (limit {math.degrees(max_tilt_rad):.1f}°)"
+        )
+    return Levelling(u, _rotation_onto_z(u), tilt, ah, av)
+
+
+@dataclass(eq=False)
+class TopView:
+    """A plan image of a levelled scan's vertical surfaces.
+
+    Attributes
+    ----------
+    cells : (K, 2) int64
+        ``(ix, iy)`` of the occupied cells, scanner at cell ``(0, 0)``'s centre.
+    values : (K,) float64, metres
+        Height of vertical surface in each cell (surface area / cell width), clipped.
+    cell_m : float, metres
+    xy : (K, 2) float64, metres
+        Cell centres in the levelled scanner frame.
+    heights : (B,) float64
+        Area-weighted histogram of the heights of horizontal surfaces (see ``z0_m``, ``dz_m``).
+    z0_m, dz_m : float, metres
+        Height of the histogram's first bin and bin width.
+    """
+
+    cells: NDArray[np.int64]
+    values: NDArray[np.float64]
+    cell_m: float
+    xy: NDArray[np.float64]
+    heights: NDArray[np.float64]
+    z0_m: float
+    dz_m: float
+
+
+def top_view(
+    points: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    area: NDArray[np.float64],
+    levelling: Levelling,
+    *,
+    cell_m: float = 0.2,
+    radius_m: float = 40.0,
+    max_surface_m: float = 1.0,
+    height_bin_m: float = 0.01,
+) -> TopView:
+    """Plan image of a scan's vertical surfaces (and its horizontal surfaces' heights).
+
+    Parameters
+    ----------
+    points, normals, area
+        From :func:`surface_normals`, scanner frame.
+    levelling : Levelling
+    cell_m : float, metres
+        Plan cell size.
+    radius_m : float, metres
+        Ignore surfaces farther than this horizontally (sparse, noisy far field).
+    max_surface_m : float, metres
+        Clip each cell's vertical-surface height (a tall wall should not outweigh the
+        furniture that makes a room unique).
+    height_bin_m : float, metres
+        Bin of the horizontal-surface height histogram.
+    """
+    R = levelling.R_level
+    p = points @ R.T
+    n = normals @ R.T
+    horiz_dist = np.hypot(p[:, 0], p[:, 1])
+    near = horiz_dist < radius_m
+    vert = near & (np.abs(n[:, 2]) < 0.5)
+    ij = np.floor(p[vert, :2] / cell_m + 0.5).astype(np.int64)
+    a = area[vert]
+    if len(ij) == 0:
+        raise DegenerateGeometryError("no vertical surfaces to draw a plan from")
+    key = (ij[:, 0] << 32) + (ij[:, 1] & 0xFFFFFFFF)
+    uk, inv = np.unique(key, return_inverse=True)
+    vals = np.bincount(inv, weights=a) / cell_m
+    cells = np.column_stack([uk >> 32, (uk & 0xFFFFFFFF).astype(np.int64)])
+    cells[:, 1] = np.where(cells[:, 1] >= 2**31, cells[:, 1] - 2**32, cells[:, 1])
+    keep = vals > 0.02
+    cells, vals = cells[keep], np.minimum(vals[keep], max_surface_m)
+    hz = near & (np.abs(n[:, 2]) > 0.95)
+    z = p[hz, 2]
+    h: NDArray[np.float64] = np.zeros(1)
+    z0 = 0.0
+    if len(z):
+        z0 = math.floor(float(z.min()) / height_bin_m) * height_bin_m
+        nb = math.ceil((float(z.max()) - z0) / height_bin_m) + 1
+        h = np.bincount(
+            np.floor((z - z0) / height_bin_m).astype(np.int64), weights=area[hz], minlength=nb
+        ).astype(np.float64)
+    return TopView(cells, vals, cell_m, cells * float(cell_m), h, z0, height_bin_m)
+
+
+@dataclass(frozen=True)
+class PlanMatch:
+    """One yaw / offset that overlays two plans.
+
+    Attributes
+    ----------
+    yaw_rad : float, radians
+        Rotation about the vertical taking the levelled source into the levelled target.
+    t_xy : (2,) float64, metres
+    score : float
+        Correlation of the two plans (overlapping vertical surface, metres of height x cells).
+    """
+
+    yaw_rad: float
+    t_xy: tuple[float, float]
+    score: float
+
+
+def _raster(
+    cells: NDArray[np.int64], vals: NDArray[np.float64], shape: tuple[int, int], off: int
+) -> NDArray[np.float64]:
+    lin = (cells[:, 1] + off) * shape[1] + (cells[:, 0] + off)
+    img = np.bincount(lin, weights=vals, minlength=shape[0] * shape[1])
+    return np.asarray(img, dtype=np.float64).reshape(shape)
+
+
+def match_top_views(
+    target: TopView,
+    source: TopView,
+    *,
+    yaw_step_rad: float = math.radians(1.0),
+    top_k: int = 5,
+    min_separation_m: float = 1.0,
+) -> list[PlanMatch]:
+    """Best yaw / horizontal offsets overlaying ``source``'s plan onto ``target``'s.
+
+    For every yaw on a regular grid the source cells are rotated and re-rasterised, and the
+    cross-correlation with the target plan over all offsets is one FFT product; the ``top_k``
+    best distinct peaks (different yaw or more than ``min_separation_m`` apart) are returned,
+    each refined to sub-cell offset by a parabola through the peak's neighbours.
+    """
+    from scipy import fft
+
+    c = target.cell_m
+    if source.cell_m != c:
+        raise ValueError("plans must share their cell size")
+    rt = int(np.abs(target.cells).max()) + 1
+    rs = math.ceil(float(np.hypot(source.xy[:, 0], source.xy[:, 1]).max()) / c) + 2
+    size = fft.next_fast_len(2 * (rt + rs) + 1, real=True)
+    shape = (size, size)
+    T = _raster(target.cells, target.values, shape, rt)
+    FT = np.conj(fft.rfft2(T, workers=-1))
+    yaws = np.arange(0.0, 2 * math.pi, yaw_step_rad)
+    peaks: list[tuple[float, float, float, float]] = []  # score, yaw, t_x, t_y
+    for yaw in yaws:
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        xy = source.xy @ np.array([[cy, sy], [-sy, cy]])
+        cells = np.floor(xy / c + 0.5).astype(np.int64)
+        S = _raster(cells, source.values, shape, rs)
+        # corr[d] = sum_x T[x] S[x + d]: source raster position x + d lies on target position x
+        corr = fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1)
+        idx = int(np.argmax(corr))
+        iy, ix = divmod(idx, size)
+        best = float(corr[iy, ix])
+        fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
+        fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
+        dx = (ix if ix <= 2 * rs else ix - size) + fx
+        dy = (iy if iy <= 2 * rs else iy - size) + fy
+        # source cell s sits at raster s + rs, target cell t at t + rt: t = s + (rs - rt - d)
+        peaks.append((best, float(yaw), (rs - rt - dx) * c, (rs - rt - dy) * c))
+    scores = np.array([p[0] for p in peaks])
+    out: list[PlanMatch] = []
+    for i in np.argsort(-scores, kind="stable"):
+        best, yaw, tx, ty = peaks[i]
+        n = len(peaks)
+        yaw += _parabola(scores[(i - 1) % n], best, scores[(i + 1) % n]) * yaw_step_rad
+        dup = any(
+            abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
+            or (
+                math.hypot(tx - m.t_xy[0], ty - m.t_xy[1]) < min_separation_m
+                and abs(_wrap_angle(yaw - m.yaw_rad)) < math.radians(10.0)
+            )
+            for m in out
+        )
+        if not dup:
+            out.append(PlanMatch(_wrap_angle(yaw), (tx, ty), best))
+        if len(out) >= top_k:
+            break
+    return out
+
+
+def refine_plan_match(
+    target: TopView,
+    source: TopView,
+    match: PlanMatch,
+    *,
+    yaw_range_rad: float = math.radians(1.5),
+    yaw_step_rad: float = math.radians(0.25),
+    shift_m: float = 0.4,
+) -> PlanMatch:
+    """Refine a plan overlay on finer plans: local yaw search, sub-cell correlation peak.
+
+    The source plan, placed by ``match``, is rotated about its scanner through
+    ``yaw ± yaw_range_rad`` and correlated (FFT) with the target plan, lightly blurred, over
+    offsets up to ``shift_m``; the best yaw and offset are interpolated by parabolas.
+    """
+    from scipy import fft, ndimage
+
+    c = target.cell_m
+    if source.cell_m != c:
+        raise ValueError("plans must share their cell size")
+    rt = int(np.abs(target.cells).max()) + 1
+    w = math.ceil(shift_m / c) + 1
+    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
+    shape = (n, n)
+    off = rt + w
+    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
+    FT = np.conj(fft.rfft2(T, workers=-1))
+    t0 = np.asarray(match.t_xy)
+    yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
+    best = []
+    for yaw in yaws:
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        xy = source.xy @ np.array([[cy, sy], [-sy, cy]]) + t0
+        cells = np.floor(xy / c + 0.5).astype(np.int64)
+        inside = (np.abs(cells) <= rt).all(axis=1)
+        S = _raster(cells[inside], source.values[inside], shape, off)
+        corr = fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1)
+        win = np.roll(np.roll(corr, w, axis=0), w, axis=1)[: 2 * w + 1, : 2 * w + 1]
+        iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
+        b = float(win[iy, ix])
+        fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
+        fx = _parabola(win[iy, ix - 1], b, win[iy, ix + 1]) if 0 < ix < 2 * w else 0.0
+        # corr[d] = sum_x T[x] S[x + d]: move the source by -d
+        best.append((b, float(yaw), t0[0] - (ix - w + fx) * c, t0[1] - (iy - w + fy) * c))
+    scores = np.array([b[0] for b in best])
+    i = int(np.argmax(scores))
+    b, yaw, tx, ty = best[i]
+    if 0 < i < len(best) - 1:
+        f = _parabola(scores[i - 1], b, scores[i + 1])
+        j = i + (1 if f > 0 else -1)
+        # interpolate the offset towards the neighbouring yaw's as well
+        tx += abs(f) * (best[j][2] - tx)
+        ty += abs(f) * (best[j][3] - ty)
+        yaw += f * yaw_step_rad
+    return PlanMatch(_wrap_angle(yaw), (float(tx), float(ty)), b)
+
+
+def _parabola(a: float, b: float, c: float) -> float:
+    d = a - 2 * b + c
+    return 0.0 if d >= 0 else float(np.clip(0.5 * (a - c) / d, -0.5, 0.5))
+
+
+def _wrap_angle(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def height_offset(target: TopView, source: TopView, *, max_offset_m: float = 5.0) -> float:
+    """Height of the source scanner above the target's (levelled frames), metres: the shift
+    that best overlays the two histograms of horizontal-surface heights."""
+    from scipy import signal
+
+    a = np.log1p(target.heights / max(target.heights.max(), 1e-12) * 100)
+    b = np.log1p(source.heights / max(source.heights.max(), 1e-12) * 100)
+    corr = signal.correlate(a, b, mode="full", method="fft")
+    lags = np.arange(-len(b) + 1, len(a))
+    # target bin i + lag... z_t = z0_t + (j + lag) * dz  <->  z_s = z0_s + j * dz
+    shift = target.z0_m - source.z0_m + lags * target.dz_m
+    ok = np.abs(shift) <= max_offset_m
+    if not ok.any():
+        return 0.0
+    i = int(np.flatnonzero(ok)[np.argmax(corr[ok])])
+    return float(shift[i])
+
+
+__all__ = [
+    "Levelling",
+    "PlanMatch",
+    "TopView",
+    "estimate_up",
+    "height_offset",
+    "match_top_views",
+    "refine_plan_match",
+    "surface_normals",
+    "top_view",
+]

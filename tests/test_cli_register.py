@@ -1,0 +1,257 @@
+"""`flexreg register`: a real scan against a displaced second station recovers the known
+transform; JSON, text, match image and merged cloud agree with it; failures print one line,
+exit 1 and write nothing."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from conftest import REPO
+
+import flexreg.pipeline
+from flexreg import Scan, __version__, read_scan, write_scan
+from flexreg.camera import SphericalCamera
+from flexreg.cli import run
+from flexreg.cli.register import SOURCE_RGB, TARGET_RGB
+from flexreg.projection import project, to_scan
+from flexreg.transforms import (
+    apply,
+    invert,
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+
+LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.rglob("*") if p.is_file()) if folder.exists() else []
+
+
+def _one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert sum(line.startswith("error:") for line in lines) == 1, err
+    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
+    return lines[-1]
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    """The real laser scan (npz) and a second station 0.67 m away, turned 75° (PTX). Both files
+    carry an unrelated stored pose, which registration must ignore (scanner frames)."""
+    folder = tmp_path_factory.mktemp("pair")
+    target = read_scan(LASERSCAN)
+    T_source_target = make_transform(
+        rotation_about_axis([0.05, 0.02, 1.0], np.radians(75.0)), [0.6, -0.3, 0.05]
+    )
+    cam = SphericalCamera.from_reference(1799, 397, 0.80, 2.34)
+    source = to_scan(project(Scan(points=apply(T_source_target, target.points)), cam))
+    target.T_world_scanner = make_transform(rotation_about_axis([0, 0, 1], 0.4), [5, -2, 1])
+    source.T_world_scanner = make_transform(rotation_about_axis([1, 0, 0], 1.0), [10, 20, 3])
+    write_scan(folder / "target.npz", target)
+    write_scan(folder / "source.ptx", source)
+    return folder / "target.npz", folder / "source.ptx", invert(T_source_target)
+
+
+@pytest.fixture(scope="module")
+def registered(pair, tmp_path_factory):
+    """One successful run with every output (into a folder that does not exist yet)."""
+    target, source, _ = pair
+    out = tmp_path_factory.mktemp("registered") / "new" / "folder"
+    argv = [
+        "register",
+        str(target),
+        str(source),
+        "--out",
+        str(out / "T.json"),
+        "--txt",
+        str(out / "T.txt"),
+        "--matches",
+        str(out / "matches.png"),
+        "--merged",
+        str(out / "merged.ply"),
+        "--voxel",
+        "0.08",
+    ]
+    results = []
+    real_register = flexreg.pipeline.register
+
+    def spy(*args, **kwargs):
+        results.append(real_register(*args, **kwargs))
+        return results[-1]
+
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with (
+        pytest.MonkeyPatch.context() as mp,
+        contextlib.redirect_stdout(stdout),
+        contextlib.redirect_stderr(stderr),
+    ):
+        mp.setattr(flexreg.pipeline, "register", spy)
+        rc = run(argv)
+    assert rc == 0, stderr.getvalue()
+    (result,) = results
+    return {"out": out, "stdout": stdout.getvalue(), "stderr": stderr.getvalue(), "result": result}
+
+
+# ------------------------------------------------------------------------ a successful run
+
+
+def test_json_holds_the_true_transform_and_the_run(registered, pair):
+    target, source, gt = pair
+    doc = json.loads((registered["out"] / "T.json").read_text())
+    T = np.array(doc["T_target_source"])
+    assert rotation_error_deg(T, gt) < 0.05
+    assert translation_error_m(T, gt) < 0.01
+    result = registered["result"]
+    np.testing.assert_array_equal(T, result.T_target_source)
+    assert doc["target"] == str(target) and doc["source"] == str(source)
+    assert doc["flexreg_version"] == __version__
+    assert doc["inliers"] == result.inliers >= 50 and doc["matches"] >= doc["inliers"]
+    assert 0 < doc["inlier_rmse_m"] < 0.05
+    assert "voxel" in doc["fitness_denominator"] and 0.5 < doc["fitness"] <= 1.0
+    assert {"features", "estimation", "refinement"} <= set(doc["timings_s"])
+    assert doc["config"]["voxel_m"] == 0.08 and doc["config"]["features"] == "sift"
+    assert doc["config"]["image"] == "flexion" and doc["config"]["n"] == 5
+    assert doc["seed"] == 0 and doc["config"]["refine"] is True
+    assert set(result.to_dict()) <= set(doc)
+
+
+def test_txt_is_the_same_matrix(registered):
+    T_json = np.array(json.loads((registered["out"] / "T.json").read_text())["T_target_source"])
+    T_txt = np.loadtxt(registered["out"] / "T.txt")
+    assert T_txt.shape == (4, 4)
+    np.testing.assert_array_equal(T_txt, T_json)
+
+
+def test_match_image_stacks_both_feature_images(registered, pair):
+    png = cv2.imread(str(registered["out"] / "matches.png"), cv2.IMREAD_UNCHANGED)
+    # target 397 rows (the laser scan), source 397 rows (the simulated station), 1799 wide
+    assert png.dtype == np.uint8 and png.shape == (397 + 397, 1799, 3)
+    colourful = (png.max(axis=2).astype(int) - png.min(axis=2)) > 60
+    assert colourful[:397].any() and colourful[397:].any(), "lines reach both images"
+
+
+def test_merged_cloud_has_both_scans_in_two_colours(registered, pair):
+    target, source, _ = pair
+    n_t, n_s = len(read_scan(target)), len(read_scan(source))
+    merged = read_scan(registered["out"] / "merged.ply")
+    assert len(merged) == n_t + n_s and merged.colors is not None
+    np.testing.assert_array_equal(merged.colors[:n_t], np.tile(TARGET_RGB, (n_t, 1)))
+    np.testing.assert_array_equal(merged.colors[n_t:], np.tile(SOURCE_RGB, (n_s, 1)))
+    # target points are in their own scanner frame (its stored pose ignored), unmoved
+    np.testing.assert_allclose(merged.points[:n_t], read_scan(target).points, atol=1e-9)
+
+
+def test_summary_and_stage_progress(registered):
+    out, err = registered["stdout"], registered["stderr"]
+    for word in ("matches", "inliers", "inlier RMSE", "mm", "fitness", "voxel", "coarse", "°"):
+        assert word in out, word
+    assert "T.json" in out and "merged.ply" in out
+    assert "Reading target.npz" in err and "Reading source.ptx" in err
+    for name in registered["result"].timings_s:  # a spinner and a done line per stage
+        assert f"{name[:1].upper()}{name[1:]} (" in err, name
+
+
+# ------------------------------------------------------------------------ failures
+
+
+def test_unrelated_scans_exit_1_and_write_nothing(pair, tmp_path, capsys):
+    target, _, _ = pair
+    rng = np.random.default_rng(0)
+    cam = SphericalCamera.from_reference(600, 200, 0.8, 2.3)
+    noise = to_scan(project(Scan(points=rng.normal(0, 5, (60000, 3))), cam))
+    write_scan(tmp_path / "noise.npz", noise)
+    out = tmp_path / "out"
+    argv = [
+        "register",
+        str(target),
+        str(tmp_path / "noise.npz"),
+        "--out",
+        str(out / "T.json"),
+        "--txt",
+        str(out / "T.txt"),
+        "--matches",
+        str(out / "m.png"),
+        "--merged",
+        str(out / "m.ply"),
+    ]
+    assert run(argv) == 1
+    line = _one_error_line(capsys.readouterr().err)
+    assert any(c.isdigit() for c in line)  # the counts that fell short
+    assert _files(out) == []
+
+
+def test_missing_input_names_the_file(pair, tmp_path, capsys):
+    target, _, _ = pair
+    missing = tmp_path / "nope.ptx"
+    assert run(["register", str(target), str(missing), "--out", str(tmp_path / "T.json")]) == 1
+    assert _one_error_line(capsys.readouterr().err).startswith(f"error: {missing}: ")
+    assert _files(tmp_path) == []
+
+
+@pytest.mark.parametrize(
+    ("args", "culprit"),
+    [
+        (["--image", "flexon"], "--image"),
+        (["--features", "surfish"], "--features"),
+        (["--n", "4"], "--n"),
+        (["--n", "1"], "--n"),
+        (["--icp", "p2p"], "--icp"),
+        (["--voxel", "0"], "--voxel"),
+        (["--voxel", "nan"], "--voxel"),
+        (["--threshold", "-0.1"], "--threshold"),
+        (["--seed", "-1"], "--seed"),
+        (["--matches", "m.jpg"], "--matches"),
+        (["--merged", "m.pcd"], "--merged"),
+        (["--txt", "T.json"], "--txt"),
+        (["--txt", "a.ptx"], "--txt"),  # would overwrite an input
+    ],
+)
+def test_bad_options_exit_1_before_reading(args, culprit, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    # the inputs do not exist: the option is refused before anything is read
+    argv = ["register", "a.ptx", "b.ptx", "--out", "T.json", *args]
+    assert run(argv) == 1
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith(f"error: {culprit}: "), line
+    assert _files(tmp_path) == []
+
+
+def test_out_must_be_json(tmp_path, capsys):
+    assert run(["register", "a.ptx", "b.ptx", "--out", str(tmp_path / "T.txt")]) == 1
+    assert _one_error_line(capsys.readouterr().err).startswith("error: --out: ")
+
+
+def test_failed_write_removes_the_outputs_already_written(
+    registered, pair, tmp_path, monkeypatch, capsys
+):
+    """T.json is written last; when it cannot be, the PLY, PNG and text written before it go."""
+    target, source, _ = pair
+    monkeypatch.setattr(flexreg.pipeline, "register", lambda *a, **k: registered["result"])
+    (tmp_path / "blocker").write_text("a file where a folder is needed")
+    out = tmp_path / "out"
+    argv = [
+        "register",
+        str(target),
+        str(source),
+        "--out",
+        str(tmp_path / "blocker" / "T.json"),
+        "--txt",
+        str(out / "T.txt"),
+        "--matches",
+        str(out / "m.png"),
+        "--merged",
+        str(out / "m.ply"),
+    ]
+    assert run(argv) == 1
+    line = _one_error_line(capsys.readouterr().err)
+    assert str(tmp_path / "blocker" / "T.json") in line
+    assert _files(out) == []

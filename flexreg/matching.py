@@ -146,6 +146,8 @@ def match_guided(
     second = np.where(counts > 1, d[np.minimum(starts + 1, len(d) - 1)], np.inf)
     keep = best_d < ratio * second if ratio < 1 else np.ones(len(starts), dtype=bool)
     best_t, best_s, best_d = best_t[keep], best_s[keep], best_d[keep]
+    if len(best_t) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
     # one source per target keypoint: the nearest descriptor keeps it
     o = np.lexsort((best_s, best_d, best_t))
     uniq = np.r_[True, best_t[o][1:] != best_t[o][:-1]]

@@ -349,6 +349,30 @@ def upright_priors(
     return out
 
 
+def range_slack(image: RangeImage) -> NDArray[np.float32]:
+    """(H, W) largest range (or depth) change from each pixel to its 4 neighbours, metres (0
+    where unknown): how much range one pixel spans on an oblique surface."""
+    ref = image.depth_z() if isinstance(image.camera, PinholeCamera) else image.range
+    out = np.zeros(image.shape, dtype=np.float32)
+    if image.wraps:  # the seam columns are neighbours
+        ref = np.concatenate([ref, ref[:, :1]], axis=1)
+    with np.errstate(invalid="ignore"):
+        for axis in (0, 1):
+            d = np.abs(np.diff(ref, axis=axis))
+            d = np.nan_to_num(d, nan=0.0)
+            W = out.shape[1]
+            if axis == 0:
+                out[1:] = np.maximum(out[1:], d[:, :W])
+                out[:-1] = np.maximum(out[:-1], d[:, :W])
+            else:
+                out[:, 1:] = np.maximum(out[:, 1:], d[:, : W - 1])
+                out[:, :-1] = np.maximum(out[:, :-1], d[:, : W - 1])
+                if image.wraps:
+                    out[:, -1] = np.maximum(out[:, -1], d[:, -1])
+                    out[:, 0] = np.maximum(out[:, 0], d[:, -1])
+    return out
+
+
 def overlap_score(
     target: RangeImage,
     source: RangeImage,
@@ -357,6 +381,7 @@ def overlap_score(
     tolerance_m: float = 0.05,
     tolerance_rel: float = 0.01,
     samples: int = 20000,
+    slack: NDArray[np.float32] | None = None,
 ) -> tuple[float, float]:
     """How well a transform explains the target's view of the source: a dense check.
 
@@ -365,15 +390,19 @@ def overlap_score(
     same range (within ``tolerance_m + tolerance_rel * range``) and *in conflict* when it
     lies clearly in front of what the target saw: the target looked through the place where
     the transform puts it, so a wrong transform collects conflicts while a right one only
-    collects consistent and occluded points. Native grids without a camera model fall back
-    to nearest-neighbour distances (no conflicts).
+    collects consistent and occluded points. Each pixel's tolerance also grows by the range
+    change to its neighbours (``slack``, see :func:`range_slack`), since a pixel on a surface
+    seen at grazing incidence spans a long stretch of range. Native grids without a camera
+    model fall back to nearest-neighbour distances (no conflicts).
 
     Returns
     -------
     consistent, conflicting : float
         Fractions of the sampled source points.
     """
-    _, ok, bad = _overlap(target, source, T_target_source, tolerance_m, tolerance_rel, samples)
+    _, ok, bad = _overlap(
+        target, source, T_target_source, tolerance_m, tolerance_rel, samples, slack
+    )
     return (float(ok.mean()), float(bad.mean())) if len(ok) else (0.0, 0.0)
 
 
@@ -384,6 +413,7 @@ def _overlap(
     tolerance_m: float,
     tolerance_rel: float,
     samples: int,
+    slack: NDArray[np.float32] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     ps = source.xyz[source.valid]
     if len(ps) == 0:
@@ -405,12 +435,19 @@ def _overlap(
     with np.errstate(invalid="ignore"):
         iu = np.floor(u + 0.5)
         iv = np.floor(v + 0.5)
+        if target.wraps:
+            iu = np.where(iu >= target.width, iu - target.width, iu)
         inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
         inside &= (iu >= 0) & (iu < target.width) & (iv >= 0) & (iv < target.height)
     ref = target.depth_z() if isinstance(cam, PinholeCamera) else target.range
+    if slack is None:
+        slack = range_slack(target)
     r = np.full(len(q), np.nan)
-    r[inside] = ref[iv[inside].astype(np.int64), iu[inside].astype(np.int64)]
-    tol = tolerance_m + tolerance_rel * np.abs(d)
+    extra = np.zeros(len(q))
+    pix = (iv[inside].astype(np.int64), iu[inside].astype(np.int64))
+    r[inside] = ref[pix]
+    extra[inside] = slack[pix]
+    tol = tolerance_m + tolerance_rel * np.abs(d) + extra
     with np.errstate(invalid="ignore"):
         consistent = np.abs(d - r) < tol
         conflict = d < r - tol
@@ -614,10 +651,11 @@ def register(
                 fam.append((f"{origin}+keypoints", est.T))
             if fam:
                 families.append(fam)
+        slack = range_slack(ti)
         best_fam, best_score, best_fit = -1, -np.inf, (0.0, 0.0)
         for i, fam in enumerate(families):
             for origin, T in fam:
-                ok, bad = overlap_score(ti, si, T)
+                ok, bad = overlap_score(ti, si, T, slack=slack)
                 log.info("%s: overlap %.3f, conflict %.3f", origin, ok, bad)
                 if ok - 3 * bad > best_score:
                     best_fam, best_score, best_fit = i, ok - 3 * bad, (ok, bad)
@@ -637,7 +675,7 @@ def register(
         origin, T = max(
             families[best_fam],
             key=lambda c: (lambda f: f[0] - 3 * f[1])(
-                overlap_score(ti, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002)
+                overlap_score(ti, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002, slack=slack)
             ),
         )
         fin = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)
@@ -656,7 +694,7 @@ def register(
             raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
     rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")
-    q, cons, _ = _overlap(ti, si, T, fine_tol, 0.002, 20000)
+    q, cons, _ = _overlap(ti, si, T, fine_tol, 0.002, 20000, slack)
     fitness = float(cons.mean())
     denom = f"sampled source points within {fine_tol:.3g} m + 0.2% of range of the target's view"
     info = _information_from_points(q[cons])
@@ -704,6 +742,7 @@ __all__ = [
     "feature_image",
     "overlap_score",
     "pixel_footprint",
+    "range_slack",
     "register",
     "upright_priors",
 ]

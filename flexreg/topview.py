@@ -86,7 +86,8 @@ def surface_normals(
     nrm = n[ok] / nn[ok][:, None]
     flip = np.einsum("ij,ij->i", nrm, pts) > 0
     nrm[flip] *= -1
-    area = lh[ok] * lv[ok] / float(4 * k * k) * float(stride * stride)
+    # neighbours 2k strided pixels apart: the product covers one stride x stride cell
+    area = lh[ok] * lv[ok] / float(4 * k * k)
     return pts, nrm, area
 
 
@@ -227,7 +228,7 @@ def top_view(
     *,
     cell_m: float = 0.2,
     radius_m: float = 40.0,
-    max_surface_m: float = 1.0,
+    max_surface_m: float = 0.25,
     height_bin_m: float = 0.01,
 ) -> TopView:
     """Plan image of a scan's vertical surfaces (and its horizontal surfaces' heights).
@@ -242,8 +243,9 @@ def top_view(
     radius_m : float, metres
         Ignore surfaces farther than this horizontally (sparse, noisy far field).
     max_surface_m : float, metres
-        Clip each cell's vertical-surface height (a tall wall should not outweigh the
-        furniture that makes a room unique).
+        Clip each cell's vertical-surface height: a tall wall should not outweigh the
+        chair legs, shelves and pillars that make a site unique, so the plan is close to an
+        occupancy map of vertical structure (cells with less than 5 mm are dropped).
     height_bin_m : float, metres
         Bin of the horizontal-surface height histogram.
     """
@@ -262,7 +264,7 @@ def top_view(
     vals = np.bincount(inv, weights=a) / cell_m
     cells = np.column_stack([uk >> 32, (uk & 0xFFFFFFFF).astype(np.int64)])
     cells[:, 1] = np.where(cells[:, 1] >= 2**31, cells[:, 1] - 2**32, cells[:, 1])
-    keep = vals > 0.02
+    keep = vals > 0.005
     cells, vals = cells[keep], np.minimum(vals[keep], max_surface_m)
     hz = near & (np.abs(n[:, 2]) > 0.95)
     z = p[hz, 2]

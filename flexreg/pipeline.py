@@ -708,6 +708,7 @@ def register(
                 T,
                 method=config.icp,  # type: ignore[arg-type]
                 voxel_m=config.voxel_m,
+                initial_error_m=3 * thr,
             )
         T, rmse, fitness, info = (
             icp.T_target_source,
@@ -715,7 +716,10 @@ def register(
             icp.fitness,
             icp.information,
         )
-        denom = f"source points after {icp.voxel_m:.3g} m voxel downsampling"
+        denom = (
+            f"{icp.source_points} source points ({icp.voxel_m:.3g} m voxels, thinned) with a "
+            f"target point within {icp.max_distance_m:.3g} m"
+        )
     return RegistrationResult(
         T_target_source=T,
         T_coarse=T_coarse,

@@ -29,8 +29,13 @@ class IcpResult:
     inlier_rmse_m : float
     information : (6, 6) float64
         Open3D's information matrix of the correspondences (rotation first, then translation).
-    voxel_m, max_distance_m : float
-        Parameters used.
+    voxel_m : float
+        Downsampling voxel used, metres.
+    max_distance_m : float
+        Correspondence distance of the final ICP level (``fitness`` and ``inlier_rmse_m``
+        refer to it), metres.
+    source_points : int
+        Downsampled source points (the denominator of ``fitness``).
     """
 
     T_target_source: NDArray[np.float64]
@@ -39,6 +44,7 @@ class IcpResult:
     information: NDArray[np.float64]
     voxel_m: float
     max_distance_m: float
+    source_points: int = 0
 
 
 def median_spacing(points: NDArray[np.float64], *, sample: int = 5000, seed: int = 0) -> float:
@@ -70,9 +76,20 @@ def refine_icp(
     method: IcpMethod = "point-to-plane",
     voxel_m: float | None = None,
     max_distance_m: float | None = None,
-    max_iterations: int = 60,
+    max_iterations: int = 30,
+    max_target_points: int = 150_000,
+    max_source_points: int = 40_000,
+    initial_error_m: float = 0.0,
 ) -> IcpResult:
-    """Refine ``T_target_source`` with Open3D ICP on voxel-downsampled clouds.
+    """Refine ``T_target_source`` with Open3D ICP on downsampled clouds, coarse to fine.
+
+    The target is voxel-downsampled (its normals or covariances come from that cloud), the
+    source is downsampled with the same voxel and then thinned to ``max_source_points`` evenly
+    spread points: the source only supplies residuals, and a few tens of thousands of them pin
+    a rigid transform far below the noise. ICP runs three times with a shrinking
+    correspondence distance (``max_distance_m``, a third of it, a tenth of it but at least
+    half a voxel), so a start a few centimetres off converges without letting the final
+    iterations pair points across surfaces.
 
     Parameters
     ----------
@@ -82,10 +99,17 @@ def refine_icp(
         Initial ``T_target_source`` (e.g. from RANSAC on feature matches).
     method : {"point-to-plane", "gicp", "point-to-point"}
     voxel_m : float, optional
-        Downsampling voxel; default 2x the median point spacing of the target (at least 5 mm).
+        Downsampling voxel; default twice the target's median point spacing (at least 5 mm),
+        enlarged until the target keeps at most ``max_target_points`` points.
     max_distance_m : float, optional
-        Correspondence distance; default 3 voxels.
+        First correspondence distance; default 5 voxels or ``initial_error_m``, whichever is
+        larger.
     max_iterations : int
+        Per distance level.
+    max_target_points, max_source_points : int
+        Point budgets (speed on large scans).
+    initial_error_m : float, metres
+        How far off ``T_init`` may be.
 
     Raises
     ------
@@ -95,61 +119,83 @@ def refine_icp(
     import open3d as o3d
 
     reg = o3d.pipelines.registration
+    tgt_full = _cloud(target)
     if voxel_m is None:
         voxel_m = max(0.005, 2.0 * median_spacing(target))
+        tgt = tgt_full.voxel_down_sample(voxel_m)
+        for _ in range(4):  # surfaces: point count falls with the square of the voxel
+            if len(tgt.points) <= max_target_points:
+                break
+            voxel_m *= 1.05 * float(np.sqrt(len(tgt.points) / max_target_points))
+            tgt = tgt_full.voxel_down_sample(voxel_m)
+    elif not voxel_m > 0:
+        raise ConfigError(f"voxel must be positive, got {voxel_m}")
+    else:
+        tgt = tgt_full.voxel_down_sample(voxel_m)
     if max_distance_m is None:
-        max_distance_m = 3.0 * voxel_m
-    if not (voxel_m > 0 and max_distance_m > 0):
-        raise ConfigError(f"voxel and distance must be positive: {voxel_m}, {max_distance_m}")
-    tgt = _cloud(target).voxel_down_sample(voxel_m)
+        max_distance_m = max(5.0 * voxel_m, initial_error_m)
+    if not max_distance_m > 0:
+        raise ConfigError(f"ICP distance must be positive, got {max_distance_m}")
     src = _cloud(source).voxel_down_sample(voxel_m)
+    if len(src.points) > max_source_points:
+        src = src.uniform_down_sample(int(np.ceil(len(src.points) / max_source_points)))
     search = o3d.geometry.KDTreeSearchParamHybrid(radius=3 * voxel_m, max_nn=30)
     crit = reg.ICPConvergenceCriteria(
-        relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=max_iterations
+        relative_fitness=1e-8, relative_rmse=1e-8, max_iteration=max_iterations
     )
-    T0 = np.asarray(T_init, dtype=np.float64)
+    T = np.asarray(T_init, dtype=np.float64)
+    levels = [max_distance_m, max_distance_m / 3, max(max_distance_m / 10, voxel_m / 2)]
     # Open3D's multi-threaded reductions sum in varying order; one thread keeps the result
     # bit-identical from run to run (flexreg's determinism contract).
     threads = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(1)
     try:
-        res, tgt, src = _icp(reg, tgt, src, T0, method, search, crit, max_distance_m)
-        info = np.asarray(
-            reg.get_information_matrix_from_point_clouds(
-                src, tgt, max_distance_m, np.asarray(res.transformation)
-            )
-        )
+        _prepare(tgt, src, method, search)
+        for dist in levels:
+            res = _icp(reg, tgt, src, T, method, crit, dist)
+            if len(res.correspondence_set) == 0:
+                raise RegistrationError(
+                    f"ICP found no correspondences within {dist:.3g} m of the initial pose"
+                )
+            T = np.array(res.transformation, dtype=np.float64)
+        info = np.asarray(reg.get_information_matrix_from_point_clouds(src, tgt, levels[-1], T))
     finally:
         o3d.utility.set_max_threads(threads)
-    if len(res.correspondence_set) == 0:
-        raise RegistrationError(
-            f"ICP found no correspondences within {max_distance_m:.3g} m of the initial pose"
-        )
+    log.info(
+        "ICP on %d target / %d source points, voxel %.3g m: fitness %.3f, rmse %.3g m",
+        len(tgt.points),
+        len(src.points),
+        voxel_m,
+        res.fitness,
+        res.inlier_rmse,
+    )
     return IcpResult(
-        T_target_source=np.array(res.transformation, dtype=np.float64),
+        T_target_source=T,
         fitness=float(res.fitness),
         inlier_rmse_m=float(res.inlier_rmse),
         information=info,
         voxel_m=float(voxel_m),
-        max_distance_m=float(max_distance_m),
+        max_distance_m=float(levels[-1]),
+        source_points=len(src.points),
     )
 
 
-def _icp(
-    reg: Any, tgt: Any, src: Any, T0: Any, method: str, search: Any, crit: Any, dist: float
-) -> Any:
+def _prepare(tgt: Any, src: Any, method: str, search: Any) -> None:
     if method == "point-to-plane":
         tgt.estimate_normals(search)
-        est: Any = reg.TransformationEstimationPointToPlane()
-        res = reg.registration_icp(src, tgt, dist, T0, est, crit)
     elif method == "gicp":
         tgt.estimate_covariances(search)
         src.estimate_covariances(search)
-        est = reg.TransformationEstimationForGeneralizedICP()
-        res = reg.registration_generalized_icp(src, tgt, dist, T0, est, crit)
-    elif method == "point-to-point":
-        est = reg.TransformationEstimationPointToPoint()
-        res = reg.registration_icp(src, tgt, dist, T0, est, crit)
-    else:
+    elif method != "point-to-point":
         raise ConfigError(f"unknown ICP method {method!r}")
-    return res, tgt, src
+
+
+def _icp(reg: Any, tgt: Any, src: Any, T0: Any, method: str, crit: Any, dist: float) -> Any:
+    if method == "point-to-plane":
+        est: Any = reg.TransformationEstimationPointToPlane()
+        return reg.registration_icp(src, tgt, dist, T0, est, crit)
+    if method == "gicp":
+        est = reg.TransformationEstimationForGeneralizedICP()
+        return reg.registration_generalized_icp(src, tgt, dist, T0, est, crit)
+    est = reg.TransformationEstimationPointToPoint()
+    return reg.registration_icp(src, tgt, dist, T0, est, crit)

@@ -89,6 +89,9 @@ class RegistrationConfig:
     guided_radius_m, guided_radius_per_m : float
         Guided matching search radius around a prior's prediction: metres plus metres per
         metre of range.
+    max_image_pixels : int
+        Larger range images are subsampled (every k-th row and column) before the image
+        stages; ICP still uses every point.
     min_overlap : float
         Smallest share of the source's points the result must explain (see
         :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
@@ -120,6 +123,7 @@ class RegistrationConfig:
     guided_radius_m: float = 0.25
     guided_radius_per_m: float = 0.02
     min_overlap: float = 0.1
+    max_image_pixels: int = 2_500_000
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -256,6 +260,20 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
 
 def _as_image(x: Scan | RangeImage) -> RangeImage:
     return x if isinstance(x, RangeImage) else range_image(x)
+
+
+def _working_image(x: Scan | RangeImage, max_pixels: int) -> RangeImage:
+    """The range image the image stages work on: at most ``max_pixels`` (every k-th row and
+    column of larger grids)."""
+    from .projection import downsample_image, from_grid
+
+    def factor(h: int, w: int) -> int:
+        return max(1, math.ceil(math.sqrt(h * w / max(1, max_pixels))))
+
+    if isinstance(x, Scan) and x.has_grid and x.grid_shape is not None:
+        return from_grid(x, stride=factor(*x.grid_shape))
+    img = _as_image(x)
+    return downsample_image(img, factor(img.height, img.width))
 
 
 def _points(x: Scan | RangeImage) -> NDArray[np.float64]:
@@ -565,7 +583,7 @@ def register(
         return _timed(timings, name)
 
     with stage("range images"):
-        ti, si = _as_image(target), _as_image(source)
+        ti, si = (_working_image(x, config.max_image_pixels) for x in (target, source))
         if config.fill_holes:
             ti, si = fill_holes(ti), fill_holes(si)
     with stage("feature images"):

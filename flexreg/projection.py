@@ -105,7 +105,7 @@ class RangeImage:
 # ------------------------------------------------------------------------------ builders
 
 
-def from_grid(scan: Scan) -> RangeImage:
+def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
     """Range image on the scan's native grid, without resampling.
 
     Parameters
@@ -113,6 +113,9 @@ def from_grid(scan: Scan) -> RangeImage:
     scan : Scan
         Must carry ``grid_shape`` and ``grid_index`` (PTX, gridded E57, organised PCD, 3DTK,
         depth images, synthetic stations).
+    stride : int
+        Keep every ``stride``-th row and column (as :func:`downsample_image`, without building
+        the full-size image first).
     """
     if scan.grid_shape is None or scan.grid_index is None:
         raise InputError(scan.path or scan.name, "scan has no native grid; project it instead")
@@ -120,7 +123,19 @@ def from_grid(scan: Scan) -> RangeImage:
     r, c = scan.grid_index[:, 0], scan.grid_index[:, 1]
     index = np.full((H, W), -1, dtype=np.int64)
     index[r, c] = np.arange(len(scan), dtype=np.int64)
-    return _from_index(scan, index, scan.camera)
+    if stride == 1:
+        return _from_index(scan, index, scan.camera)
+    # a camera-only image of the right size gives the scaled camera
+    small = downsample_image(
+        RangeImage(
+            xyz=np.empty((H, W, 3)),
+            valid=np.zeros((H, W), bool),
+            index=index,
+            camera=scan.camera,
+        ),
+        stride,
+    )
+    return _from_index(scan, np.ascontiguousarray(index[::stride, ::stride]), small.camera)
 
 
 def _from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> RangeImage:
@@ -317,6 +332,37 @@ def from_depth(
     index = np.full(d.shape, -1, dtype=np.int64)
     index[valid] = np.arange(int(valid.sum()), dtype=np.int64)
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera)
+
+
+def downsample_image(image: RangeImage, factor: int) -> RangeImage:
+    """Every ``factor``-th row and column of a range image (points kept, not averaged).
+
+    The camera is scaled to match when the image size is a multiple of ``factor`` (pixel
+    ``(u', v')`` is the original ``(factor u', factor v')``); otherwise the result is a native
+    grid without a camera model.
+    """
+    f = int(factor)
+    if f < 1:
+        raise InputError("factor", f"must be a positive integer, got {factor}")
+    if f == 1:
+        return image
+    H, W = image.shape
+    cam: Camera | None = None
+    c = image.camera
+    if c is not None and H % f == 0 and W % f == 0:
+        if isinstance(c, SphericalCamera):
+            cam = SphericalCamera(W // f, H // f, c.phi_min, c.phi_max, c.theta_min, c.theta_max)
+        elif isinstance(c, PinholeCamera):
+            cam = PinholeCamera(
+                c.fx / f, c.fy / f, c.cx / f, c.cy / f, W // f, H // f, skew=c.skew / f
+            )
+    return RangeImage(
+        xyz=np.ascontiguousarray(image.xyz[::f, ::f]),
+        valid=np.ascontiguousarray(image.valid[::f, ::f]),
+        index=np.ascontiguousarray(image.index[::f, ::f]),
+        camera=cam,
+        intensity=None if image.intensity is None else image.intensity[::f, ::f].copy(),
+    )
 
 
 def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 0.03) -> RangeImage:

@@ -15,6 +15,18 @@ log = logging.getLogger(__name__)
 
 IcpMethod = Literal["point-to-plane", "gicp", "point-to-point"]
 
+#: clouds above this many points are randomly thinned (fixed seed) before voxel downsampling
+_PRE_THIN = 1_000_000
+
+
+def _thin(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """At most about ``_PRE_THIN`` of the points, a fixed-seed uniform random subset (voxels
+    of the sizes ICP uses hold many points, so the voxel grid hardly changes)."""
+    if len(points) <= _PRE_THIN:
+        return points
+    keep = np.random.default_rng(0).random(len(points)) < _PRE_THIN / len(points)
+    return points[keep]
+
 
 @dataclass(frozen=True)
 class IcpResult:
@@ -47,13 +59,25 @@ class IcpResult:
     source_points: int = 0
 
 
-def median_spacing(points: NDArray[np.float64], *, sample: int = 5000, seed: int = 0) -> float:
-    """Median nearest-neighbour distance of a point cloud (metres), from a fixed subsample."""
+def median_spacing(
+    points: NDArray[np.float64],
+    *,
+    sample: int = 5000,
+    seed: int = 0,
+    tree_points: int | None = None,
+) -> float:
+    """Median nearest-neighbour distance of a point cloud (metres), from a fixed subsample.
+
+    With ``tree_points``, the neighbours are searched among at most that many points (a
+    fixed random subset), which overestimates the spacing of larger clouds but is fast.
+    """
     from scipy.spatial import cKDTree
 
     P = np.asarray(points, dtype=np.float64)
     if len(P) < 2:
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
+    if tree_points is not None and len(P) > tree_points:
+        P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
     tree = cKDTree(P)
     idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
     d, _ = tree.query(P[idx], k=2)
@@ -119,15 +143,18 @@ def refine_icp(
     import open3d as o3d
 
     reg = o3d.pipelines.registration
+    # very large scans: a regular thinning first (voxels of the sizes used here hold many
+    # points, so the voxel grid hardly changes, and the downsampling gets much cheaper)
+    target, source = _thin(np.asarray(target)), _thin(np.asarray(source))
     tgt_full = _cloud(target)
     if voxel_m is None:
-        voxel_m = max(0.005, 2.0 * median_spacing(target))
+        voxel_m = max(0.005, 2.0 * median_spacing(target, tree_points=200_000))
         tgt = tgt_full.voxel_down_sample(voxel_m)
-        for _ in range(4):  # surfaces: point count falls with the square of the voxel
+        for _ in range(6):  # surfaces: point count falls with the square of the voxel
             if len(tgt.points) <= max_target_points:
                 break
-            voxel_m *= 1.05 * float(np.sqrt(len(tgt.points) / max_target_points))
-            tgt = tgt_full.voxel_down_sample(voxel_m)
+            voxel_m *= 1.1 * float(np.sqrt(len(tgt.points) / max_target_points))
+            tgt = tgt.voxel_down_sample(voxel_m)  # re-binning the smaller cloud is cheap
     elif not voxel_m > 0:
         raise ConfigError(f"voxel must be positive, got {voxel_m}")
     else:
@@ -139,7 +166,7 @@ def refine_icp(
     src = _cloud(source).voxel_down_sample(voxel_m)
     if len(src.points) > max_source_points:
         src = src.uniform_down_sample(int(np.ceil(len(src.points) / max_source_points)))
-    search = o3d.geometry.KDTreeSearchParamHybrid(radius=3 * voxel_m, max_nn=30)
+    search = o3d.geometry.KDTreeSearchParamHybrid(radius=3 * voxel_m, max_nn=20)
     crit = reg.ICPConvergenceCriteria(
         relative_fitness=1e-8, relative_rmse=1e-8, max_iteration=max_iterations
     )
@@ -147,10 +174,10 @@ def refine_icp(
     levels = [max_distance_m, max_distance_m / 3, max(max_distance_m / 10, voxel_m / 2)]
     # Open3D's multi-threaded reductions sum in varying order; one thread keeps the result
     # bit-identical from run to run (flexreg's determinism contract).
+    _prepare(tgt, src, method, search)  # per point: the same with any number of threads
     threads = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(1)
     try:
-        _prepare(tgt, src, method, search)
         for dist in levels:
             res = _icp(reg, tgt, src, T, method, crit, dist)
             if len(res.correspondence_set) == 0:

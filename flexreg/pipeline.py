@@ -262,6 +262,17 @@ def _as_image(x: Scan | RangeImage) -> RangeImage:
     return x if isinstance(x, RangeImage) else range_image(x)
 
 
+def _with_camera(image: RangeImage) -> RangeImage:
+    """The image itself when it has a camera model; otherwise its points re-projected through
+    an equirectangular camera fitted to them, so that free-space checks can look pixels up."""
+    from .projection import auto_spherical_camera, project
+
+    if image.camera is not None:
+        return image
+    pts = image.xyz[image.valid]
+    return project(Scan(points=pts), auto_spherical_camera(pts))
+
+
 def _working_image(x: Scan | RangeImage, max_pixels: int) -> RangeImage:
     """The range image the image stages work on: at most ``max_pixels`` (every k-th row and
     column of larger grids)."""
@@ -340,7 +351,7 @@ def upright_priors(
             (
                 lev,
                 topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m),
-                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m / 4),
+                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m / 4, radius_m=20.0),
             )
         )
     (lt, vt, vtf), (ls, vs, vsf) = views
@@ -669,11 +680,12 @@ def register(
                 fam.append((f"{origin}+keypoints", est.T))
             if fam:
                 families.append(fam)
-        slack = range_slack(ti)
+        vt = _with_camera(ti)
+        slack = range_slack(vt)
         best_fam, best_score, best_fit = -1, -np.inf, (0.0, 0.0)
         for i, fam in enumerate(families):
             for origin, T in fam:
-                ok, bad = overlap_score(ti, si, T, slack=slack)
+                ok, bad = overlap_score(vt, si, T, tolerance_m=2.5 * thr, slack=slack)
                 log.info("%s: overlap %.3f, conflict %.3f", origin, ok, bad)
                 if ok - 3 * bad > best_score:
                     best_fam, best_score, best_fit = i, ok - 3 * bad, (ok, bad)
@@ -689,7 +701,7 @@ def register(
                 f"{100 * config.min_overlap:.0f}%); {len(ft)}/{len(fs)} keypoints, "
                 f"{len(pairs)} descriptor matches"
             )
-        fine_tol = max(thr / 2, 0.01)
+        fine_tol = thr / 2
         origin, T = max(
             families[best_fam],
             key=lambda c: (lambda f: f[0] - 3 * f[1])(
@@ -712,7 +724,7 @@ def register(
             raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
     rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")
-    q, cons, _ = _overlap(ti, si, T, fine_tol, 0.002, 20000, slack)
+    q, cons, _ = _overlap(vt, si, T, fine_tol, 0.002, 20000, slack)
     fitness = float(cons.mean())
     denom = f"sampled source points within {fine_tol:.3g} m + 0.2% of range of the target's view"
     info = _information_from_points(q[cons])

@@ -223,18 +223,57 @@ def azimuth_polar_extent(points: NDArray[np.float64]) -> tuple[float, float, flo
     return float(phi_min), float(phi_max), float(theta.min()), float(theta.max()), full
 
 
+def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float] | None:
+    """``(rings, spacing_rad)`` when the cloud is a spinning lidar's: its polar angles fall
+    into a few narrow, about evenly spaced bands (one per beam); else None."""
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) < 1000:
+        return None
+    r = np.linalg.norm(P, axis=1)
+    th = np.sort(np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)))
+    gaps = np.diff(th)
+    sep = gaps > math.radians(0.2)
+    n = int(sep.sum()) + 1
+    if not (4 <= n <= 256) or n * 50 > len(P):
+        return None
+    spacing = float(np.median(gaps[sep]))
+    # rings about evenly spaced, and each band much narrower than the spacing
+    if not np.all((gaps[sep] > 0.5 * spacing) & (gaps[sep] < 2.5 * spacing)):
+        return None
+    starts = np.r_[0, np.flatnonzero(sep) + 1]
+    ends = np.r_[np.flatnonzero(sep), len(th) - 1]
+    if np.max(th[ends] - th[starts]) > 0.25 * spacing:
+        return None
+    return n, spacing
+
+
 def auto_spherical_camera(
     points: NDArray[np.float64], *, angular_resolution_rad: float | None = None
 ) -> SphericalCamera:
     """Choose an equirectangular camera that fits an unstructured cloud.
 
     The azimuth/polar extent comes from the data (a full turn when there is no gap wider than
-    5 degrees). Unless ``angular_resolution_rad`` is given, the pixel pitch makes the number of
-    pixels over the covered part of the (phi, theta) domain equal to the number of points, so
-    a scan at its native density fills the image without holes or overdraw.
+    5 degrees). A spinning lidar's cloud (polar angles in a few narrow, evenly spaced bands)
+    gets one row per beam. Otherwise, unless ``angular_resolution_rad`` is given, the pixel
+    pitch makes the number of pixels over the covered part of the (phi, theta) domain equal
+    to the number of points, so a scan at its native density fills the image without holes
+    or overdraw.
     """
     phi_min, phi_max, th_min, th_max, full = azimuth_polar_extent(points)
     span_phi, span_th = phi_max - phi_min, max(th_max - th_min, 1e-6)
+    rings = _lidar_rings(points) if angular_resolution_rad is None else None
+    if rings is not None:  # spinning lidar: one row per beam, azimuth at the ring density
+        n_rings, spacing = rings
+        H = math.floor(span_th / spacing + 0.5) + 1
+        th_lo = th_min
+        th_hi = min(np.pi, th_lo + H * spacing)
+        dphi = span_phi * n_rings / len(points)
+        if full:
+            return SphericalCamera(
+                max(1, math.ceil(2 * np.pi / dphi)), H, -np.pi, np.pi, th_lo, th_hi
+            )
+        W = math.floor(span_phi / dphi + 0.5) + 1
+        return SphericalCamera(W, H, phi_min, phi_min + W * dphi, th_lo, th_hi)
     if angular_resolution_rad is None:
         n = len(points)
         step = math.sqrt(span_phi * span_th / max(n, 1))

@@ -18,6 +18,9 @@ IcpMethod = Literal["point-to-plane", "gicp", "point-to-point"]
 #: clouds above this many points are randomly thinned (fixed seed) before voxel downsampling
 _PRE_THIN = 1_000_000
 
+#: smallest ICP correspondence distance, in voxels
+_FLOOR = 0.5
+
 
 def _thin(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """At most about ``_PRE_THIN`` of the points, a fixed-seed uniform random subset (voxels
@@ -123,8 +126,8 @@ def refine_icp(
         Initial ``T_target_source`` (e.g. from RANSAC on feature matches).
     method : {"point-to-plane", "gicp", "point-to-point"}
     voxel_m : float, optional
-        Downsampling voxel; default twice the target's median point spacing (at least 5 mm),
-        enlarged until the target keeps at most ``max_target_points`` points.
+        Downsampling voxel; default twice the target's median point spacing, enlarged until
+        the target keeps at most ``max_target_points`` points.
     max_distance_m : float, optional
         First correspondence distance; default 5 voxels or ``initial_error_m``, whichever is
         larger.
@@ -143,12 +146,12 @@ def refine_icp(
     import open3d as o3d
 
     reg = o3d.pipelines.registration
-    # very large scans: a regular thinning first (voxels of the sizes used here hold many
+    # very large scans: a random thinning first (voxels of the sizes used here hold many
     # points, so the voxel grid hardly changes, and the downsampling gets much cheaper)
     target, source = _thin(np.asarray(target)), _thin(np.asarray(source))
     tgt_full = _cloud(target)
     if voxel_m is None:
-        voxel_m = max(0.005, 2.0 * median_spacing(target, tree_points=200_000))
+        voxel_m = 2.0 * median_spacing(target, tree_points=200_000)
         tgt = tgt_full.voxel_down_sample(voxel_m)
         for _ in range(6):  # surfaces: point count falls with the square of the voxel
             if len(tgt.points) <= max_target_points:
@@ -171,14 +174,20 @@ def refine_icp(
         relative_fitness=1e-8, relative_rmse=1e-8, max_iteration=max_iterations
     )
     T = np.asarray(T_init, dtype=np.float64)
-    levels = [max_distance_m, max_distance_m / 3, max(max_distance_m / 10, voxel_m / 2)]
+    levels: list[float] = []
     # Open3D's multi-threaded reductions sum in varying order; one thread keeps the result
     # bit-identical from run to run (flexreg's determinism contract).
     _prepare(tgt, src, method, search)  # per point: the same with any number of threads
     threads = o3d.utility.get_max_threads()
     o3d.utility.set_max_threads(1)
     try:
-        for dist in levels:
+        for shrink in (1.0, 3.0, 10.0):
+            # below half a voxel, or below the typical gap between the two clouds' samples
+            # (sparse lidar rings), two samplings of one surface would lose each other
+            dist = max(max_distance_m / shrink, _FLOOR * voxel_m)
+            if shrink == 10.0:
+                dist = max(dist, _sample_gap(tgt, src, T, levels[-1]))
+            levels.append(dist)
             res = _icp(reg, tgt, src, T, method, crit, dist)
             if len(res.correspondence_set) == 0:
                 raise RegistrationError(
@@ -205,6 +214,17 @@ def refine_icp(
         max_distance_m=float(levels[-1]),
         source_points=len(src.points),
     )
+
+
+def _sample_gap(tgt: Any, src: Any, T: NDArray[np.float64], within: float) -> float:
+    """Median distance from the source points (placed by ``T``) to their nearest target point,
+    among those closer than ``within``, metres."""
+    from scipy.spatial import cKDTree
+
+    q = np.asarray(src.points) @ T[:3, :3].T + T[:3, 3]
+    d, _ = cKDTree(np.asarray(tgt.points)).query(q, distance_upper_bound=within)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if len(d) else 0.0
 
 
 def _prepare(tgt: Any, src: Any, method: str, search: Any) -> None:

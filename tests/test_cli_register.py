@@ -80,7 +80,10 @@ def registered(pair, tmp_path_factory):
         str(out / "merged.ply"),
         "--voxel",
         "0.08",
+        "--truth",
+        str(target.parent / "truth.txt"),
     ]
+    np.savetxt(target.parent / "truth.txt", pair[2])
     results = []
     real_register = flexreg.pipeline.register
 
@@ -122,6 +125,33 @@ def test_json_holds_the_true_transform_and_the_run(registered, pair):
     assert doc["config"]["image"] == "flexion" and doc["config"]["n"] == 5
     assert doc["seed"] == 0 and doc["config"]["refine"] is True
     assert set(result.to_dict()) <= set(doc)
+
+
+def test_truth_errors_reported_and_stored(registered):
+    doc = json.loads((registered["out"] / "T.json").read_text())
+    err = doc["error_vs_truth"]
+    assert err["truth"].endswith("truth.txt")
+    assert err["rotation_deg"] < 0.05 and err["translation_m"] < 0.01
+    assert err["coarse_rotation_deg"] < 0.5 and err["coarse_translation_m"] < 0.05
+    assert "error vs truth" in registered["stdout"]
+
+
+def test_truth_from_a_synth_ground_truth_file(tmp_path):
+    from flexreg.cli.register import read_truth
+
+    T = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.1])
+    doc = {
+        "pairs": [{"target": "station_00", "source": "station_01", "T_target_source": T.tolist()}]
+    }
+    gt = tmp_path / "gt.json"
+    gt.write_text(json.dumps(doc))
+    a, b = Path("x/station_00.ptx"), Path("y/station_01.e57")
+    np.testing.assert_allclose(read_truth(gt, a, b), T)
+    np.testing.assert_allclose(read_truth(gt, b, a), invert(T), atol=1e-12)
+    from flexreg.errors import InputError
+
+    with pytest.raises(InputError, match="no pair station_00 / station_02"):
+        read_truth(gt, a, Path("station_02.ptx"))
 
 
 def test_txt_is_the_same_matrix(registered):
@@ -209,6 +239,7 @@ def test_missing_input_names_the_file(pair, tmp_path, capsys):
         (["--voxel", "nan"], "--voxel"),
         (["--threshold", "-0.1"], "--threshold"),
         (["--seed", "-1"], "--seed"),
+        (["--upright", "yes"], "--upright"),
         (["--matches", "m.jpg"], "--matches"),
         (["--merged", "m.pcd"], "--merged"),
         (["--txt", "T.json"], "--txt"),

@@ -37,6 +37,7 @@ def _check_options(
     voxel: float | None,
     threshold: float | None,
     seed: int,
+    upright: str,
     inputs: tuple[Path, Path],
     out: Path,
     txt: Path | None,
@@ -61,6 +62,8 @@ def _check_options(
             raise ConfigError(f"{option}: must be a positive number of metres, got {value}")
     if seed < 0:
         raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
+    if upright not in ("auto", "on", "off"):
+        raise ConfigError(f"--upright: must be auto, on or off, got {upright!r}")
     suffixes = (
         ("--out", out, ".json"),
         ("--matches", matches, ".png"),
@@ -204,6 +207,18 @@ def register_command(
         help="Write a .ply of both clouds in the target frame (target orange, source blue).",
     ),
     seed: int = typer.Option(0, "--seed", help="Random seed; the same seed gives the same T."),
+    upright: str = typer.Option(
+        "auto",
+        "--upright",
+        help="Levelled-scanner plan-view prior: auto (when both scans look levelled), on "
+        "(required) or off.",
+    ),
+    truth: Path | None = typer.Option(
+        None,
+        "--truth",
+        help="Known T_target_source (.json or 4x4 .txt; a 'flexreg synth' gt.json works): "
+        "report the errors in degrees and metres and store them in the output JSON.",
+    ),
 ) -> None:
     """Register SOURCE onto TARGET through feature images; write T_target_source.
 
@@ -221,6 +236,7 @@ def register_command(
         voxel=voxel,
         threshold=threshold,
         seed=seed,
+        upright=upright,
         inputs=(target, source),
         out=out,
         txt=txt,
@@ -236,7 +252,9 @@ def register_command(
         voxel_m=voxel,
         threshold_m=threshold,
         seed=seed,
+        upright=upright,
     )
+    T_true = None if truth is None else read_truth(truth, target, source)
     scans = []
     for path in (target, source):
         with stage(f"Reading {path.name}"):
@@ -262,9 +280,12 @@ def register_command(
     meta = result.to_dict()
     meta.pop("T_target_source", None)
     meta = {"target": str(target), "source": str(source), **meta, "flexreg_version": __version__}
+    errors = None if T_true is None else _errors(result, T_true)
+    if errors is not None:
+        meta["error_vs_truth"] = {"truth": str(truth), **errors}
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     _write_all(writers)
-    _print_summary(result, config)
+    _print_summary(result, config, errors)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False)
 
@@ -276,7 +297,48 @@ def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:
         raise InputError(path, "cannot write the PNG file")
 
 
-def _print_summary(result: RegistrationResult, config: RegistrationConfig) -> None:
+def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
+    """A known ``T_target_source``: a transform file, or the pair ``target``/``source`` (by
+    file stem, either order) of a ``flexreg synth`` gt.json."""
+    import json
+
+    import numpy as np
+
+    from ..io import read_transform
+    from ..transforms import as_transform, invert
+
+    if path.suffix.lower() == ".json" and path.is_file():
+        try:
+            doc = json.loads(path.read_text(errors="replace"))
+        except json.JSONDecodeError as e:
+            raise InputError(path, f"invalid JSON: {e.msg} (line {e.lineno})") from None
+        if isinstance(doc, dict) and "pairs" in doc and "T_target_source" not in doc:
+            for pair in doc["pairs"]:
+                names = (pair.get("target"), pair.get("source"))
+                if names == (target.stem, source.stem):
+                    return as_transform(pair["T_target_source"], name=str(path))
+                if names == (source.stem, target.stem):
+                    return invert(as_transform(pair["T_target_source"], name=str(path)))
+            raise InputError(path, f"no pair {target.stem} / {source.stem} in its 'pairs'")
+    return np.asarray(read_transform(path), dtype=np.float64)
+
+
+def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str, float]:
+    from ..transforms import rotation_error_deg, translation_error_m
+
+    return {
+        "coarse_rotation_deg": rotation_error_deg(result.T_coarse, T_true),
+        "coarse_translation_m": translation_error_m(result.T_coarse, T_true),
+        "rotation_deg": rotation_error_deg(result.T_target_source, T_true),
+        "translation_m": translation_error_m(result.T_target_source, T_true),
+    }
+
+
+def _print_summary(
+    result: RegistrationResult,
+    config: RegistrationConfig,
+    errors: dict[str, float] | None = None,
+) -> None:
     import numpy as np
     from rich.table import Table
 
@@ -287,17 +349,25 @@ def _print_summary(result: RegistrationResult, config: RegistrationConfig) -> No
         return f"rotation {rot:.3f}°, translation {dist:.3f} m"
 
     r = result
-    final = "ICP " + config.icp if config.refine else "RANSAC, not refined"
+    final = "ICP " + config.icp if config.refine else "keypoint inliers, not refined"
     t = Table(title="T_target_source", show_header=False, title_justify="left")
     t.add_column(style="bold")
     t.add_column()
     share = 100 * r.inliers / r.matches if r.matches else 0.0
-    t.add_row("matches", f"{r.matches:,} lifted 2D matches ({config.features} on {config.image})")
+    t.add_row("matches", f"{r.matches:,} 3D keypoint matches ({config.features} on {config.image})")
     t.add_row("inliers", f"{r.inliers:,} ({share:.1f} %) within {1000 * r.threshold_m:.1f} mm")
     t.add_row("inlier RMSE", f"{1000 * r.inlier_rmse_m:.2f} mm ({final})")
     t.add_row("fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
-    t.add_row("coarse (RANSAC)", motion(r.T_coarse))
+    t.add_row("prior", r.prior)
+    t.add_row("coarse", motion(r.T_coarse))
     t.add_row("final", motion(r.T_target_source))
+    if errors is not None:
+        t.add_row(
+            "error vs truth",
+            f"coarse {errors['coarse_rotation_deg']:.3f}°, "
+            f"{1000 * errors['coarse_translation_m']:.1f} mm; final "
+            f"{errors['rotation_deg']:.4f}°, {1000 * errors['translation_m']:.2f} mm",
+        )
     if config.refine:
         dr = rotation_error_deg(r.T_target_source, r.T_coarse)
         dt = translation_error_m(r.T_target_source, r.T_coarse)

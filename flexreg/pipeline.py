@@ -92,6 +92,8 @@ class RegistrationConfig:
     max_image_pixels : int
         Larger range images are subsampled (every k-th row and column) before the image
         stages; ICP still uses every point.
+    polish : bool
+        Judge each candidate after a quick local ICP on small subsets of the scans.
     min_overlap : float
         Smallest share of the source's points the result must explain (see
         :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
@@ -124,6 +126,7 @@ class RegistrationConfig:
     guided_radius_per_m: float = 0.02
     min_overlap: float = 0.1
     max_image_pixels: int = 2_500_000
+    polish: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -260,6 +263,35 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
 
 def _as_image(x: Scan | RangeImage) -> RangeImage:
     return x if isinstance(x, RangeImage) else range_image(x)
+
+
+def _polisher(
+    target: RangeImage, source: RangeImage, thr: float
+) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    """A quick local ICP on small fixed subsets of both scans (for judging candidates)."""
+    from .refine import refine_icp
+
+    def subset(img: RangeImage, n: int) -> NDArray[np.float64]:
+        p = img.xyz[img.valid]
+        return p[:: max(1, len(p) // n)]
+
+    tp, sp = subset(target, 200_000), subset(source, 50_000)
+
+    def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
+        try:
+            return refine_icp(
+                tp,
+                sp,
+                T,
+                max_target_points=30_000,
+                max_source_points=5_000,
+                max_iterations=15,
+                initial_error_m=3 * thr,
+            ).T_target_source
+        except RegistrationError:
+            return T
+
+    return polish
 
 
 def _with_camera(image: RangeImage) -> RangeImage:
@@ -682,10 +714,14 @@ def register(
                 families.append(fam)
         vt = _with_camera(ti)
         slack = range_slack(vt)
+        polish = _polisher(ti, si, thr) if config.polish else None
         best_fam, best_score, best_fit = -1, -np.inf, (0.0, 0.0)
         for i, fam in enumerate(families):
             for origin, T in fam:
-                ok, bad = overlap_score(vt, si, T, tolerance_m=2.5 * thr, slack=slack)
+                # judged after a quick local ICP: a right but rough candidate improves, a
+                # wrong one stays wrong
+                Tj = polish(T) if polish is not None else T
+                ok, bad = overlap_score(vt, si, Tj, tolerance_m=2.5 * thr, slack=slack)
                 log.info("%s: overlap %.3f, conflict %.3f", origin, ok, bad)
                 if ok - 3 * bad > best_score:
                     best_fam, best_score, best_fit = i, ok - 3 * bad, (ok, bad)

@@ -56,3 +56,16 @@ def test_register_unrelated_scans_raises(mine_pair):
     noise = to_scan(project(Scan(points=rng.normal(0, 5, (60000, 3))), cam))
     with pytest.raises(RegistrationError, match=r"\d+"):
         register(target, noise, RegistrationConfig(refine=False))
+
+
+def test_register_stanford_bunny_within_1_deg_and_5_mm(shared_data):
+    """Real structured scans (400 x 512 grids, no camera model) with ground truth."""
+    from flexreg import read_scans
+
+    a, b = read_scans(shared_data / "bunny_range_scans_gt" / "derived_bunny_grids_and_gt.npz")
+    gt = invert(a.T_world_scanner) @ b.T_world_scanner
+    r = register(a, b, RegistrationConfig(seed=0))
+    assert "plan" not in r.prior  # not a levelled panorama: descriptors alone
+    for T in (r.T_coarse, r.T_target_source):
+        assert rotation_error_deg(T, gt) < 1.0
+        assert translation_error_m(T, gt) < 0.005

@@ -276,20 +276,24 @@ def _polisher(
         return p[:: max(1, len(p) // n)]
 
     tp, sp = subset(target, 200_000), subset(source, 50_000)
+    voxel: list[float] = []  # found by the first call, reused
 
     def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
         try:
-            return refine_icp(
+            r = refine_icp(
                 tp,
                 sp,
                 T,
+                voxel_m=voxel[0] if voxel else None,
                 max_target_points=30_000,
                 max_source_points=5_000,
                 max_iterations=15,
                 initial_error_m=3 * thr,
-            ).T_target_source
+            )
         except RegistrationError:
             return T
+        voxel[:1] = [r.voxel_m]
+        return r.T_target_source
 
     return polish
 

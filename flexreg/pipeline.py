@@ -719,16 +719,28 @@ def register(
         vt = _with_camera(ti)
         slack = range_slack(vt)
         polish = _polisher(ti, si, thr) if config.polish else None
-        best_fam, best_score, best_fit = -1, -np.inf, (0.0, 0.0)
+        from .transforms import rotation_error_deg, translation_error_m
+
+        judged = []  # (score, moved, family, consistent, conflicting, polished T)
         for i, fam in enumerate(families):
             for origin, T in fam:
                 # judged after a quick local ICP: a right but rough candidate improves, a
                 # wrong one stays wrong
                 Tj = polish(T) if polish is not None else T
                 ok, bad = overlap_score(vt, si, Tj, tolerance_m=2.5 * thr, slack=slack)
-                log.info("%s: overlap %.3f, conflict %.3f", origin, ok, bad)
-                if ok - 3 * bad > best_score:
-                    best_fam, best_score, best_fit = i, ok - 3 * bad, (ok, bad)
+                moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
+                log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
+                judged.append((ok - 3 * bad, moved, i, ok, bad, Tj))
+        best_fam, best_fit, best_polished = -1, (0.0, 0.0), None
+        if judged:
+            top = max(j[0] for j in judged)
+            # candidates that end in the same place score alike: take the one that was
+            # already there (moved least under the quick ICP)
+            _, _, best_fam, ok, bad, Tj = min(
+                (j for j in judged if j[0] >= top - 0.01), key=lambda j: j[1]
+            )
+            best_fit = (ok, bad)
+            best_polished = Tj if polish is not None else None
         if best_fam < 0:
             raise RegistrationError(
                 f"no transform found: {len(ft)}/{len(fs)} keypoints, {len(pairs)} descriptor "
@@ -742,10 +754,19 @@ def register(
                 f"{len(pairs)} descriptor matches"
             )
         fine_tol = thr / 2
+        finalists = list(families[best_fam])
+        if best_polished is not None:
+            # the keypoint estimate around the polished winner: a candidate that was far off
+            # but converged under the quick ICP still gets a feature-based coarse transform
+            est = _guided_estimate(
+                ft, fs, xt, xs, best_polished, thr, config, finalists[0][0].split("+")[0]
+            )
+            if est is not None and est.inliers.sum() >= 3:
+                finalists.append((f"{est.origin}+keypoints", est.T))
         origin, T = max(
-            families[best_fam],
+            finalists,
             key=lambda c: (lambda f: f[0] - 3 * f[1])(
-                overlap_score(ti, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002, slack=slack)
+                overlap_score(vt, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002, slack=slack)
             ),
         )
         fin = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)

@@ -28,7 +28,7 @@ from .features import Features, detect_and_describe
 from .matching import match
 from .projection import RangeImage, range_image
 from .scan import Scan
-from .transforms import invert, rotation_about_axis
+from .transforms import invert, rotation_about_axis, rotation_error_deg, translation_error_m
 
 log = logging.getLogger(__name__)
 
@@ -414,10 +414,15 @@ def upright_priors(
     return out
 
 
+def _measured(image: RangeImage) -> NDArray[np.float32]:
+    """What the camera model measures per pixel: depth z (pinhole) or range, NaN where invalid."""
+    return image.depth_z() if isinstance(image.camera, PinholeCamera) else image.range
+
+
 def range_slack(image: RangeImage) -> NDArray[np.float32]:
     """(H, W) largest range (or depth) change from each pixel to its 4 neighbours, metres (0
     where unknown): how much range one pixel spans on an oblique surface."""
-    ref = image.depth_z() if isinstance(image.camera, PinholeCamera) else image.range
+    ref = _measured(image)
     out = np.zeros(image.shape, dtype=np.float32)
     if image.wraps:  # the seam columns are neighbours
         ref = np.concatenate([ref, ref[:, :1]], axis=1)
@@ -504,7 +509,7 @@ def _overlap(
             iu = np.where(iu >= target.width, iu - target.width, iu)
         inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
         inside &= (iu >= 0) & (iu < target.width) & (iv >= 0) & (iv < target.height)
-    ref = target.depth_z() if isinstance(cam, PinholeCamera) else target.range
+    ref = _measured(target)
     if slack is None:
         slack = range_slack(target)
     r = np.full(len(q), np.nan)
@@ -544,32 +549,24 @@ def _guided_estimate(
     the estimate cannot jump to an unrelated model the way RANSAC on the same matches can.
     A second, tight guided round around the result collects the final matches.
     """
-    from .alignment import kabsch
+    from .alignment import COLLINEAR_RATIO, kabsch, spread_ratio
     from .matching import match_guided
 
     def shrink(T: NDArray[np.float64], pairs: NDArray[np.int64], r0: float) -> Any:
         pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
         rng_s = np.linalg.norm(ps, axis=1)
-        radius = r0
-        inl = np.zeros(len(pairs), dtype=bool)
-        while True:
-            lim = np.maximum(radius, thr) if radius > thr else thr
+        # radii r0, r0/2, ... down to thr (the range-proportional part shrinking alike),
+        # then two more fits at thr
+        radii = [r0]
+        while radii[-1] > thr:
+            radii.append(max(radii[-1] / 2, thr))
+        for radius in [*radii, thr, thr]:
             extra = config.guided_radius_per_m * rng_s * (radius / r0) if radius > thr else 0.0
-            inl = squared_residuals(T, pt, ps) < (lim + extra) ** 2
-            if inl.sum() < 3 or spread_ratio(ps[inl]) < 1e-3:
-                return None, inl
-            T = kabsch(pt[inl], ps[inl])
-            if radius <= thr:
-                break
-            radius = max(radius / 2, thr)
-        for _ in range(2):
-            inl = squared_residuals(T, pt, ps) < thr * thr
-            if inl.sum() < 3 or spread_ratio(ps[inl]) < 1e-3:
+            inl = squared_residuals(T, pt, ps) < (radius + extra) ** 2
+            if inl.sum() < 3 or spread_ratio(ps[inl]) < COLLINEAR_RATIO:
                 return None, inl
             T = kabsch(pt[inl], ps[inl])
         return T, squared_residuals(T, pt, ps) < thr * thr
-
-    from .alignment import spread_ratio
 
     r0 = max(config.guided_radius_m, 2 * thr)
     pairs = match_guided(ft, fs, xt, xs, T0, radius_m=r0, radius_per_m=config.guided_radius_per_m)
@@ -599,8 +596,9 @@ def register(
     Priors come from two independent routes: global descriptor matching (ratio test, mutual
     check, pairwise-consistency pruning, RANSAC) and, for levelled scanners, plan-view overlays
     (:func:`upright_priors`). Each prior guides a second matching of all keypoints near its
-    predictions (:func:`flexreg.matching.match_guided`), followed by RANSAC and a least-squares
-    fit on the inliers; the estimate with the most inliers wins and is refined by ICP.
+    predictions (:func:`flexreg.matching.match_guided`) and a least-squares fit with a
+    shrinking inlier radius. The candidates are judged, after a quick local ICP, by the dense
+    free-space check :func:`overlap_score`; the winner is the coarse transform, refined by ICP.
 
     Parameters
     ----------
@@ -616,7 +614,7 @@ def register(
         Too few matches or inliers, degenerate (collinear) inliers, or ICP without overlap;
         the message gives the counts. No transform is returned then.
     """
-    from .alignment import spread_ratio
+    from .alignment import COLLINEAR_RATIO, spread_ratio
     from .matching import match_guided
     from .projection import fill_holes
 
@@ -644,10 +642,9 @@ def register(
             fsi, config.features, ms, max_features=config.max_features, wrap=si.wraps
         )
     with stage("lifting"):
-        xt, _ = lift(ti, ft.xy)
-        xs, _ = lift(si, fs.xy)
-    n_lt = int(np.isfinite(xt).all(1).sum())
-    n_ls = int(np.isfinite(xs).all(1).sum())
+        xt, lt_ok = lift(ti, ft.xy)
+        xs, ls_ok = lift(si, fs.xy)
+    n_lt, n_ls = int(lt_ok.sum()), int(ls_ok.sum())
     log.info("%d/%d keypoints, %d/%d lifted", len(ft), len(fs), n_lt, n_ls)
     if n_lt < 3 or n_ls < 3:
         raise RegistrationError(
@@ -660,8 +657,8 @@ def register(
         else derive_threshold(
             ti,
             si,
-            ft.xy[np.isfinite(xt).all(1)],
-            fs.xy[np.isfinite(xs).all(1)],
+            ft.xy[lt_ok],
+            fs.xy[ls_ok],
             threshold_px=config.threshold_px,
         )
     )
@@ -680,8 +677,6 @@ def register(
                 notes.append(f"no plan prior ({e})")
                 log.info("no plan prior: %s", e)
     with stage("matching"):
-        lt_ok = np.asarray(np.isfinite(xt).all(1), dtype=bool)
-        ls_ok = np.asarray(np.isfinite(xs).all(1), dtype=bool)
         pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
         pairs = pairs[lt_ok[pairs[:, 0]] & ls_ok[pairs[:, 1]]]
     with stage("estimation"):
@@ -719,7 +714,11 @@ def register(
         vt = _with_camera(ti)
         slack = range_slack(vt)
         polish = _polisher(ti, si, thr) if config.polish else None
-        from .transforms import rotation_error_deg, translation_error_m
+
+        def judge(T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
+            """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
+            ok, bad = overlap_score(vt, si, T, tolerance_m=tol, tolerance_rel=rel, slack=slack)
+            return ok - 3 * bad, ok, bad
 
         judged = []  # (score, moved, family, consistent, conflicting, polished T)
         for i, fam in enumerate(families):
@@ -727,10 +726,10 @@ def register(
                 # judged after a quick local ICP: a right but rough candidate improves, a
                 # wrong one stays wrong
                 Tj = polish(T) if polish is not None else T
-                ok, bad = overlap_score(vt, si, Tj, tolerance_m=2.5 * thr, slack=slack)
+                score, ok, bad = judge(Tj, 2.5 * thr, 0.01)
                 moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
                 log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
-                judged.append((ok - 3 * bad, moved, i, ok, bad, Tj))
+                judged.append((score, moved, i, ok, bad, Tj))
         best_fam, best_fit, best_polished = -1, (0.0, 0.0), None
         if judged:
             top = max(j[0] for j in judged)
@@ -763,12 +762,7 @@ def register(
             )
             if est is not None and est.inliers.sum() >= 3:
                 finalists.append((f"{est.origin}+keypoints", est.T))
-        origin, T = max(
-            finalists,
-            key=lambda c: (lambda f: f[0] - 3 * f[1])(
-                overlap_score(vt, si, c[1], tolerance_m=fine_tol, tolerance_rel=0.002, slack=slack)
-            ),
-        )
+        origin, T = max(finalists, key=lambda c: judge(c[1], fine_tol, 0.002)[0])
         fin = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)
         pt, ps = xt[fin[:, 0]], xs[fin[:, 1]]
         d2 = squared_residuals(T, pt, ps)
@@ -781,7 +775,7 @@ def register(
                 f"{max(3, config.min_inliers)}); {len(ft)}/{len(fs)} keypoints, "
                 f"{len(pairs)} descriptor matches"
             )
-        if spread_ratio(ps[inl]) < 1e-3:
+        if spread_ratio(ps[inl]) < COLLINEAR_RATIO:
             raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
     rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")

@@ -125,17 +125,11 @@ def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
     index[r, c] = np.arange(len(scan), dtype=np.int64)
     if stride == 1:
         return _from_index(scan, index, scan.camera)
-    # a camera-only image of the right size gives the scaled camera
-    small = downsample_image(
-        RangeImage(
-            xyz=np.empty((H, W, 3)),
-            valid=np.zeros((H, W), bool),
-            index=index,
-            camera=scan.camera,
-        ),
-        stride,
+    return _from_index(
+        scan,
+        np.ascontiguousarray(index[::stride, ::stride]),
+        _subsampled_camera(scan.camera, H, W, stride),
     )
-    return _from_index(scan, np.ascontiguousarray(index[::stride, ::stride]), small.camera)
 
 
 def _from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> RangeImage:
@@ -373,6 +367,21 @@ def from_depth(
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera)
 
 
+def _subsampled_camera(camera: Camera | None, H: int, W: int, f: int) -> Camera | None:
+    """The camera of every ``f``-th row and column of an H x W image (pixel ``(u', v')`` is the
+    original ``(f u', f v')``), or None when the size is not a multiple of ``f``."""
+    c = camera
+    if c is None or H % f or W % f:
+        return None
+    if isinstance(c, SphericalCamera):
+        return SphericalCamera(W // f, H // f, c.phi_min, c.phi_max, c.theta_min, c.theta_max)
+    if isinstance(c, PinholeCamera):
+        return PinholeCamera(
+            c.fx / f, c.fy / f, c.cx / f, c.cy / f, W // f, H // f, skew=c.skew / f
+        )
+    return None
+
+
 def downsample_image(image: RangeImage, factor: int) -> RangeImage:
     """Every ``factor``-th row and column of a range image (points kept, not averaged).
 
@@ -385,21 +394,11 @@ def downsample_image(image: RangeImage, factor: int) -> RangeImage:
         raise InputError("factor", f"must be a positive integer, got {factor}")
     if f == 1:
         return image
-    H, W = image.shape
-    cam: Camera | None = None
-    c = image.camera
-    if c is not None and H % f == 0 and W % f == 0:
-        if isinstance(c, SphericalCamera):
-            cam = SphericalCamera(W // f, H // f, c.phi_min, c.phi_max, c.theta_min, c.theta_max)
-        elif isinstance(c, PinholeCamera):
-            cam = PinholeCamera(
-                c.fx / f, c.fy / f, c.cx / f, c.cy / f, W // f, H // f, skew=c.skew / f
-            )
     return RangeImage(
         xyz=np.ascontiguousarray(image.xyz[::f, ::f]),
         valid=np.ascontiguousarray(image.valid[::f, ::f]),
         index=np.ascontiguousarray(image.index[::f, ::f]),
-        camera=cam,
+        camera=_subsampled_camera(image.camera, image.height, image.width, f),
         intensity=None if image.intensity is None else image.intensity[::f, ::f].copy(),
     )
 

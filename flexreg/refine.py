@@ -149,19 +149,17 @@ def refine_icp(
     # very large scans: a random thinning first (voxels of the sizes used here hold many
     # points, so the voxel grid hardly changes, and the downsampling gets much cheaper)
     target, source = _thin(np.asarray(target)), _thin(np.asarray(source))
-    tgt_full = _cloud(target)
+    auto_voxel = voxel_m is None
     if voxel_m is None:
         voxel_m = 2.0 * median_spacing(target, tree_points=200_000)
-        tgt = tgt_full.voxel_down_sample(voxel_m)
-        for _ in range(6):  # surfaces: point count falls with the square of the voxel
-            if len(tgt.points) <= max_target_points:
-                break
-            voxel_m *= 1.1 * float(np.sqrt(len(tgt.points) / max_target_points))
-            tgt = tgt.voxel_down_sample(voxel_m)  # re-binning the smaller cloud is cheap
     elif not voxel_m > 0:
         raise ConfigError(f"voxel must be positive, got {voxel_m}")
-    else:
-        tgt = tgt_full.voxel_down_sample(voxel_m)
+    tgt = _cloud(target).voxel_down_sample(voxel_m)
+    for _ in range(6 if auto_voxel else 0):  # point count falls with the square of the voxel
+        if len(tgt.points) <= max_target_points:
+            break
+        voxel_m *= 1.1 * float(np.sqrt(len(tgt.points) / max_target_points))
+        tgt = tgt.voxel_down_sample(voxel_m)  # re-binning the smaller cloud is cheap
     if max_distance_m is None:
         max_distance_m = max(5.0 * voxel_m, initial_error_m)
     if not max_distance_m > 0:

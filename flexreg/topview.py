@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -305,6 +306,23 @@ def _raster(
     return np.asarray(img, dtype=np.float64).reshape(shape)
 
 
+def _placed_cells(
+    xy: NDArray[np.float64], yaw: float, t: tuple[float, float], cell_m: float
+) -> NDArray[np.int64]:
+    """Plan cells of points ``xy`` rotated by ``yaw`` about the scanner and shifted by ``t``."""
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    moved = xy @ np.array([[cy, sy], [-sy, cy]]) + np.asarray(t)
+    return np.floor(moved / cell_m + 0.5).astype(np.int64)
+
+
+def _correlation(S: NDArray[np.float64], FT: Any, shape: tuple[int, int]) -> NDArray[np.float64]:
+    """``corr[d] = sum_x T[x] S[x + d]`` (circular), given ``FT = conj(rfft2(T))``: source
+    raster position ``x + d`` lies on target position ``x``."""
+    from scipy import fft
+
+    return np.asarray(fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1))
+
+
 def match_top_views(
     target: TopView,
     source: TopView,
@@ -334,12 +352,8 @@ def match_top_views(
     yaws = np.arange(0.0, 2 * math.pi, yaw_step_rad)
     peaks: list[tuple[float, float, float, float]] = []  # score, yaw, t_x, t_y
     for yaw in yaws:
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        xy = source.xy @ np.array([[cy, sy], [-sy, cy]])
-        cells = np.floor(xy / c + 0.5).astype(np.int64)
-        S = _raster(cells, source.values, shape, rs)
-        # corr[d] = sum_x T[x] S[x + d]: source raster position x + d lies on target position x
-        corr = fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1)
+        S = _raster(_placed_cells(source.xy, yaw, (0.0, 0.0), c), source.values, shape, rs)
+        corr = _correlation(S, FT, shape)
         idx = int(np.argmax(corr))
         iy, ix = divmod(idx, size)
         best = float(corr[iy, ix])
@@ -401,18 +415,16 @@ def refine_plan_match(
     yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
     best = []
     for yaw in yaws:
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        xy = source.xy @ np.array([[cy, sy], [-sy, cy]]) + t0
-        cells = np.floor(xy / c + 0.5).astype(np.int64)
+        cells = _placed_cells(source.xy, yaw, match.t_xy, c)
         inside = (np.abs(cells) <= rt).all(axis=1)
         S = _raster(cells[inside], source.values[inside], shape, off)
-        corr = fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1)
+        corr = _correlation(S, FT, shape)
         win = np.roll(np.roll(corr, w, axis=0), w, axis=1)[: 2 * w + 1, : 2 * w + 1]
         iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
         b = float(win[iy, ix])
         fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
         fx = _parabola(win[iy, ix - 1], b, win[iy, ix + 1]) if 0 < ix < 2 * w else 0.0
-        # corr[d] = sum_x T[x] S[x + d]: move the source by -d
+        # the source at x + d lies on the target at x: move it by -d
         best.append((b, float(yaw), t0[0] - (ix - w + fx) * c, t0[1] - (iy - w + fy) * c))
     scores = np.array([b[0] for b in best])
     i = int(np.argmax(scores))

@@ -56,7 +56,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from flexreg.errors import RegistrationError  # noqa: E402
-from flexreg.pipeline import RegistrationConfig, register  # noqa: E402
+from flexreg.pipeline import RegistrationConfig, area_sample, refine, register  # noqa: E402
 from flexreg.scan import Scan  # noqa: E402
 from flexreg.transforms import invert, rotation_error_deg, translation_error_m  # noqa: E402
 
@@ -79,6 +79,7 @@ VELODYNE_REF_ROT_DEG, VELODYNE_REF_TRANS_M = 0.2, 0.02  # uncertainty of the ref
 KURT_MIN_RANGE_M = 0.48
 KURT_PAIRS = ((0, 1), (1, 2), (0, 2))
 KURT_GROSS_ROT_DEG, KURT_GROSS_TRANS_M = 5.0, 0.5  # further from odometry = wrong solution
+KURT_ODOMETRY_ERROR_M = 0.05  # ICP start tolerance when register failed (no threshold)
 NN_WITHIN_M = 0.05
 
 
@@ -265,7 +266,9 @@ def _range_image_note(scan: Scan) -> dict[str, Any]:
 
 
 def _nn_fit(tree: Any, source: NDArray[np.float64], T: NDArray[np.float64]) -> tuple[float, float]:
-    """(median nearest-neighbour distance m, share within NN_WITHIN_M) of the mapped source."""
+    """(median nearest-neighbour distance m, share within NN_WITHIN_M) of the mapped source,
+    sampled evenly over its surfaces (so the dense near field does not dominate)."""
+    source = area_sample(source, 20000)
     d, _ = tree.query(source @ T[:3, :3].T + T[:3, 3])
     return float(np.median(d)), float(np.mean(d < NN_WITHIN_M))
 
@@ -295,7 +298,6 @@ def real_pairs(config: RegistrationConfig) -> list[dict[str, Any]]:
     from scipy.spatial import cKDTree
 
     from flexreg.io import read_scan, read_scans
-    from flexreg.refine import refine_icp
 
     out: list[dict[str, Any]] = []
 
@@ -349,9 +351,11 @@ def real_pairs(config: RegistrationConfig) -> list[dict[str, Any]]:
             rec["nn_prior"] = _nn_fit(tree, k[j].points, T_prior)
             if rec["ok"]:
                 rec["nn_result"] = _nn_fit(tree, k[j].points, np.asarray(rec["T_target_source"]))
-            # the same ICP register uses, started from the odometry: the nearest local optimum
+            # the same refinement register uses, started from the odometry: the nearest local
+            # optimum
             try:
-                T_icp = refine_icp(k[i].points, k[j].points, T_prior).T_target_source
+                thr = rec.get("threshold_m") or KURT_ODOMETRY_ERROR_M
+                T_icp = refine(k[i], k[j], T_prior, threshold_m=thr).T_target_source
                 rec["T_prior_icp"] = T_icp.tolist()
                 rec["nn_prior_icp"] = _nn_fit(tree, k[j].points, T_icp)
             except RegistrationError as e:
@@ -668,8 +672,10 @@ def render_real(records: list[dict[str, Any]]) -> list[str]:
             "3DTK: how well each transform lays the source onto the target (median "
             "nearest-neighbour distance of the source points to the target, and the share within "
             f"{100 * NN_WITHIN_M:.0f} cm). *odometry + ICP* = the odometry pose refined by the "
-            "same ICP `register` uses (`flexreg.refine.refine_icp`), the local optimum nearest "
-            "to it. Without ground truth this shows which transform the data favour:",
+            "same refinement `register` uses (`flexreg.pipeline.refine`), the local optimum nearest "
+            "to it. Source points are sampled evenly over the surfaces. Without ground truth "
+            "this shows which transform the data favour, and the last column how far the "
+            "result is from where the odometry leads:",
             "",
             "| pair | odometry distance m | result | odometry | odometry + ICP "
             "| result vs odometry + ICP |",

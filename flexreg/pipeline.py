@@ -27,6 +27,7 @@ from .errors import ConfigError, DegenerateGeometryError, RegistrationError
 from .features import Features, detect_and_describe
 from .matching import match
 from .projection import RangeImage, range_image
+from .refine import IcpResult
 from .scan import Scan
 from .transforms import invert, rotation_about_axis, rotation_error_deg, translation_error_m
 
@@ -261,6 +262,13 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     timings[name] = timings.get(name, 0.0) + time.perf_counter() - t
 
 
+#: target points of the area-weighted ICP scale (see :func:`area_cell`)
+AREA_ICP_POINTS = 10_000
+#: the finest ICP scale is kept unless the dense check scores it this much lower (fraction of
+#: the sampled source points) than the area-weighted scale
+FINE_ICP_SLACK = 0.01
+
+
 def _as_image(x: Scan | RangeImage) -> RangeImage:
     return x if isinstance(x, RangeImage) else range_image(x)
 
@@ -452,6 +460,7 @@ def overlap_score(
     tolerance_rel: float = 0.01,
     samples: int = 20000,
     slack: NDArray[np.float32] | None = None,
+    sampling: str = "area",
 ) -> tuple[float, float]:
     """How well a transform explains the target's view of the source: a dense check.
 
@@ -465,31 +474,99 @@ def overlap_score(
     seen at grazing incidence spans a long stretch of range. Native grids without a camera
     model fall back to nearest-neighbour distances (no conflicts).
 
+    With ``sampling="area"`` (default) the sample is spread evenly over the source's surfaces
+    (one point per cell of a voxel grid sized to give about ``samples`` points,
+    :func:`area_sample`), so fractions are fractions of surface area; ``"pixels"`` takes every
+    k-th valid pixel instead, which weights surfaces near the scanner by their many pixels. Area
+    matters where the near field is self-similar: in a corridor the walls beside the scanner
+    fill most pixels and fit any shift along it, while the far structure that fixes the shift
+    has few pixels but most of the area.
+
     Returns
     -------
     consistent, conflicting : float
         Fractions of the sampled source points.
     """
-    _, ok, bad = _overlap(
-        target, source, T_target_source, tolerance_m, tolerance_rel, samples, slack
-    )
+    if sampling not in ("area", "pixels"):
+        raise ConfigError(f"sampling must be 'area' or 'pixels', got {sampling!r}")
+    ps = source.xyz[source.valid]
+    ps = area_sample(ps, samples) if sampling == "area" else ps[:: max(1, len(ps) // samples)]
+    _, ok, bad = _overlap(target, ps, T_target_source, tolerance_m, tolerance_rel, slack)
     return (float(ok.mean()), float(bad.mean())) if len(ok) else (0.0, 0.0)
+
+
+def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64]:
+    """About ``samples`` points spread evenly over the surfaces of a cloud.
+
+    One point (the first in input order) per occupied cell of the voxel grid of
+    :func:`area_cell`; deterministic.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Metres.
+    samples : int
+        Wanted number of points (the result has about 0.7 to 1.4 times that, or all N points
+        when N is smaller).
+
+    Returns
+    -------
+    (M, 3) float64
+        A subset of ``points`` in input order.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) <= samples:
+        return p
+    return p[np.sort(_area_cells(p, samples)[1])]
+
+
+def area_cell(points: NDArray[np.float64], samples: int) -> float:
+    """Voxel size at which about ``samples`` voxels of a cloud's surfaces are occupied, metres.
+
+    Downsampling with it weights every part of a scene by its surface area rather than by its
+    number of points (a scanner samples the surfaces near it far more densely).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Metres.
+    samples : int
+        Wanted number of occupied voxels.
+    """
+    return _area_cells(np.asarray(points, dtype=np.float64), samples)[0]
+
+
+def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
+    """Cell size and the index of the first point in each occupied cell (of a thinned copy
+    of ``p`` when it is large: indices then refer to ``p`` itself)."""
+    step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
+    q = p[::step]
+    lo = q.min(axis=0)
+    span = float(np.max(q.max(axis=0) - lo))
+    cell = max(span, 1e-9) / math.sqrt(samples)  # surfaces: cells grow with 1 / cell^2
+    first = np.arange(len(q))
+    for _ in range(8):
+        k = np.floor((q - lo) / cell).astype(np.int64)
+        key = (k[:, 0] * (2**21) + k[:, 1]) * (2**21) + k[:, 2]
+        _, first = np.unique(key, return_index=True)
+        ratio = len(first) / samples
+        if 0.7 < ratio < 1.4:
+            break
+        cell *= math.sqrt(ratio)
+    return cell, first * step
 
 
 def _overlap(
     target: RangeImage,
-    source: RangeImage,
+    ps: NDArray[np.float64],
     T_target_source: NDArray[np.float64],
     tolerance_m: float,
     tolerance_rel: float,
-    samples: int,
     slack: NDArray[np.float32] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
-    ps = source.xyz[source.valid]
+    """Source points ``ps`` (already sampled) checked against the target's view."""
     if len(ps) == 0:
         return np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, bool)
-    step = max(1, len(ps) // samples)
-    ps = ps[::step]
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
     cam = target.camera
@@ -582,6 +659,84 @@ def _guided_estimate(
     if T is None:
         return None
     return _Estimate(T, pairs, inl, origin)
+
+
+def refine(
+    target: Scan | RangeImage,
+    source: Scan | RangeImage,
+    T_init: NDArray[np.float64],
+    *,
+    threshold_m: float,
+    method: str = "point-to-plane",
+    voxel_m: float | None = None,
+    check: Callable[[NDArray[np.float64]], float] | None = None,
+) -> IcpResult:
+    """ICP refinement of a coarse ``T_target_source`` at two scales, checked on the data.
+
+    First ICP on voxels sized so that the target keeps about :data:`AREA_ICP_POINTS`
+    (:func:`area_cell`): every part of the scene then counts by its surface area, which keeps
+    the dense, noisy or self-similar near field of a scanner (a corridor's walls fit any shift
+    along it) from outweighing the far structure that fixes the pose. Then ICP at the finest
+    voxels the point budget allows (:func:`refine.refine_icp`), started from the first; it is
+    kept unless the dense free-space check scores it more than :data:`FINE_ICP_SLACK` lower.
+    On clean scans the fine scale wins (sub-millimetre); on real scans with centimetre noise
+    or distortion it can drift, and the area-weighted result is returned.
+
+    Parameters
+    ----------
+    target, source : Scan or RangeImage
+    T_init : (4, 4) float64
+        Coarse transform.
+    threshold_m : float
+        Inlier threshold of the coarse stage (how far off ``T_init`` may be), metres.
+    method : {"point-to-plane", "gicp", "point-to-point"}
+    voxel_m : float, optional
+        A fixed voxel: one coarse-to-fine ICP at that voxel, no second scale.
+    check : callable, optional
+        ``check(T) -> score`` (higher is better); default the consistent minus three times
+        the conflicting fraction of :func:`overlap_score` at ``threshold_m / 2``.
+
+    Returns
+    -------
+    IcpResult
+    """
+    from .refine import refine_icp
+
+    tp, sp = _points(target), _points(source)
+    kind: Any = method
+    if voxel_m is not None:
+        return refine_icp(
+            tp, sp, T_init, method=kind, voxel_m=voxel_m, initial_error_m=3 * threshold_m
+        )
+    broad = refine_icp(
+        tp,
+        sp,
+        T_init,
+        method=kind,
+        voxel_m=area_cell(tp, AREA_ICP_POINTS),
+        initial_error_m=3 * threshold_m,
+    )
+    fine = refine_icp(tp, sp, broad.T_target_source, method=kind, initial_error_m=3 * threshold_m)
+    if check is None:
+        vt = _with_camera(_working_image(target, RegistrationConfig.max_image_pixels))
+        slack = range_slack(vt)
+        sample = area_sample(sp, 20000)
+
+        def check(T: NDArray[np.float64]) -> float:
+            _, ok, bad = _overlap(vt, sample, T, threshold_m / 2, 0.002, slack)
+            return float(ok.mean() - 3 * bad.mean())
+
+    s_broad, s_fine = check(broad.T_target_source), check(fine.T_target_source)
+    best = fine if s_fine >= s_broad - FINE_ICP_SLACK else broad
+    log.info(
+        "ICP at %.3g m voxels: check %.3f; at %.3g m: %.3f -> %.3g m kept",
+        broad.voxel_m,
+        s_broad,
+        fine.voxel_m,
+        s_fine,
+        best.voxel_m,
+    )
+    return best
 
 
 def register(
@@ -713,11 +868,13 @@ def register(
                 families.append(fam)
         vt = _with_camera(ti)
         slack = range_slack(vt)
+        sample = area_sample(si.xyz[si.valid], 20000)
         polish = _polisher(ti, si, thr) if config.polish else None
 
         def judge(T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
             """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
-            ok, bad = overlap_score(vt, si, T, tolerance_m=tol, tolerance_rel=rel, slack=slack)
+            _, ok_, bad_ = _overlap(vt, sample, T, tol, rel, slack)
+            ok, bad = float(ok_.mean()), float(bad_.mean())
             return ok - 3 * bad, ok, bad
 
         judged = []  # (score, moved, family, consistent, conflicting, polished T)
@@ -779,21 +936,23 @@ def register(
             raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
     rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")
-    q, cons, _ = _overlap(vt, si, T, fine_tol, 0.002, 20000, slack)
+    q, cons, _ = _overlap(vt, sample, T, fine_tol, 0.002, slack)
     fitness = float(cons.mean())
-    denom = f"sampled source points within {fine_tol:.3g} m + 0.2% of range of the target's view"
+    denom = (
+        f"{len(sample)} source points spread evenly over its surfaces, within {fine_tol:.3g} m "
+        "+ 0.2% of range of what the target saw"
+    )
     info = _information_from_points(q[cons])
     if config.refine:
-        from .refine import refine_icp
-
         with stage("refinement"):
-            icp = refine_icp(
-                _points(target),
-                _points(source),
+            icp = refine(
+                target,
+                source,
                 T,
-                method=config.icp,  # type: ignore[arg-type]
+                threshold_m=thr,
+                method=config.icp,
                 voxel_m=config.voxel_m,
-                initial_error_m=3 * thr,
+                check=lambda T_: judge(T_, fine_tol, 0.002)[0],
             )
         T, rmse, fitness, info = (
             icp.T_target_source,
@@ -828,10 +987,13 @@ __all__ = [
     "Features",
     "RegistrationConfig",
     "RegistrationResult",
+    "area_cell",
+    "area_sample",
     "feature_image",
     "overlap_score",
     "pixel_footprint",
     "range_slack",
+    "refine",
     "register",
     "upright_priors",
 ]

@@ -14,10 +14,17 @@ import numpy as np
 import pytest
 
 from flexreg.camera import PinholeCamera, SphericalCamera
-from flexreg.errors import RegistrationError
+from flexreg.errors import ConfigError, RegistrationError
 from flexreg.features import Features
 from flexreg.matching import descriptor_distances, match_guided
-from flexreg.pipeline import RegistrationConfig, overlap_score, range_slack, register
+from flexreg.pipeline import (
+    RegistrationConfig,
+    area_cell,
+    area_sample,
+    overlap_score,
+    range_slack,
+    register,
+)
 from flexreg.projection import RangeImage, from_depth, from_grid
 from flexreg.scan import Scan
 from flexreg.synth import station_pair
@@ -223,10 +230,13 @@ def test_overlap_transform_moves_source():
     def yaw(k):
         return make_transform(rotation_about_axis([0.0, 0.0, 1.0], k * cam.dphi), [0, 0, 0])
 
-    assert overlap_score(target, source, yaw(1), slack=no_slack) == (1.0, 0.0)
+    def score(T, sampling="pixels"):
+        return overlap_score(target, source, T, slack=no_slack, sampling=sampling)
+
+    assert score(yaw(1)) == score(yaw(1), "area") == (1.0, 0.0)
     # identity: 6 m lands on 5 m (conflict) in one column of three, behind in the other two
-    assert overlap_score(target, source, yaw(0), slack=no_slack) == (0.0, pytest.approx(1 / 3))
-    assert overlap_score(target, source, yaw(-1), slack=no_slack) == (0.0, pytest.approx(2 / 3))
+    assert score(yaw(0)) == (0.0, pytest.approx(1 / 3))
+    assert score(yaw(-1)) == (0.0, pytest.approx(2 / 3))
     # a translation puts one side of a sphere in front (conflict), the other behind (occluded)
     sphere = _sphere(SphericalCamera.from_reference(72, 36, 0.0, math.pi), 5.0)
     ok, bad = overlap_score(sphere, sphere, SHIFT)
@@ -327,3 +337,39 @@ def test_register_without_upright_prior(registered):
         assert any(ch.isdigit() for ch in str(e)), str(e)
         return
     assert "plan" not in r.prior and "plan views" not in r.timings_s
+
+
+def test_area_sample_spreads_over_surface_area():
+    rng = np.random.default_rng(0)
+    # a dense 1 m x 1 m patch (10 000 points) and a sparse 10 m x 10 m wall (5 000 points)
+    near = np.c_[rng.uniform(0, 1, (10000, 2)), np.zeros(10000)]
+    far = np.c_[rng.uniform(0, 10, (5000, 2)), np.full(5000, 20.0)]
+    pts = np.vstack([near, far])
+    sample = area_sample(pts, 1000)
+    assert 700 <= len(sample) <= 1400
+    share_far = np.mean(sample[:, 2] > 10)
+    assert share_far > 0.9  # 100 of 101 m^2, although a third of the points
+    # a subset, in input order, and the same every time
+    assert np.all(np.isin(sample[:, 0], pts[:, 0]))
+    assert np.all(np.diff(np.flatnonzero(np.isin(pts[:, 0], sample[:, 0]))) > 0)
+    np.testing.assert_array_equal(sample, area_sample(pts, 1000))
+    assert len(area_sample(pts[:500], 1000)) == 500  # fewer points than wanted: all of them
+    cell = area_cell(far, 1000)  # 100 m^2 in about 1000 cells: about 0.3 m
+    assert 0.25 < cell < 0.4
+
+
+def test_overlap_area_sampling_weights_surfaces_not_pixels():
+    # the source's lower half sees a floor 1 m away, the upper half a ceiling 10 m away; the
+    # target saw the floor where the source does, but the ceiling at 12 m: the source's
+    # ceiling sits in the target's free space
+    cam = SphericalCamera(72, 36, -math.pi, math.pi, 0.2, math.pi - 0.2)
+    r_src = np.where(np.arange(36)[:, None] < 18, 10.0, 1.0) * np.ones((1, 72))
+    r_tgt = np.where(r_src > 5, 12.0, r_src)
+    target, source = from_depth(r_tgt, cam), from_depth(r_src, cam)
+    zero = np.zeros(cam.shape, np.float32)
+    by_pixels = overlap_score(target, source, np.eye(4), slack=zero, sampling="pixels")
+    assert by_pixels == (0.5, 0.5)
+    ok, bad = overlap_score(target, source, np.eye(4), slack=zero, samples=200)
+    assert bad > 0.9 and ok < 0.1  # the far half holds nearly all of the surface area
+    with pytest.raises(ConfigError, match="sampling"):
+        overlap_score(target, source, np.eye(4), sampling="voxels")

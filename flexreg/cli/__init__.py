@@ -54,7 +54,7 @@ def _root(
 
 
 # command modules register themselves on `app`
-from . import convert, evaluate, register, scan_commands, synth  # noqa: E402,F401
+from . import calibrate, convert, evaluate, register, scan_commands, synth  # noqa: E402,F401
 
 
 def _click_classes(name: str) -> tuple[type[BaseException], ...]:

@@ -1,0 +1,408 @@
+"""`flexreg calibrate`: camera image + lidar scan + 2D-3D correspondences -> ``T_camera_lidar``
+as JSON (+ overlay PNG, + picking views)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import typer
+
+from ..errors import ConfigError, InputError
+from . import app
+from ._common import console, stage
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from ..calibration import CalibrationResult
+    from ..io.intrinsics import CameraIntrinsics
+
+#: header and help of the template written with --export-views
+PAIRS_TEMPLATE = """\
+# flexreg calibrate correspondences: one pair per line.
+# u,v     pixel in camera.png (column, row; the cursor position of an image viewer)
+# row,col pixel in panorama.png (the cursor's y, x), lifted to the lidar point there
+# Alternatively use the header u,v,X,Y,Z with lidar-frame coordinates in metres.
+u,v,row,col
+"""
+
+
+def _check_options(
+    *,
+    image: Path,
+    camera: Path | None,
+    pinhole: tuple[float, float, float, float] | None,
+    distortion: str | None,
+    scan: Path,
+    pairs: Path | None,
+    out: Path | None,
+    overlay: Path | None,
+    auto: bool,
+    init: Path | None,
+    export_views: Path | None,
+    seed: int,
+    threshold_px: float,
+    kitti_camera: int,
+    truth: Path | None,
+) -> None:
+    """Validate everything that does not need the input files, before anything is read."""
+    if (camera is None) == (pinhole is None):
+        raise ConfigError("give the camera intrinsics with either --camera FILE or --pinhole")
+    if distortion is not None and pinhole is None:
+        raise ConfigError("--distortion: only with --pinhole (a --camera file holds its own)")
+    if pinhole is not None and not all(math.isfinite(x) for x in pinhole):
+        raise ConfigError(f"--pinhole: FX FY CX CY must be finite numbers, got {pinhole}")
+    if seed < 0:
+        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
+    if not (math.isfinite(threshold_px) and threshold_px > 0):
+        raise ConfigError(
+            f"--threshold-px: must be a positive number of pixels, got {threshold_px}"
+        )
+    if kitti_camera not in (0, 1, 2, 3):
+        raise ConfigError(f"--kitti-camera: must be 0, 1, 2 or 3, got {kitti_camera}")
+    solving = pairs is not None or auto
+    if not solving and export_views is None:
+        raise ConfigError("nothing to do: give --pairs and/or --auto (or --export-views DIR)")
+    if auto and init is None and pairs is None:
+        raise ConfigError("--auto: needs an initial guess (--init) or correspondences (--pairs)")
+    if solving and out is None:
+        raise ConfigError("--out: required to write the calibration (a .json file)")
+    if not solving:
+        for option, value in (("--out", out), ("--overlay", overlay), ("--truth", truth)):
+            if value is not None:
+                raise ConfigError(f"{option}: needs a calibration: give --pairs and/or --auto")
+    for option, path, suffix in (("--out", out, ".json"), ("--overlay", overlay, ".png")):
+        if path is not None and path.suffix.lower() != suffix:
+            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
+    if export_views is not None and export_views.exists() and not export_views.is_dir():
+        raise ConfigError(f"--export-views: {export_views}: exists and is not a folder")
+    inputs = [p for p in (image, camera, scan, pairs, init, truth) if p is not None]
+    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
+    for option, path in (("--out", out), ("--overlay", overlay)):
+        if path is None:
+            continue
+        if path.is_dir():
+            raise ConfigError(f"{option}: {path}: is a folder, not a file")
+        key = path.resolve()
+        if key in seen:
+            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
+        seen[key] = option
+
+
+def _parse_distortion(text: str | None) -> list[float]:
+    if text is None:
+        return []
+    try:
+        values = [float(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
+        raise ConfigError(f"--distortion: expected comma-separated numbers, got {text!r}") from None
+    from ..io.intrinsics import DISTORTION_LENGTHS
+
+    if len(values) not in DISTORTION_LENGTHS or not all(math.isfinite(x) for x in values):
+        raise ConfigError(
+            f"--distortion: {len(values)} coefficients; OpenCV takes "
+            f"{', '.join(str(n) for n in DISTORTION_LENGTHS[1:])} finite numbers "
+            "(k1,k2,p1,p2[,k3[,k4,k5,k6...]])"
+        )
+    return values
+
+
+def read_image(path: Path) -> NDArray[np.uint8]:
+    """An 8-bit camera image as BGR (grey images are expanded)."""
+    import cv2
+    import numpy as np
+
+    if not path.is_file():
+        raise InputError(path, "no such file")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(path, "not a readable image (PNG, JPEG, ...)")
+    if img.dtype != np.uint8:
+        raise InputError(path, f"camera image must be 8 bit per channel, got {img.dtype}")
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    elif img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return np.asarray(img, dtype=np.uint8)
+
+
+def _intrinsics(
+    camera: Path | None,
+    pinhole: tuple[float, float, float, float] | None,
+    distortion: list[float],
+    kitti_camera: int,
+    image_path: Path,
+    width: int,
+    height: int,
+) -> CameraIntrinsics:
+    import numpy as np
+
+    from ..io.intrinsics import CameraIntrinsics, read_intrinsics
+
+    if camera is not None:
+        intr = read_intrinsics(camera, kitti_camera=kitti_camera)
+    else:
+        assert pinhole is not None
+        fx, fy, cx, cy = pinhole
+        try:
+            intr = CameraIntrinsics(
+                np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]),
+                np.asarray(distortion, dtype=np.float64),
+                width,
+                height,
+                "--pinhole",
+            )
+        except InputError as e:
+            raise ConfigError(f"--pinhole: {e.problem}") from None
+    return intr.for_image(width, height, image=str(image_path))
+
+
+def _write_all(writers: list[tuple[Path, Any]]) -> None:
+    """Run each ``(path, write)``; if one fails, remove the files already written here."""
+    done: list[Path] = []
+    try:
+        for path, write in writers:
+            try:
+                write()
+            except OSError as e:
+                raise InputError(path, f"cannot write: {e.strerror or e}") from e
+            done.append(path)
+    except BaseException:
+        for p in done:
+            p.unlink(missing_ok=True)
+        raise
+
+
+def _png_writer(path: Path, image: NDArray[np.uint8]) -> Any:
+    import cv2
+
+    from ..io import atomic_write
+
+    def write_png(tmp: Path) -> None:
+        if not cv2.imwrite(str(tmp), image):
+            raise InputError(tmp, "cannot write the PNG file")
+
+    return lambda: atomic_write(path, write_png)
+
+
+@app.command("calibrate")
+def calibrate_command(
+    image: Path = typer.Option(..., "--image", help="Camera image (PNG, JPEG, ...)."),
+    scan: Path = typer.Option(
+        ..., "--scan", help="Lidar scan in any readable format (KITTI .bin, .pcd, .ply, ...)."
+    ),
+    camera: Path | None = typer.Option(
+        None,
+        "--camera",
+        help="Intrinsics: OpenCV/ROS .yaml, .json (K, distortion, width, height; or the PJLab "
+        "intrinsic JSON) or a KITTI calib .txt (P2, rectified, no distortion).",
+    ),
+    pinhole: tuple[float, float, float, float] | None = typer.Option(
+        None,
+        "--pinhole",
+        metavar="FX FY CX CY",
+        help="Intrinsics as options instead of --camera (pixels; size from the image).",
+    ),
+    distortion: str | None = typer.Option(
+        None,
+        "--distortion",
+        metavar="K1,K2,P1,P2[,K3...]",
+        help="OpenCV distortion coefficients with --pinhole.",
+    ),
+    pairs: Path | None = typer.Option(
+        None,
+        "--pairs",
+        help="CSV of correspondences with a header: u,v,X,Y,Z (lidar frame, metres) or "
+        "u,v,row,col (pixel of the scan's panorama.png, see --export-views).",
+    ),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        help="Output .json: T_camera_lidar (lidar points into the camera frame), its inverse, "
+        "quaternions (xyzw and wxyz), reprojection RMSE, inliers, per-pair residuals.",
+    ),
+    overlay: Path | None = typer.Option(
+        None, "--overlay", help="Write a .png of the lidar points projected, coloured by range."
+    ),
+    auto: bool = typer.Option(
+        False,
+        "--auto",
+        help="Propose correspondences automatically (Flexion view vs. camera edges) around the "
+        "initial guess; --pairs, if given, join them.",
+    ),
+    init: Path | None = typer.Option(
+        None,
+        "--init",
+        help="Initial T_camera_lidar: .json (a calibrate output, a 4x4 list, the PJLab "
+        "extrinsic JSON), KITTI calib .txt, or 4x4 text.",
+    ),
+    export_views: Path | None = typer.Option(
+        None,
+        "--export-views",
+        metavar="DIR",
+        help="Write picking aids to DIR: camera.png and panorama.png with pixel grids, "
+        "flexion-view.png (with --init) and pairs-template.csv.",
+    ),
+    seed: int = typer.Option(0, "--seed", help="RANSAC seed; the same seed gives the same result."),
+    threshold_px: float = typer.Option(
+        3.0, "--threshold-px", help="RANSAC inlier threshold on the reprojection error, pixels."
+    ),
+    kitti_camera: int = typer.Option(
+        2, "--kitti-camera", help="Camera of a KITTI calib file (2: left colour, image_2)."
+    ),
+    truth: Path | None = typer.Option(
+        None,
+        "--truth",
+        help="Known T_camera_lidar (same formats as --init): report the errors in degrees and "
+        "metres and store them in the output JSON.",
+    ),
+) -> None:
+    """Camera-lidar extrinsic calibration: write T_camera_lidar (maps lidar points into the
+    camera frame).
+
+    Correspondences come from --pairs and/or --auto; nothing is written unless everything
+    succeeds.
+    """
+    from .._version import __version__
+    from ..calibration import (
+        CalibrationConfig,
+        calibrate,
+        overlay_image,
+        picking_views,
+        read_correspondences,
+    )
+    from ..io import read_scan, write_transform_json
+    from ..io.intrinsics import read_extrinsic
+
+    _check_options(
+        image=image,
+        camera=camera,
+        pinhole=pinhole,
+        distortion=distortion,
+        scan=scan,
+        pairs=pairs,
+        out=out,
+        overlay=overlay,
+        auto=auto,
+        init=init,
+        export_views=export_views,
+        seed=seed,
+        threshold_px=threshold_px,
+        kitti_camera=kitti_camera,
+        truth=truth,
+    )
+    dist = _parse_distortion(distortion)
+    config = CalibrationConfig(threshold_px=threshold_px, seed=seed)
+
+    with stage(f"Reading {image.name}"):
+        img = read_image(image)
+    H, W = img.shape[:2]
+    intr = _intrinsics(camera, pinhole, dist, kitti_camera, image, W, H)
+    T_init = None if init is None else read_extrinsic(init, kitti_camera=kitti_camera)
+    T_true = None if truth is None else read_extrinsic(truth, kitti_camera=kitti_camera)
+    with stage(f"Reading {scan.name}"):
+        lidar = read_scan(scan)
+    corr = None
+    if pairs is not None:
+        with stage(f"Reading {pairs.name}"):
+            corr = read_correspondences(pairs, scan=lidar)
+
+    result = None
+    if pairs is not None or auto:
+        with stage("Solving PnP" + (" with automatic proposals" if auto else "")):
+            result = calibrate(
+                img, lidar, intr, pairs=corr, T_init=T_init, auto=auto, config=config
+            )
+
+    # everything is computed before the first file is written
+    writers: list[tuple[Path, Any]] = []
+    if export_views is not None:
+        with stage("Drawing picking views"):
+            views = picking_views(img, lidar, intrinsics=intr, T_init=T_init)
+        for name, picture in views.items():
+            path = export_views / f"{name}.png"
+            writers.append((path, _png_writer(path, picture)))
+        template = export_views / "pairs-template.csv"
+        writers.append((template, _text_writer(template, PAIRS_TEMPLATE)))
+    errors = None
+    if result is not None:
+        assert out is not None
+        if overlay is not None:
+            with stage("Drawing overlay"):
+                picture = overlay_image(
+                    img, lidar.points, intr, result.T_camera_lidar, result=result
+                )
+            writers.append((overlay, _png_writer(overlay, picture)))
+        meta = result.to_dict()
+        T = meta.pop("T_camera_lidar")
+        errors = None if T_true is None else _errors(result.T_camera_lidar, T_true)
+        meta = {
+            "image": str(image),
+            "camera": str(camera) if camera is not None else "--pinhole",
+            "scan": str(scan),
+            "pairs_file": None if pairs is None else str(pairs),
+            "init": None if init is None else str(init),
+            **meta,
+            "flexreg_version": __version__,
+        }
+        if errors is not None:
+            meta["error_vs_truth"] = {"truth": str(truth), **errors}
+        writers.append((out, lambda: write_transform_json(out, T, key="T_camera_lidar", **meta)))
+    _write_all(writers)
+    if result is not None:
+        _print_summary(result, errors)
+    for path, _ in writers:
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
+
+
+def _text_writer(path: Path, text: str) -> Any:
+    from ..io import atomic_write
+
+    return lambda: atomic_write(path, lambda tmp: tmp.write_text(text))
+
+
+def _errors(T: NDArray[np.float64], T_true: NDArray[np.float64]) -> dict[str, float]:
+    from ..transforms import rotation_error_deg, translation_error_m
+
+    return {
+        "rotation_deg": rotation_error_deg(T, T_true),
+        "translation_m": translation_error_m(T, T_true),
+    }
+
+
+def _print_summary(result: CalibrationResult, errors: dict[str, float] | None) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    r = result
+    t = Table(title="T_camera_lidar", show_header=False, title_justify="left")
+    t.add_column(style="bold")
+    t.add_column()
+    n = len(r.correspondences)
+    share = 100.0 * r.inliers / n if n else 0.0
+    t.add_row("method", "automatic proposals" if r.method == "auto" else "given correspondences")
+    t.add_row("inliers", f"{r.inliers} of {n} ({share:.1f} %) within {r.threshold_px:g} px")
+    t.add_row("reprojection RMSE", f"{r.reprojection_rmse_px:.3f} px (inliers)")
+    tx, ty, tz = r.translation_m
+    t.add_row("translation", f"[{tx:.4f}, {ty:.4f}, {tz:.4f}] m (lidar origin in the camera frame)")
+    q = r.quaternion_xyzw
+    t.add_row("quaternion xyzw", f"[{q[0]:.6f}, {q[1]:.6f}, {q[2]:.6f}, {q[3]:.6f}]")
+    if r.auto is not None:
+        s0 = r.auto["edge_score_init"]
+        before = "none" if s0 is None else f"{s0:.3f}"
+        t.add_row(
+            "edge score",
+            f"{before} (initial guess) -> {r.auto['edge_score_final']:.3f} "
+            f"({len(r.auto['rounds'])} rounds)",
+        )
+    if errors is not None:
+        t.add_row(
+            "error vs truth",
+            f"{errors['rotation_deg']:.4f}°, {1000 * errors['translation_m']:.1f} mm",
+        )
+    console.print(t)
+    with np.printoptions(precision=6, suppress=True):
+        console.print(str(r.T_camera_lidar), markup=False)

@@ -1,0 +1,326 @@
+"""`flexreg calibrate`: the real KITTI and PJLab sets recover their reference extrinsic from
+projected correspondences (X,Y,Z or row,col picked on the exported panorama); JSON, overlay and
+picking views; the automatic mode; bad input prints one line, exits 1 and writes nothing."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from flexreg import __version__, read_scan
+from flexreg.calibration import project_points, scan_range_image
+from flexreg.cli import run
+from flexreg.io.intrinsics import read_extrinsic, read_intrinsics, read_kitti_calib
+from flexreg.transforms import (
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+
+
+def _run(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = run(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
+def _one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert sum(line.startswith("error:") for line in lines) == 1, err
+    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
+    return lines[-1]
+
+
+@pytest.fixture(scope="module")
+def kitti(shared_data):
+    d = shared_data / "camlidar_kitti_object"
+    image = d / "image_2_000000.png"
+    calib = d / "calib_000000.txt"
+    scan = d / "velodyne_000000.bin"
+    intr, T = read_kitti_calib(calib)
+    intr = intr.for_image(1224, 370)
+    points = read_scan(scan).points
+    uv, z = project_points(points, intr, T)
+    ok = (z > 1) & (uv[:, 0] > 5) & (uv[:, 0] < 1218) & (uv[:, 1] > 5) & (uv[:, 1] < 364)
+    return {"image": image, "calib": calib, "scan": scan, "T": T, "intr": intr, "uv": uv, "ok": ok}
+
+
+def _xyz_csv(path: Path, uv: np.ndarray, xyz: np.ndarray) -> Path:
+    rows = ["u,v,X,Y,Z"] + [
+        f"{u:.3f},{v:.3f},{x:.5f},{y:.5f},{zz:.5f}"
+        for (u, v), (x, y, zz) in zip(uv, xyz, strict=True)
+    ]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _kitti_pairs(kitti, path: Path, n: int = 100, seed: int = 0) -> Path:
+    rng = np.random.default_rng(seed)
+    sel = rng.choice(np.flatnonzero(kitti["ok"]), n, replace=False)
+    uv = kitti["uv"][sel] + rng.normal(0.0, 1.0, (n, 2))
+    return _xyz_csv(path, uv, read_scan(kitti["scan"]).points[sel])
+
+
+def _base(kitti, out: Path) -> list[str]:
+    return [
+        "calibrate",
+        "--image",
+        str(kitti["image"]),
+        "--camera",
+        str(kitti["calib"]),
+        "--scan",
+        str(kitti["scan"]),
+        "--out",
+        str(out / "calib.json"),
+    ]
+
+
+# ------------------------------------------------------------------------ successful runs
+
+
+def test_kitti_pairs_recover_the_official_extrinsic(kitti, tmp_path):
+    pairs = _kitti_pairs(kitti, tmp_path / "pairs.csv")
+    out = tmp_path / "new" / "folder"
+    argv = [
+        *_base(kitti, out),
+        "--pairs",
+        str(pairs),
+        "--overlay",
+        str(out / "overlay.png"),
+        "--init",
+        str(kitti["calib"]),
+        "--truth",
+        str(kitti["calib"]),
+    ]
+    rc, stdout, stderr = _run(argv)
+    assert rc == 0, stderr
+    doc = json.loads((out / "calib.json").read_text())
+    T = np.array(doc["T_camera_lidar"])
+    assert rotation_error_deg(T, kitti["T"]) < 0.2 and translation_error_m(T, kitti["T"]) < 0.02
+    np.testing.assert_allclose(np.array(doc["T_lidar_camera"]) @ T, np.eye(4), atol=1e-12)
+    assert len(doc["rotation_camera_lidar"]["quaternion_xyzw"]) == 4
+    assert doc["inliers"] >= 95 and doc["correspondences"] == 100 and len(doc["pairs"]) == 100
+    assert doc["pairs"][0]["line"] == 2 and 0.8 < doc["reprojection_rmse_px"] < 1.8
+    assert doc["scan"] == str(kitti["scan"]) and doc["flexreg_version"] == __version__
+    assert doc["intrinsics"]["width"] == 1224 and doc["config"]["seed"] == 0
+    err = doc["error_vs_truth"]
+    assert err["rotation_deg"] < 0.2 and err["translation_m"] < 0.02
+    overlay = cv2.imread(str(out / "overlay.png"))
+    assert overlay.shape == (370, 1224, 3)
+    assert "quaternion xyzw" in stdout and "error vs truth" in stdout
+    assert f"wrote {out / 'calib.json'}" in stdout
+    # the output is a valid initial guess / truth for the next run
+    np.testing.assert_allclose(read_extrinsic(out / "calib.json"), T, atol=1e-9)
+
+
+def test_rowcol_pairs_read_on_the_exported_panorama(kitti, tmp_path):
+    """The picking workflow: export the views, read row,col on the panorama, u,v on the
+    camera image (here: the reference projection of the point the panorama shows)."""
+    views = tmp_path / "views"
+    rc, _, stderr = _run(
+        [
+            "calibrate",
+            "--image",
+            str(kitti["image"]),
+            "--camera",
+            str(kitti["calib"]),
+            "--scan",
+            str(kitti["scan"]),
+            "--export-views",
+            str(views),
+            "--init",
+            str(kitti["calib"]),
+        ]
+    )
+    assert rc == 0, stderr
+    names = sorted(p.name for p in views.iterdir())
+    assert names == ["camera.png", "flexion-view.png", "pairs-template.csv", "panorama.png"]
+    assert not (tmp_path / "calib.json").exists()
+    template = (views / "pairs-template.csv").read_text()
+    assert "u,v,row,col" in template.splitlines()
+    pano = cv2.imread(str(views / "panorama.png"))
+    scan = read_scan(kitti["scan"])
+    ri = scan_range_image(scan)
+    assert pano.shape[:2] == ri.shape
+    assert cv2.imread(str(views / "camera.png")).shape == (370, 1224, 3)
+    # 60 pixels of the panorama whose points the camera sees
+    idx = np.where(ri.valid, ri.index, -1)
+    cand = np.argwhere((idx >= 0) & kitti["ok"][np.maximum(idx, 0)])
+    rng = np.random.default_rng(5)
+    pick = cand[rng.choice(len(cand), 60, replace=False)]
+    uv = kitti["uv"][idx[pick[:, 0], pick[:, 1]]] + rng.normal(0.0, 1.0, (60, 2))
+    lines = ["u,v,row,col"] + [
+        f"{u:.2f},{v:.2f},{r},{c}" for (u, v), (r, c) in zip(uv, pick, strict=True)
+    ]
+    template_path = tmp_path / "picked.csv"
+    template_path.write_text(template + "\n".join(lines[1:]) + "\n")
+    rc, _, stderr = _run([*_base(kitti, tmp_path), "--pairs", str(template_path)])
+    assert rc == 0, stderr
+    T = np.array(json.loads((tmp_path / "calib.json").read_text())["T_camera_lidar"])
+    assert rotation_error_deg(T, kitti["T"]) < 0.2 and translation_error_m(T, kitti["T"]) < 0.02
+
+
+def test_pinhole_options_equal_the_camera_file(shared_data, tmp_path):
+    d = shared_data / "camlidar_pjlab"
+    intr = read_intrinsics(d / "scene_a_center_camera-intrinsic.json")
+    T = read_extrinsic(d / "scene_a_top_center_lidar-to-center_camera-extrinsic.json")
+    points = read_scan(d / "scene_a_calib.pcd").points
+    uv, z = project_points(points, intr, T)
+    ok = np.flatnonzero((z > 1) & (uv[:, 0] > 5) & (uv[:, 0] < 1914) & (uv[:, 1] > 5))
+    ok = ok[uv[ok, 1] < 1194]
+    rng = np.random.default_rng(1)
+    sel = rng.choice(ok, 80, replace=False)
+    pairs = _xyz_csv(tmp_path / "pairs.csv", uv[sel] + rng.normal(0, 1, (80, 2)), points[sel])
+    common = ["calibrate", "--image", str(d / "scene_a_calib.png"), "--scan"]
+    common += [str(d / "scene_a_calib.pcd"), "--pairs", str(pairs)]
+    rc, _, err = _run(
+        [*common, "--camera", str(d / "scene_a_center_camera-intrinsic.json"), "--out"]
+        + [str(tmp_path / "a.json")]
+    )
+    assert rc == 0, err
+    K = intr.K
+    rc, _, err = _run(
+        [*common, "--pinhole", *(str(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))]
+        + ["--distortion", ",".join(str(x) for x in intr.distortion)]
+        + ["--out", str(tmp_path / "b.json")]
+    )
+    assert rc == 0, err
+    a = np.array(json.loads((tmp_path / "a.json").read_text())["T_camera_lidar"])
+    b = np.array(json.loads((tmp_path / "b.json").read_text())["T_camera_lidar"])
+    np.testing.assert_allclose(a, b, atol=1e-12)
+    assert rotation_error_deg(a, T) < 0.2 and translation_error_m(a, T) < 0.02
+
+
+def test_auto_mode_from_a_perturbed_guess(kitti, tmp_path):
+    P = make_transform(
+        rotation_about_axis([-0.5, 0.3, 0.8], math.radians(2.0)), [-0.05, 0.07, 0.04]
+    )
+    T0 = P @ kitti["T"]
+    (tmp_path / "init.json").write_text(json.dumps({"T_camera_lidar": T0.tolist()}))
+    rc, stdout, stderr = _run(
+        [*_base(kitti, tmp_path), "--auto", "--init", str(tmp_path / "init.json")]
+        + ["--overlay", str(tmp_path / "overlay.png")]
+    )
+    assert rc == 0, stderr
+    doc = json.loads((tmp_path / "calib.json").read_text())
+    T = np.array(doc["T_camera_lidar"])
+    assert doc["method"] == "auto" and len(doc["auto"]["rounds"]) >= 1
+    assert rotation_error_deg(T, kitti["T"]) < 0.75 < rotation_error_deg(T0, kitti["T"])
+    assert "edge score" in stdout and (tmp_path / "overlay.png").is_file()
+
+
+# ------------------------------------------------------------------------ bad input
+
+
+def _pairs_text(kitti, n: int) -> list[str]:
+    rng = np.random.default_rng(3)
+    sel = rng.choice(np.flatnonzero(kitti["ok"]), n, replace=False)
+    pts = read_scan(kitti["scan"]).points[sel]
+    uv = kitti["uv"][sel]
+    return [
+        f"{u:.2f},{v:.2f},{x:.4f},{y:.4f},{z:.4f}"
+        for (u, v), (x, y, z) in zip(uv, pts, strict=True)
+    ]
+
+
+@pytest.mark.parametrize(
+    ("case", "message"),
+    [
+        ("five pairs", r"only 5 correspondence\(s\); camera-lidar calibration needs at least 6"),
+        ("behind", r"line 4: lidar point \(.*\) lies behind the camera of the initial guess"),
+        ("outside", r"line 6: pixel \(1300, 20\) lies outside the 1224x370 camera image"),
+        ("malformed", r"line 5: expected 5 values \(u,v,x,y,z\), got 3"),
+        ("size", r"image is 1224x370 px but the intrinsics .* are for 1242x375"),
+    ],
+)
+def test_bad_input_one_line_exit_1_nothing_written(kitti, tmp_path, case, message):
+    rows = _pairs_text(kitti, 12)
+    camera = kitti["calib"]
+    extra = ["--init", str(kitti["calib"])]
+    if case == "five pairs":
+        rows = rows[:5]
+    elif case == "behind":
+        u, v, x, y, z = rows[2].split(",")
+        rows[2] = ",".join([u, v, str(-float(x)), y, z])  # a point behind the lidar's front
+    elif case == "outside":
+        rows[4] = "1300,20," + ",".join(rows[4].split(",")[2:])
+    elif case == "malformed":
+        rows[3] = "1,2,3"
+    elif case == "size":
+        intr = read_kitti_calib(kitti["calib"])[0]
+        camera = tmp_path / "camera.json"
+        camera.write_text(json.dumps({"K": intr.K.tolist(), "width": 1242, "height": 375}))
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("u,v,X,Y,Z\n" + "\n".join(rows) + "\n")
+    argv = [
+        "calibrate",
+        "--image",
+        str(kitti["image"]),
+        "--camera",
+        str(camera),
+        "--scan",
+        str(kitti["scan"]),
+        "--pairs",
+        str(pairs),
+        "--out",
+        str(tmp_path / "out" / "calib.json"),
+        "--overlay",
+        str(tmp_path / "out" / "overlay.png"),
+        *extra,
+    ]
+    rc, _, err = _run(argv)
+    assert rc == 1
+    line = _one_error_line(err)
+    assert re.search(message, line), line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            ["--camera", "c.yaml", "--pinhole", "1", "1", "1", "1"],
+            "either --camera FILE or --pinhole",
+        ),
+        (["--camera", "c.yaml", "--auto", "--out", "o.json"], "--auto: needs an initial guess"),
+        (
+            ["--camera", "c.yaml", "--pairs", "p.csv", "--out", "o.txt"],
+            "--out: o.txt: must be a .json",
+        ),
+        (["--camera", "c.yaml"], "nothing to do"),
+        (["--camera", "c.yaml", "--pairs", "p.csv"], "--out: required"),
+        (
+            ["--camera", "c.yaml", "--distortion", "0,0,0,0", "--pairs", "p.csv"],
+            "only with --pinhole",
+        ),
+        (["--camera", "c.yaml", "--pairs", "p.csv", "--out", "o.json", "--seed", "-1"], "--seed"),
+    ],
+)
+def test_options_are_checked_before_any_input_is_read(tmp_path, options, message):
+    """The input paths do not exist: the option error must come first."""
+    rc, _, err = _run(
+        ["calibrate", "--image", str(tmp_path / "none.png"), "--scan", str(tmp_path / "none.bin")]
+        + options
+    )
+    assert rc == 1
+    assert message in _one_error_line(err)
+
+
+def test_missing_scan_is_one_line(kitti, tmp_path):
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("u,v,X,Y,Z\n" + "\n".join(_pairs_text(kitti, 8)) + "\n")
+    argv = _base(kitti, tmp_path)
+    argv[argv.index("--scan") + 1] = str(tmp_path / "missing.bin")
+    rc, _, err = _run([*argv, "--pairs", str(pairs)])
+    assert rc == 1 and "missing.bin: no such file" in _one_error_line(err)
+    assert not (tmp_path / "calib.json").exists()

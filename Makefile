@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.flexreg-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test lint bench clean
+.PHONY: install demo test lint bench bench-registration bench-calibration clean
 
 install: $(STAMP)
 
@@ -39,6 +39,12 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/io.py
+
+bench-registration: $(STAMP)
+	$(BIN)/python benchmarks/registration.py
+
+bench-calibration: $(STAMP)
+	$(BIN)/python benchmarks/calibration.py
 
 clean:
 	rm -rf $(VENV) $(DEMO) .pytest_cache .ruff_cache .mypy_cache

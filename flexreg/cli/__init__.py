@@ -54,7 +54,15 @@ def _root(
 
 
 # command modules register themselves on `app`
-from . import calibrate, convert, evaluate, register, scan_commands, synth  # noqa: E402,F401
+from . import (  # noqa: E402,F401
+    calibrate,
+    convert,
+    evaluate,
+    odometry,
+    register,
+    scan_commands,
+    synth,
+)
 
 
 def _click_classes(name: str) -> tuple[type[BaseException], ...]:

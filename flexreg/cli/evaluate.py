@@ -188,7 +188,7 @@ def evaluate_command(
     _write_all(writers)
     _print_table(result, formats[0])
     for path, _ in writers:
-        console.print(f"wrote {path}", markup=False)
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
 
 
 def _save_figure(path: Path, fig: Any) -> None:

@@ -268,7 +268,7 @@ def odometry_command(
         written.append(json_out)
     _print_summary(seq, result, seconds, evaluation, note)
     for p in written:
-        console.print(f"wrote {p}", markup=False)
+        console.print(f"wrote {p}", markup=False, soft_wrap=True)
 
 
 def _json_default(o: Any) -> Any:

@@ -287,7 +287,7 @@ def register_command(
     _write_all(writers)
     _print_summary(result, config, errors)
     for path, _ in writers:
-        console.print(f"wrote {path}", markup=False)
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
 
 
 def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:

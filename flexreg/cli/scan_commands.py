@@ -135,4 +135,4 @@ def project(
         f"{written['png_scale_m'] * 1000:g} mm per PNG unit"
     )
     for p in written["files"]:
-        console.print(f"wrote {p}")
+        console.print(f"wrote {p}", markup=False, soft_wrap=True)

@@ -240,11 +240,11 @@ def speed_run(
         "synth_s": synth_s,
         "runs": {},
     }
-    for label, refine in (("with refinement", True), ("without refinement", False)):
+    for label, refined in (("with refinement", True), ("without refinement", False)):
         runs = []
         for _ in range(repeats):
             rec = timed_register(
-                p.target, p.source, replace(config, refine=refine), p.T_target_source
+                p.target, p.source, replace(config, refine=refined), p.T_target_source
             )
             runs.append(rec)
             state = (
@@ -672,9 +672,9 @@ def render_real(records: list[dict[str, Any]]) -> list[str]:
             "3DTK: how well each transform lays the source onto the target (median "
             "nearest-neighbour distance of the source points to the target, and the share within "
             f"{100 * NN_WITHIN_M:.0f} cm). *odometry + ICP* = the odometry pose refined by the "
-            "same refinement `register` uses (`flexreg.pipeline.refine`), the local optimum nearest "
-            "to it. Source points are sampled evenly over the surfaces. Without ground truth "
-            "this shows which transform the data favour, and the last column how far the "
+            "same refinement `register` uses (`flexreg.pipeline.refine`), the local optimum "
+            "nearest to it. Source points are sampled evenly over the surfaces. Without ground "
+            "truth this shows which transform the data favour, and the last column how far the "
             "result is from where the odometry leads:",
             "",
             "| pair | odometry distance m | result | odometry | odometry + ICP "

@@ -229,8 +229,9 @@ def _prepare(tgt: Any, src: Any, method: str, search: Any) -> None:
     if method == "point-to-plane":
         tgt.estimate_normals(search)
     elif method == "gicp":
-        tgt.estimate_covariances(search)
-        src.estimate_covariances(search)
+        # Open3D builds regularised covariances itself (its own 20-neighbour normals); raw
+        # covariances of planar patches are near-singular and can give NaN transforms
+        pass
     elif method != "point-to-point":
         raise ConfigError(f"unknown ICP method {method!r}")
 

@@ -56,6 +56,7 @@ def _root(
 # command modules register themselves on `app`
 from . import (  # noqa: E402,F401
     calibrate,
+    compare,
     convert,
     evaluate,
     odometry,

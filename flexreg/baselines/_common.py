@@ -1,0 +1,238 @@
+"""Pieces shared by the baselines: point extraction, the scale parameter, Open3D clouds, results."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ConfigError, InputError, RegistrationError
+from ..transforms import as_transform
+
+if TYPE_CHECKING:
+    from ..pipeline import RegistrationConfig, RegistrationResult
+
+#: default point budget of the scale parameter: the voxel is enlarged until the voxel-downsampled
+#: target keeps at most this many points (FPFH + RANSAC cost grows quickly with the count)
+DEFAULT_MAX_POINTS = 20_000
+
+#: default voxel in median point spacings of the target (before the point budget applies)
+SPACINGS_PER_VOXEL = 2.0
+
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    """How a baseline was run; stored in its :class:`~flexreg.pipeline.RegistrationResult`.
+
+    Attributes
+    ----------
+    method : str
+        Registry name (``"icp-plane"``, ``"fpfh-ransac"``, ...).
+    voxel_m : float, metres
+        The scale parameter every size of the method derives from.
+    voxel_source : str
+        ``"given"`` or how the default was derived from the scan resolution.
+    start : str
+        ``"identity"``, ``"initial guess"`` or ``"global"`` (no start needed).
+    seed : int
+        Seed of the method's randomness (RANSAC); same seed, same result.
+    parameters : dict
+        Every other setting, with its value (distances in metres).
+    """
+
+    method: str
+    voxel_m: float
+    voxel_source: str
+    start: str
+    seed: int = 0
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "voxel_m": self.voxel_m,
+            "voxel_source": self.voxel_source,
+            "start": self.start,
+            "seed": self.seed,
+            "parameters": dict(self.parameters),
+        }
+
+
+def as_points(x: Any, *, name: str) -> NDArray[np.float64]:
+    """(N, 3) float64 points of a :class:`~flexreg.scan.Scan`, a
+    :class:`~flexreg.projection.RangeImage` (valid pixels) or an array, in metres.
+
+    Raises
+    ------
+    InputError
+        Not (N, 3), non-finite values, or fewer than 3 points.
+    """
+    from ..projection import RangeImage
+    from ..scan import Scan
+
+    if isinstance(x, Scan):
+        P = x.points
+    elif isinstance(x, RangeImage):
+        P = x.xyz[x.valid]
+    else:
+        P = np.asarray(x, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(name, f"points must have shape (N, 3), got {P.shape}")
+    if not np.isfinite(P).all():
+        raise InputError(name, "points hold NaN or Inf")
+    if len(P) < 3:
+        raise InputError(name, f"need at least 3 points, got {len(P)}")
+    return np.ascontiguousarray(P, dtype=np.float64)
+
+
+def initial_transform(T_init: ArrayLike | None) -> tuple[NDArray[np.float64], str]:
+    """``(T, start)``: the validated initial guess, or the identity."""
+    if T_init is None:
+        return np.eye(4), "identity"
+    return as_transform(T_init, name="T_init"), "initial guess"
+
+
+def cloud(points: NDArray[np.float64]) -> Any:
+    """An Open3D point cloud of (N, 3) float64 points."""
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud()
+    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    return pc
+
+
+def default_voxel(
+    target: NDArray[np.float64], *, max_points: int = DEFAULT_MAX_POINTS
+) -> tuple[float, str]:
+    """The scale parameter from the scan resolution: ``(voxel_m, how)``.
+
+    ``SPACINGS_PER_VOXEL`` (2) times the target's median nearest-neighbour spacing
+    (:func:`flexreg.refine.median_spacing`), enlarged until the voxel-downsampled target keeps at
+    most ``max_points`` points. Deterministic (fixed subsample seeds).
+
+    Parameters
+    ----------
+    target : (N, 3) float64, metres
+    max_points : int
+        Point budget after downsampling.
+
+    Returns
+    -------
+    voxel_m : float, metres
+    how : str
+        Which rule set the value (for the record).
+    """
+    from ..refine import median_spacing
+
+    if max_points < 100:
+        raise ConfigError(f"max_points must be at least 100, got {max_points}")
+    spacing = median_spacing(target, tree_points=200_000)
+    if not spacing > 0:
+        raise RegistrationError("cannot derive a voxel size: the target's points coincide")
+    voxel = SPACINGS_PER_VOXEL * spacing
+    how = f"{SPACINGS_PER_VOXEL:g} x median spacing {spacing:.4g} m"
+    pts = thin(target, 2_000_000)
+    base = cloud(pts)
+    n = len(base.voxel_down_sample(voxel).points)
+    for _ in range(12):  # the count falls roughly with the square of the voxel (surfaces)
+        if n <= max_points:
+            break
+        voxel *= 1.05 * math.sqrt(n / max_points)
+        n = len(base.voxel_down_sample(voxel).points)
+        how = f"enlarged until at most {max_points:,} target points remain"
+    return float(voxel), how
+
+
+def resolve_voxel(
+    voxel_m: float | None, target: NDArray[np.float64], max_points: int
+) -> tuple[float, str]:
+    """The given voxel (validated) or :func:`default_voxel`."""
+    if voxel_m is None:
+        return default_voxel(target, max_points=max_points)
+    if not (math.isfinite(voxel_m) and voxel_m > 0):
+        raise ConfigError(f"voxel must be a positive number of metres, got {voxel_m}")
+    return float(voxel_m), "given"
+
+
+def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
+    """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
+    the sizes the baselines use hold many points of a large scan, so the voxel grid of the
+    thinned cloud hardly differs and downsampling gets much cheaper."""
+    if len(points) <= max_points:
+        return points
+    return points[:: math.ceil(len(points) / max_points)]
+
+
+@contextmanager
+def open3d_threads(n: int | None) -> Iterator[None]:
+    """Run Open3D with at most ``n`` threads inside the block (``None``: unchanged)."""
+    import open3d as o3d
+
+    if n is None:
+        yield
+        return
+    old = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(int(n))
+    try:
+        yield
+    finally:
+        o3d.utility.set_max_threads(old)
+
+
+def make_result(
+    *,
+    T: NDArray[np.float64],
+    T_coarse: NDArray[np.float64],
+    matches: int,
+    inliers: int,
+    inlier_rmse_m: float,
+    fitness: float,
+    fitness_denominator: str,
+    information: NDArray[np.float64],
+    timings_s: dict[str, float],
+    threshold_m: float,
+    config: BaselineConfig,
+    correspondences: NDArray[np.float64] | None = None,
+    prior: str,
+) -> RegistrationResult:
+    """A :class:`~flexreg.pipeline.RegistrationResult` for a baseline.
+
+    ``config`` is a :class:`BaselineConfig` (it provides ``seed`` and ``to_dict()``, all the
+    result uses); ``keypoints`` are empty (no image features).
+    """
+    from ..pipeline import RegistrationResult
+
+    corr = np.zeros((0, 2, 3)) if correspondences is None else correspondences
+    return RegistrationResult(
+        T_target_source=np.asarray(T, dtype=np.float64),
+        T_coarse=np.asarray(T_coarse, dtype=np.float64),
+        matches=int(matches),
+        inliers=int(inliers),
+        inlier_rmse_m=float(inlier_rmse_m),
+        fitness=float(fitness),
+        fitness_denominator=fitness_denominator,
+        information=np.asarray(information, dtype=np.float64),
+        timings_s=timings_s,
+        threshold_m=float(threshold_m),
+        config=cast("RegistrationConfig", config),
+        correspondences=corr,
+        inlier_mask=np.ones(len(corr), dtype=bool),
+        keypoints=(np.zeros((0, 2)), np.zeros((0, 2))),
+        prior=prior,
+    )
+
+
+def correspondence_pairs(target: Any, source: Any, correspondence_set: Any) -> NDArray[np.float64]:
+    """(Q, 2, 3) ``[target point, source point]`` pairs (scanner frames) of an Open3D
+    correspondence set ``(source index, target index)``."""
+    c = np.asarray(correspondence_set, dtype=np.int64).reshape(-1, 2)
+    if len(c) == 0:
+        return np.zeros((0, 2, 3))
+    pt = np.asarray(target.points)[c[:, 1]]
+    ps = np.asarray(source.points)[c[:, 0]]
+    return np.stack([pt, ps], axis=1)

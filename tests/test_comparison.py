@@ -1,0 +1,227 @@
+"""flexreg.comparison: ground-truth parsing, success and fit on hand-computed cases, measured
+calls (failures, crashes and timeouts become rows), a compare run and its files."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+import flexreg.comparison as comparison
+from flexreg import ConfigError, InputError, RegistrationError, read_scans
+from flexreg.comparison import (
+    FitEvaluator,
+    SuccessCriteria,
+    compare,
+    measure_call,
+    parse_methods,
+    read_ground_truth,
+    run_isolated,
+    to_markdown,
+    write_comparison,
+)
+from flexreg.transforms import apply, invert, make_transform, rotation_about_axis
+
+
+@pytest.fixture(scope="module")
+def bunny(shared_data):
+    a, b = read_scans(shared_data / "bunny_range_scans_gt" / "derived_bunny_grids_and_gt.npz")
+    return a, b, invert(a.T_world_scanner) @ b.T_world_scanner
+
+
+def test_parse_methods():
+    assert parse_methods("flexreg, icp-plane,flexreg,,kiss-icp") == (
+        "flexreg",
+        "icp-plane",
+        "kiss-icp",
+    )
+    with pytest.raises(ConfigError, match="unknown method 'icp'"):
+        parse_methods("flexreg,icp")
+    with pytest.raises(ConfigError, match="no method"):
+        parse_methods(" , ")
+
+
+def test_read_ground_truth_formats(tmp_path):
+    T = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 3.0])
+    p = tmp_path / "gt.json"
+    p.write_text(json.dumps({"T_target_source": T.tolist(), "method": "survey"}))
+    np.testing.assert_allclose(read_ground_truth(p), T)
+    txt = tmp_path / "T.txt"
+    txt.write_text("\n".join(" ".join(str(x) for x in row) for row in T))
+    np.testing.assert_allclose(read_ground_truth(txt), T)
+    # a flexreg synth gt.json: the pair by file stems, inverted when listed the other way
+    synth = tmp_path / "synth.json"
+    synth.write_text(
+        json.dumps({"pairs": [{"target": "a", "source": "b", "T_target_source": T.tolist()}]})
+    )
+    np.testing.assert_allclose(read_ground_truth(synth, target="a", source="b"), T)
+    np.testing.assert_allclose(read_ground_truth(synth, target="b", source="a"), invert(T))
+    with pytest.raises(InputError, match="no pair c / a"):
+        read_ground_truth(synth, target="c", source="a")
+
+
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        ({"T_target_source": np.diag([1.0, 1.0, 2.0, 1.0]).tolist()}, "not a proper rotation"),
+        ({"T_target_source": np.diag([1.0, 1.0, -1.0, 1.0]).tolist()}, "not a proper rotation"),
+        ({"T_target_source": [[1, 0, 0], [0, 1, 0]]}, "4x4"),
+        ({"T_target_source": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]]}, "last row"),
+        ({"transform": np.eye(4).tolist()}, "no 'T_target_source'"),
+    ],
+)
+def test_read_ground_truth_rejects_non_rigid_matrices(tmp_path, content, problem):
+    p = tmp_path / "gt.json"
+    p.write_text(json.dumps(content))
+    with pytest.raises(InputError, match=problem) as e:
+        read_ground_truth(p)
+    assert str(p) in str(e.value)
+
+
+def test_read_ground_truth_missing_or_broken(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_ground_truth(tmp_path / "nope.json")
+    p = tmp_path / "broken.json"
+    p.write_text("{not json")
+    with pytest.raises(InputError, match="invalid JSON"):
+        read_ground_truth(p)
+
+
+def test_success_criteria_limits_are_inclusive():
+    c = SuccessCriteria(rotation_deg=0.5, translation_m=0.05)
+    assert c.met(0.5, 0.05) and c.met(0.0, 0.0)
+    assert not c.met(0.5001, 0.01) and not c.met(0.1, 0.0501)
+    assert c.label() == "≤ 0.5° and ≤ 5 cm"
+    with pytest.raises(ConfigError, match="rotation_deg"):
+        SuccessCriteria(rotation_deg=0.0)
+    with pytest.raises(ConfigError, match="translation_m"):
+        SuccessCriteria(translation_m=float("nan"))
+
+
+def test_fit_on_a_hand_computed_case():
+    # target: 4 points; source: 4 points of which, at T = identity, two lie 0.1 m and one
+    # 0.3 m from a target point and one 5 m away; distance limit 0.25 m
+    target = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    source = np.array([[0.1, 0, 0], [1, 0.1, 0], [0, 1.3, 0], [5, 5, 5]])
+    fit = FitEvaluator(target, source, 0.25)
+    share, rmse = fit(np.eye(4))
+    assert share == 0.5
+    assert rmse == pytest.approx(0.1)
+    # moving the source by -0.1 m in x puts the first point exactly on the target
+    share, rmse = fit(make_transform(np.eye(3), [-0.1, 0.0, 0.0]))
+    assert share == 0.5
+    assert rmse == pytest.approx(np.sqrt((0.0 + 0.02) / 2))
+    assert fit.denominator.startswith("4 evenly spaced source points")
+
+
+def _raise_registration_error():
+    raise RegistrationError("too few inliers: 2")
+
+
+def _raise_value_error():
+    raise ValueError("boom")
+
+
+def test_measure_call_statuses_time_and_memory():
+    m = measure_call(_raise_registration_error)
+    assert (m.status, m.message, m.result) == ("failed", "too few inliers: 2", None)
+    m = measure_call(_raise_value_error)
+    assert (m.status, m.message) == ("error", "ValueError: boom")
+
+    def allocate():
+        a = np.ones(40_000_000)  # 305 MiB, touched
+        time.sleep(0.05)
+        return float(a.sum())
+
+    m = measure_call(allocate)  # type: ignore[arg-type]
+    assert m.status == "ok" and m.result == 40_000_000.0
+    assert m.time_s >= 0.05
+    if comparison._reset_high_water_mark():  # Linux: the kernel's peak resident size
+        assert 280 < m.peak_memory_mb < 1000
+
+
+def test_run_isolated_reports_crashes_and_timeouts():
+    crashed = run_isolated(os.abort)
+    assert crashed.status == "crashed" and "signal" in crashed.message
+    timeout = run_isolated(time.sleep, (30,), timeout_s=1.0)
+    assert timeout.status == "timeout" and timeout.time_s == 1.0
+    assert timeout.message == "no result within 1 s"
+
+
+def test_compare_gives_every_method_a_row(bunny, tmp_path):
+    a, b, T = bunny
+    far = make_transform(np.eye(3), [0.5, 0.0, 0.0])
+    # the source moved 0.5 m away (the bunny is 15 cm across): ICP from the identity finds no
+    # correspondence (a failed row), FPFH + RANSAC is global and still registers it
+    source = apply(invert(far), b.points)
+    T_gt = T @ far
+    cmp = compare(
+        a.points,
+        source,
+        methods="icp-point,fpfh-ransac",
+        T_gt=T_gt,
+        criteria=SuccessCriteria(rotation_deg=1.0, translation_m=0.005),
+        timeout_s=120,
+        names=("bun000", "bun045 moved"),
+    )
+    icp_row, fpfh = cmp.runs
+    assert (icp_row.method, icp_row.status) == ("icp-point", "failed")
+    assert "no correspondence" in icp_row.message and icp_row.success is False
+    assert icp_row.T_target_source is None and icp_row.rotation_error_deg is None
+    assert fpfh.status == "ok" and fpfh.success is True
+    assert fpfh.rotation_error_deg < 1.0 and fpfh.translation_error_m < 0.005
+    assert fpfh.coarse_rotation_error_deg is not None and fpfh.fitness > 0.3
+    assert fpfh.time_s > 0 and fpfh.peak_memory_mb is not None and fpfh.peak_memory_mb > 0
+    assert fpfh.details["config"]["method"] == "fpfh-ransac"
+
+    md = to_markdown(cmp)
+    assert "| icp-point | failed: ICP (point-to-point) found no correspondence" in md
+    assert "| fpfh-ransac | ok |" in md
+
+    out = tmp_path / "report"
+    paths = write_comparison(cmp, out)
+    assert sorted(p.name for p in paths) == ["comparison.json", "comparison.md", "comparison.png"]
+    doc = json.loads((out / "comparison.json").read_text())
+    assert [m["method"] for m in doc["methods"]] == ["icp-point", "fpfh-ransac"]
+    assert doc["methods"][0]["status"] == "failed" and doc["methods"][1]["success"] is True
+    assert doc["success_criteria"] == {"rotation_deg": 1.0, "translation_m": 0.005}
+    png = cv2.imread(str(out / "comparison.png"))
+    assert png is not None and png.shape[0] > 200
+
+
+def test_compare_refuses_pairs_without_overlap(bunny):
+    a, b, T = bunny
+    shifted = b.points + [0.0, 0.0, 1000.0]
+    with pytest.raises(InputError, match="do not overlap at the ground-truth pose"):
+        compare(a.points, shifted, methods="icp-point", T_gt=T, isolate=False)
+    with pytest.raises(RegistrationError, match="no overlap found"):
+        compare(a.points, shifted, methods="icp-point", isolate=False)
+
+
+def test_compare_rejects_bad_options(bunny):
+    a, b, _ = bunny
+    with pytest.raises(ConfigError, match="unknown method"):
+        compare(a, b, methods="flexreg,sift-icp")
+    with pytest.raises(ConfigError, match="time limit"):
+        compare(a, b, methods="icp-point", timeout_s=0)
+    with pytest.raises(InputError, match="ground truth"):
+        compare(a, b, methods="icp-point", T_gt=np.diag([1.0, 2.0, 1.0, 1.0]))
+
+
+def test_write_comparison_leaves_nothing_when_a_file_fails(bunny, tmp_path, monkeypatch):
+    a, b, T = bunny
+    cmp = compare(a.points, b.points, methods="icp-plane", T_gt=T, isolate=False)
+    assert cmp.run("icp-plane").status == "ok"
+
+    def broken_plot(*_args, **_kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(comparison, "plot_comparison", broken_plot)
+    out = tmp_path / "report"
+    with pytest.raises(InputError, match="No space left"):
+        write_comparison(cmp, out)
+    assert not out.exists() or list(out.iterdir()) == []

@@ -38,6 +38,25 @@ def stage(description: str) -> Iterator[None]:
     err_console.print(f"[green]✓[/green] {description} ({time.perf_counter() - t0:.2f} s)")
 
 
+def write_all(writers: list[tuple[Path, Any]]) -> None:
+    """Run each ``(path, write)``; if one fails, remove the files already written here, so a
+    command leaves all of its outputs or none."""
+    from ..errors import InputError
+
+    done: list[Path] = []
+    try:
+        for path, write in writers:
+            try:
+                write()
+            except OSError as e:
+                raise InputError(path, f"cannot write: {e.strerror or e}") from e
+            done.append(path)
+    except BaseException:
+        for p in done:
+            p.unlink(missing_ok=True)
+        raise
+
+
 def progress_bar() -> Progress:
     """A progress bar for loops over files or items (on stderr)."""
     return Progress(

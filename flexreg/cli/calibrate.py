@@ -11,7 +11,7 @@ import typer
 
 from ..errors import ConfigError, InputError
 from . import app
-from ._common import console, stage
+from ._common import console, stage, write_all
 
 if TYPE_CHECKING:
     import numpy as np
@@ -158,22 +158,6 @@ def _intrinsics(
         except InputError as e:
             raise ConfigError(f"--pinhole: {e.problem}") from None
     return intr.for_image(width, height, image=str(image_path))
-
-
-def _write_all(writers: list[tuple[Path, Any]]) -> None:
-    """Run each ``(path, write)``; if one fails, remove the files already written here."""
-    done: list[Path] = []
-    try:
-        for path, write in writers:
-            try:
-                write()
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        raise
 
 
 def _png_writer(path: Path, image: NDArray[np.uint8]) -> Any:
@@ -351,7 +335,7 @@ def calibrate_command(
         if errors is not None:
             meta["error_vs_truth"] = {"truth": str(truth), **errors}
         writers.append((out, lambda: write_transform_json(out, T, key="T_camera_lidar", **meta)))
-    _write_all(writers)
+    write_all(writers)
     if result is not None:
         _print_summary(result, errors)
     for path, _ in writers:

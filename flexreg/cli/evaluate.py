@@ -11,7 +11,7 @@ import typer
 
 from ..errors import ConfigError, InputError
 from . import app
-from ._common import console, stage
+from ._common import console, stage, write_all
 
 if TYPE_CHECKING:
     from ..metrics import EvaluationResult
@@ -185,7 +185,7 @@ def evaluate_command(
             "flexreg_version": __version__,
         }
         writers.append((json_out, lambda: _write_json(json_out, doc)))
-    _write_all(writers)
+    write_all(writers)
     _print_table(result, formats[0])
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -204,22 +204,6 @@ def _write_json(path: Path, doc: dict[str, Any]) -> None:
 
     text = json.dumps(doc, indent=2) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
-
-
-def _write_all(writers: list[tuple[Path, Any]]) -> None:
-    """Run each ``(path, write)``; if one fails, remove the files already written here."""
-    done: list[Path] = []
-    try:
-        for path, write in writers:
-            try:
-                write()
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        raise
 
 
 def _print_table(result: EvaluationResult, fmt: str) -> None:

@@ -13,7 +13,7 @@ import typer
 
 from ..errors import ConfigError, InputError
 from . import app
-from ._common import console, read_input, stage
+from ._common import console, read_input, stage, write_all
 
 if TYPE_CHECKING:
     import numpy as np
@@ -143,22 +143,6 @@ def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
     return Scan(points=points, colors=colors, name="merged")
 
 
-def _write_all(writers: list[tuple[Path, Any]]) -> None:
-    """Run each ``(path, write)``; if one fails, remove the files already written here."""
-    done: list[Path] = []
-    try:
-        for path, write in writers:
-            try:
-                write()
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        raise
-
-
 @app.command("register")
 def register_command(
     target: Path = typer.Argument(
@@ -284,7 +268,7 @@ def register_command(
     if errors is not None:
         meta["error_vs_truth"] = {"truth": str(truth), **errors}
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
-    _write_all(writers)
+    write_all(writers)
     _print_summary(result, config, errors)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)

@@ -51,6 +51,7 @@ __all__ = [
     "align_umeyama",
     "associate",
     "ate",
+    "check_interval",
     "evaluate",
     "interval_label",
     "nearest_partner",
@@ -428,15 +429,19 @@ def ate(
     )
 
 
-def _check_delta(delta: float, delta_unit: str) -> None:
+def check_interval(
+    delta: float, delta_unit: str, *, names: tuple[str, str] = ("delta", "delta_unit")
+) -> None:
+    """Raise :class:`ConfigError` unless ``delta`` in ``delta_unit`` is a usable RPE interval
+    (positive; whole frames). ``names`` are how the two values are called in the message (the
+    CLI passes its option names)."""
+    d, unit = names
     if delta_unit not in DELTA_UNITS:
-        raise ConfigError(
-            f"delta_unit: must be one of {', '.join(DELTA_UNITS)}, got {delta_unit!r}"
-        )
+        raise ConfigError(f"{unit}: must be one of {', '.join(DELTA_UNITS)}, got {delta_unit!r}")
     if not (math.isfinite(delta) and delta > 0):
-        raise ConfigError(f"delta: must be a positive number of {delta_unit}, got {delta}")
+        raise ConfigError(f"{d}: must be a positive number of {delta_unit}, got {delta}")
     if delta_unit == "frames" and delta != int(delta):
-        raise ConfigError(f"delta: must be a whole number of frames, got {delta}")
+        raise ConfigError(f"{d}: must be a whole number of frames, got {delta}")
 
 
 def _check_convention(convention: str) -> None:
@@ -672,7 +677,7 @@ def rpe(
     >>> r.n_pairs, round(r.trans_rmse_m, 12), r.rot_max_deg
     (4, 0.1, 0.0)
     """
-    _check_delta(delta, delta_unit)
+    check_interval(delta, delta_unit)
     _check_convention(convention)
     if not (math.isfinite(scale) and scale > 0):
         raise ConfigError(f"scale: must be a positive number, got {scale}")
@@ -816,7 +821,7 @@ def evaluate(
     -------
     EvaluationResult
     """
-    _check_delta(delta, delta_unit)
+    check_interval(delta, delta_unit)
     _check_convention(convention)
     a = ate(
         gt,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 
 import pytest
@@ -23,3 +25,22 @@ def rng():
     import numpy as np
 
     return np.random.default_rng(12345)
+
+
+def run_cli(argv: list) -> tuple[int, str, str]:
+    """Run ``flexreg`` in-process: (exit status, stdout, stderr)."""
+    from flexreg.cli import run
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = run([str(a) for a in argv])
+    return rc, out.getvalue(), err.getvalue()
+
+
+def one_error_line(err: str) -> str:
+    """The single ``error: ...`` line a failed command printed (asserts there is exactly one
+    and no traceback)."""
+    lines = [line for line in err.strip().splitlines() if line.strip()]
+    assert sum(line.startswith("error:") for line in lines) == 1, err
+    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
+    return lines[-1]

@@ -4,8 +4,6 @@ picking views; the automatic mode; bad input prints one line, exits 1 and writes
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 import re
@@ -14,10 +12,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import one_error_line, run_cli
 
 from flexreg import __version__, read_scan
 from flexreg.calibration import project_points, scan_range_image
-from flexreg.cli import run
 from flexreg.io.intrinsics import read_extrinsic, read_intrinsics, read_kitti_calib
 from flexreg.transforms import (
     make_transform,
@@ -25,20 +23,6 @@ from flexreg.transforms import (
     rotation_error_deg,
     translation_error_m,
 )
-
-
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = run(argv)
-    return rc, out.getvalue(), err.getvalue()
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert sum(line.startswith("error:") for line in lines) == 1, err
-    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +86,7 @@ def test_kitti_pairs_recover_the_official_extrinsic(kitti, tmp_path):
         "--truth",
         str(kitti["calib"]),
     ]
-    rc, stdout, stderr = _run(argv)
+    rc, stdout, stderr = run_cli(argv)
     assert rc == 0, stderr
     doc = json.loads((out / "calib.json").read_text())
     T = np.array(doc["T_camera_lidar"])
@@ -127,7 +111,7 @@ def test_rowcol_pairs_read_on_the_exported_panorama(kitti, tmp_path):
     """The picking workflow: export the views, read row,col on the panorama, u,v on the
     camera image (here: the reference projection of the point the panorama shows)."""
     views = tmp_path / "views"
-    rc, _, stderr = _run(
+    rc, _, stderr = run_cli(
         [
             "calibrate",
             "--image",
@@ -164,7 +148,7 @@ def test_rowcol_pairs_read_on_the_exported_panorama(kitti, tmp_path):
     ]
     template_path = tmp_path / "picked.csv"
     template_path.write_text(template + "\n".join(lines[1:]) + "\n")
-    rc, _, stderr = _run([*_base(kitti, tmp_path), "--pairs", str(template_path)])
+    rc, _, stderr = run_cli([*_base(kitti, tmp_path), "--pairs", str(template_path)])
     assert rc == 0, stderr
     T = np.array(json.loads((tmp_path / "calib.json").read_text())["T_camera_lidar"])
     assert rotation_error_deg(T, kitti["T"]) < 0.2 and translation_error_m(T, kitti["T"]) < 0.02
@@ -183,13 +167,13 @@ def test_pinhole_options_equal_the_camera_file(shared_data, tmp_path):
     pairs = _xyz_csv(tmp_path / "pairs.csv", uv[sel] + rng.normal(0, 1, (80, 2)), points[sel])
     common = ["calibrate", "--image", str(d / "scene_a_calib.png"), "--scan"]
     common += [str(d / "scene_a_calib.pcd"), "--pairs", str(pairs)]
-    rc, _, err = _run(
+    rc, _, err = run_cli(
         [*common, "--camera", str(d / "scene_a_center_camera-intrinsic.json"), "--out"]
         + [str(tmp_path / "a.json")]
     )
     assert rc == 0, err
     K = intr.K
-    rc, _, err = _run(
+    rc, _, err = run_cli(
         [*common, "--pinhole", *(str(x) for x in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))]
         + ["--distortion", ",".join(str(x) for x in intr.distortion)]
         + ["--out", str(tmp_path / "b.json")]
@@ -207,7 +191,7 @@ def test_auto_mode_from_a_perturbed_guess(kitti, tmp_path):
     )
     T0 = P @ kitti["T"]
     (tmp_path / "init.json").write_text(json.dumps({"T_camera_lidar": T0.tolist()}))
-    rc, stdout, stderr = _run(
+    rc, stdout, stderr = run_cli(
         [*_base(kitti, tmp_path), "--auto", "--init", str(tmp_path / "init.json")]
         + ["--overlay", str(tmp_path / "overlay.png")]
     )
@@ -278,9 +262,9 @@ def test_bad_input_one_line_exit_1_nothing_written(kitti, tmp_path, case, messag
         str(tmp_path / "out" / "overlay.png"),
         *extra,
     ]
-    rc, _, err = _run(argv)
+    rc, _, err = run_cli(argv)
     assert rc == 1
-    line = _one_error_line(err)
+    line = one_error_line(err)
     assert re.search(message, line), line
     assert not (tmp_path / "out").exists()
 
@@ -308,12 +292,12 @@ def test_bad_input_one_line_exit_1_nothing_written(kitti, tmp_path, case, messag
 )
 def test_options_are_checked_before_any_input_is_read(tmp_path, options, message):
     """The input paths do not exist: the option error must come first."""
-    rc, _, err = _run(
+    rc, _, err = run_cli(
         ["calibrate", "--image", str(tmp_path / "none.png"), "--scan", str(tmp_path / "none.bin")]
         + options
     )
     assert rc == 1
-    assert message in _one_error_line(err)
+    assert message in one_error_line(err)
 
 
 def test_missing_scan_is_one_line(kitti, tmp_path):
@@ -321,6 +305,6 @@ def test_missing_scan_is_one_line(kitti, tmp_path):
     pairs.write_text("u,v,X,Y,Z\n" + "\n".join(_pairs_text(kitti, 8)) + "\n")
     argv = _base(kitti, tmp_path)
     argv[argv.index("--scan") + 1] = str(tmp_path / "missing.bin")
-    rc, _, err = _run([*argv, "--pairs", str(pairs)])
-    assert rc == 1 and "missing.bin: no such file" in _one_error_line(err)
+    rc, _, err = run_cli([*argv, "--pairs", str(pairs)])
+    assert rc == 1 and "missing.bin: no such file" in one_error_line(err)
     assert not (tmp_path / "calib.json").exists()

@@ -3,32 +3,16 @@ error line, exit status 1 and no files."""
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import io
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import one_error_line, run_cli
 
 from flexreg import read_scans, write_scan
-from flexreg.cli import run
 from flexreg.transforms import invert, make_transform
-
-
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = run([str(a) for a in argv])
-    return rc, out.getvalue(), err.getvalue()
-
-
-def _one_error_line(err: str) -> str:
-    lines = [line for line in err.strip().splitlines() if line.strip()]
-    assert sum(line.startswith("error:") for line in lines) == 1, err
-    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +33,7 @@ def test_compare_prints_a_table_and_writes_three_files(files, tmp_path):
     init = tmp_path / "init.txt"
     start = T @ make_transform(np.eye(3), [0.002, -0.001, 0.0])
     np.savetxt(init, start)
-    rc, stdout, stderr = _run(
+    rc, stdout, stderr = run_cli(
         [
             "compare",
             target,
@@ -95,9 +79,9 @@ def test_compare_prints_a_table_and_writes_three_files(files, tmp_path):
 def test_compare_bad_options(files, tmp_path, extra, message):
     target, source, _, _ = files
     out = tmp_path / "report"
-    rc, _, err = _run(["compare", target, source, "--out", out, *extra])
+    rc, _, err = run_cli(["compare", target, source, "--out", out, *extra])
     assert rc == 1
-    assert message in _one_error_line(err)
+    assert message in one_error_line(err)
     assert not out.exists()
 
 
@@ -106,9 +90,9 @@ def test_compare_non_rigid_ground_truth(files, tmp_path):
     gt = tmp_path / "scaled.json"
     gt.write_text(json.dumps({"T_target_source": np.diag([2.0, 2.0, 2.0, 1.0]).tolist()}))
     out = tmp_path / "report"
-    rc, _, err = _run(["compare", target, source, "--gt", gt, "--out", out])
+    rc, _, err = run_cli(["compare", target, source, "--gt", gt, "--out", out])
     assert rc == 1
-    line = _one_error_line(err)
+    line = one_error_line(err)
     assert str(gt) in line and "not a proper rotation" in line
     assert not out.exists()
 
@@ -122,9 +106,9 @@ def test_compare_pair_without_overlap(files, tmp_path):
     gt = tmp_path / "identity.json"
     gt.write_text(json.dumps({"T_target_source": np.eye(4).tolist()}))
     out = tmp_path / "report"
-    rc, _, err = _run(["compare", target, far, "--gt", gt, "--out", out])
+    rc, _, err = run_cli(["compare", target, far, "--gt", gt, "--out", out])
     assert rc == 1
-    assert "do not overlap at the ground-truth pose" in _one_error_line(err)
+    assert "do not overlap at the ground-truth pose" in one_error_line(err)
     assert not out.exists()
 
 
@@ -132,14 +116,14 @@ def test_compare_out_is_a_file(files, tmp_path):
     target, source, _, _ = files
     out = tmp_path / "report.txt"
     out.write_text("keep me")
-    rc, _, err = _run(["compare", target, source, "--out", out])
-    assert rc == 1 and "exists and is not a folder" in _one_error_line(err)
+    rc, _, err = run_cli(["compare", target, source, "--out", out])
+    assert rc == 1 and "exists and is not a folder" in one_error_line(err)
     assert out.read_text() == "keep me"
 
 
 def test_bench_quick_real_suite(shared_data, tmp_path):
     out = tmp_path / "bench"
-    rc, stdout, stderr = _run(
+    rc, stdout, stderr = run_cli(
         [
             "bench",
             "--suite",
@@ -181,7 +165,7 @@ def test_bench_quick_real_suite(shared_data, tmp_path):
 
 def test_bench_quick_synthetic_suite_plots(tmp_path):
     out = tmp_path / "bench"
-    rc, _, stderr = _run(
+    rc, _, stderr = run_cli(
         ["bench", "--suite", "synthetic", "--quick", "--methods", "kiss-icp", "--out", out]
     )
     assert rc == 0, stderr
@@ -215,9 +199,9 @@ def test_bench_quick_synthetic_suite_plots(tmp_path):
 )
 def test_bench_bad_options(tmp_path, argv, message):
     out = tmp_path / "bench"
-    rc, _, err = _run(["bench", *argv, "--out", out])
+    rc, _, err = run_cli(["bench", *argv, "--out", out])
     assert rc == 1
-    assert message in _one_error_line(err)
+    assert message in one_error_line(err)
     assert not out.exists()
 
 
@@ -229,7 +213,7 @@ def test_bench_pair_that_cannot_be_loaded_is_a_row(shared_data, tmp_path, monkey
 
     monkeypatch.setattr(bs, "real_case", broken)
     out = tmp_path / "bench"
-    rc, _, err = _run(
+    rc, _, err = run_cli(
         ["bench", "--suite", "real", "--quick", "--methods", "kiss-icp", "--data", shared_data]
         + ["--out", out]
     )
@@ -250,9 +234,9 @@ def test_bench_writes_nothing_when_writing_fails(shared_data, tmp_path, monkeypa
 
     monkeypatch.setattr(bs, "to_csv", full_disk)
     out = tmp_path / "bench"
-    rc, _, err = _run(
+    rc, _, err = run_cli(
         ["bench", "--suite", "real", "--quick", "--methods", "kiss-icp", "--data", shared_data]
         + ["--out", out]
     )
-    assert rc == 1 and "No space left on device" in _one_error_line(err)
+    assert rc == 1 and "No space left on device" in one_error_line(err)
     assert not out.exists()

@@ -9,18 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import one_error_line
 from matplotlib.image import imread
 
 from flexreg import __version__
 from flexreg.cli import run
 from flexreg.io.trajectory import Trajectory, read_trajectory, write_trajectory
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert sum(line.startswith("error:") for line in lines) == 1, err
-    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
-    return lines[-1]
 
 
 def _files(folder: Path) -> list[str]:
@@ -106,7 +100,7 @@ def test_unassociated_timestamps_exit_1_and_write_nothing(evo, tmp_path, capsys)
     argv = ["evaluate", "--gt", str(evo / "freiburg1_xyz-groundtruth.txt"), "--est", str(late)]
     argv += ["--json", str(tmp_path / "out.json"), "--plot", str(tmp_path / "out.png")]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert line.startswith(f"error: {late}: only 0 of its 788 poses have a ground-truth pose")
     assert "at least 3 are needed" in line and "1305031202.160407 .. " in line
     assert _files(tmp_path) == ["late.txt"]
@@ -119,7 +113,7 @@ def test_malformed_line_exit_1_names_file_and_line(evo, tmp_path, capsys):
     bad.write_text("\n".join(lines) + "\n")
     argv = ["evaluate", "--gt", str(evo / "freiburg1_xyz-groundtruth.txt"), "--est", str(bad)]
     assert run([*argv, "--json", str(tmp_path / "out.json")]) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert line == f"error: {bad}: line 6: expected 8 values (t tx ty tz qx qy qz qw), got 7"
     assert _files(tmp_path) == ["bad.txt"]
 
@@ -128,7 +122,7 @@ def test_formats_must_match(evo, tmp_path, capsys):
     argv = ["evaluate", "--gt", str(evo / "freiburg1_xyz-groundtruth.txt")]
     argv += ["--est", str(evo / "KITTI_00_ORB.txt")]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert "KITTI_00_ORB.txt: is a kitti trajectory but --gt" in line and "is tum" in line
 
 
@@ -151,7 +145,7 @@ def test_bad_options_exit_1_before_reading(args, culprit, tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path)  # the inputs do not exist: options are checked first
     argv = ["evaluate", "--gt", "gt.json", "--est", "est.txt", *args]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert line.startswith(f"error: {culprit}: "), line
     assert _files(tmp_path) == []
 
@@ -159,4 +153,4 @@ def test_bad_options_exit_1_before_reading(args, culprit, tmp_path, monkeypatch,
 def test_missing_input_names_the_file(tmp_path, capsys):
     missing = tmp_path / "nope.txt"
     assert run(["evaluate", "--gt", str(missing), "--est", str(missing)]) == 1
-    assert _one_error_line(capsys.readouterr().err) == f"error: {missing}: no such file"
+    assert one_error_line(capsys.readouterr().err) == f"error: {missing}: no such file"

@@ -4,8 +4,6 @@ one error line, exit 1 and write nothing."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import shutil
 from pathlib import Path
@@ -13,24 +11,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import one_error_line, run_cli
 
-from flexreg.cli import run
 from flexreg.io.trajectory import read_trajectory
 from flexreg.metrics import ate
-
-
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = run(argv)
-    return rc, out.getvalue(), err.getvalue()
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert sum(line.startswith("error:") for line in lines) == 1, err
-    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +36,7 @@ def _argv(seq: Path, out: Path, *extra: str) -> list[str]:
 
 def test_tracks_and_writes_tum_and_json(sequence, tmp_path):
     out, js = tmp_path / "new" / "traj.txt", tmp_path / "new" / "run.json"
-    rc, stdout, stderr = _run(_argv(sequence, out, "--json", str(js), "--seed", "3"))
+    rc, stdout, stderr = run_cli(_argv(sequence, out, "--json", str(js), "--seed", "3"))
     assert rc == 0, stderr
     traj = read_trajectory(out, "tum")
     gt = read_trajectory(sequence / "groundtruth.txt", "tum")
@@ -70,7 +54,7 @@ def test_tracks_and_writes_tum_and_json(sequence, tmp_path):
     assert "ATE" in stdout and "5 of 5 motions measured" in stdout and f"wrote {out}" in stdout
     # same seed, same bytes
     out2 = tmp_path / "again.txt"
-    assert _run(_argv(sequence, out2, "--seed", "3"))[0] == 0
+    assert run_cli(_argv(sequence, out2, "--seed", "3"))[0] == 0
     assert out2.read_bytes() == out.read_bytes()
 
 
@@ -81,7 +65,7 @@ def test_blank_frame_is_reported_and_bridged(sequence, tmp_path):
     blank = seq / lines[3].split()[1]
     assert cv2.imwrite(str(blank), np.zeros((240, 320), np.uint16))  # no reading at all
     out, js = tmp_path / "t.txt", tmp_path / "t.json"
-    rc, _, stderr = _run(_argv(seq, out, "--json", str(js), "--min-inliers", "8"))
+    rc, _, stderr = run_cli(_argv(seq, out, "--json", str(js), "--min-inliers", "8"))
     assert rc == 0, stderr
     assert "frame 3: not solved against frame(s) 2" in stderr
     assert "bridged by constant velocity" in stderr
@@ -105,28 +89,28 @@ def test_blank_frame_is_reported_and_bridged(sequence, tmp_path):
 )
 def test_bad_options_write_nothing(sequence, tmp_path, extra, message):
     out = tmp_path / "traj.txt"
-    rc, _, err = _run(_argv(sequence, out, *extra))
-    assert rc == 1 and message in _one_error_line(err)
+    rc, _, err = run_cli(_argv(sequence, out, *extra))
+    assert rc == 1 and message in one_error_line(err)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_bad_sequences_write_nothing(sequence, tmp_path):
     out = tmp_path / "out" / "traj.txt"
-    rc, _, err = _run(_argv(tmp_path / "nowhere", out))
-    assert rc == 1 and "nowhere: no such folder" in _one_error_line(err)
+    rc, _, err = run_cli(_argv(tmp_path / "nowhere", out))
+    assert rc == 1 and "nowhere: no such folder" in one_error_line(err)
     seq = tmp_path / "seq"
     shutil.copytree(sequence, seq)
     lines = [ln for ln in (seq / "depth.txt").read_text().splitlines() if not ln.startswith("#")]
     (seq / lines[2].split()[1]).unlink()
-    rc, _, err = _run(_argv(seq, out))
-    assert rc == 1 and "depth.txt: line 5: " in _one_error_line(err)
+    rc, _, err = run_cli(_argv(seq, out))
+    assert rc == 1 and "depth.txt: line 5: " in one_error_line(err)
     shutil.rmtree(seq / "rgb")
     (seq / "rgb.txt").unlink()
     for ln in lines[2:]:
         (seq / ln.split()[1]).unlink(missing_ok=True)
     (seq / "depth.txt").write_text("\n".join(lines[:2]) + "\n")
-    rc, _, err = _run(_argv(seq, out, "--image", "color"))
-    assert rc == 1 and "no colour image" in _one_error_line(err)
+    rc, _, err = run_cli(_argv(seq, out, "--image", "color"))
+    assert rc == 1 and "no colour image" in one_error_line(err)
     assert not (tmp_path / "out").exists()
 
 
@@ -134,7 +118,7 @@ def test_real_7scenes_frames(shared_data, tmp_path):
     out = tmp_path / "traj.txt"
     argv = ["odometry", str(shared_data / "rgbd_7scenes_redkitchen"), "--out", str(out),
             "--max-frames", "6", "--features", "akaze"]  # fmt: skip
-    rc, stdout, stderr = _run(argv)
+    rc, stdout, stderr = run_cli(argv)
     assert rc == 0, stderr
     assert "7scenes, 6 frames" in stdout and "ATE" in stdout
     assert len(read_trajectory(out, "tum")) == 6

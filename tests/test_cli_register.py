@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO
+from conftest import REPO, one_error_line
 
 import flexreg.pipeline
 from flexreg import Scan, __version__, read_scan, write_scan
@@ -34,13 +34,6 @@ LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
 
 def _files(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.rglob("*") if p.is_file()) if folder.exists() else []
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert sum(line.startswith("error:") for line in lines) == 1, err
-    assert lines[-1].startswith("error: ") and "Traceback" not in err, err
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")
@@ -214,7 +207,7 @@ def test_unrelated_scans_exit_1_and_write_nothing(pair, tmp_path, capsys):
         str(out / "m.ply"),
     ]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert any(c.isdigit() for c in line)  # the counts that fell short
     assert _files(out) == []
 
@@ -223,7 +216,7 @@ def test_missing_input_names_the_file(pair, tmp_path, capsys):
     target, _, _ = pair
     missing = tmp_path / "nope.ptx"
     assert run(["register", str(target), str(missing), "--out", str(tmp_path / "T.json")]) == 1
-    assert _one_error_line(capsys.readouterr().err).startswith(f"error: {missing}: ")
+    assert one_error_line(capsys.readouterr().err).startswith(f"error: {missing}: ")
     assert _files(tmp_path) == []
 
 
@@ -251,14 +244,14 @@ def test_bad_options_exit_1_before_reading(args, culprit, tmp_path, monkeypatch,
     # the inputs do not exist: the option is refused before anything is read
     argv = ["register", "a.ptx", "b.ptx", "--out", "T.json", *args]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert line.startswith(f"error: {culprit}: "), line
     assert _files(tmp_path) == []
 
 
 def test_out_must_be_json(tmp_path, capsys):
     assert run(["register", "a.ptx", "b.ptx", "--out", str(tmp_path / "T.txt")]) == 1
-    assert _one_error_line(capsys.readouterr().err).startswith("error: --out: ")
+    assert one_error_line(capsys.readouterr().err).startswith("error: --out: ")
 
 
 def test_failed_write_removes_the_outputs_already_written(
@@ -283,6 +276,6 @@ def test_failed_write_removes_the_outputs_already_written(
         str(out / "m.ply"),
     ]
     assert run(argv) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert str(tmp_path / "blocker" / "T.json") in line
     assert _files(out) == []

@@ -17,7 +17,6 @@ if TYPE_CHECKING:
     from ..metrics import EvaluationResult
 
 FORMATS = ("auto", "tum", "kitti")
-DELTA_UNITS = ("frames", "seconds", "metres")
 CONVENTIONS = ("tools", "paper")
 
 
@@ -36,14 +35,9 @@ def _check_options(
     """Validate everything that does not need the input files, before anything is read."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    if delta_unit not in DELTA_UNITS:
-        raise ConfigError(
-            f"--delta-unit: must be one of {', '.join(DELTA_UNITS)}, got {delta_unit!r}"
-        )
-    if not (math.isfinite(delta) and delta > 0):
-        raise ConfigError(f"--delta: must be a positive number of {delta_unit}, got {delta}")
-    if delta_unit == "frames" and delta != int(delta):
-        raise ConfigError(f"--delta: must be a whole number of frames, got {delta}")
+    from ..metrics import check_interval
+
+    check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
     if convention not in CONVENTIONS:
         raise ConfigError(
             f"--rpe-convention: must be one of {', '.join(CONVENTIONS)}, got {convention!r}"

@@ -19,8 +19,6 @@ if TYPE_CHECKING:
     from ..metrics import EvaluationResult
     from ..odometry import OdometryResult
 
-DELTA_UNITS = ("frames", "seconds", "metres")
-
 
 def _check_options(
     *,
@@ -81,14 +79,9 @@ def _check_options(
         )
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise ConfigError(f"--rate-hz: must be a positive frame rate, got {rate_hz}")
-    if delta_unit not in DELTA_UNITS:
-        raise ConfigError(
-            f"--delta-unit: must be one of {', '.join(DELTA_UNITS)}, got {delta_unit!r}"
-        )
-    if not (math.isfinite(delta) and delta > 0):
-        raise ConfigError(f"--delta: must be a positive number of {delta_unit}, got {delta}")
-    if delta_unit == "frames" and delta != int(delta):
-        raise ConfigError(f"--delta: must be a whole number of frames, got {delta}")
+    from ..metrics import check_interval
+
+    check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
     if not sequence.exists():
         raise InputError(sequence, "no such folder")
     if not sequence.is_dir():

@@ -27,6 +27,7 @@ from .errors import ConfigError, DegenerateGeometryError, RegistrationError
 from .features import Features, detect_and_describe
 from .matching import match
 from .projection import RangeImage, range_image
+from .projective import grid_normals, point_information
 from .refine import IcpResult
 from .scan import Scan
 from .transforms import invert, rotation_about_axis, rotation_error_deg, translation_error_m
@@ -274,33 +275,23 @@ def _as_image(x: Scan | RangeImage) -> RangeImage:
 
 
 def _polisher(
-    target: RangeImage, source: RangeImage, thr: float
+    target: RangeImage, normals: NDArray[np.float32], source: RangeImage, thr: float
 ) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
-    """A quick local ICP on small fixed subsets of both scans (for judging candidates)."""
-    from .refine import refine_icp
+    """A quick local ICP of a small even sample of the source against the target's range image
+    (projective, :func:`flexreg.projective.projective_icp`), for judging candidates.
 
-    def subset(img: RangeImage, n: int) -> NDArray[np.float64]:
-        p = img.xyz[img.valid]
-        return p[:: max(1, len(p) // n)]
+    ``target`` must have a camera model; ``normals`` are its :func:`grid_normals`."""
+    from .projective import projective_icp
 
-    tp, sp = subset(target, 200_000), subset(source, 50_000)
-    voxel: list[float] = []  # found by the first call, reused
+    sample = area_sample(source.xyz[source.valid], 5000)
 
     def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
         try:
-            r = refine_icp(
-                tp,
-                sp,
-                T,
-                voxel_m=voxel[0] if voxel else None,
-                max_target_points=30_000,
-                max_source_points=5_000,
-                max_iterations=15,
-                initial_error_m=3 * thr,
+            r = projective_icp(
+                target, sample, T, max_distance_m=3 * thr, normals=normals, max_iterations=15
             )
         except RegistrationError:
             return T
-        voxel[:1] = [r.voxel_m]
         return r.T_target_source
 
     return polish
@@ -333,17 +324,6 @@ def _working_image(x: Scan | RangeImage, max_pixels: int) -> RangeImage:
 
 def _points(x: Scan | RangeImage) -> NDArray[np.float64]:
     return x.points if isinstance(x, Scan) else x.xyz[x.valid]
-
-
-def _information_from_points(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Information matrix of point correspondences (Open3D's convention: rotation first)."""
-    info = np.zeros((6, 6))
-    for x, y, z in points:
-        G = np.array(
-            [[0, z, -y, 1, 0, 0], [-z, 0, x, 0, 1, 0], [y, -x, 0, 0, 0, 1]], dtype=np.float64
-        )
-        info += G.T @ G
-    return info
 
 
 def derive_threshold(
@@ -388,7 +368,7 @@ def upright_priors(
 
     views = []
     for img in (target, source):
-        stride = max(1, math.ceil(math.sqrt(img.height * img.width / 1.0e6)))
+        stride = max(1, math.ceil(math.sqrt(img.height * img.width / PLAN_PIXELS)))
         pts, nrm, area = topview.surface_normals(img, k=2, stride=stride)
         lev = topview.estimate_up(nrm, area, max_tilt_rad=config.max_tilt_rad)
         views.append(
@@ -514,10 +494,16 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
     (M, 3) float64
         A subset of ``points`` in input order.
     """
+    return _area_sample_cell(points, samples)[1]
+
+
+def _area_sample_cell(
+    points: NDArray[np.float64], samples: int
+) -> tuple[float, NDArray[np.float64]]:
+    """:func:`area_cell` and :func:`area_sample` at once."""
     p = np.asarray(points, dtype=np.float64)
-    if len(p) <= samples:
-        return p
-    return p[np.sort(_area_cells(p, samples)[1])]
+    cell, first = _area_cells(p, samples)
+    return cell, p if len(p) <= samples else p[np.sort(first)]
 
 
 def area_cell(points: NDArray[np.float64], samples: int) -> float:
@@ -661,6 +647,14 @@ def _guided_estimate(
     return _Estimate(T, pairs, inl, origin)
 
 
+#: the plan views are drawn from at most about this many pixels per scan (every k-th row and
+#: column): they only give a prior good to a plan cell and a degree
+PLAN_PIXELS = 300_000
+
+#: source points (spread evenly over its surfaces) of the projective refinement
+PROJECTIVE_ICP_POINTS = 30_000
+
+
 def refine(
     target: Scan | RangeImage,
     source: Scan | RangeImage,
@@ -670,17 +664,27 @@ def refine(
     method: str = "point-to-plane",
     voxel_m: float | None = None,
     check: Callable[[NDArray[np.float64]], float] | None = None,
+    target_image: RangeImage | None = None,
+    target_normals: NDArray[np.float32] | None = None,
+    source_image: RangeImage | None = None,
 ) -> IcpResult:
-    """ICP refinement of a coarse ``T_target_source`` at two scales, checked on the data.
+    """ICP refinement of a coarse ``T_target_source``.
 
-    First ICP on voxels sized so that the target keeps about :data:`AREA_ICP_POINTS`
-    (:func:`area_cell`): every part of the scene then counts by its surface area, which keeps
-    the dense, noisy or self-similar near field of a scanner (a corridor's walls fit any shift
-    along it) from outweighing the far structure that fixes the pose. Then ICP at the finest
-    voxels the point budget allows (:func:`refine.refine_icp`), started from the first; it is
-    kept unless the dense free-space check scores it more than :data:`FINE_ICP_SLACK` lower.
-    On clean scans the fine scale wins (sub-millimetre); on real scans with centimetre noise
-    or distortion it can drift, and the area-weighted result is returned.
+    **Point-to-plane (default): symmetric projective ICP on both range images**
+    (:func:`flexreg.projective.projective_icp`). About :data:`PROJECTIVE_ICP_POINTS` points,
+    half from each scan, spread evenly over its surfaces (:func:`area_sample`), are paired with
+    the other scan's pixel their rays hit, whose plane comes from that image's grid; both scans
+    keep their full image resolution. Sampling by area keeps the dense, noisy or self-similar
+    near field of a scanner (a corridor's walls fit any shift along it) from outweighing the far
+    structure that fixes the pose; pairing in both directions keeps either scan's viewpoint and
+    normals alone from deciding it.
+
+    **GICP, point-to-point, or a fixed voxel: Open3D** nearest-neighbour ICP at two scales.
+    First on voxels sized so that the target keeps about :data:`AREA_ICP_POINTS`
+    (:func:`area_cell`, area-weighted as above), then at the finest voxels the point budget
+    allows (:func:`refine.refine_icp`), started from the first; the fine result is kept unless
+    the dense free-space check scores it more than :data:`FINE_ICP_SLACK` lower. With
+    ``voxel_m``, one coarse-to-fine ICP at that voxel.
 
     Parameters
     ----------
@@ -691,10 +695,16 @@ def refine(
         Inlier threshold of the coarse stage (how far off ``T_init`` may be), metres.
     method : {"point-to-plane", "gicp", "point-to-point"}
     voxel_m : float, optional
-        A fixed voxel: one coarse-to-fine ICP at that voxel, no second scale.
+        A fixed voxel: Open3D ICP at that voxel, no second scale.
     check : callable, optional
-        ``check(T) -> score`` (higher is better); default the consistent minus three times
-        the conflicting fraction of :func:`overlap_score` at ``threshold_m / 2``.
+        Open3D path: ``check(T) -> score`` (higher is better); default the consistent minus
+        three times the conflicting fraction of :func:`overlap_score` at ``threshold_m / 2``.
+    target_image : RangeImage, optional
+        The target's range image with a camera model, when already at hand (projective path).
+    target_normals : (H, W, 3) float32, optional
+        Its :func:`flexreg.projective.grid_normals`, when already at hand.
+    source_image : RangeImage, optional
+        The source's range image with a camera model, when already at hand.
 
     Returns
     -------
@@ -702,8 +712,36 @@ def refine(
     """
     from .refine import refine_icp
 
-    tp, sp = _points(target), _points(source)
+    sp = _points(source)
     kind: Any = method
+    if method == "point-to-plane" and voxel_m is None:
+        from .projective import projective_icp
+
+        vt = target_image if target_image is not None else _camera_image(target)
+        vs = source_image if source_image is not None else _camera_image(source)
+        n = PROJECTIVE_ICP_POINTS // 2
+        cell_s, src_sample = _area_sample_cell(sp, n)
+        _, tgt_sample = _area_sample_cell(_points(target), n)
+        r = projective_icp(
+            vt,
+            src_sample,
+            T_init,
+            max_distance_m=3 * threshold_m,
+            normals=target_normals if target_image is not None else None,
+            source=vs,
+            target_points=tgt_sample,
+        )
+        return IcpResult(
+            T_target_source=r.T_target_source,
+            fitness=r.fitness,
+            inlier_rmse_m=r.inlier_rmse_m,
+            information=r.information,
+            voxel_m=cell_s,
+            max_distance_m=r.max_distance_m,
+            source_points=len(src_sample) + len(tgt_sample),
+            association="projective",
+        )
+    tp = _points(target)
     if voxel_m is not None:
         return refine_icp(
             tp, sp, T_init, method=kind, voxel_m=voxel_m, initial_error_m=3 * threshold_m
@@ -718,7 +756,7 @@ def refine(
     )
     fine = refine_icp(tp, sp, broad.T_target_source, method=kind, initial_error_m=3 * threshold_m)
     if check is None:
-        vt = _with_camera(_working_image(target, RegistrationConfig.max_image_pixels))
+        vt = _camera_image(target)
         slack = range_slack(vt)
         sample = area_sample(sp, 20000)
 
@@ -737,6 +775,14 @@ def refine(
         best.voxel_m,
     )
     return best
+
+
+def _camera_image(target: Scan | RangeImage) -> RangeImage:
+    """The range image (with a camera model, holes filled) that :func:`register` checks
+    against and refines on."""
+    from .projection import fill_holes
+
+    return _with_camera(fill_holes(_working_image(target, RegistrationConfig.max_image_pixels)))
 
 
 def register(
@@ -869,7 +915,8 @@ def register(
         vt = _with_camera(ti)
         slack = range_slack(vt)
         sample = area_sample(si.xyz[si.valid], 20000)
-        polish = _polisher(ti, si, thr) if config.polish else None
+        normals = grid_normals(vt)
+        polish = _polisher(vt, normals, si, thr) if config.polish else None
 
         def judge(T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
             """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
@@ -942,7 +989,7 @@ def register(
         f"{len(sample)} source points spread evenly over its surfaces, within {fine_tol:.3g} m "
         "+ 0.2% of range of what the target saw"
     )
-    info = _information_from_points(q[cons])
+    info = point_information(q[cons])
     if config.refine:
         with stage("refinement"):
             icp = refine(
@@ -953,6 +1000,9 @@ def register(
                 method=config.icp,
                 voxel_m=config.voxel_m,
                 check=lambda T_: judge(T_, fine_tol, 0.002)[0],
+                target_image=vt,
+                target_normals=normals,
+                source_image=_with_camera(si),
             )
         T, rmse, fitness, info = (
             icp.T_target_source,
@@ -961,8 +1011,12 @@ def register(
             icp.information,
         )
         denom = (
-            f"{icp.source_points} source points ({icp.voxel_m:.3g} m voxels, thinned) with a "
-            f"target point within {icp.max_distance_m:.3g} m"
+            f"{icp.source_points} source points spread evenly over its surfaces (one per "
+            f"{icp.voxel_m:.3g} m cell) within {icp.max_distance_m:.3g} m of the target surface "
+            "on their ray"
+            if icp.association == "projective"
+            else f"{icp.source_points} source points ({icp.voxel_m:.3g} m voxels, thinned) "
+            f"with a target point within {icp.max_distance_m:.3g} m"
         )
     return RegistrationResult(
         T_target_source=T,

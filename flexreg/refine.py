@@ -51,6 +51,11 @@ class IcpResult:
         refer to it), metres.
     source_points : int
         Downsampled source points (the denominator of ``fitness``).
+    association : {"nearest", "projective"}
+        How source points found their target partners: nearest neighbour (Open3D ICP;
+        ``voxel_m`` is the downsampling voxel) or the pixel hit by their ray in the target's
+        range image (:func:`flexreg.projective.projective_icp`; ``voxel_m`` is the cell of
+        the even sampling of the source).
     """
 
     T_target_source: NDArray[np.float64]
@@ -60,6 +65,7 @@ class IcpResult:
     voxel_m: float
     max_distance_m: float
     source_points: int = 0
+    association: str = "nearest"
 
 
 def median_spacing(

@@ -260,13 +260,14 @@ def top_view(
     a = area[vert]
     if len(ij) == 0:
         raise DegenerateGeometryError("no vertical surfaces to draw a plan from")
-    key = (ij[:, 0] << 32) + (ij[:, 1] & 0xFFFFFFFF)
-    uk, inv = np.unique(key, return_inverse=True)
-    vals = np.bincount(inv, weights=a) / cell_m
-    cells = np.column_stack([uk >> 32, (uk & 0xFFFFFFFF).astype(np.int64)])
-    cells[:, 1] = np.where(cells[:, 1] >= 2**31, cells[:, 1] - 2**32, cells[:, 1])
-    keep = vals > 0.005
-    cells, vals = cells[keep], np.minimum(vals[keep], max_surface_m)
+    # sum per cell on the dense grid of the cells in reach (no sort): |ij| <= radius / cell
+    lo = ij.min(axis=0)
+    nx, ny = (ij.max(axis=0) - lo + 1).tolist()
+    lin = (ij[:, 1] - lo[1]) * nx + (ij[:, 0] - lo[0])
+    grid = np.bincount(lin, weights=a, minlength=nx * ny) / cell_m
+    occupied = np.flatnonzero(grid > 0.005)  # row-major: cells sorted by (iy, ix)
+    cells = np.column_stack([occupied % nx + lo[0], occupied // nx + lo[1]]).astype(np.int64)
+    vals = np.minimum(grid[occupied], max_surface_m)
     hz = near & (np.abs(n[:, 2]) > 0.95)
     z = p[hz, 2]
     h: NDArray[np.float64] = np.zeros(1)
@@ -277,7 +278,8 @@ def top_view(
         h = np.bincount(
             np.floor((z - z0) / height_bin_m).astype(np.int64), weights=area[hz], minlength=nb
         ).astype(np.float64)
-    return TopView(cells, vals, cell_m, cells * float(cell_m), h, z0, height_bin_m)
+    xy = (cells * float(cell_m)).astype(np.float64)
+    return TopView(cells, vals, cell_m, xy, h, z0, height_bin_m)
 
 
 @dataclass(frozen=True)
@@ -315,12 +317,14 @@ def _placed_cells(
     return np.floor(moved / cell_m + 0.5).astype(np.int64)
 
 
-def _correlation(S: NDArray[np.float64], FT: Any, shape: tuple[int, int]) -> NDArray[np.float64]:
-    """``corr[d] = sum_x T[x] S[x + d]`` (circular), given ``FT = conj(rfft2(T))``: source
-    raster position ``x + d`` lies on target position ``x``."""
+def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[Any]:
+    """``corr[d] = sum_x T[x] S[x + d]`` (circular) of each raster in ``S`` (..., H, W), given
+    ``FT = conj(rfft2(T))``: source raster position ``x + d`` lies on target position ``x``."""
     from scipy import fft
 
-    return np.asarray(fft.irfft2(fft.rfft2(S, workers=-1) * FT, s=shape, workers=-1))
+    return np.asarray(
+        fft.irfft2(fft.rfft2(S, axes=(-2, -1), workers=-1) * FT, s=shape, axes=(-2, -1), workers=-1)
+    )
 
 
 def match_top_views(
@@ -347,22 +351,29 @@ def match_top_views(
     rs = math.ceil(float(np.hypot(source.xy[:, 0], source.xy[:, 1]).max()) / c) + 2
     size = fft.next_fast_len(2 * (rt + rs) + 1, real=True)
     shape = (size, size)
-    T = _raster(target.cells, target.values, shape, rt)
+    T = _raster(target.cells, target.values, shape, rt).astype(np.float32)
     FT = np.conj(fft.rfft2(T, workers=-1))
     yaws = np.arange(0.0, 2 * math.pi, yaw_step_rad)
     peaks: list[tuple[float, float, float, float]] = []  # score, yaw, t_x, t_y
-    for yaw in yaws:
-        S = _raster(_placed_cells(source.xy, yaw, (0.0, 0.0), c), source.values, shape, rs)
-        corr = _correlation(S, FT, shape)
-        idx = int(np.argmax(corr))
-        iy, ix = divmod(idx, size)
-        best = float(corr[iy, ix])
-        fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
-        fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
-        dx = (ix if ix <= 2 * rs else ix - size) + fx
-        dy = (iy if iy <= 2 * rs else iy - size) + fy
-        # source cell s sits at raster s + rs, target cell t at t + rt: t = s + (rs - rt - d)
-        peaks.append((best, float(yaw), (rs - rt - dx) * c, (rs - rt - dy) * c))
+    batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
+    for b0 in range(0, len(yaws), batch):
+        S = np.stack(
+            [
+                _raster(_placed_cells(source.xy, yaw, (0.0, 0.0), c), source.values, shape, rs)
+                for yaw in yaws[b0 : b0 + batch]
+            ]
+        ).astype(np.float32)
+        corrs = _correlation(S, FT, shape)
+        for yaw, corr in zip(yaws[b0 : b0 + batch], corrs, strict=True):
+            idx = int(np.argmax(corr))
+            iy, ix = divmod(idx, size)
+            best = float(corr[iy, ix])
+            fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
+            fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
+            dx = (ix if ix <= 2 * rs else ix - size) + fx
+            dy = (iy if iy <= 2 * rs else iy - size) + fy
+            # source cell s sits at raster s + rs, target cell t at t + rt: t = s + (rs - rt - d)
+            peaks.append((best, float(yaw), (rs - rt - dx) * c, (rs - rt - dy) * c))
     scores = np.array([p[0] for p in peaks])
     out: list[PlanMatch] = []
     for i in np.argsort(-scores, kind="stable"):
@@ -396,30 +407,33 @@ def refine_plan_match(
     """Refine a plan overlay on finer plans: local yaw search, sub-cell correlation peak.
 
     The source plan, placed by ``match``, is rotated about its scanner through
-    ``yaw ± yaw_range_rad`` and correlated (FFT) with the target plan, lightly blurred, over
-    offsets up to ``shift_m``; the best yaw and offset are interpolated by parabolas.
+    ``yaw ± yaw_range_rad`` and correlated with the target plan, lightly blurred, over offsets
+    up to ``shift_m`` (directly: a small window); the best yaw and offset are interpolated by
+    parabolas.
     """
-    from scipy import fft, ndimage
+    from scipy import ndimage
 
     c = target.cell_m
     if source.cell_m != c:
         raise ValueError("plans must share their cell size")
     rt = int(np.abs(target.cells).max()) + 1
     w = math.ceil(shift_m / c) + 1
-    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
-    shape = (n, n)
     off = rt + w
-    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
-    FT = np.conj(fft.rfft2(T, workers=-1))
+    n = 2 * off + 1
+    T = ndimage.gaussian_filter(_raster(target.cells, target.values, (n, n), off), 1.0)
     t0 = np.asarray(match.t_xy)
     yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
+    # offsets d of the window, row-major over (dy, dx) in [-w, w]^2
+    dy, dx = (g.ravel() for g in np.mgrid[-w : w + 1, -w : w + 1])
     best = []
     for yaw in yaws:
         cells = _placed_cells(source.xy, yaw, match.t_xy, c)
         inside = (np.abs(cells) <= rt).all(axis=1)
-        S = _raster(cells[inside], source.values[inside], shape, off)
-        corr = _correlation(S, FT, shape)
-        win = np.roll(np.roll(corr, w, axis=0), w, axis=1)[: 2 * w + 1, : 2 * w + 1]
+        cells, vals = cells[inside], source.values[inside]
+        # corr[d] = sum_s S[s] T[s - d]: the source at s + ... lies on the target at s - d
+        rows = cells[None, :, 1] + off - dy[:, None]
+        cols = cells[None, :, 0] + off - dx[:, None]
+        win = (T[rows, cols] @ vals).reshape(2 * w + 1, 2 * w + 1)
         iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
         b = float(win[iy, ix])
         fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
@@ -451,11 +465,15 @@ def _wrap_angle(a: float) -> float:
 def height_offset(target: TopView, source: TopView, *, max_offset_m: float = 5.0) -> float:
     """Height of the source scanner above the target's (levelled frames), metres: the shift
     that best overlays the two histograms of horizontal-surface heights."""
-    from scipy import signal
+    from scipy import fft
 
     a = np.log1p(target.heights / max(target.heights.max(), 1e-12) * 100)
     b = np.log1p(source.heights / max(source.heights.max(), 1e-12) * 100)
-    corr = signal.correlate(a, b, mode="full", method="fft")
+    # full cross-correlation (lags -(len(b) - 1) .. len(a) - 1) as a convolution with the
+    # reversed source histogram
+    n = len(a) + len(b) - 1
+    m = fft.next_fast_len(n, real=True)
+    corr = fft.irfft(fft.rfft(a, m) * fft.rfft(b[::-1], m), m)[:n]
     lags = np.arange(-len(b) + 1, len(a))
     # target bin i + lag... z_t = z0_t + (j + lag) * dz  <->  z_s = z0_s + j * dz
     shift = target.z0_m - source.z0_m + lags * target.dz_m

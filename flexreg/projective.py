@@ -1,0 +1,478 @@
+"""Projective point-to-plane ICP on a range image.
+
+A scan's range image already says which target surface a source point would be matched to: the
+one the target scanner saw along the ray through that point. Mapping a sample of source points
+into the target frame, projecting them through the target's camera model and reading the pixel
+hit gives every correspondence in constant time (projective data association), where a
+nearest-neighbour ICP searches a k-d tree; the normals come from the image grid as well
+(:func:`grid_normals`). One iteration over tens of thousands of points then takes about a
+millisecond, so the target keeps its full image resolution instead of being voxel-thinned.
+
+Starting from a coarse transform within a few centimetres (the registration's inlier
+threshold), each iteration linearises the point-to-plane residuals
+``r_i = n_i . (R p_i + t - x_i)`` around the current pose, solves the 6x6 normal equations
+(Tukey-weighted, Levenberg damped) and composes the increment, for a shrinking sequence of
+correspondence distances.
+The result is deterministic: one thread, one fixed summation order.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from .camera import PinholeCamera, SphericalCamera
+from .errors import ConfigError, RegistrationError
+from .projection import RangeImage
+from .transforms import rotation_about_axis
+
+log = logging.getLogger(__name__)
+
+#: camera kinds of the compiled kernels
+_SPHERICAL, _PINHOLE = 0, 1
+
+
+def _camera_params(image: RangeImage) -> tuple[int, NDArray[np.float64]]:
+    """The camera of ``image`` as (kind, parameters) for the kernels."""
+    cam = image.camera
+    if isinstance(cam, SphericalCamera):
+        return _SPHERICAL, np.array(
+            [cam.phi_min, cam.dphi, cam.theta_min, cam.dtheta, float(cam.wraps)]
+        )
+    if isinstance(cam, PinholeCamera):
+        return _PINHOLE, np.array([cam.fx, cam.fy, cam.cx, cam.cy, cam.skew])
+    raise ConfigError("projective ICP needs a range image with a camera model")
+
+
+def angular_step(image: RangeImage) -> float:
+    """Largest angle between neighbouring pixels' rays, radians (pinhole: at the centre)."""
+    cam = image.camera
+    if isinstance(cam, SphericalCamera):
+        return float(max(cam.dphi, cam.dtheta))
+    if isinstance(cam, PinholeCamera):
+        return float(1.0 / min(cam.fx, cam.fy))
+    raise ConfigError("projective ICP needs a range image with a camera model")
+
+
+# ---------------------------------------------------------------------------- numba kernels
+
+
+@numba.njit(cache=True)
+def _normals_kernel(xyz, k, wrap, max_jump):  # pragma: no cover - compiled
+    """Unit normals from the cross product of central differences at offset ``k``, averaged
+    over the 3x3 neighbourhood (sign-aligned), NaN where a neighbour is missing or across a
+    depth jump (span above ``max_jump`` times the range)."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    raw = np.full((H, W, 3), np.nan)
+    for i in range(k, H - k):
+        for j in range(W):
+            jl, jr = j - k, j + k
+            if wrap:
+                jl %= W
+                jr %= W
+            elif jl < 0 or jr >= W:
+                continue
+            x0, y0, z0 = xyz[i, j, 0], xyz[i, j, 1], xyz[i, j, 2]
+            r = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
+            if not r > 0.0:
+                continue
+            hx = xyz[i, jr, 0] - xyz[i, jl, 0]
+            hy = xyz[i, jr, 1] - xyz[i, jl, 1]
+            hz = xyz[i, jr, 2] - xyz[i, jl, 2]
+            vx = xyz[i + k, j, 0] - xyz[i - k, j, 0]
+            vy = xyz[i + k, j, 1] - xyz[i - k, j, 1]
+            vz = xyz[i + k, j, 2] - xyz[i - k, j, 2]
+            lh = math.sqrt(hx * hx + hy * hy + hz * hz)
+            lv = math.sqrt(vx * vx + vy * vy + vz * vz)
+            if not (lh < max_jump * r and lv < max_jump * r):  # also False for NaN
+                continue
+            nx = hy * vz - hz * vy
+            ny = hz * vx - hx * vz
+            nz = hx * vy - hy * vx
+            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if not nn > 0.0:
+                continue
+            if nx * x0 + ny * y0 + nz * z0 > 0.0:  # towards the scanner
+                nn = -nn
+            raw[i, j, 0] = nx / nn
+            raw[i, j, 1] = ny / nn
+            raw[i, j, 2] = nz / nn
+    out = np.full((H, W, 3), np.nan, dtype=np.float32)
+    for i in range(H):
+        for j in range(W):
+            if not math.isfinite(raw[i, j, 0]):
+                continue
+            sx = sy = sz = 0.0
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= H:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if wrap:
+                        jj %= W
+                    elif jj < 0 or jj >= W:
+                        continue
+                    if math.isfinite(raw[ii, jj, 0]):
+                        c = (
+                            raw[ii, jj, 0] * raw[i, j, 0]
+                            + raw[ii, jj, 1] * raw[i, j, 1]
+                            + raw[ii, jj, 2] * raw[i, j, 2]
+                        )
+                        if c > 0.9:  # same surface (within about 25 degrees)
+                            sx += raw[ii, jj, 0]
+                            sy += raw[ii, jj, 1]
+                            sz += raw[ii, jj, 2]
+            s = math.sqrt(sx * sx + sy * sy + sz * sz)
+            out[i, j, 0] = sx / s
+            out[i, j, 1] = sy / s
+            out[i, j, 2] = sz / s
+    return out
+
+
+@numba.njit(cache=True)
+def _associate(
+    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+):  # pragma: no cover
+    """Pair points with the pixels their rays hit in an image and add the Tukey-weighted
+    point-to-plane normal equations of ``T`` (a left increment) to ``A``, ``b``.
+
+    Forward: ``pts`` are source points, ``M = T`` maps them into the target image's frame and
+    the mapped point moves against the pixel's fixed plane. Reverse: ``pts`` are target points,
+    ``M = T^-1`` maps them into the source image's frame, and the pixel's point and plane,
+    mapped into the target frame by ``T``, move against the fixed target point.
+    ``out_q`` receives the moving point of each pair (target frame), ``out_r`` its residual
+    (NaN when unpaired). Returns the number of pairs."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    count = 0
+    J = np.empty(6)
+    wrap = kind == 0 and cam[4] > 0.5
+    for i in range(pts.shape[0]):
+        px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+        out_r[i] = np.nan
+        # into the image's frame
+        qx = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
+        qy = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
+        qz = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
+        rq = math.sqrt(qx * qx + qy * qy + qz * qz)
+        if kind == 0:
+            if not rq > 0.0:
+                continue
+            u = (math.atan2(qy, qx) - cam[0]) / cam[1]
+            c = min(1.0, max(-1.0, qz / rq))
+            v = (math.acos(c) - cam[2]) / cam[3]
+            if wrap:
+                u = u % W
+            elif u < -0.5:
+                u += 2.0 * math.pi / cam[1]
+        else:
+            if not qz > 0.0:
+                continue
+            u = cam[0] * qx / qz + cam[4] * qy / qz + cam[2]
+            v = cam[1] * qy / qz + cam[3]
+        iu = math.floor(u + 0.5)
+        iv = math.floor(v + 0.5)
+        if wrap and iu >= W:
+            iu -= W
+        if iu < 0 or iu >= W or iv < 0 or iv >= H:
+            continue
+        nx = np.float64(nrm[iv, iu, 0])
+        ny = np.float64(nrm[iv, iu, 1])
+        nz = np.float64(nrm[iv, iu, 2])
+        if not math.isfinite(nx):
+            continue
+        x0, x1, x2 = xyz[iv, iu, 0], xyz[iv, iu, 1], xyz[iv, iu, 2]
+        if reverse:  # the pixel moves: its point and normal into the target frame
+            mx = T[0, 0] * x0 + T[0, 1] * x1 + T[0, 2] * x2 + T[0, 3]
+            my = T[1, 0] * x0 + T[1, 1] * x1 + T[1, 2] * x2 + T[1, 3]
+            mz = T[2, 0] * x0 + T[2, 1] * x1 + T[2, 2] * x2 + T[2, 3]
+            n0 = T[0, 0] * nx + T[0, 1] * ny + T[0, 2] * nz
+            n1 = T[1, 0] * nx + T[1, 1] * ny + T[1, 2] * nz
+            n2 = T[2, 0] * nx + T[2, 1] * ny + T[2, 2] * nz
+            nx, ny, nz = n0, n1, n2
+            dx, dy, dz = mx - px, my - py, mz - pz
+        else:
+            mx, my, mz = qx, qy, qz
+            dx, dy, dz = qx - x0, qy - x1, qz - x2
+        res = nx * dx + ny * dy + nz * dz
+        if not abs(res) < dist:
+            continue
+        # the pixel's point lies on the ray's surface within about a pixel footprint
+        reach = dist + lateral * rq
+        if dx * dx + dy * dy + dz * dz > reach * reach:
+            continue
+        out_q[i, 0], out_q[i, 1], out_q[i, 2] = mx, my, mz
+        out_r[i] = res
+        w = 1.0 - (res / dist) ** 2
+        w *= w
+        J[0] = my * nz - mz * ny  # (m x n): derivative for a small rotation about the origin
+        J[1] = mz * nx - mx * nz
+        J[2] = mx * ny - my * nx
+        J[3], J[4], J[5] = nx, ny, nz
+        for a in range(6):
+            b[a] += w * J[a] * res
+            for c2 in range(6):
+                A[a, c2] += w * J[a] * J[c2]
+        count += 1
+    return count
+
+
+# ---------------------------------------------------------------------------- Python API
+
+
+def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
+    """Unit surface normals of every pixel of an organised scan, from its grid.
+
+    The cross product of the central differences at pixel offset ``k`` along the rows and the
+    columns, averaged with the neighbouring pixels' normals of the same surface (3x3). Pixels
+    whose neighbours are missing or lie across a depth jump get NaN.
+
+    Parameters
+    ----------
+    image : RangeImage
+    k : int
+        Pixel offset of the differences (larger is smoother on noisy surfaces, but blurs
+        edges; 1 was the most accurate for refinement on synthetic and real scans).
+
+    Returns
+    -------
+    (H, W, 3) float32
+        Unit normals, oriented towards the scanner; NaN where unknown.
+    """
+    xyz = np.where(image.valid[..., None], image.xyz, np.nan)
+    return _normals_kernel(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps, 0.2)
+
+
+@dataclass(frozen=True)
+class ProjectiveIcpResult:
+    """Outcome of :func:`projective_icp`.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+    fitness : float
+        Share of the source points paired at the final correspondence distance.
+    inlier_rmse_m : float
+        RMS point-to-plane residual of those pairs, metres.
+    information : (6, 6) float64
+        Information matrix of the paired points (Open3D's convention: rotation first).
+    max_distance_m : float
+        Final correspondence distance, metres.
+    iterations : int
+        Iterations over all distance levels.
+    """
+
+    T_target_source: NDArray[np.float64]
+    fitness: float
+    inlier_rmse_m: float
+    information: NDArray[np.float64]
+    max_distance_m: float
+    iterations: int
+
+
+def _exp_se3(delta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """4x4 transform of a small twist ``(omega, tau)`` (rotation vector about the origin, then
+    translation)."""
+    D = np.eye(4)
+    angle = float(np.linalg.norm(delta[:3]))
+    if angle > 0:
+        D[:3, :3] = rotation_about_axis(delta[:3] / angle, angle)
+    D[:3, 3] = delta[3:]
+    return D
+
+
+def point_information(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Information matrix of paired points: the sum of ``G^T G`` with
+    ``G = [[0, z, -y, 1, 0, 0], [-z, 0, x, 0, 1, 0], [y, -x, 0, 0, 0, 1]]`` per point
+    (Open3D's convention: rotation first, then translation).
+
+    Parameters
+    ----------
+    q : (N, 3) float64, metres
+        The paired points in the target frame.
+
+    Returns
+    -------
+    (6, 6) float64
+    """
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 3)
+    G = np.zeros((len(q), 3, 6))
+    x, y, z = q[:, 0], q[:, 1], q[:, 2]
+    G[:, 0, 1], G[:, 0, 2], G[:, 1, 0], G[:, 1, 2], G[:, 2, 0], G[:, 2, 1] = z, -y, -z, x, y, -x
+    G[:, 0, 3] = G[:, 1, 4] = G[:, 2, 5] = 1.0
+    return np.einsum("nij,nik->jk", G, G)
+
+
+class _Side:
+    """One direction of the association: points paired against an image."""
+
+    def __init__(
+        self,
+        image: RangeImage,
+        normals: NDArray[np.float32] | None,
+        points: NDArray[np.float64],
+        reverse: bool,
+    ) -> None:
+        self.kind, self.cam = _camera_params(image)
+        self.normals = grid_normals(image) if normals is None else normals
+        self.xyz = np.ascontiguousarray(np.where(image.valid[..., None], image.xyz, np.nan))
+        self.pts = np.ascontiguousarray(points, dtype=np.float64)
+        self.reverse = reverse
+        self.lateral = 2.0 * angular_step(image)
+        self.q = np.empty_like(self.pts)
+        self.res = np.empty(len(self.pts))
+
+    def add(
+        self, T: NDArray[np.float64], dist: float, A: NDArray[np.float64], b: NDArray[np.float64]
+    ) -> int:
+        M = np.ascontiguousarray(np.linalg.inv(T) if self.reverse else T)
+        return int(
+            _associate(
+                self.pts, M, T, self.reverse, self.xyz, self.normals, self.kind, self.cam,
+                dist, self.lateral, A, b, self.q, self.res,
+            )
+        )  # fmt: skip
+
+
+def projective_icp(
+    target: RangeImage,
+    source_points: NDArray[np.float64],
+    T_init: NDArray[np.float64],
+    *,
+    max_distance_m: float,
+    min_distance_m: float = 0.0,
+    normals: NDArray[np.float32] | None = None,
+    source: RangeImage | None = None,
+    target_points: NDArray[np.float64] | None = None,
+    source_normals: NDArray[np.float32] | None = None,
+    max_iterations: int = 30,
+    levels: int = 3,
+    tolerance: float = 1e-7,
+) -> ProjectiveIcpResult:
+    """Refine ``T_target_source`` by point-to-plane ICP with projective data association.
+
+    Each source point, mapped by the current transform, is paired with the target pixel its
+    ray hits (:func:`grid_normals` gives that pixel's plane). With ``source`` and
+    ``target_points`` the association is symmetric: target points are also paired with the
+    source pixels their rays hit, and both sets of residuals enter one least-squares problem,
+    so neither scan's viewpoint and normals alone decide the pose. The correspondence distance
+    shrinks by a factor of three per level, from ``max_distance_m`` down to the larger of
+    ``min_distance_m`` and four robust standard deviations of the residuals; every level
+    iterates until the update is below ``tolerance`` (radians and metres over the scan's
+    extent) or ``max_iterations``.
+
+    Parameters
+    ----------
+    target : RangeImage
+        Target scan with a camera model (spherical or pinhole).
+    source_points : (N, 3) float64, metres
+        Source points in the source frame (a sample spread over its surfaces is enough).
+    T_init : (4, 4) float64
+        Initial ``T_target_source``, at most about ``max_distance_m`` off.
+    max_distance_m : float, metres
+        First correspondence distance.
+    min_distance_m : float, metres
+        Smallest correspondence distance.
+    normals : (H, W, 3) float32, optional
+        The target's :func:`grid_normals` (computed when omitted).
+    source : RangeImage, optional
+        Source scan with a camera model, for the symmetric association.
+    target_points : (M, 3) float64, optional
+        Target points in the target frame, for the symmetric association.
+    source_normals : (H', W', 3) float32, optional
+        The source's :func:`grid_normals` (computed when omitted).
+    max_iterations : int
+        Per level.
+    levels : int
+        Most distance levels.
+    tolerance : float
+        Convergence on the size of the update.
+
+    Returns
+    -------
+    ProjectiveIcpResult
+        ``fitness`` and ``inlier_rmse_m`` over the pairs of both directions.
+
+    Raises
+    ------
+    RegistrationError
+        Fewer than 6 pairs at some iteration (no overlap at the initial pose), or the pairs
+        cannot fix a pose.
+    ConfigError
+        An image has no camera model, or a distance is not positive.
+    """
+    if not (math.isfinite(max_distance_m) and max_distance_m > 0):
+        raise ConfigError(f"ICP distance must be positive, got {max_distance_m}")
+    if (source is None) != (target_points is None):
+        raise ConfigError("symmetric projective ICP needs both the source image and target points")
+    sides = [_Side(target, normals, source_points, False)]
+    if source is not None and target_points is not None:
+        sides.append(_Side(source, source_normals, target_points, True))
+    n_points = sum(len(sd.pts) for sd in sides)
+    if n_points < 6:
+        raise RegistrationError(f"projective ICP needs at least 6 points, got {n_points}")
+    extent = max(float(np.max(np.linalg.norm(sd.pts, axis=1))) for sd in sides) or 1.0
+    T = np.array(T_init, dtype=np.float64)
+    A, b = np.zeros((6, 6)), np.zeros(6)
+
+    def accumulate(T: NDArray[np.float64], dist: float) -> int:
+        A[:] = 0.0
+        b[:] = 0.0
+        return sum(sd.add(T, dist, A, b) for sd in sides)
+
+    dist, total = float(max_distance_m), 0
+    for level in range(levels):
+        for _ in range(max_iterations):
+            n = accumulate(T, dist)
+            total += 1
+            if n < 6:
+                raise RegistrationError(f"projective ICP paired {n} points within {dist:.3g} m")
+            damp = 1e-9 * float(np.trace(A)) + 1e-12
+            try:
+                delta = np.asarray(-np.linalg.solve(A + damp * np.eye(6), b), dtype=np.float64)
+            except np.linalg.LinAlgError:
+                raise RegistrationError("projective ICP: the pairs cannot fix a pose") from None
+            T = _exp_se3(delta) @ T
+            if np.linalg.norm(delta[:3]) * extent + np.linalg.norm(delta[3:]) < tolerance * extent:
+                break
+        r = np.concatenate([sd.res[np.isfinite(sd.res)] for sd in sides])
+        sigma = 1.4826 * float(np.median(np.abs(r))) if len(r) else 0.0
+        nxt = max(dist / 3.0, min_distance_m, 4.0 * sigma)
+        if level == levels - 1 or nxt >= dist:
+            break
+        dist = nxt
+    n = accumulate(T, dist)
+    res = np.concatenate([sd.res for sd in sides])
+    q = np.concatenate([sd.q for sd in sides])
+    paired = np.isfinite(res)
+    rmse = float(np.sqrt(np.mean(res[paired] ** 2))) if n else float("nan")
+    log.info(
+        "projective ICP on %d points: %d paired within %.3g m, rmse %.3g m, %d iterations",
+        n_points,
+        n,
+        dist,
+        rmse,
+        total,
+    )
+    return ProjectiveIcpResult(
+        T_target_source=T,
+        fitness=n / n_points,
+        inlier_rmse_m=rmse,
+        information=point_information(q[paired]),
+        max_distance_m=dist,
+        iterations=total,
+    )
+
+
+__all__ = [
+    "ProjectiveIcpResult",
+    "angular_step",
+    "grid_normals",
+    "point_information",
+    "projective_icp",
+]

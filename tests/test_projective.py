@@ -1,0 +1,105 @@
+"""Projective point-to-plane ICP: grid normals, the information matrix, pose recovery, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.errors import ConfigError, RegistrationError
+from flexreg.pipeline import area_sample
+from flexreg.projection import RangeImage, from_depth, from_grid, range_image
+from flexreg.projective import grid_normals, point_information, projective_icp
+from flexreg.scan import Scan
+from flexreg.synth import station_pair
+from flexreg.transforms import (
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+
+
+def _plane_image(z: float = 2.0) -> RangeImage:
+    cam = PinholeCamera(100.0, 100.0, 31.5, 23.5, 64, 48)
+    return from_depth(np.full((48, 64), z), cam)
+
+
+def test_grid_normals_of_a_plane_face_the_camera():
+    n = grid_normals(_plane_image(), k=2)
+    assert n.shape == (48, 64, 3) and n.dtype == np.float32
+    inner = n[2:-2, 2:-2].reshape(-1, 3)
+    assert np.allclose(inner, [0.0, 0.0, -1.0], atol=1e-6)
+    # the k = 2 differences need two pixels on each side: the border is unknown
+    assert np.isnan(n[:2]).all() and np.isnan(n[:, :2]).all() and np.isnan(n[:, -2:]).all()
+
+
+def test_grid_normals_inside_a_sphere_point_at_the_scanner():
+    cam = SphericalCamera.from_reference(360, 90, 0.4, 2.7)
+    xyz = cam.rays() * 5.0
+    img = RangeImage(
+        xyz=xyz,
+        valid=np.ones((90, 360), bool),
+        index=np.arange(90 * 360).reshape(90, 360),
+        camera=cam,
+    )
+    n = grid_normals(img)
+    ok = np.isfinite(n[..., 0])
+    # wrapping: the seam columns have their neighbours across it
+    assert ok[1:-1].all() and not ok[0].any() and not ok[-1].any()
+    cos = -np.einsum("ijk,ijk->ij", n[ok].reshape(-1, 1, 3), cam.rays()[ok].reshape(-1, 1, 3))
+    assert cos.min() > 0.9999
+
+
+def test_grid_normals_skip_depth_jumps():
+    depth = np.full((48, 64), 2.0)
+    depth[:, 32:] = 6.0  # a step: no normal across it
+    n = grid_normals(from_depth(depth, PinholeCamera(100.0, 100.0, 31.5, 23.5, 64, 48)))
+    assert np.isnan(n[10, 31:33]).all()  # the two columns beside the step
+    assert np.isfinite(n[10, 10]).all() and np.isfinite(n[10, 50]).all()
+
+
+def test_point_information_hand_computed():
+    # one point (1, 2, 3): G = [[0, 3, -2, 1, 0, 0], [-3, 0, 1, 0, 1, 0], [2, -1, 0, 0, 0, 1]]
+    info = point_information(np.array([[1.0, 2.0, 3.0]]))
+    G = np.array([[0, 3, -2, 1, 0, 0], [-3, 0, 1, 0, 1, 0], [2, -1, 0, 0, 0, 1]], float)
+    assert np.array_equal(info, G.T @ G)
+    assert info[0, 0] == 13 and info[3, 3] == 1 and info[0, 4] == -3
+    assert np.array_equal(point_information(np.zeros((0, 3))), np.zeros((6, 6)))
+
+
+@pytest.fixture(scope="module")
+def room_pair():
+    return station_pair("room", seed=4, resolution=(512, 256), noise_m=0.002)
+
+
+def test_projective_icp_recovers_synthetic_station(room_pair):
+    gt = room_pair.T_target_source
+    target = range_image(room_pair.target)
+    source = room_pair.source.points
+    # 3 cm and 0.5 degrees off
+    T0 = make_transform(rotation_about_axis([0.3, -0.2, 1.0], np.radians(0.5)), [0.02, -0.02, 0.01])
+    r = projective_icp(target, area_sample(source, 20000), T0 @ gt, max_distance_m=0.15)
+    assert rotation_error_deg(r.T_target_source, gt) < 0.02
+    assert translation_error_m(r.T_target_source, gt) < 0.003
+    assert 0.3 < r.fitness <= 1.0 and r.inlier_rmse_m < 0.01  # two scans with 2 mm noise
+    assert r.information.shape == (6, 6) and np.all(np.linalg.eigvalsh(r.information) > 0)
+    # deterministic
+    r2 = projective_icp(target, area_sample(source, 20000), T0 @ gt, max_distance_m=0.15)
+    assert np.array_equal(r.T_target_source, r2.T_target_source)
+
+
+def test_projective_icp_no_overlap_raises(room_pair):
+    target = range_image(room_pair.target)
+    far = make_transform(np.eye(3), [500.0, 0.0, 0.0])
+    with pytest.raises(RegistrationError, match="paired 0 points"):
+        projective_icp(target, room_pair.source.points[:5000], far, max_distance_m=0.1)
+
+
+def test_projective_icp_needs_a_camera_and_a_positive_distance(room_pair):
+    idx = np.array([[i, j] for i in range(2) for j in range(3)], dtype=np.int32)
+    grid = from_grid(Scan(points=np.ones((6, 3)), grid_shape=(2, 3), grid_index=idx))
+    with pytest.raises(ConfigError, match="camera"):
+        projective_icp(grid, np.ones((10, 3)), np.eye(4), max_distance_m=0.1)
+    with pytest.raises(ConfigError, match="positive"):
+        projective_icp(range_image(room_pair.target), np.ones((10, 3)), np.eye(4), max_distance_m=0)

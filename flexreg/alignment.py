@@ -12,6 +12,7 @@ All transforms are ``T_target_source``: ``target ~= R @ source + t``.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from dataclasses import dataclass
@@ -177,7 +178,8 @@ def ransac_rigid(
     """Robust rigid transform from putative 3D correspondences.
 
     Hypotheses come from 3 random correspondences (Kabsch), generated and scored ``batch`` at a
-    time with array operations. Scoring is MSAC (truncated quadratic), which separates models
+    time with array operations; when there are at most ``batch`` triplets, every one is tried
+    once instead. Scoring is MSAC (truncated quadratic), which separates models
     with equal inlier counts by their fit. The number of iterations adapts to the best inlier
     ratio ``w`` so far: stop after ``log(1 - confidence) / log(1 - w^3)``. The winner is refitted
     by least squares on its inliers, twice (inliers re-selected in between).
@@ -216,14 +218,16 @@ def ransac_rigid(
     th2 = threshold_m * threshold_m
     best_score, best_T, best_count = np.inf, None, 0
     needed = max_iterations
+    # few correspondences: every triplet once (exhaustive, no sampling)
+    exhaustive = math.comb(n, 3) <= batch
     it = 0
     while it < min(needed, max_iterations):
-        b = min(batch, max_iterations - it)
-        idx = (
-            np.stack([gen.choice(n, 3, replace=False) for _ in range(b)])
-            if n < 8
-            else (_sample_triplets(gen, n, b))
-        )
+        if exhaustive:
+            idx = np.array(list(itertools.combinations(range(n), 3)), dtype=np.int64)
+            needed = 0
+        else:
+            idx = _sample_triplets(gen, n, min(batch, max_iterations - it))
+        b = len(idx)
         it += b
         Ps, Qs = P[idx], Q[idx]
         # rigid motions preserve the sample's side lengths: cheap pre-test
@@ -247,6 +251,8 @@ def ransac_rigid(
                 needed = 0
             elif w > 0:
                 needed = math.ceil(math.log(1 - confidence) / math.log(1 - w**3))
+        if exhaustive:
+            break
     if best_T is None:
         raise DegenerateGeometryError(
             f"no valid 3-point sample among {n} correspondences (all too close or inconsistent)"

@@ -288,7 +288,13 @@ def _polisher(
     def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
         try:
             r = projective_icp(
-                target, sample, T, max_distance_m=3 * thr, normals=normals, max_iterations=15
+                target,
+                sample,
+                T,
+                max_distance_m=3 * thr,
+                normals=normals,
+                max_iterations=15,
+                tolerance=1e-5,
             )
         except RegistrationError:
             return T

@@ -122,3 +122,17 @@ def test_consistent_subset_removes_outliers(T_true, rng):
         else ransac_rigid(tgt[keep], src[keep], threshold_m=0.05, rng=0).T_target_source
     )
     assert rotation_error_deg(T, T_true) < 0.1
+
+
+def test_ransac_few_correspondences_tries_every_triplet_once():
+    """6 correspondences (one wrong): all C(6, 3) = 20 triplets, then the exact transform."""
+    src = np.array(
+        [[0, 0, 0], [2, 0, 0], [0, 3, 0], [0, 0, 1.5], [1, 1, 1], [2, 2, 0.5]], dtype=float
+    )
+    T_true = make_transform(rotation_about_axis([0.2, 0.1, 1.0], np.radians(40.0)), [1, -2, 0.5])
+    tgt = apply(T_true, src)
+    tgt[5] += [0.0, 0.0, 0.8]  # an outlier
+    r = ransac_rigid(tgt, src, threshold_m=0.01, rng=0)
+    assert r.iterations == 20
+    assert r.inliers.tolist() == [True] * 5 + [False]
+    assert np.allclose(r.T_target_source, T_true, atol=1e-9)

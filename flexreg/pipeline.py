@@ -654,8 +654,9 @@ def _guided_estimate(
 
 
 #: the plan views are drawn from at most about this many pixels per scan (every k-th row and
-#: column): they only give a prior good to a plan cell and a degree
-PLAN_PIXELS = 300_000
+#: column of larger images); 300 k at 1024 x 512 already lost the far structure that places a
+#: distant station
+PLAN_PIXELS = 1_000_000
 
 #: source points (spread evenly over its surfaces) of the projective refinement
 PROJECTIVE_ICP_POINTS = 30_000

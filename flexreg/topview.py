@@ -327,34 +327,23 @@ def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[An
     )
 
 
-def match_top_views(
-    target: TopView,
-    source: TopView,
-    *,
-    yaw_step_rad: float = math.radians(1.0),
-    top_k: int = 5,
-    min_separation_m: float = 1.0,
-) -> list[PlanMatch]:
-    """Best yaw / horizontal offsets overlaying ``source``'s plan onto ``target``'s.
-
-    For every yaw on a regular grid the source cells are rotated and re-rasterised, and the
-    cross-correlation with the target plan over all offsets is one FFT product; the ``top_k``
-    best distinct peaks (different yaw or more than ``min_separation_m`` apart) are returned,
-    each refined to sub-cell offset by a parabola through the peak's neighbours.
-    """
+def _yaw_peaks(
+    target: TopView, source: TopView, yaws: NDArray[Any], cell_m: float
+) -> list[tuple[float, float, float]]:
+    """For each yaw, the best correlation of the rotated source plan with the target plan over
+    all offsets (FFT), rasterised at ``cell_m``: ``(score, t_x, t_y)`` per yaw, the offset
+    refined to sub-cell by parabolas."""
     from scipy import fft
 
-    c = target.cell_m
-    if source.cell_m != c:
-        raise ValueError("plans must share their cell size")
-    rt = int(np.abs(target.cells).max()) + 1
+    c = cell_m
+    tcells = np.floor(target.xy / c + 0.5).astype(np.int64)
+    rt = int(np.abs(tcells).max()) + 1
     rs = math.ceil(float(np.hypot(source.xy[:, 0], source.xy[:, 1]).max()) / c) + 2
     size = fft.next_fast_len(2 * (rt + rs) + 1, real=True)
     shape = (size, size)
-    T = _raster(target.cells, target.values, shape, rt).astype(np.float32)
+    T = _raster(tcells, target.values, shape, rt).astype(np.float32)
     FT = np.conj(fft.rfft2(T, workers=-1))
-    yaws = np.arange(0.0, 2 * math.pi, yaw_step_rad)
-    peaks: list[tuple[float, float, float, float]] = []  # score, yaw, t_x, t_y
+    out: list[tuple[float, float, float]] = []
     batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
     for b0 in range(0, len(yaws), batch):
         S = np.stack(
@@ -363,23 +352,56 @@ def match_top_views(
                 for yaw in yaws[b0 : b0 + batch]
             ]
         ).astype(np.float32)
-        corrs = _correlation(S, FT, shape)
-        for yaw, corr in zip(yaws[b0 : b0 + batch], corrs, strict=True):
-            idx = int(np.argmax(corr))
-            iy, ix = divmod(idx, size)
+        for corr in _correlation(S, FT, shape):
+            iy, ix = divmod(int(np.argmax(corr)), size)
             best = float(corr[iy, ix])
             fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
             fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
             dx = (ix if ix <= 2 * rs else ix - size) + fx
             dy = (iy if iy <= 2 * rs else iy - size) + fy
             # source cell s sits at raster s + rs, target cell t at t + rt: t = s + (rs - rt - d)
-            peaks.append((best, float(yaw), (rs - rt - dx) * c, (rs - rt - dy) * c))
-    scores = np.array([p[0] for p in peaks])
+            out.append((best, (rs - rt - dx) * c, (rs - rt - dy) * c))
+    return out
+
+
+def match_top_views(
+    target: TopView,
+    source: TopView,
+    *,
+    yaw_step_rad: float = math.radians(1.0),
+    top_k: int = 5,
+    min_separation_m: float = 1.0,
+    coarse_candidates: int = 8,
+) -> list[PlanMatch]:
+    """Best yaw / horizontal offsets overlaying ``source``'s plan onto ``target``'s.
+
+    For every yaw on a regular grid the source cells are rotated and re-rasterised, and the
+    cross-correlation with the target plan over all offsets is one FFT product. This runs
+    first on plans of twice the cell size (a quarter of the FFT work), then at the plans' own
+    cell for the ``coarse_candidates`` best yaws there (local maxima over yaw) and their two
+    neighbouring yaws. The ``top_k`` best distinct peaks (different yaw or more than
+    ``min_separation_m`` apart) are returned, each refined to sub-cell offset and sub-step yaw
+    by parabolas through the peak's neighbours.
+    """
+    c = target.cell_m
+    if source.cell_m != c:
+        raise ValueError("plans must share their cell size")
+    n = max(1, round(2 * math.pi / yaw_step_rad))
+    yaws = np.arange(n, dtype=np.float64) * (2 * math.pi / n)
+    coarse = np.array([p[0] for p in _yaw_peaks(target, source, yaws, 2 * c)])
+    # local maxima over the yaw circle, best first
+    left, right = np.roll(coarse, 1), np.roll(coarse, -1)
+    maxima = np.flatnonzero((coarse >= left) & (coarse >= right))
+    maxima = maxima[np.argsort(-coarse[maxima], kind="stable")][:coarse_candidates]
+    ks = sorted({int((k + d) % n) for k in maxima for d in (-1, 0, 1)})
+    fine = dict(zip(ks, _yaw_peaks(target, source, yaws[ks], c), strict=True))
     out: list[PlanMatch] = []
-    for i in np.argsort(-scores, kind="stable"):
-        best, yaw, tx, ty = peaks[i]
-        n = len(peaks)
-        yaw += _parabola(scores[(i - 1) % n], best, scores[(i + 1) % n]) * yaw_step_rad
+    for k in sorted(fine, key=lambda k: (-fine[k][0], k)):
+        best, tx, ty = fine[k]
+        prev, nxt = fine.get((k - 1) % n), fine.get((k + 1) % n)
+        yaw = float(yaws[k])
+        if prev is not None and nxt is not None:
+            yaw += _parabola(prev[0], best, nxt[0]) * yaw_step_rad
         dup = any(
             abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
             or (
@@ -407,33 +429,35 @@ def refine_plan_match(
     """Refine a plan overlay on finer plans: local yaw search, sub-cell correlation peak.
 
     The source plan, placed by ``match``, is rotated about its scanner through
-    ``yaw ± yaw_range_rad`` and correlated with the target plan, lightly blurred, over offsets
-    up to ``shift_m`` (directly: a small window); the best yaw and offset are interpolated by
+    ``yaw ± yaw_range_rad`` and correlated (FFT, all yaws in one batch) with the target plan,
+    lightly blurred, over offsets up to ``shift_m``; the best yaw and offset are interpolated by
     parabolas.
     """
-    from scipy import ndimage
+    from scipy import fft, ndimage
 
     c = target.cell_m
     if source.cell_m != c:
         raise ValueError("plans must share their cell size")
     rt = int(np.abs(target.cells).max()) + 1
     w = math.ceil(shift_m / c) + 1
+    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
+    shape = (n, n)
     off = rt + w
-    n = 2 * off + 1
-    T = ndimage.gaussian_filter(_raster(target.cells, target.values, (n, n), off), 1.0)
+    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
+    FT = np.conj(fft.rfft2(T.astype(np.float32), workers=-1))
     t0 = np.asarray(match.t_xy)
     yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
-    # offsets d of the window, row-major over (dy, dx) in [-w, w]^2
-    dy, dx = (g.ravel() for g in np.mgrid[-w : w + 1, -w : w + 1])
-    best = []
+    rasters = []
     for yaw in yaws:
         cells = _placed_cells(source.xy, yaw, match.t_xy, c)
         inside = (np.abs(cells) <= rt).all(axis=1)
-        cells, vals = cells[inside], source.values[inside]
-        # corr[d] = sum_s S[s] T[s - d]: the source at s + ... lies on the target at s - d
-        rows = cells[None, :, 1] + off - dy[:, None]
-        cols = cells[None, :, 0] + off - dx[:, None]
-        win = (T[rows, cols] @ vals).reshape(2 * w + 1, 2 * w + 1)
+        rasters.append(_raster(cells[inside], source.values[inside], shape, off))
+    # all yaws in one batched FFT product; offsets d in [-w, w]^2 (circular indices)
+    corrs = _correlation(np.stack(rasters).astype(np.float32), FT, shape)
+    near = np.arange(-w, w + 1) % n
+    best = []
+    for yaw, corr in zip(yaws, corrs, strict=True):
+        win = corr[np.ix_(near, near)]
         iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
         b = float(win[iy, ix])
         fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0

@@ -1018,9 +1018,9 @@ def register(
             icp.information,
         )
         denom = (
-            f"{icp.source_points} source points spread evenly over its surfaces (one per "
-            f"{icp.voxel_m:.3g} m cell) within {icp.max_distance_m:.3g} m of the target surface "
-            "on their ray"
+            f"{icp.source_points} points of both scans spread evenly over their surfaces (one "
+            f"per {icp.voxel_m:.3g} m cell) within {icp.max_distance_m:.3g} m of the other "
+            "scan's surface on their ray"
             if icp.association == "projective"
             else f"{icp.source_points} source points ({icp.voxel_m:.3g} m voxels, thinned) "
             f"with a target point within {icp.max_distance_m:.3g} m"

@@ -54,8 +54,9 @@ class IcpResult:
     association : {"nearest", "projective"}
         How source points found their target partners: nearest neighbour (Open3D ICP;
         ``voxel_m`` is the downsampling voxel) or the pixel hit by their ray in the target's
-        range image (:func:`flexreg.projective.projective_icp`; ``voxel_m`` is the cell of
-        the even sampling of the source).
+        range image (:func:`flexreg.projective.projective_icp`, symmetric: ``source_points``
+        counts the sampled points of both scans, ``voxel_m`` is the cell of the source's even
+        sampling).
     """
 
     T_target_source: NDArray[np.float64]

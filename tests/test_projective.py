@@ -103,3 +103,17 @@ def test_projective_icp_needs_a_camera_and_a_positive_distance(room_pair):
         projective_icp(grid, np.ones((10, 3)), np.eye(4), max_distance_m=0.1)
     with pytest.raises(ConfigError, match="positive"):
         projective_icp(range_image(room_pair.target), np.ones((10, 3)), np.eye(4), max_distance_m=0)
+
+
+def test_pipeline_refine_is_symmetric_projective_by_default(room_pair):
+    from flexreg.pipeline import refine
+
+    gt = room_pair.T_target_source
+    T0 = make_transform(rotation_about_axis([0.1, 0.3, 1.0], np.radians(0.4)), [-0.02, 0.01, 0.0])
+    r = refine(room_pair.target, room_pair.source, T0 @ gt, threshold_m=0.05)
+    assert r.association == "projective" and r.source_points > 20000  # both scans sampled
+    assert rotation_error_deg(r.T_target_source, gt) < 0.02
+    assert translation_error_m(r.T_target_source, gt) < 0.003
+    # GICP keeps Open3D's nearest-neighbour ICP
+    g = refine(room_pair.target, room_pair.source, T0 @ gt, threshold_m=0.05, method="gicp")
+    assert g.association == "nearest"

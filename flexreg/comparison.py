@@ -296,9 +296,11 @@ def _child(
     conn.close()
 
 
-#: every module a method imports on its first call (imports are not part of the measured time)
+#: every module a method imports on its first call (imports are not part of the measured time),
+#: and numba's deferred start-up (:mod:`flexreg._startup`)
 _PRELOAD = [
     "flexreg.comparison",
+    "flexreg._startup",
     "flexreg.pipeline",
     "flexreg.alignment",
     "flexreg.images",

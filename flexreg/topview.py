@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -58,38 +59,58 @@ def surface_normals(
         Surface area each pixel covers (product of its neighbour spacings), so that sums over
         pixels measure surface independently of the distance to the scanner.
     """
-    xyz = image.xyz[::stride, ::stride]
-    wrap = image.wraps
+    xyz = np.ascontiguousarray(image.xyz[::stride, ::stride], dtype=np.float64)
     H, W = xyz.shape[:2]
     if H <= 2 * k or W <= 2 * k:
         z = np.zeros((0, 3))
         return z, z, np.zeros(0)
-    if wrap:
-        left, right = np.roll(xyz, k, axis=1), np.roll(xyz, -k, axis=1)
-    else:
-        pad = np.full((H, k, 3), np.nan)
-        left = np.concatenate([pad, xyz[:, :-k]], axis=1)
-        right = np.concatenate([xyz[:, k:], pad], axis=1)
-    padv = np.full((k, W, 3), np.nan)
-    up = np.concatenate([padv, xyz[:-k]], axis=0)
-    down = np.concatenate([xyz[k:], padv], axis=0)
-    dh = right - left
-    dv = down - up
-    n = np.cross(dh, dv)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.linalg.norm(xyz, axis=2)
-        lh, lv = np.linalg.norm(dh, axis=2), np.linalg.norm(dv, axis=2)
-        # continuity: both neighbour spans short compared with the range (no depth jump)
-        ok = np.isfinite(n).all(axis=2) & (lh < 0.2 * r) & (lv < 0.2 * r)
-        nn = np.linalg.norm(n, axis=2)
-        ok &= nn > 0
-    pts = xyz[ok]
-    nrm = n[ok] / nn[ok][:, None]
-    flip = np.einsum("ij,ij->i", nrm, pts) > 0
-    nrm[flip] *= -1
-    # neighbours 2k strided pixels apart: the product covers one stride x stride cell
-    area = lh[ok] * lv[ok] / float(4 * k * k)
-    return pts, nrm, area
+    nrm, area = _normals_area(xyz, int(k), image.wraps)
+    ok = area > 0
+    return xyz[ok], nrm[ok], area[ok]
+
+
+@numba.njit(cache=True)
+def _normals_area(xyz, k, wrap):  # pragma: no cover - compiled
+    """Per pixel: unit normal (towards the scanner) from the cross product of the central
+    differences at offset ``k`` and the area the pixel covers; area 0 where a neighbour is
+    missing or lies across a depth jump (a span of 0.2 x the range or more)."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    nrm = np.zeros((H, W, 3))
+    area = np.zeros((H, W))
+    for i in range(k, H - k):
+        for j in range(W):
+            jl, jr = j - k, j + k
+            if wrap:
+                jl %= W
+                jr %= W
+            elif jl < 0 or jr >= W:
+                continue
+            x0, y0, z0 = xyz[i, j, 0], xyz[i, j, 1], xyz[i, j, 2]
+            hx = xyz[i, jr, 0] - xyz[i, jl, 0]
+            hy = xyz[i, jr, 1] - xyz[i, jl, 1]
+            hz = xyz[i, jr, 2] - xyz[i, jl, 2]
+            vx = xyz[i + k, j, 0] - xyz[i - k, j, 0]
+            vy = xyz[i + k, j, 1] - xyz[i - k, j, 1]
+            vz = xyz[i + k, j, 2] - xyz[i - k, j, 2]
+            nx = hy * vz - hz * vy
+            ny = hz * vx - hx * vz
+            nz = hx * vy - hy * vx
+            r = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
+            lh = math.sqrt(hx * hx + hy * hy + hz * hz)
+            lv = math.sqrt(vx * vx + vy * vy + vz * vz)
+            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+            # continuity: both neighbour spans short compared with the range (no depth jump);
+            # every comparison is False for NaN
+            if not (lh < 0.2 * r and lv < 0.2 * r and nn > 0.0 and math.isfinite(nn)):
+                continue
+            if nx * x0 + ny * y0 + nz * z0 > 0.0:
+                nn = -nn
+            nrm[i, j, 0] = nx / nn
+            nrm[i, j, 1] = ny / nn
+            nrm[i, j, 2] = nz / nn
+            # neighbours 2k strided pixels apart: the product covers one stride x stride cell
+            area[i, j] = lh * lv / (4.0 * k * k)
+    return nrm, area
 
 
 def _rotation_onto_z(u: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -102,6 +123,30 @@ def _rotation_onto_z(u: NDArray[np.float64]) -> NDArray[np.float64]:
     K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
     a = math.atan2(s, c)
     return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
+
+
+@numba.njit(cache=True)
+def _cone_moments(normals, area, u, cos_h, sin_v):  # pragma: no cover - compiled
+    """Area and area-weighted ``n n^T`` of the normals within the cone ``|n.u| > cos_h``
+    (horizontal surfaces) and of those with ``|n.u| < sin_v`` (vertical surfaces)."""
+    ah = 0.0
+    av = 0.0
+    Mh = np.zeros((3, 3))
+    Mv = np.zeros((3, 3))
+    for i in range(normals.shape[0]):
+        c = abs(normals[i, 0] * u[0] + normals[i, 1] * u[1] + normals[i, 2] * u[2])
+        a = area[i]
+        if c > cos_h:
+            ah += a
+            for p in range(3):
+                for q in range(3):
+                    Mh[p, q] += a * normals[i, p] * normals[i, q]
+        elif c < sin_v:
+            av += a
+            for p in range(3):
+                for q in range(3):
+                    Mv[p, q] += a * normals[i, p] * normals[i, q]
+    return ah, av, Mh, Mv
 
 
 @dataclass(eq=False)
@@ -159,21 +204,19 @@ def estimate_up(
     """
     u = np.array([0.0, 0.0, 1.0])
     ah = av = 0.0
+    nrm = np.ascontiguousarray(normals, dtype=np.float64)
+    wts = np.ascontiguousarray(area, dtype=np.float64)
     for cone in (20.0, 10.0, 5.0, 3.0):
-        c = np.abs(normals @ u)
-        s = math.sin(math.radians(cone))
-        hz = c > math.cos(math.radians(cone))
-        vt = c < s
-        ah, av = float(area[hz].sum()), float(area[vt].sum())
+        ah, av, Mh, Mv = _cone_moments(
+            nrm, wts, u, math.cos(math.radians(cone)), math.sin(math.radians(cone))
+        )
         if ah <= 0.0 and av <= 0.0:
             break
         M = np.zeros((3, 3))
         if ah > 0:
-            nh = normals[hz]
-            M += (nh * area[hz, None]).T @ nh / ah
+            M += Mh / ah
         if av > 0:
-            nv = normals[vt]
-            M -= (nv * area[vt, None]).T @ nv / av
+            M -= Mv / av
         w, V = np.linalg.eigh(M)
         u = V[:, int(np.argmax(w))]
         if u[2] < 0:
@@ -423,7 +466,7 @@ def refine_plan_match(
     match: PlanMatch,
     *,
     yaw_range_rad: float = math.radians(1.5),
-    yaw_step_rad: float = math.radians(0.25),
+    yaw_step_rad: float = math.radians(0.5),
     shift_m: float = 0.4,
 ) -> PlanMatch:
     """Refine a plan overlay on finer plans: local yaw search, sub-cell correlation peak.

@@ -225,3 +225,16 @@ def test_write_comparison_leaves_nothing_when_a_file_fails(bunny, tmp_path, monk
     with pytest.raises(InputError, match="No space left"):
         write_comparison(cmp, out)
     assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_fork_server_preloads_importable_modules():
+    """Every flexreg module the fork server imports exists (a typo would silently cost the
+    first measured call its import time)."""
+    import importlib
+
+    from flexreg.comparison import _PRELOAD
+
+    for name in _PRELOAD:
+        if name.startswith("flexreg"):
+            importlib.import_module(name)
+    assert "flexreg._startup" in _PRELOAD and "flexreg.projective" in _PRELOAD

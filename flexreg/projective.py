@@ -67,45 +67,10 @@ def angular_step(image: RangeImage) -> float:
 
 
 @numba.njit(cache=True)
-def _normals_kernel(xyz, k, wrap, max_jump):  # pragma: no cover - compiled
-    """Unit normals from the cross product of central differences at offset ``k``, averaged
-    over the 3x3 neighbourhood (sign-aligned), NaN where a neighbour is missing or across a
-    depth jump (span above ``max_jump`` times the range)."""
-    H, W = xyz.shape[0], xyz.shape[1]
-    raw = np.full((H, W, 3), np.nan)
-    for i in range(k, H - k):
-        for j in range(W):
-            jl, jr = j - k, j + k
-            if wrap:
-                jl %= W
-                jr %= W
-            elif jl < 0 or jr >= W:
-                continue
-            x0, y0, z0 = xyz[i, j, 0], xyz[i, j, 1], xyz[i, j, 2]
-            r = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
-            if not r > 0.0:
-                continue
-            hx = xyz[i, jr, 0] - xyz[i, jl, 0]
-            hy = xyz[i, jr, 1] - xyz[i, jl, 1]
-            hz = xyz[i, jr, 2] - xyz[i, jl, 2]
-            vx = xyz[i + k, j, 0] - xyz[i - k, j, 0]
-            vy = xyz[i + k, j, 1] - xyz[i - k, j, 1]
-            vz = xyz[i + k, j, 2] - xyz[i - k, j, 2]
-            lh = math.sqrt(hx * hx + hy * hy + hz * hz)
-            lv = math.sqrt(vx * vx + vy * vy + vz * vz)
-            if not (lh < max_jump * r and lv < max_jump * r):  # also False for NaN
-                continue
-            nx = hy * vz - hz * vy
-            ny = hz * vx - hx * vz
-            nz = hx * vy - hy * vx
-            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-            if not nn > 0.0:
-                continue
-            if nx * x0 + ny * y0 + nz * z0 > 0.0:  # towards the scanner
-                nn = -nn
-            raw[i, j, 0] = nx / nn
-            raw[i, j, 1] = ny / nn
-            raw[i, j, 2] = nz / nn
+def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
+    """Each unit normal averaged with its 3x3 neighbours' of the same surface (within about
+    25 degrees), renormalised; NaN stays NaN."""
+    H, W = raw.shape[0], raw.shape[1]
     out = np.full((H, W, 3), np.nan, dtype=np.float32)
     for i in range(H):
         for j in range(W):
@@ -258,8 +223,14 @@ def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
     (H, W, 3) float32
         Unit normals, oriented towards the scanner; NaN where unknown.
     """
+    from .topview import _normals_area
+
     xyz = np.where(image.valid[..., None], image.xyz, np.nan)
-    return _normals_kernel(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps, 0.2)
+    H, W = xyz.shape[:2]
+    if H <= 2 * k or W <= 2 * k:
+        return np.full((H, W, 3), np.nan, dtype=np.float32)
+    nrm, area = _normals_area(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps)
+    return _smooth_normals(np.where(area[..., None] > 0, nrm, np.nan), image.wraps)
 
 
 @dataclass(frozen=True)

@@ -263,7 +263,16 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     timings[name] = timings.get(name, 0.0) + time.perf_counter() - t
 
 
-#: target points of the area-weighted ICP scale (see :func:`area_cell`)
+#: the plan views are drawn from at most about this many pixels per scan (every k-th row and
+#: column of larger images); 300 k at 1024 x 512 already lost the far structure that places a
+#: distant station
+PLAN_PIXELS = 1_000_000
+
+#: points of the projective refinement, half from each scan (spread evenly over its surfaces)
+PROJECTIVE_ICP_POINTS = 30_000
+
+#: target points of the area-weighted scale of the Open3D refinement (GICP, point-to-point;
+#: see :func:`area_cell`)
 AREA_ICP_POINTS = 10_000
 #: the finest ICP scale is kept unless the dense check scores it this much lower (fraction of
 #: the sampled source points) than the area-weighted scale
@@ -651,15 +660,6 @@ def _guided_estimate(
     if T is None:
         return None
     return _Estimate(T, pairs, inl, origin)
-
-
-#: the plan views are drawn from at most about this many pixels per scan (every k-th row and
-#: column of larger images); 300 k at 1024 x 512 already lost the far structure that places a
-#: distant station
-PLAN_PIXELS = 1_000_000
-
-#: source points (spread evenly over its surfaces) of the projective refinement
-PROJECTIVE_ICP_POINTS = 30_000
 
 
 def refine(

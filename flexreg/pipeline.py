@@ -13,10 +13,12 @@ import logging
 import math
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -256,6 +258,28 @@ def pixel_footprint(image: RangeImage) -> NDArray[np.float32]:
         return np.fmin(dh, dv)
 
 
+def _footprint_at(
+    image: RangeImage, rows: NDArray[np.int64], cols: NDArray[np.int64]
+) -> NDArray[np.float32]:
+    """:func:`pixel_footprint` at the given pixels only (the same values)."""
+    xyz = image.xyz
+    p = xyz[rows, cols]
+    right = cols + 1
+    if image.wraps:
+        right = np.where(right == image.width, 0, right)
+    nan = np.full(3, np.nan)
+    ph = np.where(
+        (right < image.width)[:, None], xyz[rows, np.minimum(right, image.width - 1)], nan
+    )
+    below = rows + 1
+    pv = np.where(
+        (below < image.height)[:, None], xyz[np.minimum(below, image.height - 1), cols], nan
+    )
+    with np.errstate(invalid="ignore"):
+        dh = np.linalg.norm(ph - p, axis=1).astype(np.float32)
+        return np.fmin(dh, np.linalg.norm(pv - p, axis=1).astype(np.float32))
+
+
 @contextmanager
 def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     t = time.perf_counter()
@@ -355,9 +379,8 @@ def derive_threshold(
     for img, xy in ((target, xy_target), (source, xy_source)):
         if len(xy) == 0:
             continue
-        fp = pixel_footprint(img)
         c = np.clip(np.rint(xy).astype(np.int64), 0, [img.width - 1, img.height - 1])
-        f.append(fp[c[:, 1], c[:, 0]])
+        f.append(_footprint_at(img, c[:, 1], c[:, 0]))
     fa = np.concatenate(f) if f else np.zeros(0)
     thr = float(threshold_px * np.nanmedian(fa)) if np.isfinite(fa).any() else 0.05
     return max(thr, 0.005)
@@ -422,10 +445,13 @@ def _measured(image: RangeImage) -> NDArray[np.float32]:
     return image.depth_z() if isinstance(image.camera, PinholeCamera) else image.range
 
 
-def range_slack(image: RangeImage) -> NDArray[np.float32]:
+def range_slack(
+    image: RangeImage, measured: NDArray[np.float32] | None = None
+) -> NDArray[np.float32]:
     """(H, W) largest range (or depth) change from each pixel to its 4 neighbours, metres (0
-    where unknown): how much range one pixel spans on an oblique surface."""
-    ref = _measured(image)
+    where unknown): how much range one pixel spans on an oblique surface. ``measured`` is the
+    image's range (depth for pinhole cameras), when already at hand."""
+    ref = _measured(image) if measured is None else measured
     out = np.zeros(image.shape, dtype=np.float32)
     if image.wraps:  # the seam columns are neighbours
         ref = np.concatenate([ref, ref[:, :1]], axis=1)
@@ -518,7 +544,7 @@ def _area_sample_cell(
     """:func:`area_cell` and :func:`area_sample` at once."""
     p = np.asarray(points, dtype=np.float64)
     cell, first = _area_cells(p, samples)
-    return cell, p if len(p) <= samples else p[np.sort(first)]
+    return cell, p if len(p) <= samples else p[first]
 
 
 def area_cell(points: NDArray[np.float64], samples: int) -> float:
@@ -538,23 +564,71 @@ def area_cell(points: NDArray[np.float64], samples: int) -> float:
 
 
 def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
-    """Cell size and the index of the first point in each occupied cell (of a thinned copy
-    of ``p`` when it is large: indices then refer to ``p`` itself)."""
+    """Cell size and the index of the first point in each occupied cell, ascending (of a
+    thinned copy of ``p`` when it is large: indices then refer to ``p`` itself)."""
     step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
-    q = p[::step]
-    lo = q.min(axis=0)
-    span = float(np.max(q.max(axis=0) - lo))
+    q = np.ascontiguousarray(p[::step])
+    if len(q) == 0:
+        return 1e-9, np.zeros(0, dtype=np.int64)
+    lo, hi = _bounds(q)
+    span = float(np.max(hi - lo))
     cell = max(span, 1e-9) / math.sqrt(samples)  # surfaces: cells grow with 1 / cell^2
     first = np.arange(len(q))
+    table = np.empty(1 << max(4, int(2 * len(q) - 1).bit_length()), dtype=np.int64)
     for _ in range(8):
-        k = np.floor((q - lo) / cell).astype(np.int64)
-        key = (k[:, 0] * (2**21) + k[:, 1]) * (2**21) + k[:, 2]
-        _, first = np.unique(key, return_index=True)
+        first = _first_in_cells(q, lo, cell, table)
         ratio = len(first) / samples
         if 0.7 < ratio < 1.4:
             break
         cell *= math.sqrt(ratio)
     return cell, first * step
+
+
+@numba.njit(cache=True)
+def _bounds(q):  # pragma: no cover - compiled
+    """Per-axis minimum and maximum of (N, 3) points (N >= 1)."""
+    lo = q[0].copy()
+    hi = q[0].copy()
+    for i in range(1, q.shape[0]):
+        for c in range(3):
+            x = q[i, c]
+            if x < lo[c]:
+                lo[c] = x
+            elif x > hi[c]:
+                hi[c] = x
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
+    """Indices (ascending) of the first point of each occupied cell of side ``cell`` anchored
+    at ``lo``: an open-addressing hash set of the integer cell coordinates; ``table`` is
+    scratch space of a power-of-two size at least twice the number of points."""
+    mask = table.shape[0] - 1
+    table[:] = -1
+    out = np.empty(q.shape[0], dtype=np.int64)
+    n = 0
+    for i in range(q.shape[0]):
+        kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
+        ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
+        kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
+        h = (kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)
+        slot = h & mask
+        while True:
+            j = table[slot]
+            if j < 0:
+                table[slot] = i
+                out[n] = i
+                n += 1
+                break
+            if (
+                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
+                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
+                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
+            ):
+                break
+            slot = (slot + 1) & mask
+    return out[:n]
 
 
 def _overlap(
@@ -564,8 +638,10 @@ def _overlap(
     tolerance_m: float,
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
+    ref: NDArray[np.float32] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
-    """Source points ``ps`` (already sampled) checked against the target's view."""
+    """Source points ``ps`` (already sampled) checked against the target's view (``ref``: its
+    :func:`_measured` image, when at hand)."""
     if len(ps) == 0:
         return np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, bool)
     T = np.asarray(T_target_source, dtype=np.float64)
@@ -587,9 +663,10 @@ def _overlap(
             iu = np.where(iu >= target.width, iu - target.width, iu)
         inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
         inside &= (iu >= 0) & (iu < target.width) & (iv >= 0) & (iv < target.height)
-    ref = _measured(target)
+    if ref is None:
+        ref = _measured(target)
     if slack is None:
-        slack = range_slack(target)
+        slack = range_slack(target, ref)
     r = np.full(len(q), np.nan)
     extra = np.zeros(len(q))
     pix = (iv[inside].astype(np.int64), iu[inside].astype(np.int64))
@@ -764,11 +841,12 @@ def refine(
     fine = refine_icp(tp, sp, broad.T_target_source, method=kind, initial_error_m=3 * threshold_m)
     if check is None:
         vt = _camera_image(target)
-        slack = range_slack(vt)
+        ref = _measured(vt)
+        slack = range_slack(vt, ref)
         sample = area_sample(sp, 20000)
 
         def check(T: NDArray[np.float64]) -> float:
-            _, ok, bad = _overlap(vt, sample, T, threshold_m / 2, 0.002, slack)
+            _, ok, bad = _overlap(vt, sample, T, threshold_m / 2, 0.002, slack, ref)
             return float(ok.mean() - 3 * bad.mean())
 
     s_broad, s_fine = check(broad.T_target_source), check(fine.T_target_source)
@@ -790,6 +868,88 @@ def _camera_image(target: Scan | RangeImage) -> RangeImage:
     from .projection import fill_holes
 
     return _with_camera(fill_holes(_working_image(target, RegistrationConfig.max_image_pixels)))
+
+
+@dataclass(eq=False)
+class _Matched:
+    """What the feature stages of :func:`register` found (see :func:`_global_matching`)."""
+
+    ft: Features
+    fs: Features
+    xt: NDArray[np.float64]
+    xs: NDArray[np.float64]
+    thr: float
+    pairs: NDArray[np.int64]
+    priors: list[tuple[str, NDArray[np.float64]]]
+    notes: list[str]
+
+
+def _global_matching(
+    ti: RangeImage,
+    si: RangeImage,
+    config: RegistrationConfig,
+    stage: Callable[[str], Any],
+) -> _Matched:
+    """The feature stages of :func:`register`: feature images, keypoints and descriptors,
+    lifting, the inlier threshold, descriptor matching and RANSAC (the descriptor prior)."""
+    with stage("feature images"):
+        fti, mt = feature_image(ti, config)
+        fsi, ms = feature_image(si, config)
+    with stage("features"):
+        ft = detect_and_describe(
+            fti, config.features, mt, max_features=config.max_features, wrap=ti.wraps
+        )
+        fs = detect_and_describe(
+            fsi, config.features, ms, max_features=config.max_features, wrap=si.wraps
+        )
+    with stage("lifting"):
+        xt, lt_ok = lift(ti, ft.xy)
+        xs, ls_ok = lift(si, fs.xy)
+    n_lt, n_ls = int(lt_ok.sum()), int(ls_ok.sum())
+    log.info("%d/%d keypoints, %d/%d lifted", len(ft), len(fs), n_lt, n_ls)
+    if n_lt < 3 or n_ls < 3:
+        raise RegistrationError(
+            f"too few keypoints on valid surface: {n_lt} target / {n_ls} source "
+            f"(of {len(ft)} / {len(fs)} detected)"
+        )
+    thr = (
+        float(config.threshold_m)
+        if config.threshold_m is not None
+        else derive_threshold(
+            ti,
+            si,
+            ft.xy[lt_ok],
+            fs.xy[ls_ok],
+            threshold_px=config.threshold_px,
+        )
+    )
+    priors: list[tuple[str, NDArray[np.float64]]] = []
+    notes: list[str] = []
+    with stage("matching"):
+        pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
+        pairs = pairs[lt_ok[pairs[:, 0]] & ls_ok[pairs[:, 1]]]
+    with stage("estimation"):
+        if len(pairs) >= 3:
+            pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
+            idx = np.arange(len(pairs))
+            if config.consistency:
+                idx = consistent_subset(pt, ps, threshold_m=2 * thr, relative=0.01)
+            try:
+                rr = ransac_rigid(
+                    pt[idx],
+                    ps[idx],
+                    threshold_m=thr,
+                    confidence=config.confidence,
+                    max_iterations=config.max_iterations,
+                    min_inliers=3,
+                    rng=config.seed,
+                )
+                priors.append(("descriptors", rr.T_target_source))
+            except DegenerateGeometryError as e:
+                notes.append(f"global matching: {e}")
+        else:
+            notes.append(f"global matching: {len(pairs)} matches")
+    return _Matched(ft, fs, xt, xs, thr, pairs, priors, notes)
 
 
 def register(
@@ -839,75 +999,40 @@ def register(
         ti, si = (_working_image(x, config.max_image_pixels) for x in (target, source))
         if config.fill_holes:
             ti, si = fill_holes(ti), fill_holes(si)
-    with stage("feature images"):
-        fti, mt = feature_image(ti, config)
-        fsi, ms = feature_image(si, config)
-    with stage("features"):
-        ft = detect_and_describe(
-            fti, config.features, mt, max_features=config.max_features, wrap=ti.wraps
-        )
-        fs = detect_and_describe(
-            fsi, config.features, ms, max_features=config.max_features, wrap=si.wraps
-        )
-    with stage("lifting"):
-        xt, lt_ok = lift(ti, ft.xy)
-        xs, ls_ok = lift(si, fs.xy)
-    n_lt, n_ls = int(lt_ok.sum()), int(ls_ok.sum())
-    log.info("%d/%d keypoints, %d/%d lifted", len(ft), len(fs), n_lt, n_ls)
-    if n_lt < 3 or n_ls < 3:
-        raise RegistrationError(
-            f"too few keypoints on valid surface: {n_lt} target / {n_ls} source "
-            f"(of {len(ft)} / {len(fs)} detected)"
-        )
-    thr = (
-        float(config.threshold_m)
-        if config.threshold_m is not None
-        else derive_threshold(
-            ti,
-            si,
-            ft.xy[lt_ok],
-            fs.xy[ls_ok],
-            threshold_px=config.threshold_px,
-        )
-    )
-    priors: list[tuple[str, NDArray[np.float64]]] = []
-    notes: list[str] = []
     panoramic = not isinstance(ti.camera, PinholeCamera) and not isinstance(
         si.camera, PinholeCamera
     )
+    pool, plan_job = None, None
     if config.upright == "on" or (config.upright == "auto" and panoramic):
-        with stage("plan views"):
+        # the plan views need only the range images: they run in a second thread beside the
+        # feature stages, whose kernels leave part of the machine idle
+        if progress is not None:
+            progress("plan views")
+
+        def plan_views() -> list[NDArray[np.float64]]:
+            numba.set_num_threads(1)  # per thread: the feature stages use the other cores
+            with _timed(timings, "plan views"):
+                return upright_priors(ti, si, config)
+
+        pool = ThreadPoolExecutor(max_workers=1)
+        plan_job = pool.submit(plan_views)
+    try:
+        m = _global_matching(ti, si, config, stage)
+        ft, fs, xt, xs, thr, pairs, notes = m.ft, m.fs, m.xt, m.xs, m.thr, m.pairs, m.notes
+        priors: list[tuple[str, NDArray[np.float64]]] = []
+        if plan_job is not None:
             try:
-                priors += [("plan", T) for T in upright_priors(ti, si, config)]
+                priors += [("plan", T) for T in plan_job.result()]
             except DegenerateGeometryError as e:
                 if config.upright == "on":
                     raise RegistrationError(f"upright prior impossible: {e}") from None
                 notes.append(f"no plan prior ({e})")
                 log.info("no plan prior: %s", e)
-    with stage("matching"):
-        pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
-        pairs = pairs[lt_ok[pairs[:, 0]] & ls_ok[pairs[:, 1]]]
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    priors += m.priors
     with stage("estimation"):
-        if len(pairs) >= 3:
-            pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
-            idx = np.arange(len(pairs))
-            if config.consistency:
-                idx = consistent_subset(pt, ps, threshold_m=2 * thr, relative=0.01)
-            try:
-                rr = ransac_rigid(
-                    pt[idx],
-                    ps[idx],
-                    threshold_m=thr,
-                    confidence=config.confidence,
-                    max_iterations=config.max_iterations,
-                    min_inliers=3,
-                    rng=config.seed,
-                )
-                priors.append(("descriptors", rr.T_target_source))
-            except DegenerateGeometryError as e:
-                notes.append(f"global matching: {e}")
-        else:
-            notes.append(f"global matching: {len(pairs)} matches")
         # every prior and its keypoint-refined version compete on the dense overlap check:
         # first the best prior family at a coarse tolerance (a wrong model puts the source
         # in the target's free space), then the more precise member at a fine tolerance
@@ -920,14 +1045,15 @@ def register(
             if fam:
                 families.append(fam)
         vt = _with_camera(ti)
-        slack = range_slack(vt)
+        ref = _measured(vt)
+        slack = range_slack(vt, ref)
         sample = area_sample(si.xyz[si.valid], 20000)
         normals = grid_normals(vt)
         polish = _polisher(vt, normals, si, thr) if config.polish else None
 
         def judge(T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
             """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
-            _, ok_, bad_ = _overlap(vt, sample, T, tol, rel, slack)
+            _, ok_, bad_ = _overlap(vt, sample, T, tol, rel, slack, ref)
             ok, bad = float(ok_.mean()), float(bad_.mean())
             return ok - 3 * bad, ok, bad
 
@@ -990,7 +1116,7 @@ def register(
             raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
     T_coarse = T.copy()
     rmse = float(np.sqrt(d2[inl].mean())) if inl.any() else float("nan")
-    q, cons, _ = _overlap(vt, sample, T, fine_tol, 0.002, slack)
+    q, cons, _ = _overlap(vt, sample, T, fine_tol, 0.002, slack, ref)
     fitness = float(cons.mean())
     denom = (
         f"{len(sample)} source points spread evenly over its surfaces, within {fine_tol:.3g} m "

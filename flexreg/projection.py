@@ -426,27 +426,19 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
         A new image; filled pixels are valid with ``index`` -1 (they are no scan points) and
         NaN intensity.
     """
-    from scipy import ndimage
-
     v = image.valid
     if v.all() or not v.any():
         return image
-    mode = "wrap" if image.wraps else "constant"
-    ones = np.ones((3, 3))
-    cnt = ndimage.convolve(v.astype(np.float64), ones, mode=mode, cval=0.0)
-    r = np.where(v, np.sqrt(np.einsum("ijk,ijk->ij", *(np.nan_to_num(image.xyz),) * 2)), np.nan)
-    rmax = ndimage.maximum_filter(np.where(v, r, -np.inf), 3, mode=mode, cval=-np.inf)
-    rmin = ndimage.minimum_filter(np.where(v, r, np.inf), 3, mode=mode, cval=np.inf)
-    with np.errstate(invalid="ignore"):
-        hole = ~v & (cnt >= min_neighbours) & ((rmax - rmin) <= max_jump * rmax)
-    if not hole.any():
+    xyz, hole, filled = _fill_holes(
+        np.ascontiguousarray(image.xyz, dtype=np.float64),
+        np.ascontiguousarray(v),
+        int(min_neighbours),
+        float(max_jump),
+        image.wraps,
+    )
+    if filled == 0:
         return image
-    xyz = image.xyz.copy()
-    vx = np.where(v[..., None], image.xyz, 0.0)
-    for c in range(3):
-        s = ndimage.convolve(vx[..., c], ones, mode=mode, cval=0.0)
-        xyz[..., c][hole] = s[hole] / cnt[hole]
-    log.debug("filled %d isolated no-return pixels", int(hole.sum()))
+    log.debug("filled %d isolated no-return pixels", filled)
     return RangeImage(
         xyz=xyz,
         valid=v | hole,
@@ -454,6 +446,54 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
         camera=image.camera,
         intensity=image.intensity,
     )
+
+
+@numba.njit(cache=True)
+def _fill_holes(xyz, valid, min_neighbours, max_jump, wrap):  # pragma: no cover - compiled
+    """:func:`fill_holes` on the arrays: a copy of ``xyz`` with the fillable holes set to the
+    mean of their valid 3x3 neighbours (columns wrap when ``wrap``), their mask, and how
+    many."""
+    H, W = valid.shape
+    out = xyz.copy()
+    hole = np.zeros((H, W), dtype=np.bool_)
+    filled = 0
+    for i in range(H):
+        for j in range(W):
+            if valid[i, j]:
+                continue
+            cnt = 0
+            rmin = np.inf
+            rmax = -np.inf
+            sx = 0.0
+            sy = 0.0
+            sz = 0.0
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= H:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if jj < 0 or jj >= W:
+                        if not wrap:
+                            continue
+                        jj = jj % W
+                    if not valid[ii, jj]:
+                        continue
+                    x, y, z = xyz[ii, jj, 0], xyz[ii, jj, 1], xyz[ii, jj, 2]
+                    r = math.sqrt(x * x + y * y + z * z)
+                    rmin = min(rmin, r)
+                    rmax = max(rmax, r)
+                    sx += x
+                    sy += y
+                    sz += z
+                    cnt += 1
+            if cnt >= min_neighbours and rmax - rmin <= max_jump * rmax:
+                out[i, j, 0] = sx / cnt
+                out[i, j, 1] = sy / cnt
+                out[i, j, 2] = sz / cnt
+                hole[i, j] = True
+                filled += 1
+    return out, hole, filled
 
 
 def to_scan(image: RangeImage, **kwargs: Any) -> Scan:

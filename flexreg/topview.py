@@ -365,9 +365,7 @@ def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[An
     ``FT = conj(rfft2(T))``: source raster position ``x + d`` lies on target position ``x``."""
     from scipy import fft
 
-    return np.asarray(
-        fft.irfft2(fft.rfft2(S, axes=(-2, -1), workers=-1) * FT, s=shape, axes=(-2, -1), workers=-1)
-    )
+    return np.asarray(fft.irfft2(fft.rfft2(S, axes=(-2, -1)) * FT, s=shape, axes=(-2, -1)))
 
 
 def _yaw_peaks(
@@ -385,7 +383,7 @@ def _yaw_peaks(
     size = fft.next_fast_len(2 * (rt + rs) + 1, real=True)
     shape = (size, size)
     T = _raster(tcells, target.values, shape, rt).astype(np.float32)
-    FT = np.conj(fft.rfft2(T, workers=-1))
+    FT = np.conj(fft.rfft2(T))
     out: list[tuple[float, float, float]] = []
     batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
     for b0 in range(0, len(yaws), batch):
@@ -487,7 +485,7 @@ def refine_plan_match(
     shape = (n, n)
     off = rt + w
     T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
-    FT = np.conj(fft.rfft2(T.astype(np.float32), workers=-1))
+    FT = np.conj(fft.rfft2(T.astype(np.float32)))
     t0 = np.asarray(match.t_xy)
     yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
     rasters = []

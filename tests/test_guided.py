@@ -358,6 +358,18 @@ def test_area_sample_spreads_over_surface_area():
     assert 0.25 < cell < 0.4
 
 
+def test_area_sample_is_the_first_point_of_each_occupied_cell():
+    # against a plain dictionary of the voxels at the chosen cell size
+    rng = np.random.default_rng(3)
+    pts = np.vstack([rng.normal(0, 2, (20000, 3)), rng.uniform(-8, 8, (3000, 3))])
+    cell = area_cell(pts, 2000)
+    k = np.floor((pts - pts.min(axis=0)) / cell).astype(np.int64)
+    first: dict[tuple[int, int, int], int] = {}
+    for i, key in enumerate(map(tuple, k)):
+        first.setdefault(key, i)
+    np.testing.assert_array_equal(area_sample(pts, 2000), pts[sorted(first.values())])
+
+
 def test_overlap_area_sampling_weights_surfaces_not_pixels():
     # the source's lower half sees a floor 1 m away, the upper half a ceiling 10 m away; the
     # target saw the floor where the source does, but the ceiling at 12 m: the source's

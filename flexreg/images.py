@@ -109,7 +109,7 @@ _CURVATURE_MODES = {"gaussian": 0, "mean": 1, "max": 2}
 # ---------------------------------------------------------------------------- numba kernels
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _ok(x: float, y: float, z: float) -> bool:  # pragma: no cover - compiled
     """A point is valid if finite and not the origin (a zero depth is no return)."""
     return (
@@ -120,7 +120,7 @@ def _ok(x: float, y: float, z: float) -> bool:  # pragma: no cover - compiled
     )
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _col(j: int, W: int, wrap: bool) -> int:  # pragma: no cover - compiled
     """Column ``j`` wrapped into ``[0, W)`` for a wrapping image, else -1 when outside."""
     if 0 <= j < W:
@@ -131,7 +131,7 @@ def _col(j: int, W: int, wrap: bool) -> int:  # pragma: no cover - compiled
     return -1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _soa_row(xyz, i, k, wrap, B, s):  # pragma: no cover
     """Copy image row ``i`` into slot ``s`` of the ring buffer ``B`` (m, 3, W + 2k) as float64
     x / y / z planes, invalid points as NaN, with ``k`` padding columns on each side holding
@@ -169,7 +169,7 @@ def _soa_row(xyz, i, k, wrap, B, s):  # pragma: no cover
             X[right] = Y[right] = Z[right] = np.nan
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _flexion_row(B, s0, s1, s2, k, mode, out, i):  # pragma: no cover
     """Flexion variant ``mode`` of one image row from the ring-buffer rows i-k, i, i+k.
 
@@ -229,7 +229,7 @@ def _flexion_row(B, s0, s1, s2, k, mode, out, i):  # pragma: no cover
         out[i, j] = q if den > 0.0 else np.nan
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _flexion_kernel(xyz, k, wrap, mode, block, out):  # pragma: no cover
     H, W = out.shape
     m = 2 * k + 1
@@ -261,7 +261,7 @@ def _flexion_kernel(xyz, k, wrap, mode, block, out):  # pragma: no cover
                 _flexion_row(B, s0, s1, s2, k, 2, out, i)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _bearing_px(xyz, i, j, ip, jp):  # pragma: no cover
     """Bearing Angle (eq. 9) at P = xyz[i, j] with the previous neighbour Q = xyz[ip, jp]."""
     px = np.float64(xyz[i, j, 0])
@@ -282,7 +282,7 @@ def _bearing_px(xyz, i, j, ip, jp):  # pragma: no cover
     return math.acos(min(1.0, max(-1.0, c)))
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _bearing_kernel(xyz, di, dj, wrap, out):  # pragma: no cover
     H, W = out.shape
     j0 = max(0, -dj)
@@ -302,7 +302,7 @@ def _bearing_kernel(xyz, di, dj, wrap, out):  # pragma: no cover
             out[i, j] = np.nan if jp < 0 else _bearing_px(xyz, i, j, ip, jp)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _range_kernel(xyz, out):  # pragma: no cover
     H, W = out.shape
     for i in prange(H):
@@ -316,7 +316,7 @@ def _range_kernel(xyz, out):  # pragma: no cover
                 out[i, j] = np.nan
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _curvature_kernel(xyz, k, wrap, mode, out):  # pragma: no cover
     H, W = out.shape
     for i in prange(H):
@@ -386,14 +386,14 @@ def _curvature_kernel(xyz, k, wrap, mode, out):  # pragma: no cover
                 out[i, j] = Hm + s if Hm >= 0.0 else Hm - s
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sort3(a, b, c):  # pragma: no cover
     lo = min(a, b)
     hi = max(a, b)
     return min(lo, c), max(lo, min(hi, c)), max(hi, c)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _full9(r, i, j):  # pragma: no cover
     """True if the 3x3 window of ranges around (i, j) holds no NaN (invalid) sample."""
     s = r[i - 1, j - 1] + r[i - 1, j] + r[i - 1, j + 1]
@@ -402,7 +402,7 @@ def _full9(r, i, j):  # pragma: no cover
     return s == s
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _med9(r, i, j0, j1, j2):  # pragma: no cover
     """Median of a full 3x3 window without branches: sort the columns, then the median is
     med3(max of the minima, med3 of the middles, min of the maxima)."""
@@ -415,7 +415,7 @@ def _med9(r, i, j0, j1, j2):  # pragma: no cover
     return _sort3(lo, md, hi)[1]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _median_slow(rng, i, j, half, wrap, buf):  # pragma: no cover
     """Lower median of the valid ranges in the window around (i, j), any window size.
 
@@ -449,7 +449,7 @@ def _median_slow(rng, i, j, half, wrap, buf):  # pragma: no cover
     return med
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _median_kernel(xyz, rng, half, wrap, out):  # pragma: no cover
     H, W = rng.shape
     m = (2 * half + 1) * (2 * half + 1)

@@ -409,18 +409,15 @@ def upright_priors(
         stride = max(1, math.ceil(math.sqrt(img.height * img.width / PLAN_PIXELS)))
         pts, nrm, area = topview.surface_normals(img, k=2, stride=stride)
         lev = topview.estimate_up(nrm, area, max_tilt_rad=config.max_tilt_rad)
-        views.append(
-            (
-                lev,
-                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m),
-                topview.top_view(pts, nrm, area, lev, cell_m=config.plan_cell_m / 4, radius_m=20.0),
-            )
+        coarse, fine = topview.top_views(
+            pts, nrm, area, lev, [(config.plan_cell_m, 40.0), (config.plan_cell_m / 4, 20.0)]
         )
+        views.append((lev, coarse, fine))
     (lt, vt, vtf), (ls, vs, vsf) = views
     plans = topview.match_top_views(
         vt, vs, yaw_step_rad=math.radians(2.0), top_k=config.plan_hypotheses
     )
-    plans = [topview.refine_plan_match(vtf, vsf, m) for m in plans]
+    plans = topview.refine_plan_matches(vtf, vsf, plans)
     dz = topview.height_offset(vt, vs)
     out = []
     for m in plans:
@@ -584,7 +581,7 @@ def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np
     return cell, first * step
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _bounds(q):  # pragma: no cover - compiled
     """Per-axis minimum and maximum of (N, 3) points (N >= 1)."""
     lo = q[0].copy()
@@ -599,7 +596,7 @@ def _bounds(q):  # pragma: no cover - compiled
     return lo, hi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
     """Indices (ascending) of the first point of each occupied cell of side ``cell`` anchored
     at ``lo``: an open-addressing hash set of the integer cell coordinates; ``table`` is
@@ -1016,8 +1013,12 @@ def register(
 
         pool = ThreadPoolExecutor(max_workers=1)
         plan_job = pool.submit(plan_views)
+    threads = numba.get_num_threads()
     try:
+        if plan_job is not None:
+            numba.set_num_threads(1)
         m = _global_matching(ti, si, config, stage)
+        numba.set_num_threads(threads)
         ft, fs, xt, xs, thr, pairs, notes = m.ft, m.fs, m.xt, m.xs, m.thr, m.pairs, m.notes
         priors: list[tuple[str, NDArray[np.float64]]] = []
         if plan_job is not None:
@@ -1029,6 +1030,7 @@ def register(
                 notes.append(f"no plan prior ({e})")
                 log.info("no plan prior: %s", e)
     finally:
+        numba.set_num_threads(threads)
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
     priors += m.priors

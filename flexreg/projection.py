@@ -143,7 +143,7 @@ def _from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> 
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera, intensity=intensity)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _zbuffer(
     lin: NDArray[np.int64], depth: NDArray[np.float64], n_pixels: int
 ) -> NDArray[np.int64]:
@@ -448,7 +448,7 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fill_holes(xyz, valid, min_neighbours, max_jump, wrap):  # pragma: no cover - compiled
     """:func:`fill_holes` on the arrays: a copy of ``xyz`` with the fillable holes set to the
     mean of their valid 3x3 neighbours (columns wrap when ``wrap``), their mask, and how

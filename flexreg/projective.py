@@ -66,7 +66,7 @@ def angular_step(image: RangeImage) -> float:
 # ---------------------------------------------------------------------------- numba kernels
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
     """Each unit normal averaged with its 3x3 neighbours' of the same surface (within about
     25 degrees), renormalised; NaN stays NaN."""
@@ -104,7 +104,7 @@ def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, nogil=True)
 def _associate(
     pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover

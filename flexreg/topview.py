@@ -69,7 +69,7 @@ def surface_normals(
     return xyz[ok], nrm[ok], area[ok]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _normals_area(xyz, k, wrap):  # pragma: no cover - compiled
     """Per pixel: unit normal (towards the scanner) from the cross product of the central
     differences at offset ``k`` and the area the pixel covers; area 0 where a neighbour is
@@ -125,7 +125,7 @@ def _rotation_onto_z(u: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _cone_moments(normals, area, u, cos_h, sin_v):  # pragma: no cover - compiled
     """Area and area-weighted ``n n^T`` of the normals within the cone ``|n.u| > cos_h``
     (horizontal surfaces) and of those with ``|n.u| < sin_v`` (vertical surfaces)."""
@@ -293,36 +293,104 @@ def top_view(
     height_bin_m : float, metres
         Bin of the horizontal-surface height histogram.
     """
-    R = levelling.R_level
-    p = points @ R.T
-    n = normals @ R.T
-    horiz_dist = np.hypot(p[:, 0], p[:, 1])
-    near = horiz_dist < radius_m
-    vert = near & (np.abs(n[:, 2]) < 0.5)
-    ij = np.floor(p[vert, :2] / cell_m + 0.5).astype(np.int64)
-    a = area[vert]
-    if len(ij) == 0:
-        raise DegenerateGeometryError("no vertical surfaces to draw a plan from")
-    # sum per cell on the dense grid of the cells in reach (no sort): |ij| <= radius / cell
-    lo = ij.min(axis=0)
-    nx, ny = (ij.max(axis=0) - lo + 1).tolist()
-    lin = (ij[:, 1] - lo[1]) * nx + (ij[:, 0] - lo[0])
-    grid = np.bincount(lin, weights=a, minlength=nx * ny) / cell_m
-    occupied = np.flatnonzero(grid > 0.005)  # row-major: cells sorted by (iy, ix)
-    cells = np.column_stack([occupied % nx + lo[0], occupied // nx + lo[1]]).astype(np.int64)
-    vals = np.minimum(grid[occupied], max_surface_m)
-    hz = near & (np.abs(n[:, 2]) > 0.95)
-    z = p[hz, 2]
-    h: NDArray[np.float64] = np.zeros(1)
-    z0 = 0.0
-    if len(z):
-        z0 = math.floor(float(z.min()) / height_bin_m) * height_bin_m
-        nb = math.ceil((float(z.max()) - z0) / height_bin_m) + 1
-        h = np.bincount(
-            np.floor((z - z0) / height_bin_m).astype(np.int64), weights=area[hz], minlength=nb
-        ).astype(np.float64)
-    xy = (cells * float(cell_m)).astype(np.float64)
-    return TopView(cells, vals, cell_m, xy, h, z0, height_bin_m)
+    return top_views(
+        points,
+        normals,
+        area,
+        levelling,
+        [(cell_m, radius_m)],
+        max_surface_m=max_surface_m,
+        height_bin_m=height_bin_m,
+    )[0]
+
+
+def top_views(
+    points: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    area: NDArray[np.float64],
+    levelling: Levelling,
+    plans: list[tuple[float, float]],
+    *,
+    max_surface_m: float = 0.25,
+    height_bin_m: float = 0.01,
+) -> list[TopView]:
+    """:func:`top_view` at several ``(cell_m, radius_m)`` at once (the scan is levelled and
+    split into vertical and horizontal surfaces once)."""
+    R = np.ascontiguousarray(levelling.R_level, dtype=np.float64)
+    reach = max(r for _, r in plans)
+    vxy, vd, va, hz, hd, ha = _levelled_split(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(normals, dtype=np.float64),
+        np.ascontiguousarray(area, dtype=np.float64),
+        R,
+        float(reach),
+    )
+    out = []
+    for cell_m, radius_m in plans:
+        near = vd < radius_m
+        ij = np.floor(vxy[near] / cell_m + 0.5).astype(np.int64)
+        a = va[near]
+        if len(ij) == 0:
+            raise DegenerateGeometryError("no vertical surfaces to draw a plan from")
+        # sum per cell on the dense grid of the cells in reach (no sort): |ij| <= radius / cell
+        lo = ij.min(axis=0)
+        nx, ny = (ij.max(axis=0) - lo + 1).tolist()
+        lin = (ij[:, 1] - lo[1]) * nx + (ij[:, 0] - lo[0])
+        grid = np.bincount(lin, weights=a, minlength=nx * ny) / cell_m
+        occupied = np.flatnonzero(grid > 0.005)  # row-major: cells sorted by (iy, ix)
+        cells = np.column_stack([occupied % nx + lo[0], occupied // nx + lo[1]]).astype(np.int64)
+        vals = np.minimum(grid[occupied], max_surface_m)
+        hnear = hd < radius_m
+        z = hz[hnear]
+        h: NDArray[np.float64] = np.zeros(1)
+        z0 = 0.0
+        if len(z):
+            z0 = math.floor(float(z.min()) / height_bin_m) * height_bin_m
+            nb = math.ceil((float(z.max()) - z0) / height_bin_m) + 1
+            h = np.bincount(
+                np.floor((z - z0) / height_bin_m).astype(np.int64),
+                weights=ha[hnear],
+                minlength=nb,
+            ).astype(np.float64)
+        xy = (cells * float(cell_m)).astype(np.float64)
+        out.append(TopView(cells, vals, cell_m, xy, h, z0, height_bin_m))
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _levelled_split(points, normals, area, R, reach):  # pragma: no cover - compiled
+    """Points levelled by ``R`` within ``reach`` horizontally, split into vertical surfaces
+    (normal within 30 degrees of horizontal: plan position, horizontal distance, area) and
+    horizontal ones (normal within 18 degrees of vertical: height, horizontal distance,
+    area)."""
+    n = points.shape[0]
+    vxy = np.empty((n, 2))
+    vd = np.empty(n)
+    va = np.empty(n)
+    hz = np.empty(n)
+    hd = np.empty(n)
+    ha = np.empty(n)
+    nv = 0
+    nh = 0
+    for i in range(n):
+        x = R[0, 0] * points[i, 0] + R[0, 1] * points[i, 1] + R[0, 2] * points[i, 2]
+        y = R[1, 0] * points[i, 0] + R[1, 1] * points[i, 1] + R[1, 2] * points[i, 2]
+        d = math.hypot(x, y)
+        if not d < reach:
+            continue
+        nz = R[2, 0] * normals[i, 0] + R[2, 1] * normals[i, 1] + R[2, 2] * normals[i, 2]
+        if abs(nz) < 0.5:
+            vxy[nv, 0] = x
+            vxy[nv, 1] = y
+            vd[nv] = d
+            va[nv] = area[i]
+            nv += 1
+        elif abs(nz) > 0.95:
+            hz[nh] = R[2, 0] * points[i, 0] + R[2, 1] * points[i, 1] + R[2, 2] * points[i, 2]
+            hd[nh] = d
+            ha[nh] = area[i]
+            nh += 1
+    return vxy[:nv], vd[:nv], va[:nv], hz[:nh], hd[:nh], ha[:nh]
 
 
 @dataclass(frozen=True)
@@ -474,6 +542,27 @@ def refine_plan_match(
     lightly blurred, over offsets up to ``shift_m``; the best yaw and offset are interpolated by
     parabolas.
     """
+    return refine_plan_matches(
+        target,
+        source,
+        [match],
+        yaw_range_rad=yaw_range_rad,
+        yaw_step_rad=yaw_step_rad,
+        shift_m=shift_m,
+    )[0]
+
+
+def refine_plan_matches(
+    target: TopView,
+    source: TopView,
+    matches: list[PlanMatch],
+    *,
+    yaw_range_rad: float = math.radians(1.5),
+    yaw_step_rad: float = math.radians(0.5),
+    shift_m: float = 0.4,
+) -> list[PlanMatch]:
+    """:func:`refine_plan_match` of several overlays of the same plans (the target's
+    transform is computed once)."""
     from scipy import fft, ndimage
 
     c = target.cell_m
@@ -486,36 +575,39 @@ def refine_plan_match(
     off = rt + w
     T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
     FT = np.conj(fft.rfft2(T.astype(np.float32)))
-    t0 = np.asarray(match.t_xy)
-    yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
-    rasters = []
-    for yaw in yaws:
-        cells = _placed_cells(source.xy, yaw, match.t_xy, c)
-        inside = (np.abs(cells) <= rt).all(axis=1)
-        rasters.append(_raster(cells[inside], source.values[inside], shape, off))
-    # all yaws in one batched FFT product; offsets d in [-w, w]^2 (circular indices)
-    corrs = _correlation(np.stack(rasters).astype(np.float32), FT, shape)
     near = np.arange(-w, w + 1) % n
-    best = []
-    for yaw, corr in zip(yaws, corrs, strict=True):
-        win = corr[np.ix_(near, near)]
-        iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
-        b = float(win[iy, ix])
-        fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
-        fx = _parabola(win[iy, ix - 1], b, win[iy, ix + 1]) if 0 < ix < 2 * w else 0.0
-        # the source at x + d lies on the target at x: move it by -d
-        best.append((b, float(yaw), t0[0] - (ix - w + fx) * c, t0[1] - (iy - w + fy) * c))
-    scores = np.array([b[0] for b in best])
-    i = int(np.argmax(scores))
-    b, yaw, tx, ty = best[i]
-    if 0 < i < len(best) - 1:
-        f = _parabola(scores[i - 1], b, scores[i + 1])
-        j = i + (1 if f > 0 else -1)
-        # interpolate the offset towards the neighbouring yaw's as well
-        tx += abs(f) * (best[j][2] - tx)
-        ty += abs(f) * (best[j][3] - ty)
-        yaw += f * yaw_step_rad
-    return PlanMatch(_wrap_angle(yaw), (float(tx), float(ty)), b)
+    out = []
+    for match in matches:
+        t0 = np.asarray(match.t_xy)
+        yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
+        rasters = []
+        for yaw in yaws:
+            cells = _placed_cells(source.xy, yaw, match.t_xy, c)
+            inside = (np.abs(cells) <= rt).all(axis=1)
+            rasters.append(_raster(cells[inside], source.values[inside], shape, off))
+        # all yaws in one batched FFT product; offsets d in [-w, w]^2 (circular indices)
+        corrs = _correlation(np.stack(rasters).astype(np.float32), FT, shape)
+        best = []
+        for yaw, corr in zip(yaws, corrs, strict=True):
+            win = corr[np.ix_(near, near)]
+            iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
+            b = float(win[iy, ix])
+            fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
+            fx = _parabola(win[iy, ix - 1], b, win[iy, ix + 1]) if 0 < ix < 2 * w else 0.0
+            # the source at x + d lies on the target at x: move it by -d
+            best.append((b, float(yaw), t0[0] - (ix - w + fx) * c, t0[1] - (iy - w + fy) * c))
+        scores = np.array([b[0] for b in best])
+        i = int(np.argmax(scores))
+        b, yaw, tx, ty = best[i]
+        if 0 < i < len(best) - 1:
+            f = _parabola(scores[i - 1], b, scores[i + 1])
+            j = i + (1 if f > 0 else -1)
+            # interpolate the offset towards the neighbouring yaw's as well
+            tx += abs(f) * (best[j][2] - tx)
+            ty += abs(f) * (best[j][3] - ty)
+            yaw += f * yaw_step_rad
+        out.append(PlanMatch(_wrap_angle(yaw), (float(tx), float(ty)), b))
+    return out
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -557,6 +649,8 @@ __all__ = [
     "height_offset",
     "match_top_views",
     "refine_plan_match",
+    "refine_plan_matches",
     "surface_normals",
     "top_view",
+    "top_views",
 ]

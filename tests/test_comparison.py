@@ -238,3 +238,28 @@ def test_fork_server_preloads_importable_modules():
         if name.startswith("flexreg"):
             importlib.import_module(name)
     assert "flexreg._startup" in _PRELOAD and "flexreg.projective" in _PRELOAD
+
+
+def test_startup_loads_cached_serial_kernels_without_compiling():
+    """A kernel compiled once (and cached on disk) is loaded when a new process imports
+    flexreg._startup, before its first call; parallel kernels are left alone (they would start
+    OpenMP threads in the fork server)."""
+    import subprocess
+    import sys
+
+    from flexreg.projection import RangeImage, fill_holes
+
+    xyz = np.ones((3, 3, 3))
+    valid = np.ones((3, 3), bool)
+    valid[1, 1] = False
+    fill_holes(RangeImage(xyz=xyz, valid=valid, index=np.zeros((3, 3), np.int64)))
+    code = (
+        "import flexreg._startup as s\n"
+        "from flexreg.projection import _fill_holes\n"
+        "from flexreg.projective import _associate\n"
+        "print(len(_fill_holes.signatures), len(_associate.signatures))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert int(out[0]) >= 1 and int(out[1]) == 0

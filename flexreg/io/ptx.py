@@ -47,12 +47,12 @@ _OK, _BAD_NUMBER, _TOO_MANY = 0, 1, 2
 # ------------------------------------------------------------------------------ parsing kernels
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _is_space(b: np.uint8) -> bool:
     return b == 32 or b == 9 or b == 13 or b == 10
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _parse_line(
     buf: NDArray[np.uint8], lo: int, hi: int, out: NDArray[np.float64], pow10: NDArray[np.float64]
 ) -> tuple[int, int]:
@@ -135,7 +135,7 @@ def _parse_line(
         count += 1
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _parse_all(
     buf: NDArray[np.uint8], n_chunks: int, pow10: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]:
@@ -295,7 +295,7 @@ def read(path: Path, **_: object) -> list[Scan]:
 # ------------------------------------------------------------------------------ writer
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _fmt_len(v: float, decimals: int, scale: float) -> int:
     q = np.int64(np.floor(abs(v) * scale + 0.5))
     ip = q // np.int64(scale)
@@ -307,7 +307,7 @@ def _fmt_len(v: float, decimals: int, scale: float) -> int:
     return neg + n + (1 + decimals if decimals > 0 else 0)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _fmt_write(out: NDArray[np.uint8], pos: int, v: float, decimals: int, scale: float) -> int:
     q = np.int64(np.floor(abs(v) * scale + 0.5))
     p10 = np.int64(scale)
@@ -335,7 +335,7 @@ def _fmt_write(out: NDArray[np.uint8], pos: int, v: float, decimals: int, scale:
     return pos
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _format_lines(vals: NDArray[np.float64], decimals: NDArray[np.int64]) -> NDArray[np.uint8]:
     """Format rows of ``vals`` as space-separated fixed-point text lines."""
     n, m = vals.shape

@@ -160,7 +160,8 @@ class RegistrationResult:
     information : (6, 6) float64
         Information matrix (rotation, translation) for pose graphs.
     timings_s : dict
-        Seconds per stage.
+        Seconds per stage. The plan views and the preparation of the checks run in background
+        threads beside the feature stages, so the stages add up to more than ``wall_s``.
     threshold_m : float
         RANSAC inlier threshold used.
     config : RegistrationConfig
@@ -172,6 +173,8 @@ class RegistrationResult:
     prior : str
         Which prior led to the estimate: ``"plan"`` (plan-view overlay) or ``"descriptors"``
         (global descriptor matching).
+    wall_s : float
+        Seconds the whole call took.
     """
 
     T_target_source: NDArray[np.float64]
@@ -189,6 +192,7 @@ class RegistrationResult:
     inlier_mask: NDArray[np.bool_] = field(repr=False)
     keypoints: tuple[NDArray[np.float64], NDArray[np.float64]] = field(repr=False)
     prior: str = "descriptors"
+    wall_s: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no per-match arrays)."""
@@ -203,6 +207,7 @@ class RegistrationResult:
             "information": self.information.tolist(),
             "threshold_m": self.threshold_m,
             "timings_s": self.timings_s,
+            "wall_s": self.wall_s,
             "prior": self.prior,
             "seed": self.config.seed,
             "config": self.config.to_dict(),
@@ -308,15 +313,14 @@ def _as_image(x: Scan | RangeImage) -> RangeImage:
 
 
 def _polisher(
-    target: RangeImage, normals: NDArray[np.float32], source: RangeImage, thr: float
+    target: RangeImage, normals: NDArray[np.float32], sample: NDArray[np.float64], thr: float
 ) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
-    """A quick local ICP of a small even sample of the source against the target's range image
-    (projective, :func:`flexreg.projective.projective_icp`), for judging candidates.
+    """A quick local ICP of a small even sample of the source (``sample``, about 5000 points)
+    against the target's range image (projective, :func:`flexreg.projective.projective_icp`),
+    for judging candidates.
 
     ``target`` must have a camera model; ``normals`` are its :func:`grid_normals`."""
     from .projective import projective_icp
-
-    sample = area_sample(source.xyz[source.valid], 5000)
 
     def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
         try:
@@ -327,7 +331,7 @@ def _polisher(
                 max_distance_m=3 * thr,
                 normals=normals,
                 max_iterations=15,
-                tolerance=1e-5,
+                tolerance=1e-4,
             )
         except RegistrationError:
             return T
@@ -415,9 +419,9 @@ def upright_priors(
         views.append((lev, coarse, fine))
     (lt, vt, vtf), (ls, vs, vsf) = views
     plans = topview.match_top_views(
-        vt, vs, yaw_step_rad=math.radians(2.0), top_k=config.plan_hypotheses
+        vt, vs, yaw_step_rad=math.radians(2.0), top_k=config.plan_hypotheses, coarse_candidates=6
     )
-    plans = topview.refine_plan_matches(vtf, vsf, plans)
+    plans = topview.refine_plan_matches(vtf, vsf, plans, yaw_range_rad=math.radians(1.0))
     dz = topview.height_offset(vt, vs)
     out = []
     for m in plans:
@@ -748,6 +752,8 @@ def refine(
     target_image: RangeImage | None = None,
     target_normals: NDArray[np.float32] | None = None,
     source_image: RangeImage | None = None,
+    source_normals: NDArray[np.float32] | None = None,
+    samples: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> IcpResult:
     """ICP refinement of a coarse ``T_target_source``.
 
@@ -786,6 +792,11 @@ def refine(
         Its :func:`flexreg.projective.grid_normals`, when already at hand.
     source_image : RangeImage, optional
         The source's range image with a camera model, when already at hand.
+    source_normals : (H, W, 3) float32, optional
+        Its :func:`flexreg.projective.grid_normals`, when already at hand.
+    samples : (float, (N, 3) float64, (M, 3) float64), optional
+        The projective path's area samples (source cell size, source and target points), when
+        already at hand.
 
     Returns
     -------
@@ -800,9 +811,9 @@ def refine(
 
         vt = target_image if target_image is not None else _camera_image(target)
         vs = source_image if source_image is not None else _camera_image(source)
-        n = PROJECTIVE_ICP_POINTS // 2
-        cell_s, src_sample = _area_sample_cell(sp, n)
-        _, tgt_sample = _area_sample_cell(_points(target), n)
+        cell_s, src_sample, tgt_sample = (
+            samples if samples is not None else _refine_samples(target, source)
+        )
         r = projective_icp(
             vt,
             src_sample,
@@ -811,6 +822,7 @@ def refine(
             normals=target_normals if target_image is not None else None,
             source=vs,
             target_points=tgt_sample,
+            source_normals=source_normals if source_image is not None else None,
         )
         return IcpResult(
             T_target_source=r.T_target_source,
@@ -868,6 +880,58 @@ def _camera_image(target: Scan | RangeImage) -> RangeImage:
 
 
 @dataclass(eq=False)
+class _Prepared:
+    """What the checks and the refinement of :func:`register` need of the scans alone, made
+    while the feature and plan stages run (see :func:`_prepare`)."""
+
+    vt: RangeImage
+    ref: NDArray[np.float32]
+    slack: NDArray[np.float32]
+    normals: NDArray[np.float32]
+    sample: NDArray[np.float64]
+    polish_sample: NDArray[np.float64]
+    vs: RangeImage
+    source_normals: NDArray[np.float32] | None
+    refine_samples: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None
+
+
+def _prepare(
+    target: Scan | RangeImage,
+    source: Scan | RangeImage,
+    ti: RangeImage,
+    si: RangeImage,
+    config: RegistrationConfig,
+) -> _Prepared:
+    """The target's view for the dense checks (range, slack, normals), the source's samples,
+    and what the default refinement uses (source normals, area samples of both scans)."""
+    vt = _with_camera(ti)
+    ref = _measured(vt)
+    vs = _with_camera(si)
+    pts_s = si.xyz[si.valid]
+    projective = config.refine and config.icp == "point-to-plane" and config.voxel_m is None
+    return _Prepared(
+        vt=vt,
+        ref=ref,
+        slack=range_slack(vt, ref),
+        normals=grid_normals(vt),
+        sample=area_sample(pts_s, 20000),
+        polish_sample=area_sample(pts_s, 5000),
+        vs=vs,
+        source_normals=grid_normals(vs) if projective else None,
+        refine_samples=_refine_samples(target, source) if projective else None,
+    )
+
+
+def _refine_samples(
+    target: Scan | RangeImage, source: Scan | RangeImage
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """The projective refinement's area samples: source cell size, source and target points."""
+    n = PROJECTIVE_ICP_POINTS // 2
+    cell_s, src = _area_sample_cell(_points(source), n)
+    return cell_s, src, _area_sample_cell(_points(target), n)[1]
+
+
+@dataclass(eq=False)
 class _Matched:
     """What the feature stages of :func:`register` found (see :func:`_global_matching`)."""
 
@@ -922,10 +986,9 @@ def _global_matching(
     )
     priors: list[tuple[str, NDArray[np.float64]]] = []
     notes: list[str] = []
-    with stage("matching"):
+    with stage("matching"):  # descriptors, then the global model (consistency, RANSAC)
         pairs = match(ft, fs, ratio=config.ratio, mutual=config.mutual)
         pairs = pairs[lt_ok[pairs[:, 0]] & ls_ok[pairs[:, 1]]]
-    with stage("estimation"):
         if len(pairs) >= 3:
             pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
             idx = np.arange(len(pairs))
@@ -971,7 +1034,8 @@ def register(
         Scans in their own scanner frames (a gridded scan keeps its native grid).
     config : RegistrationConfig
     progress : callable, optional
-        Called with the name of each stage as it starts.
+        Called with the name of each stage as it starts; for the stages that run in background
+        threads (plan views, preparation), when the call starts waiting for them.
 
     Raises
     ------
@@ -986,6 +1050,7 @@ def register(
     if config.upright not in ("auto", "on", "off"):
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.upright!r}")
     timings: dict[str, float] = {}
+    t_start = time.perf_counter()
 
     def stage(name: str) -> Any:
         if progress is not None:
@@ -1003,16 +1068,24 @@ def register(
     if config.upright == "on" or (config.upright == "auto" and panoramic):
         # the plan views need only the range images: they run in a second thread beside the
         # feature stages, whose kernels leave part of the machine idle
-        if progress is not None:
-            progress("plan views")
-
         def plan_views() -> list[NDArray[np.float64]]:
+            from scipy import fft
+
             numba.set_num_threads(1)  # per thread: the feature stages use the other cores
-            with _timed(timings, "plan views"):
+            with _timed(timings, "plan views"), fft.set_workers(-1):
                 return upright_priors(ti, si, config)
 
-        pool = ThreadPoolExecutor(max_workers=1)
+        pool = ThreadPoolExecutor(max_workers=2)
         plan_job = pool.submit(plan_views)
+    if pool is None:
+        pool = ThreadPoolExecutor(max_workers=1)
+
+    def prepare() -> _Prepared:
+        numba.set_num_threads(1)
+        with _timed(timings, "preparation"):
+            return _prepare(target, source, ti, si, config)
+
+    prep_job = pool.submit(prepare)
     threads = numba.get_num_threads()
     try:
         if plan_job is not None:
@@ -1022,6 +1095,8 @@ def register(
         ft, fs, xt, xs, thr, pairs, notes = m.ft, m.fs, m.xt, m.xs, m.thr, m.pairs, m.notes
         priors: list[tuple[str, NDArray[np.float64]]] = []
         if plan_job is not None:
+            if progress is not None:
+                progress("plan views")
             try:
                 priors += [("plan", T) for T in plan_job.result()]
             except DegenerateGeometryError as e:
@@ -1029,10 +1104,12 @@ def register(
                     raise RegistrationError(f"upright prior impossible: {e}") from None
                 notes.append(f"no plan prior ({e})")
                 log.info("no plan prior: %s", e)
+        if progress is not None:
+            progress("preparation")
+        prep = prep_job.result()
     finally:
         numba.set_num_threads(threads)
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=True, cancel_futures=True)
     priors += m.priors
     with stage("estimation"):
         # every prior and its keypoint-refined version compete on the dense overlap check:
@@ -1046,12 +1123,8 @@ def register(
                 fam.append((f"{origin}+keypoints", est.T))
             if fam:
                 families.append(fam)
-        vt = _with_camera(ti)
-        ref = _measured(vt)
-        slack = range_slack(vt, ref)
-        sample = area_sample(si.xyz[si.valid], 20000)
-        normals = grid_normals(vt)
-        polish = _polisher(vt, normals, si, thr) if config.polish else None
+        vt, ref, slack, sample, normals = prep.vt, prep.ref, prep.slack, prep.sample, prep.normals
+        polish = _polisher(vt, normals, prep.polish_sample, thr) if config.polish else None
 
         def judge(T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
             """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
@@ -1137,7 +1210,9 @@ def register(
                 check=lambda T_: judge(T_, fine_tol, 0.002)[0],
                 target_image=vt,
                 target_normals=normals,
-                source_image=_with_camera(si),
+                source_image=prep.vs,
+                source_normals=prep.source_normals,
+                samples=prep.refine_samples,
             )
         T, rmse, fitness, info = (
             icp.T_target_source,
@@ -1169,6 +1244,7 @@ def register(
         inlier_mask=inl,
         keypoints=(ft.xy[fin[:, 0]], fs.xy[fin[:, 1]]),
         prior=origin,
+        wall_s=time.perf_counter() - t_start,
     )
 
 

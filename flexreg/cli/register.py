@@ -357,7 +357,11 @@ def _print_summary(
         dt = translation_error_m(r.T_target_source, r.T_coarse)
         t.add_row("refinement moved", f"{dr:.3f}°, {1000 * dt:.1f} mm")
     timings = ", ".join(f"{k} {v:.2f}" for k, v in r.timings_s.items())
-    t.add_row("timings s", f"{timings}; total {sum(r.timings_s.values()):.2f}")
+    t.add_row(
+        "timings s",
+        f"{timings}; total {r.wall_s:.2f} (plan views and preparation run beside the "
+        "feature stages)",
+    )
     console.print(t)
     with np.printoptions(precision=6, suppress=True):
         console.print(str(r.T_target_source), markup=False)

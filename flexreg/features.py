@@ -191,7 +191,7 @@ def detect_and_describe(
         c = np.clip(np.rint(xy[:, 0]).astype(np.int64), 0, dist.shape[1] - 1)
         sel &= dist[r, c] >= support * size
     if wrap:
-        sel = (xy[:, 0] >= pad - 0.5) & (xy[:, 0] < pad + W - 0.5)
+        sel &= (xy[:, 0] >= pad - 0.5) & (xy[:, 0] < pad + W - 0.5)
         xy[:, 0] = np.mod(xy[:, 0] - pad, W)
     ok = np.flatnonzero(sel)
     order = ok[np.argsort(-resp[ok], kind="stable")]

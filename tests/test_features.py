@@ -75,6 +75,20 @@ def test_wrap_finds_seam_features_once(rng):
     assert len(np.unique(key, axis=0)) == len(key)
 
 
+def test_wrap_keeps_the_hole_support_rule(rng):
+    # on a full-turn panorama too, keypoints closer to a no-return hole than ``support`` times
+    # their size are dropped (a large support factor makes the rule bite)
+    img = _texture(rng, 200, 400)
+    mask = np.ones(img.shape, dtype=bool)
+    mask[80:120, 180:230] = False
+    img[~mask] = 0
+    dist = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    for wrap in (False, True):
+        f = detect_and_describe(img, "sift", mask, wrap=wrap, support=4.0)
+        d = dist[np.rint(f.xy[:, 1]).astype(int), np.rint(f.xy[:, 0]).astype(int) % 400]
+        assert len(f) > 20 and (d >= 4.0 * f.size).all(), wrap
+
+
 def test_to_uint8():
     assert to_uint8(np.array([[0, 65535]], dtype=np.uint16)).tolist() == [[0, 255]]
     assert to_uint8(np.array([[0.0, 1.0, np.nan]])).tolist() == [[0, 255, 0]]

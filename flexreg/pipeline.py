@@ -411,7 +411,7 @@ def upright_priors(
     views = []
     for img in (target, source):
         stride = max(1, math.ceil(math.sqrt(img.height * img.width / PLAN_PIXELS)))
-        pts, nrm, area = topview.surface_normals(img, k=2, stride=stride)
+        pts, nrm, area = topview.surface_normals(img, k=2, stride=stride, compact=False)
         lev = topview.estimate_up(nrm, area, max_tilt_rad=config.max_tilt_rad)
         coarse, fine = topview.top_views(
             pts, nrm, area, lev, [(config.plan_cell_m, 40.0), (config.plan_cell_m / 4, 20.0)]

@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 
 
 def surface_normals(
-    image: RangeImage, *, k: int = 2, stride: int = 1
+    image: RangeImage, *, k: int = 2, stride: int = 1, compact: bool = True
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Unit normals of an organised scan from central differences at pixel offset ``k``.
 
@@ -48,6 +48,10 @@ def surface_normals(
         Pixel offset of the neighbours (larger is smoother on noisy surfaces).
     stride : int
         Use every ``stride``-th row and column (speed on very large images).
+    compact : bool
+        Keep only the usable pixels (default). Otherwise every (strided) pixel in row-major
+        order, with area 0 (and zero normal) where unusable: no copies of the image, and every
+        function here accepts that form.
 
     Returns
     -------
@@ -65,6 +69,8 @@ def surface_normals(
         z = np.zeros((0, 3))
         return z, z, np.zeros(0)
     nrm, area = _normals_area(xyz, int(k), image.wraps)
+    if not compact:
+        return xyz.reshape(-1, 3), nrm.reshape(-1, 3), area.reshape(-1)
     ok = area > 0
     return xyz[ok], nrm[ok], area[ok]
 
@@ -364,7 +370,7 @@ def _levelled_split(points, normals, area, R, reach):  # pragma: no cover - comp
     horizontal ones (normal within 18 degrees of vertical: height, horizontal distance,
     area)."""
     n = points.shape[0]
-    vxy = np.empty((n, 2))
+    vxy = np.empty((n, 2))  # (entries of area 0 are skipped: see surface_normals' compact)
     vd = np.empty(n)
     va = np.empty(n)
     hz = np.empty(n)
@@ -373,6 +379,8 @@ def _levelled_split(points, normals, area, R, reach):  # pragma: no cover - comp
     nv = 0
     nh = 0
     for i in range(n):
+        if not area[i] > 0.0:
+            continue
         x = R[0, 0] * points[i, 0] + R[0, 1] * points[i, 1] + R[0, 2] * points[i, 2]
         y = R[1, 0] * points[i, 0] + R[1, 1] * points[i, 1] + R[1, 2] * points[i, 2]
         d = math.hypot(x, y)
@@ -419,13 +427,30 @@ def _raster(
     return np.asarray(img, dtype=np.float64).reshape(shape)
 
 
-def _placed_cells(
-    xy: NDArray[np.float64], yaw: float, t: tuple[float, float], cell_m: float
-) -> NDArray[np.int64]:
-    """Plan cells of points ``xy`` rotated by ``yaw`` about the scanner and shifted by ``t``."""
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    moved = xy @ np.array([[cy, sy], [-sy, cy]]) + np.asarray(t)
-    return np.floor(moved / cell_m + 0.5).astype(np.int64)
+@numba.njit(cache=True, nogil=True)
+def _rotated_rasters(xy, values, yaws, tx, ty, cell, off, size, bound):  # pragma: no cover
+    """(len(yaws), size, size) float32 rasters of the plan cells ``xy`` rotated by each yaw
+    about the scanner and shifted by ``(tx, ty)``, then rounded to cells of ``cell`` metres
+    (cell ``(ix, iy)`` at ``[iy + off, ix + off]``, as :func:`_raster`); cells beyond ``bound``
+    in x or y are left out when ``bound >= 0``."""
+    out = np.empty((yaws.shape[0], size, size), dtype=np.float32)
+    acc = np.empty((size, size))
+    for k in range(yaws.shape[0]):
+        acc[:] = 0.0
+        cy = math.cos(yaws[k])
+        sy = math.sin(yaws[k])
+        for i in range(xy.shape[0]):
+            x = xy[i, 0] * cy - xy[i, 1] * sy + tx
+            y = xy[i, 0] * sy + xy[i, 1] * cy + ty
+            ix = np.int64(math.floor(x / cell + 0.5))
+            iy = np.int64(math.floor(y / cell + 0.5))
+            if bound >= 0 and (abs(ix) > bound or abs(iy) > bound):
+                continue
+            acc[iy + off, ix + off] += values[i]
+        for r in range(size):
+            for c in range(size):
+                out[k, r, c] = acc[r, c]
+    return out
 
 
 def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[Any]:
@@ -455,12 +480,17 @@ def _yaw_peaks(
     out: list[tuple[float, float, float]] = []
     batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
     for b0 in range(0, len(yaws), batch):
-        S = np.stack(
-            [
-                _raster(_placed_cells(source.xy, yaw, (0.0, 0.0), c), source.values, shape, rs)
-                for yaw in yaws[b0 : b0 + batch]
-            ]
-        ).astype(np.float32)
+        S = _rotated_rasters(
+            source.xy,
+            source.values,
+            np.ascontiguousarray(yaws[b0 : b0 + batch], dtype=np.float64),
+            0.0,
+            0.0,
+            float(c),
+            rs,
+            size,
+            -1,
+        )
         for corr in _correlation(S, FT, shape):
             iy, ix = divmod(int(np.argmax(corr)), size)
             best = float(corr[iy, ix])
@@ -580,13 +610,11 @@ def refine_plan_matches(
     for match in matches:
         t0 = np.asarray(match.t_xy)
         yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
-        rasters = []
-        for yaw in yaws:
-            cells = _placed_cells(source.xy, yaw, match.t_xy, c)
-            inside = (np.abs(cells) <= rt).all(axis=1)
-            rasters.append(_raster(cells[inside], source.values[inside], shape, off))
+        rasters = _rotated_rasters(
+            source.xy, source.values, yaws, float(t0[0]), float(t0[1]), float(c), off, n, rt
+        )
         # all yaws in one batched FFT product; offsets d in [-w, w]^2 (circular indices)
-        corrs = _correlation(np.stack(rasters).astype(np.float32), FT, shape)
+        corrs = _correlation(rasters, FT, shape)
         best = []
         for yaw, corr in zip(yaws, corrs, strict=True):
             win = corr[np.ix_(near, near)]

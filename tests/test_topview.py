@@ -220,6 +220,36 @@ def room_views(room_pair):
     return out
 
 
+def test_uncompacted_normals_give_the_same_levelling_and_plans(room_pair, room_views):
+    # every pixel, area 0 where unusable: the same vertical and the same plans
+    lev, coarse, fine, _ = room_views[0]
+    pts, nrm, area = topview.surface_normals(range_image(room_pair.target), compact=False)
+    img = range_image(room_pair.target)
+    assert len(area) == img.height * img.width and (area == 0).any()
+    lev2 = topview.estimate_up(nrm, area)
+    np.testing.assert_allclose(lev2.up, lev.up, atol=1e-12)
+    c2, f2 = topview.top_views(pts, nrm, area, lev2, [(0.25, 40.0), (0.0625, 40.0)])
+    for a, b in ((coarse, c2), (fine, f2)):
+        np.testing.assert_array_equal(a.cells, b.cells)
+        np.testing.assert_allclose(a.values, b.values, rtol=1e-12)
+        np.testing.assert_allclose(a.heights, b.heights, rtol=1e-12)
+
+
+def test_rotated_rasters_hand_made():
+    # (0.5, 0) and (0, 1) turned by 90 degrees: (0, 0.5) and (-1, 0); 0.5 m cells (0, 1) and
+    # (-2, 0), stored at [iy + 3, ix + 3]; with bound 1 the second is left out
+    xy = np.array([[0.5, 0.0], [0.0, 1.0]])
+    vals = np.array([1.0, 2.0])
+    yaws = np.array([math.pi / 2, 0.0])
+    r = topview._rotated_rasters(xy, vals, yaws, 0.0, 0.0, 0.5, 3, 8, -1)
+    assert r.shape == (2, 8, 8) and r.dtype == np.float32
+    assert r[0, 4, 3] == 1.0 and r[0, 3, 1] == 2.0 and r[0].sum() == 3.0
+    assert r[1, 3, 4] == 1.0 and r[1, 5, 3] == 2.0  # yaw 0: cells (1, 0) and (0, 2)
+    # shifted by (-0.5, 0): (-0.5, 0.5) -> cell (-1, 1) kept; (-1.5, 0) -> cell (-3, 0) beyond
+    shifted = topview._rotated_rasters(xy, vals, yaws[:1], -0.5, 0.0, 0.5, 3, 8, 1)
+    assert shifted[0, 4, 2] == 1.0 and shifted[0].sum() == 1.0
+
+
 def test_estimate_up_synthetic_stations(room_pair, room_views):
     for scan, (lev, *_) in zip((room_pair.target, room_pair.source), room_views, strict=True):
         up_true = scan.T_world_scanner[:3, :3].T @ Z

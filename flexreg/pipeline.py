@@ -1064,32 +1064,29 @@ def register(
     panoramic = not isinstance(ti.camera, PinholeCamera) and not isinstance(
         si.camera, PinholeCamera
     )
-    pool, plan_job = None, None
-    if config.upright == "on" or (config.upright == "auto" and panoramic):
-        # the plan views need only the range images: they run in a second thread beside the
-        # feature stages, whose kernels leave part of the machine idle
-        def plan_views() -> list[NDArray[np.float64]]:
-            from scipy import fft
+    use_plan = config.upright == "on" or (config.upright == "auto" and panoramic)
 
-            numba.set_num_threads(1)  # per thread: the feature stages use the other cores
-            with _timed(timings, "plan views"), fft.set_workers(-1):
-                return upright_priors(ti, si, config)
+    # the plan views and the preparation of the checks need only the range images: they run in
+    # two background threads beside the feature stages, every thread single-threaded in numba
+    # so that together they fill the cores instead of competing for them
+    def plan_views() -> list[NDArray[np.float64]]:
+        from scipy import fft
 
-        pool = ThreadPoolExecutor(max_workers=2)
-        plan_job = pool.submit(plan_views)
-    if pool is None:
-        pool = ThreadPoolExecutor(max_workers=1)
+        numba.set_num_threads(1)
+        with _timed(timings, "plan views"), fft.set_workers(-1):
+            return upright_priors(ti, si, config)
 
     def prepare() -> _Prepared:
         numba.set_num_threads(1)
         with _timed(timings, "preparation"):
             return _prepare(target, source, ti, si, config)
 
+    pool = ThreadPoolExecutor(max_workers=2)
+    plan_job = pool.submit(plan_views) if use_plan else None
     prep_job = pool.submit(prepare)
     threads = numba.get_num_threads()
     try:
-        if plan_job is not None:
-            numba.set_num_threads(1)
+        numba.set_num_threads(1)
         m = _global_matching(ti, si, config, stage)
         numba.set_num_threads(threads)
         ft, fs, xt, xs, thr, pairs, notes = m.ft, m.fs, m.xt, m.xs, m.thr, m.pairs, m.notes

@@ -54,10 +54,12 @@ def match(
         return np.zeros((0, 2), dtype=np.int64)
     out = np.asarray(pairs, dtype=np.int64)
     if mutual:
-        back: Any = bf.match(target.descriptors, source.descriptors)  # nearest source per target
+        # nearest source of each target that has a match (the others cannot be mutual)
+        ts = np.unique(out[:, 0])
+        back: Any = bf.match(np.ascontiguousarray(target.descriptors[ts]), source.descriptors)
         nn = np.full(len(target), -1, dtype=np.int64)
         for b in back:
-            nn[b.queryIdx] = b.trainIdx
+            nn[ts[b.queryIdx]] = b.trainIdx
         out = out[nn[out[:, 0]] == out[:, 1]]
     return out[np.argsort(out[:, 1], kind="stable")]
 

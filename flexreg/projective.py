@@ -39,6 +39,8 @@ _SPHERICAL, _PINHOLE = 0, 1
 
 #: points are paired in this many fixed chunks (in parallel), whose sums are added in order
 _CHUNKS = 16
+#: convergence of the distance levels before the last (relative update, see projective_icp)
+_LEVEL_TOLERANCE = 1e-5
 
 
 def _camera_params(image: RangeImage) -> tuple[int, NDArray[np.float64]]:
@@ -347,9 +349,10 @@ def projective_icp(
     source pixels their rays hit, and both sets of residuals enter one least-squares problem,
     so neither scan's viewpoint and normals alone decide the pose. The correspondence distance
     shrinks by a factor of three per level, from ``max_distance_m`` down to the larger of
-    ``min_distance_m`` and four robust standard deviations of the residuals; every level
+    ``min_distance_m`` and four robust standard deviations of the residuals. The last level
     iterates until the update is below ``tolerance`` (radians and metres over the scan's
-    extent) or ``max_iterations``.
+    extent) or ``max_iterations``; the levels before it only have to bring the next one
+    close and stop at the looser of ``tolerance`` and 1e-5.
 
     Parameters
     ----------
@@ -372,7 +375,7 @@ def projective_icp(
     source_normals : (H', W', 3) float32, optional
         The source's :func:`grid_normals` (computed when omitted).
     max_iterations : int
-        Per level.
+        Per level (the last level's final convergence gets as many again).
     levels : int
         Most distance levels.
     tolerance : float
@@ -410,8 +413,10 @@ def projective_icp(
         b[:] = 0.0
         return sum(sd.add(T, dist, A, b) for sd in sides)
 
-    dist, total = float(max_distance_m), 0
-    for level in range(levels):
+    total = 0
+
+    def iterate(T: NDArray[np.float64], dist: float, tol: float) -> NDArray[np.float64]:
+        nonlocal total
         for _ in range(max_iterations):
             n = accumulate(T, dist)
             total += 1
@@ -423,12 +428,22 @@ def projective_icp(
             except np.linalg.LinAlgError:
                 raise RegistrationError("projective ICP: the pairs cannot fix a pose") from None
             T = _exp_se3(delta) @ T
-            if np.linalg.norm(delta[:3]) * extent + np.linalg.norm(delta[3:]) < tolerance * extent:
+            if np.linalg.norm(delta[:3]) * extent + np.linalg.norm(delta[3:]) < tol * extent:
                 break
+        return T
+
+    # every level but the last only has to bring the next one close: it stops at a looser
+    # tolerance; the last level then converges to ``tolerance``
+    loose = max(tolerance, _LEVEL_TOLERANCE)
+    dist = float(max_distance_m)
+    for level in range(levels):
+        T = iterate(T, dist, loose)
         r = np.concatenate([sd.res[np.isfinite(sd.res)] for sd in sides])
         sigma = 1.4826 * float(np.median(np.abs(r))) if len(r) else 0.0
         nxt = max(dist / 3.0, min_distance_m, 4.0 * sigma)
         if level == levels - 1 or nxt >= dist:
+            if tolerance < loose:
+                T = iterate(T, dist, tolerance)
             break
         dist = nxt
     n = accumulate(T, dist)

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from .camera import Camera, DepthKind, PinholeCamera, SphericalCamera
 from .errors import InputError
+from .images import _col
 from .scan import Scan
 
 log = logging.getLogger(__name__)
@@ -472,12 +473,8 @@ def _fill_holes(xyz, valid, min_neighbours, max_jump, wrap):  # pragma: no cover
                 if ii < 0 or ii >= H:
                     continue
                 for dj in range(-1, 2):
-                    jj = j + dj
-                    if jj < 0 or jj >= W:
-                        if not wrap:
-                            continue
-                        jj = jj % W
-                    if not valid[ii, jj]:
+                    jj = _col(j + dj, W, wrap)
+                    if jj < 0 or not valid[ii, jj]:
                         continue
                     x, y, z = xyz[ii, jj, 0], xyz[ii, jj, 1], xyz[ii, jj, 2]
                     r = math.sqrt(x * x + y * y + z * z)

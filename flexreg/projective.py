@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from .camera import PinholeCamera, SphericalCamera
 from .errors import ConfigError, RegistrationError
+from .images import _col
 from .projection import RangeImage
 from .transforms import rotation_about_axis
 
@@ -84,12 +85,8 @@ def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
                 if ii < 0 or ii >= H:
                     continue
                 for dj in range(-1, 2):
-                    jj = j + dj
-                    if wrap:
-                        jj %= W
-                    elif jj < 0 or jj >= W:
-                        continue
-                    if math.isfinite(raw[ii, jj, 0]):
+                    jj = _col(j + dj, W, wrap)
+                    if jj >= 0 and math.isfinite(raw[ii, jj, 0]):
                         c = (
                             raw[ii, jj, 0] * raw[i, j, 0]
                             + raw[ii, jj, 1] * raw[i, j, 1]

@@ -249,24 +249,14 @@ def feature_image(
 def pixel_footprint(image: RangeImage) -> NDArray[np.float32]:
     """(H, W) metric size of each pixel: the smaller of its horizontal and vertical
     neighbour distances (NaN where unknown). Used to derive thresholds from resolution."""
-    xyz = image.xyz
-    dh = np.full(image.shape, np.nan, dtype=np.float32)
-    dv = np.full(image.shape, np.nan, dtype=np.float32)
-    nxt = (
-        np.roll(xyz, -1, axis=1)
-        if image.wraps
-        else np.pad(xyz, ((0, 0), (0, 1), (0, 0)), constant_values=np.nan)[:, 1:]
-    )
-    dh[:] = np.linalg.norm(nxt - xyz, axis=2)
-    dv[:-1] = np.linalg.norm(xyz[1:] - xyz[:-1], axis=2)
-    with np.errstate(invalid="ignore"):
-        return np.fmin(dh, dv)
+    rows, cols = np.indices(image.shape).reshape(2, -1)
+    return _footprint_at(image, rows, cols).reshape(image.shape)
 
 
 def _footprint_at(
     image: RangeImage, rows: NDArray[np.int64], cols: NDArray[np.int64]
 ) -> NDArray[np.float32]:
-    """:func:`pixel_footprint` at the given pixels only (the same values)."""
+    """:func:`pixel_footprint` at the given pixels only ((N,) float32)."""
     xyz = image.xyz
     p = xyz[rows, cols]
     right = cols + 1
@@ -806,7 +796,7 @@ def refine(
 
     sp = _points(source)
     kind: Any = method
-    if method == "point-to-plane" and voxel_m is None:
+    if _projective_refinement(method, voxel_m):
         from .projective import projective_icp
 
         vt = target_image if target_image is not None else _camera_image(target)
@@ -871,6 +861,11 @@ def refine(
     return best
 
 
+def _projective_refinement(method: str, voxel_m: float | None) -> bool:
+    """Whether :func:`refine` takes the projective path (point-to-plane without a fixed voxel)."""
+    return method == "point-to-plane" and voxel_m is None
+
+
 def _camera_image(target: Scan | RangeImage) -> RangeImage:
     """The range image (with a camera model, holes filled) that :func:`register` checks
     against and refines on."""
@@ -908,7 +903,7 @@ def _prepare(
     ref = _measured(vt)
     vs = _with_camera(si)
     pts_s = si.xyz[si.valid]
-    projective = config.refine and config.icp == "point-to-plane" and config.voxel_m is None
+    projective = config.refine and _projective_refinement(config.icp, config.voxel_m)
     return _Prepared(
         vt=vt,
         ref=ref,
@@ -1088,7 +1083,6 @@ def register(
     try:
         numba.set_num_threads(1)
         m = _global_matching(ti, si, config, stage)
-        numba.set_num_threads(threads)
         ft, fs, xt, xs, thr, pairs, notes = m.ft, m.fs, m.xt, m.xs, m.thr, m.pairs, m.notes
         priors: list[tuple[str, NDArray[np.float64]]] = []
         if plan_job is not None:

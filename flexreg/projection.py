@@ -218,14 +218,22 @@ def azimuth_polar_extent(points: NDArray[np.float64]) -> tuple[float, float, flo
     return float(phi_min), float(phi_max), float(theta.min()), float(theta.max()), full
 
 
-def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float] | None:
-    """``(rings, spacing_rad)`` when the cloud is a spinning lidar's: its polar angles fall
-    into a few narrow, about evenly spaced bands (one per beam); else None."""
+def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None:
+    """``(rings, ring_spacing_rad, azimuth_pitch_rad)`` when the cloud is a spinning lidar's:
+    its polar angles fall into a few narrow, about evenly spaced bands (one per beam); else None.
+
+    The azimuth pitch is measured along the rings (consecutive azimuths of one beam), never
+    derived from the number of points: a sweep that loses returns to the sky, windows, glass
+    or range limits keeps its firing pitch, and a few rays more or less (another CPU's ray
+    caster, another dropout draw) cannot move it.
+    """
     P = np.asarray(points, dtype=np.float64)
     if len(P) < 1000:
         return None
     r = np.linalg.norm(P, axis=1)
-    th = np.sort(np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)))
+    th_all = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0))
+    order = np.argsort(th_all, kind="stable")
+    th = th_all[order]
     gaps = np.diff(th)
     sep = gaps > math.radians(0.2)
     n = int(sep.sum()) + 1
@@ -239,7 +247,32 @@ def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float] | None:
     ends = np.r_[np.flatnonzero(sep), len(th) - 1]
     if np.max(th[ends] - th[starts]) > 0.25 * spacing:
         return None
-    return n, spacing
+    pitch = _ring_azimuth_pitch(P[order], np.r_[0, np.cumsum(sep)])
+    if pitch is None:
+        return None
+    return n, spacing, pitch
+
+
+def _ring_azimuth_pitch(P: NDArray[np.float64], ring: NDArray[np.int64]) -> float | None:
+    """Firing pitch (radians) of a spinning lidar: the typical azimuth step between
+    consecutive returns of one beam.
+
+    Missing returns make some steps whole multiples of the pitch and dual returns make
+    zero steps; both are outliers here. The estimate is the median of the non-zero steps,
+    then the mean of the steps within 25 % of it (the single-pitch steps), so it stays at
+    the firing pitch while at least about a third of each turn returns.
+    """
+    phi = np.arctan2(P[:, 1], P[:, 0])
+    o = np.lexsort((phi, ring))
+    phi, ring = phi[o], ring[o]
+    step = np.diff(phi)
+    same = ring[1:] == ring[:-1]
+    step = step[same & (step > 1e-7)]
+    if len(step) < 100:
+        return None
+    first = float(np.median(step))
+    near = step[np.abs(step - first) <= 0.25 * first]
+    return float(near.mean()) if len(near) else first
 
 
 def auto_spherical_camera(
@@ -258,15 +291,12 @@ def auto_spherical_camera(
     span_phi, span_th = phi_max - phi_min, max(th_max - th_min, 1e-6)
     rings = _lidar_rings(points) if angular_resolution_rad is None else None
     if rings is not None:  # spinning lidar: one row per beam, azimuth at the ring density
-        n_rings, spacing = rings
+        _, spacing, dphi = rings
         H = math.floor(span_th / spacing + 0.5) + 1
         th_lo = th_min
         th_hi = min(np.pi, th_lo + H * spacing)
-        dphi = span_phi * n_rings / len(points)
-        if full:
-            return SphericalCamera(
-                max(1, math.ceil(2 * np.pi / dphi)), H, -np.pi, np.pi, th_lo, th_hi
-            )
+        if full:  # a whole number of firings per turn
+            return SphericalCamera(max(1, round(2 * np.pi / dphi)), H, -np.pi, np.pi, th_lo, th_hi)
         W = math.floor(span_phi / dphi + 0.5) + 1
         return SphericalCamera(W, H, phi_min, phi_min + W * dphi, th_lo, th_hi)
     if angular_resolution_rad is None:

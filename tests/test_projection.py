@@ -130,3 +130,32 @@ def test_gather_and_empty_scan():
     assert sorted(vals[img.valid].tolist()) == [7.0, 9.0]
     with pytest.raises(InputError, match="no points"):
         range_image(Scan(points=np.zeros((0, 3))))
+
+
+def _ring_lidar(rings: int, columns: int, fov_deg: tuple[float, float], keep) -> np.ndarray:
+    """Directions of a spinning lidar at 10 m: ``rings`` evenly spaced beams over ``fov_deg``
+    (polar angles, degrees), ``columns`` firings per turn, only where ``keep(phi, theta)``."""
+    theta = np.radians(np.linspace(*fov_deg, rings))
+    phi = -np.pi + (np.arange(columns) + 0.5) * 2 * np.pi / columns
+    P, T = np.meshgrid(phi, theta)
+    P, T = P[keep(P, T)], T[keep(P, T)]
+    return 10.0 * np.column_stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)])
+
+
+@pytest.mark.parametrize("lost", ["none", "sky", "random half"])
+def test_lidar_camera_keeps_firing_pitch_when_returns_are_lost(lost):
+    """One column per firing and one row per ring, however many returns the scene gives
+    back: the sky above the horizon on half the turn, or half of all returns at random."""
+    rng = np.random.default_rng(3)
+    drop = rng.random((32, 900)) < 0.5
+    keep = {
+        "none": lambda p, t: np.ones_like(p, dtype=bool),
+        "sky": lambda p, t: (t > np.pi / 2) | (p < 0),  # the sky returns nothing
+        "random half": lambda p, t: ~drop,
+    }[lost]
+    cam = auto_spherical_camera(_ring_lidar(32, 900, (70.0, 110.0), keep))
+    assert cam.wraps
+    assert (cam.width, cam.height) == (900, 32)
+    # exact geometry: 0.4 deg firings, 40/31 deg rings (to float64 rounding of the directions)
+    assert np.degrees(cam.dphi) == pytest.approx(0.4, rel=1e-9)
+    assert np.degrees(cam.dtheta) == pytest.approx(40 / 31, rel=1e-9)

@@ -56,7 +56,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from flexreg import read_scan  # noqa: E402
-from flexreg.calibration import (  # noqa: E402
+from flexreg.calibration.calibrate import (  # noqa: E402
     CalibrationConfig,
     CalibrationError,
     Correspondences2D3D,
@@ -66,18 +66,18 @@ from flexreg.calibration import (  # noqa: E402
     render_flexion_view,
     solve_pnp,
 )
-from flexreg.io.intrinsics import (  # noqa: E402
-    CameraIntrinsics,
-    read_extrinsic,
-    read_intrinsics,
-    read_kitti_calib,
-)
-from flexreg.transforms import (  # noqa: E402
+from flexreg.core.transforms import (  # noqa: E402
     invert,
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
     translation_error_m,
+)
+from flexreg.io.intrinsics import (  # noqa: E402
+    CameraIntrinsics,
+    read_extrinsic,
+    read_intrinsics,
+    read_kitti_calib,
 )
 
 DATA = REPO.parent / "shared" / "data"
@@ -421,7 +421,7 @@ def overlay_figures(
     PJLab: the reference; plus a Flexion view next to the camera edges (KITTI)."""
     import cv2
 
-    from flexreg import images
+    from flexreg.stages import feature_images as images
 
     png = [cv2.IMWRITE_PNG_COMPRESSION, 9]
     paths = []

@@ -1,4 +1,5 @@
-"""Speed and memory of the depth conversions (flexreg.images) on real and synthetic scans.
+"""Speed and memory of the depth conversions (flexreg.stages.feature_images) on real and synthetic
+scans.
 
 Images
   * the real terrestrial laser scan ``../shared/data/conversions/laserscan-depth.png``
@@ -43,9 +44,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from flexreg import images as I  # noqa: E402
-from flexreg.camera import SphericalCamera  # noqa: E402
-from flexreg.projection import from_depth  # noqa: E402
+from flexreg.core.camera import SphericalCamera  # noqa: E402
+from flexreg.core.range_image import from_depth  # noqa: E402
+from flexreg.stages import feature_images as I  # noqa: E402
 
 SHARED = REPO.parent / "shared" / "data" / "conversions"
 THETA = (math.radians(50.0), math.radians(130.0))  # the laser scan's exact polar range

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from flexreg import read_scan, write_scan
-from flexreg.camera import SphericalCamera
-from flexreg.projection import from_depth, to_scan
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.range_image import from_depth, to_scan
 
 
 def make_station(cols: int, rows: int, seed: int = 0):

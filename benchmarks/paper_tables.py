@@ -8,10 +8,11 @@ directions, colour} x {AKAZE, ORB, SIFT, KAZE} on
   (b) synthetic RGB-D sequences written by ``flexreg synth --rgbd-frames N`` (procedural
       rooms, Kinect-like depth noise, exact ground truth),
 
-each run with both pose solvers of :mod:`flexreg.odometry`: ``essential`` (the paper's 2D-2D
+each run with both pose solvers of :mod:`flexreg.odometry.track`: ``essential`` (the paper's 2D-2D
 visual odometry: ratio test, findEssentialMat with RANSAC, recoverPose, metric scale from
 depth) and ``svd`` (matches lifted to 3D, RANSAC + Kabsch/Umeyama). Scores: ATE RMSE (m, rigid
-alignment) and RPE mean translational error over 1 s (m), both from :mod:`flexreg.metrics`.
+alignment) and RPE mean translational error over 1 s (m), both from
+:mod:`flexreg.odometry.evaluation`.
 
 Tables in the layout of the paper's Tables I-II (rows: image variants, columns: features; best
 three of each column in bold, the best also underlined) go to docs/paper-reproduction.md; the
@@ -57,16 +58,16 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from flexreg.errors import FlexregError, RegistrationError  # noqa: E402
-from flexreg.features import create_detector  # noqa: E402
 from flexreg.io.sequence import Sequence, read_sequence  # noqa: E402
-from flexreg.metrics import ate, rpe  # noqa: E402
-from flexreg.odometry import (  # noqa: E402
+from flexreg.odometry.evaluation import ate, rpe  # noqa: E402
+from flexreg.odometry.track import (  # noqa: E402
     FrameFeatures,
     OdometryConfig,
     feature_image,
     frame_features,
     track,
 )
+from flexreg.stages.keypoints import create_detector  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data"
 DOC = REPO / "docs" / "paper-reproduction.md"
@@ -154,7 +155,7 @@ def prepare(name: str, spec: dict[str, Any], work: Path) -> Sequence:
 
 def describe(seq: Sequence) -> dict[str, Any]:
     """Length and motion of a sequence's ground truth over its frames."""
-    from flexreg.metrics import associate
+    from flexreg.odometry.evaluation import associate
 
     gt = seq.groundtruth
     assert gt is not None
@@ -466,8 +467,9 @@ def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
         "(matched against the last good frame, else constant velocity). Bridged frames are "
         "counted below; a run where no pair at all could be solved is shown as –.",
         f"- **ATE**: RMSE of the positions after rigid Horn/Umeyama alignment (TUM definition, "
-        f"`flexreg.metrics.ate`). **RPE**: mean translational error over {delta:g} s "
-        "(`flexreg.metrics.rpe`, the TUM tools' fixed-delta definition). The paper's RPE is "
+        f"`flexreg.odometry.evaluation.ate`). **RPE**: mean translational error over {delta:g} s "
+        "(`flexreg.odometry.evaluation.rpe`, the TUM tools' fixed-delta definition). The paper's "
+        "RPE is "
         "the TUM script's default, which averages over *all* frame pairs; its values are "
         "therefore of the order of the trajectory length (47–110 m on a 483 m path) and not "
         "comparable in size to the drift per second reported here.",
@@ -642,7 +644,7 @@ def main(argv: list[str] | None = None) -> int:
     import numba
 
     # bridged frames are counted in the tables; their warnings would drown the progress lines
-    logging.getLogger("flexreg.odometry").setLevel(logging.ERROR)
+    logging.getLogger("flexreg.odometry.track").setLevel(logging.ERROR)
     cv2.setNumThreads(args.threads)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
     specs = datasets(args.quick)

@@ -1,6 +1,6 @@
 """Registration accuracy and speed: synthetic station pairs, two 4096 x 2048 stations, real pairs.
 
-Sections (the acceptance criteria of ``flexreg.pipeline.register``)
+Sections (the acceptance criteria of ``flexreg.registration.pipeline.register``)
   * synthetic suite: ``--pairs`` room and ``--pairs`` courtyard station pairs (seeds 0..N-1) from
     :func:`flexreg.synth.station_pair` -- stations 2-10 m apart, any yaw, tilt up to 5 deg, 3 mm
     range noise -- each registered once with ICP refinement, which gives both the coarse
@@ -15,7 +15,8 @@ Sections (the acceptance criteria of ``flexreg.pipeline.register``)
     prior is reported; the prior is not given to ``register``) and two Velodyne scans of the
     fast_gicp repository (reference: its relative.txt, itself a registration result).
 
-Every ``register`` call uses the default :class:`flexreg.pipeline.RegistrationConfig` with
+Every ``register`` call uses the default :class:`flexreg.registration.pipeline.RegistrationConfig`
+with
 ``refine=True`` and ``seed=--seed``. One warm-up call on a small pair comes first (numba kernels
 compile or load from the cache then); it is not part of any figure.
 
@@ -55,10 +56,10 @@ from numpy.typing import NDArray
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from flexreg.core.scan import Scan  # noqa: E402
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m  # noqa: E402
 from flexreg.errors import RegistrationError  # noqa: E402
-from flexreg.pipeline import RegistrationConfig, area_sample, refine, register  # noqa: E402
-from flexreg.scan import Scan  # noqa: E402
-from flexreg.transforms import invert, rotation_error_deg, translation_error_m  # noqa: E402
+from flexreg.registration.pipeline import RegistrationConfig, area_sample, refine, register  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data"
 DOC = REPO / "docs" / "benchmarks.md"
@@ -258,7 +259,7 @@ def speed_run(
 
 def _range_image_note(scan: Scan) -> dict[str, Any]:
     """Size and valid share of the range image ``register`` builds from a scan."""
-    from flexreg.projection import range_image
+    from flexreg.stages.projection import range_image
 
     img = range_image(scan)
     return {"width": img.width, "height": img.height, "valid": float(img.valid.mean())}
@@ -668,7 +669,8 @@ def render_real(records: list[dict[str, Any]]) -> list[str]:
             "3DTK: how well each transform lays the source onto the target (median "
             "nearest-neighbour distance of the source points to the target, and the share within "
             f"{100 * NN_WITHIN_M:.0f} cm). *odometry + ICP* = the odometry pose refined by the "
-            "same refinement `register` uses (`flexreg.pipeline.refine`), the local optimum "
+            "same refinement `register` uses (`flexreg.registration.pipeline.refine`), the local "
+            "optimum "
             "nearest to it. Source points are sampled evenly over the surfaces. Without ground "
             "truth this shows which transform the data favour, and the last column how far the "
             "result is from where the odometry leads:",
@@ -786,7 +788,7 @@ def real_notes(records: list[dict[str, Any]]) -> list[str]:
         img = v["range_images"][0]
         notes.append(
             "- **Velodyne** (fast_gicp test pair): unorganised outdoor spinning-lidar clouds, "
-            "turned by `register` (`flexreg.projection.range_image`) into a "
+            "turned by `register` (`flexreg.stages.projection.range_image`) into a "
             f"{img['width']}x{img['height']} range image ({img['valid']:.0%} of the pixels hold "
             "a point). "
             "The reference `relative.txt` is a registration result, not survey ground truth: "

@@ -16,18 +16,19 @@ import numba
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]
 
-from ._version import __version__
-from .camera import PinholeCamera, SphericalCamera
-from .errors import (
+from flexreg._version import __version__
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import RangeImage, from_depth
+from flexreg.core.scan import Scan
+from flexreg.errors import (
     ConfigError,
     DegenerateGeometryError,
     FlexregError,
     InputError,
     RegistrationError,
 )
-from .io import read_scan, read_scans, read_transform, write_scan
-from .projection import RangeImage, from_depth, range_image
-from .scan import Scan
+from flexreg.io import read_scan, read_scans, read_transform, write_scan
+from flexreg.stages.projection import range_image
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 

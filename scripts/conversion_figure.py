@@ -22,10 +22,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from flexreg import images as I  # noqa: E402
-from flexreg.camera import SphericalCamera  # noqa: E402
+from flexreg.core.camera import SphericalCamera  # noqa: E402
+from flexreg.core.range_image import RangeImage, from_depth  # noqa: E402
 from flexreg.io.depth import read_depth_png  # noqa: E402
-from flexreg.projection import RangeImage, from_depth  # noqa: E402
+from flexreg.stages import feature_images as I  # noqa: E402
 
 SCAN = REPO.parent / "shared" / "data" / "conversions" / "laserscan-depth.png"
 # the polar range the reference images were made with (laser_intrinsic.txt rounds it)

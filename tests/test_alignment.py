@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexreg.alignment import consistent_subset, kabsch, ransac_rigid
-from flexreg.errors import DegenerateGeometryError
-from flexreg.transforms import (
+from flexreg.core.transforms import (
     apply,
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.errors import DegenerateGeometryError
+from flexreg.stages.alignment import consistent_subset, kabsch, ransac_rigid
 
 
 @pytest.fixture()

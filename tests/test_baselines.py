@@ -20,7 +20,7 @@ from flexreg.baselines import (
     get_baseline,
 )
 from flexreg.baselines.open3d_icp import icp
-from flexreg.transforms import (
+from flexreg.core.transforms import (
     apply,
     invert,
     make_transform,
@@ -81,7 +81,7 @@ def test_registry_names_and_errors():
 
 def test_heavy_libraries_load_only_when_a_baseline_runs():
     code = (
-        "import sys, flexreg.baselines, flexreg.comparison, flexreg.benchsuite, "
+        "import sys, flexreg.baselines, flexreg.bench.compare, flexreg.bench.suite, "
         "flexreg.cli.compare; print(sorted(m for m in ('open3d', 'kiss_icp', 'small_gicp') "
         "if m in sys.modules))"
     )

@@ -14,7 +14,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from flexreg import InputError, Scan, read_scan
-from flexreg.calibration import (
+from flexreg.calibration.calibrate import (
     CalibrationConfig,
     CalibrationError,
     Correspondences2D3D,
@@ -31,20 +31,20 @@ from flexreg.calibration import (
     scan_range_image,
     solve_pnp,
 )
-from flexreg.errors import ConfigError
-from flexreg.io.intrinsics import (
-    CameraIntrinsics,
-    read_extrinsic,
-    read_intrinsics,
-    read_kitti_calib,
-)
-from flexreg.transforms import (
+from flexreg.core.transforms import (
     apply,
     invert,
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
     translation_error_m,
+)
+from flexreg.errors import ConfigError
+from flexreg.io.intrinsics import (
+    CameraIntrinsics,
+    read_extrinsic,
+    read_intrinsics,
+    read_kitti_calib,
 )
 
 # ------------------------------------------------------------------------------ fixtures

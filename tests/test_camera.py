@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexreg.camera import PinholeCamera, SphericalCamera, camera_from_dict
+from flexreg.core.camera import PinholeCamera, SphericalCamera, camera_from_dict
 from flexreg.errors import InputError
 
 

@@ -15,14 +15,14 @@ import pytest
 from conftest import one_error_line, run_cli
 
 from flexreg import __version__, read_scan
-from flexreg.calibration import project_points, scan_range_image
-from flexreg.io.intrinsics import read_extrinsic, read_intrinsics, read_kitti_calib
-from flexreg.transforms import (
+from flexreg.calibration.calibrate import project_points, scan_range_image
+from flexreg.core.transforms import (
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.io.intrinsics import read_extrinsic, read_intrinsics, read_kitti_calib
 
 
 @pytest.fixture(scope="module")

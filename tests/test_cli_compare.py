@@ -12,7 +12,7 @@ import pytest
 from conftest import one_error_line, run_cli
 
 from flexreg import read_scans, write_scan
-from flexreg.transforms import invert, make_transform
+from flexreg.core.transforms import invert, make_transform
 
 
 @pytest.fixture(scope="module")
@@ -206,7 +206,7 @@ def test_bench_bad_options(tmp_path, argv, message):
 
 
 def test_bench_pair_that_cannot_be_loaded_is_a_row(shared_data, tmp_path, monkeypatch):
-    import flexreg.benchsuite as bs
+    import flexreg.bench.suite as bs
 
     def broken(*_args, **_kwargs):
         raise bs.InputError(Path("scan.ply"), "truncated file")
@@ -227,7 +227,7 @@ def test_bench_pair_that_cannot_be_loaded_is_a_row(shared_data, tmp_path, monkey
 
 
 def test_bench_writes_nothing_when_writing_fails(shared_data, tmp_path, monkeypatch):
-    import flexreg.benchsuite as bs
+    import flexreg.bench.suite as bs
 
     def full_disk(*_args, **_kwargs):
         raise OSError(28, "No space left on device")

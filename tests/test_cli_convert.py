@@ -11,11 +11,11 @@ import cv2
 import numpy as np
 import pytest
 
-from flexreg import images as I
-from flexreg.camera import PinholeCamera, SphericalCamera
 from flexreg.cli import run
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import from_depth
 from flexreg.io.depth import read_depth_png
-from flexreg.projection import from_depth
+from flexreg.stages import feature_images as I
 
 LASER_ARGS = ["--equirect", "0.87", "2.27", "--depth-kind", "range"]
 KINECT_ARGS = ["--pinhole", "519.226", "479.462", "522.23", "272.737", "--depth-kind", "z"]
@@ -326,9 +326,9 @@ def test_convert_uses_camera_sidecar(tmp_path):
     """A depth PNG with a ``<stem>.camera.json`` needs no intrinsics options (the demo data)."""
     from conftest import REPO
 
-    from flexreg.images import convert
     from flexreg.io import read_scan
-    from flexreg.projection import range_image
+    from flexreg.stages.feature_images import convert
+    from flexreg.stages.projection import range_image
 
     src = REPO / "data" / "laserscan" / "laserscan-depth.png"
     out = tmp_path / "f.png"

@@ -14,7 +14,7 @@ import pytest
 from conftest import one_error_line, run_cli
 
 from flexreg.io.trajectory import read_trajectory
-from flexreg.metrics import ate
+from flexreg.odometry.evaluation import ate
 
 
 @pytest.fixture(scope="module")

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from conftest import REPO, one_error_line
 
-import flexreg.pipeline
+import flexreg.registration.pipeline
 from flexreg import Scan, __version__, read_scan, write_scan
-from flexreg.camera import SphericalCamera
 from flexreg.cli import run
 from flexreg.cli.register import SOURCE_RGB, TARGET_RGB
-from flexreg.projection import project, to_scan
-from flexreg.transforms import (
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.range_image import to_scan
+from flexreg.core.transforms import (
     apply,
     invert,
     make_transform,
@@ -28,6 +28,7 @@ from flexreg.transforms import (
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.stages.projection import project
 
 LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
 
@@ -78,7 +79,7 @@ def registered(pair, tmp_path_factory):
     ]
     np.savetxt(target.parent / "truth.txt", pair[2])
     results = []
-    real_register = flexreg.pipeline.register
+    real_register = flexreg.registration.pipeline.register
 
     def spy(*args, **kwargs):
         results.append(real_register(*args, **kwargs))
@@ -90,7 +91,7 @@ def registered(pair, tmp_path_factory):
         contextlib.redirect_stdout(stdout),
         contextlib.redirect_stderr(stderr),
     ):
-        mp.setattr(flexreg.pipeline, "register", spy)
+        mp.setattr(flexreg.registration.pipeline, "register", spy)
         rc = run(argv)
     assert rc == 0, stderr.getvalue()
     (result,) = results
@@ -259,7 +260,9 @@ def test_failed_write_removes_the_outputs_already_written(
 ):
     """T.json is written last; when it cannot be, the PLY, PNG and text written before it go."""
     target, source, _ = pair
-    monkeypatch.setattr(flexreg.pipeline, "register", lambda *a, **k: registered["result"])
+    monkeypatch.setattr(
+        flexreg.registration.pipeline, "register", lambda *a, **k: registered["result"]
+    )
     (tmp_path / "blocker").write_text("a file where a folder is needed")
     out = tmp_path / "out"
     argv = [

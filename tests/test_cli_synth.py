@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from flexreg.cli import run
+from flexreg.core.transforms import apply, invert
 from flexreg.io import read_scan
 from flexreg.synth import read_scene
-from flexreg.transforms import apply, invert
 
 SMALL = ["--resolution", "256x128", "--noise-mm", "3"]
 

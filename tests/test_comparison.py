@@ -1,4 +1,4 @@
-"""flexreg.comparison: ground-truth parsing, success and fit on hand-computed cases, measured
+"""flexreg.bench.compare: ground-truth parsing, success and fit on hand-computed cases, measured
 calls (failures, crashes and timeouts become rows), a compare run and its files."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-import flexreg.comparison as comparison
+import flexreg.bench.compare as comparison
 from flexreg import ConfigError, InputError, RegistrationError, read_scans
-from flexreg.comparison import (
+from flexreg.bench.compare import (
     FitEvaluator,
     SuccessCriteria,
     compare,
@@ -24,7 +24,7 @@ from flexreg.comparison import (
     to_markdown,
     write_comparison,
 )
-from flexreg.transforms import apply, invert, make_transform, rotation_about_axis
+from flexreg.core.transforms import apply, invert, make_transform, rotation_about_axis
 
 
 @pytest.fixture(scope="module")
@@ -232,31 +232,34 @@ def test_fork_server_preloads_importable_modules():
     first measured call its import time)."""
     import importlib
 
-    from flexreg.comparison import _PRELOAD
+    from flexreg.bench.compare import _PRELOAD
 
     for name in _PRELOAD:
         if name.startswith("flexreg"):
             importlib.import_module(name)
-    assert "flexreg._startup" in _PRELOAD and "flexreg.projective" in _PRELOAD
+    assert (
+        "flexreg.bench._preload" in _PRELOAD and "flexreg.stages.refinement.projective" in _PRELOAD
+    )
 
 
 def test_startup_loads_cached_serial_kernels_without_compiling():
     """A kernel compiled once (and cached on disk) is loaded when a new process imports
-    flexreg._startup, before its first call; parallel kernels are left alone (they would start
+    flexreg.bench._preload, before its first call; parallel kernels are left alone (they would start
     OpenMP threads in the fork server)."""
     import subprocess
     import sys
 
-    from flexreg.projection import RangeImage, fill_holes
+    from flexreg.core.range_image import RangeImage
+    from flexreg.stages.projection import fill_holes
 
     xyz = np.ones((3, 3, 3))
     valid = np.ones((3, 3), bool)
     valid[1, 1] = False
     fill_holes(RangeImage(xyz=xyz, valid=valid, index=np.zeros((3, 3), np.int64)))
     code = (
-        "import flexreg._startup as s\n"
-        "from flexreg.projection import _fill_holes\n"
-        "from flexreg.projective import _associate\n"
+        "import flexreg.bench._preload as s\n"
+        "from flexreg.stages.projection import _fill_holes\n"
+        "from flexreg.stages.refinement.projective import _associate\n"
         "print(len(_fill_holes.signatures), len(_associate.signatures))\n"
     )
     out = subprocess.run(

@@ -6,12 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from flexreg.camera import SphericalCamera
-from flexreg.correspondences import lift
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.range_image import from_depth
 from flexreg.errors import ConfigError
-from flexreg.features import METHODS, create_detector, detect_and_describe, to_uint8
-from flexreg.matching import match
-from flexreg.projection import from_depth
+from flexreg.stages.correspondences import lift
+from flexreg.stages.keypoints import METHODS, create_detector, detect_and_describe, to_uint8
+from flexreg.stages.matching import match
 
 
 def _texture(rng, h=240, w=320):

@@ -13,11 +13,17 @@ import cv2
 import numpy as np
 import pytest
 
-from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import RangeImage, from_depth, from_grid
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import (
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.features import Features
-from flexreg.matching import descriptor_distances, match_guided
-from flexreg.pipeline import (
+from flexreg.registration.pipeline import (
     RegistrationConfig,
     area_cell,
     area_sample,
@@ -25,15 +31,9 @@ from flexreg.pipeline import (
     range_slack,
     register,
 )
-from flexreg.projection import RangeImage, from_depth, from_grid
-from flexreg.scan import Scan
+from flexreg.stages.keypoints import Features
+from flexreg.stages.matching import descriptor_distances, match_guided
 from flexreg.synth import station_pair
-from flexreg.transforms import (
-    make_transform,
-    rotation_about_axis,
-    rotation_error_deg,
-    translation_error_m,
-)
 
 
 def _features(descriptors, method: str = "sift") -> Features:

@@ -1,4 +1,5 @@
-"""Depth conversions (flexreg.images): hand-computed patches, invalid data, wrap-around,
+"""Depth conversions (flexreg.stages.feature_images): hand-computed patches, invalid data,
+wrap-around,
 roll invariance on a ray-cast scene, and conformance with the paper authors' reference images."""
 
 from __future__ import annotations
@@ -9,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexreg import images as I
-from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import RangeImage, from_depth
 from flexreg.errors import ConfigError, InputError
-from flexreg.projection import RangeImage, from_depth
+from flexreg.stages import feature_images as I
 
 # ------------------------------------------------------------------ independent NumPy reference
 

@@ -15,11 +15,11 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import invert, make_transform, rotation_error_deg
 from flexreg.errors import FlexregError, InputError
 from flexreg.io import read_scan, read_scans, write_scan
 from flexreg.io.threedtk import S_RH_FROM_LH, pose_to_transform, read_pose
-from flexreg.scan import Scan
-from flexreg.transforms import invert, make_transform, rotation_error_deg
 
 PUMP = "e57_pump_gridded/pumpAVisualReferenceImage.e57"
 KURT = "tls_3dtk_kurt3d"

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from flexreg import Scan, read_scan, read_scans, write_scan
-from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.transforms import apply, make_transform, rotation_about_axis
 from flexreg.errors import InputError
 from flexreg.io import read_transform, write_transform_json, write_transform_txt
-from flexreg.transforms import apply, make_transform, rotation_about_axis
 
 
 def _gridded_scan(rng, rows=7, cols=5, colors=True) -> Scan:

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError, InputError
 from flexreg.io.trajectory import Trajectory, detect_format, read_trajectory, write_trajectory
-from flexreg.metrics import (
+from flexreg.odometry.evaluation import (
     AssociationError,
     align_umeyama,
     associate,
@@ -24,7 +25,6 @@ from flexreg.metrics import (
     nearest_partner,
     rpe,
 )
-from flexreg.transforms import invert, make_transform, rotation_about_axis
 
 # ---------------------------------------------------------------------------------------------
 # helpers

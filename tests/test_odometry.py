@@ -9,12 +9,19 @@ import math
 import numpy as np
 import pytest
 
-from flexreg.camera import PinholeCamera
+from flexreg.core.camera import PinholeCamera
+from flexreg.core.transforms import (
+    apply,
+    invert,
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.features import Features
 from flexreg.io.sequence import read_sequence
-from flexreg.metrics import ate
-from flexreg.odometry import (
+from flexreg.odometry.evaluation import ate
+from flexreg.odometry.track import (
     FrameFeatures,
     OdometryConfig,
     essential_pose,
@@ -24,14 +31,7 @@ from flexreg.odometry import (
     svd_pose,
     track,
 )
-from flexreg.transforms import (
-    apply,
-    invert,
-    make_transform,
-    rotation_about_axis,
-    rotation_error_deg,
-    translation_error_m,
-)
+from flexreg.stages.keypoints import Features
 
 CAM = PinholeCamera(500.0, 500.0, 319.5, 239.5, 640, 480)
 
@@ -180,7 +180,7 @@ def test_unsolvable_frame_is_reported_and_bridged(scene, caplog):
     world, desc, poses, stamps = scene
     frames = [_frame(i, world, desc, T) for i, T in enumerate(poses)]
     frames[3] = _empty_frame(3)  # e.g. a blank depth image: nothing to match
-    with caplog.at_level("WARNING", logger="flexreg.odometry"):
+    with caplog.at_level("WARNING", logger="flexreg.odometry.track"):
         res = track(frames, stamps, OdometryConfig(method="svd"))
     assert res.status[3] == "bridged" and res.reference[3] == -1
     (f,) = res.failures
@@ -240,7 +240,7 @@ def test_config_is_validated():
 
 def test_feature_image_is_the_paper_8bit_mapping():
     """A plane facing the camera has Flexion 1 (-> 255); the colour path passes grey through."""
-    from flexreg.projection import from_depth
+    from flexreg.core.range_image import from_depth
 
     cam = PinholeCamera(100.0, 100.0, 15.5, 11.5, 32, 24)
     img = from_depth(np.full((24, 32), 2.0), cam)

@@ -7,11 +7,9 @@ import pytest
 from conftest import REPO
 
 from flexreg import Scan, read_scan
-from flexreg.camera import SphericalCamera
-from flexreg.errors import RegistrationError
-from flexreg.pipeline import RegistrationConfig, register
-from flexreg.projection import project, to_scan
-from flexreg.transforms import (
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.range_image import to_scan
+from flexreg.core.transforms import (
     apply,
     invert,
     make_transform,
@@ -19,6 +17,9 @@ from flexreg.transforms import (
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.errors import RegistrationError
+from flexreg.registration.pipeline import RegistrationConfig, register
+from flexreg.stages.projection import project
 
 
 @pytest.fixture(scope="module")

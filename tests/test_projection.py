@@ -6,16 +6,10 @@ import numpy as np
 import pytest
 
 from flexreg import Scan
-from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import from_depth, from_grid, to_scan
 from flexreg.errors import InputError
-from flexreg.projection import (
-    auto_spherical_camera,
-    from_depth,
-    from_grid,
-    project,
-    range_image,
-    to_scan,
-)
+from flexreg.stages.projection import auto_spherical_camera, project, range_image
 
 
 def _plane_points(distance: float, n: int, rng) -> np.ndarray:

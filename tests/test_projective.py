@@ -5,19 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexreg.camera import PinholeCamera, SphericalCamera
-from flexreg.errors import ConfigError, RegistrationError
-from flexreg.pipeline import area_sample
-from flexreg.projection import RangeImage, from_depth, from_grid, range_image
-from flexreg.projective import grid_normals, point_information, projective_icp
-from flexreg.scan import Scan
-from flexreg.synth import station_pair
-from flexreg.transforms import (
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import RangeImage, from_depth, from_grid
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import (
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.errors import ConfigError, RegistrationError
+from flexreg.registration.pipeline import area_sample
+from flexreg.stages.projection import range_image
+from flexreg.stages.refinement.projective import grid_normals, point_information, projective_icp
+from flexreg.synth import station_pair
 
 
 def _plane_image(z: float = 2.0) -> RangeImage:
@@ -106,7 +107,7 @@ def test_projective_icp_needs_a_camera_and_a_positive_distance(room_pair):
 
 
 def test_pipeline_refine_is_symmetric_projective_by_default(room_pair):
-    from flexreg.pipeline import refine
+    from flexreg.registration.pipeline import refine
 
     gt = room_pair.T_target_source
     T0 = make_transform(rotation_about_axis([0.1, 0.3, 1.0], np.radians(0.4)), [-0.02, 0.01, 0.0])

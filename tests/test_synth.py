@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from flexreg.camera import SphericalCamera
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.transforms import apply, invert, make_transform, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError
 from flexreg.synth import (
     RGBDConfig,
@@ -29,7 +30,6 @@ from flexreg.synth import (
     write_tum_sequence,
 )
 from flexreg.synth.mesh import box, cylinder, ellipsoid, tube, wall_boxes
-from flexreg.transforms import apply, invert, make_transform, rotation_about_axis
 
 SIGMA = 0.003
 CLEAN = dict(dropout_rate=0.0, mixed_pixel_prob=0.0, tripod_cone_rad=0.0, min_intensity=0.0)

@@ -1,4 +1,4 @@
-"""Levelling and plan views (flexreg.topview), and hole filling of range images.
+"""Levelling and plan views (flexreg.stages.priors), and hole filling of range images.
 
 Hand-made organised grids give exact normals, areas and verticals; synthetic TLS stations with a
 known pose give the true vertical and the true plan transform.
@@ -11,14 +11,15 @@ import math
 import numpy as np
 import pytest
 
-from flexreg import topview
-from flexreg.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import from_depth
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import DegenerateGeometryError
-from flexreg.projection import fill_holes, from_depth, project, range_image
-from flexreg.scan import Scan
+from flexreg.stages import priors as topview
+from flexreg.stages.priors import Levelling, PlanMatch, TopView
+from flexreg.stages.projection import fill_holes, project, range_image
 from flexreg.synth import TLSConfig, scan_tls, station_pair
-from flexreg.topview import Levelling, PlanMatch, TopView
-from flexreg.transforms import rotation_about_axis
 
 Z = np.array([0.0, 0.0, 1.0])
 LEVEL = Levelling(Z.copy(), np.eye(3), 0.0, 0.0, 0.0)  # an already levelled scanner

@@ -1,8 +1,9 @@
 """Registration baselines with flexreg's result type: Open3D ICP, Open3D FPFH + RANSAC, KISS-ICP.
 
 Every baseline is a function ``f(target, source, *, T_init=None, voxel_m=None, seed=0)`` that
-returns a :class:`flexreg.pipeline.RegistrationResult` (``T_target_source`` maps source points
-into the target frame), so it can stand in for :func:`flexreg.pipeline.register`:
+returns a :class:`flexreg.registration.pipeline.RegistrationResult` (``T_target_source`` maps
+source points
+into the target frame), so it can stand in for :func:`flexreg.registration.pipeline.register`:
 
 ==============  =====================================================================  =========
 name            what                                                                   start
@@ -32,11 +33,11 @@ import importlib.util
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from ..errors import ConfigError
-from ._common import DEFAULT_MAX_POINTS, BaselineConfig, default_voxel
+from flexreg.baselines._common import DEFAULT_MAX_POINTS, BaselineConfig, default_voxel
+from flexreg.errors import ConfigError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
 Baseline = Callable[..., "RegistrationResult"]
 

@@ -11,11 +11,11 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import ConfigError, InputError, RegistrationError
-from ..transforms import as_transform
+from flexreg.core.transforms import as_transform
+from flexreg.errors import ConfigError, InputError, RegistrationError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationConfig, RegistrationResult
+    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
 
 #: default point budget of the scale parameter: the voxel is enlarged until the voxel-downsampled
 #: target keeps at most this many points (FPFH + RANSAC cost grows quickly with the count)
@@ -27,7 +27,8 @@ SPACINGS_PER_VOXEL = 2.0
 
 @dataclass(frozen=True)
 class BaselineConfig:
-    """How a baseline was run; stored in its :class:`~flexreg.pipeline.RegistrationResult`.
+    """How a baseline was run; stored in its
+    :class:`~flexreg.registration.pipeline.RegistrationResult`.
 
     Attributes
     ----------
@@ -64,16 +65,16 @@ class BaselineConfig:
 
 
 def as_points(x: Any, *, name: str) -> NDArray[np.float64]:
-    """(N, 3) float64 points of a :class:`~flexreg.scan.Scan`, a
-    :class:`~flexreg.projection.RangeImage` (valid pixels) or an array, in metres.
+    """(N, 3) float64 points of a :class:`~flexreg.core.scan.Scan`, a
+    :class:`~flexreg.stages.projection.RangeImage` (valid pixels) or an array, in metres.
 
     Raises
     ------
     InputError
         Not (N, 3), non-finite values, or fewer than 3 points.
     """
-    from ..projection import RangeImage
-    from ..scan import Scan
+    from flexreg.core.range_image import RangeImage
+    from flexreg.core.scan import Scan
 
     if isinstance(x, Scan):
         P = x.points
@@ -112,7 +113,8 @@ def default_voxel(
     """The scale parameter from the scan resolution: ``(voxel_m, how)``.
 
     ``SPACINGS_PER_VOXEL`` (2) times the target's median nearest-neighbour spacing
-    (:func:`flexreg.refine.median_spacing`), enlarged until the voxel-downsampled target keeps at
+    (:func:`flexreg.stages.refinement.icp.median_spacing`), enlarged until the voxel-downsampled
+    target keeps at
     most ``max_points`` points. Deterministic (fixed subsample seeds).
 
     Parameters
@@ -127,7 +129,7 @@ def default_voxel(
     how : str
         Which rule set the value (for the record).
     """
-    from ..refine import median_spacing
+    from flexreg.stages.refinement.icp import median_spacing
 
     if max_points < 100:
         raise ConfigError(f"max_points must be at least 100, got {max_points}")
@@ -200,12 +202,12 @@ def make_result(
     correspondences: NDArray[np.float64] | None = None,
     prior: str,
 ) -> RegistrationResult:
-    """A :class:`~flexreg.pipeline.RegistrationResult` for a baseline.
+    """A :class:`~flexreg.registration.pipeline.RegistrationResult` for a baseline.
 
     ``config`` is a :class:`BaselineConfig` (it provides ``seed`` and ``to_dict()``, all the
     result uses); ``keypoints`` are empty (no image features).
     """
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
     corr = np.zeros((0, 2, 3)) if correspondences is None else correspondences
     return RegistrationResult(

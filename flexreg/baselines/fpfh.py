@@ -21,7 +21,7 @@ thread by default (``ransac_threads=1``): Open3D's parallel RANSAC draws its hyp
 thread order, and with more threads the result changes from run to run even with a fixed seed
 (observed on the bunny pair: 1 run in 3 differed by 1° before refinement). The comparison
 benchmark runs it with all cores, as Open3D does by default (see
-:func:`flexreg.comparison.run_method`). The ICP runs on one thread.
+:func:`flexreg.bench.compare.run_method`). The ICP runs on one thread.
 """
 
 from __future__ import annotations
@@ -31,8 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import RegistrationError
-from ._common import (
+from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
     as_points,
@@ -43,10 +42,11 @@ from ._common import (
     resolve_voxel,
     thin,
 )
-from .open3d_icp import ICP_LEVELS, THIN_POINTS, run_levels
+from flexreg.baselines.open3d_icp import ICP_LEVELS, THIN_POINTS, run_levels
+from flexreg.errors import RegistrationError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
 #: the 1:2:5 rule: normal and FPFH radii in voxels, with their neighbour caps
 NORMAL_RADIUS_VOXELS, NORMAL_MAX_NN = 2.0, 30

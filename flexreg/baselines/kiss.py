@@ -32,12 +32,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import ConfigError, RegistrationError
-from ..transforms import apply, invert
-from ._common import BaselineConfig, as_points, cloud, initial_transform, make_result
+from flexreg.baselines._common import (
+    BaselineConfig,
+    as_points,
+    cloud,
+    initial_transform,
+    make_result,
+)
+from flexreg.core.transforms import apply, invert
+from flexreg.errors import ConfigError, RegistrationError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
 #: max_range = this x the largest point range of the pair ("covering the scan")
 RANGE_MARGIN = 1.01

@@ -27,7 +27,7 @@ singular (NaN transforms on the Velodyne pair), and normals from the 1:2 radius 
 sparse far rings of a lidar scan without neighbours. The start is the identity or a given
 ``T_init``. Open3D's ICP iterations run on one thread: its multi-threaded reductions sum in
 varying order, and one thread keeps the result bit-identical from run to run (the same rule as
-:func:`flexreg.refine.refine_icp`).
+:func:`flexreg.stages.refinement.icp.refine_icp`).
 """
 
 from __future__ import annotations
@@ -39,8 +39,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import ConfigError, RegistrationError
-from ._common import (
+from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
     as_points,
@@ -52,9 +51,10 @@ from ._common import (
     resolve_voxel,
     thin,
 )
+from flexreg.errors import ConfigError, RegistrationError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
 log = logging.getLogger(__name__)
 
@@ -263,7 +263,7 @@ def run_levels(
 
 def level_floor(cloud_: Any) -> float:
     """Median nearest-neighbour spacing of an Open3D cloud (metres; 0 for < 2 points)."""
-    from ..refine import median_spacing
+    from flexreg.stages.refinement.icp import median_spacing
 
     pts = np.asarray(cloud_.points)
     return median_spacing(pts, sample=2000) if len(pts) >= 2 else 0.0

@@ -18,9 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import RegistrationError
-from ..transforms import apply
-from ._common import (
+from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
     as_points,
@@ -28,9 +26,11 @@ from ._common import (
     make_result,
     resolve_voxel,
 )
+from flexreg.core.transforms import apply
+from flexreg.errors import RegistrationError
 
 if TYPE_CHECKING:
-    from ..pipeline import RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
 #: downsampling resolution in scale voxels, and the correspondence distance in downsampling
 #: resolutions (small_gicp's default 1.0 m / 0.25 m)

@@ -41,7 +41,7 @@ def stage(description: str) -> Iterator[None]:
 def write_all(writers: list[tuple[Path, Any]]) -> None:
     """Run each ``(path, write)``; if one fails, remove the files already written here, so a
     command leaves all of its outputs or none."""
-    from ..errors import InputError
+    from flexreg.errors import InputError
 
     done: list[Path] = []
     try:
@@ -79,9 +79,9 @@ def read_input(
     all_scans: bool = False,
 ) -> list[Any]:
     """Read the scans of an input file, building a camera for depth PNGs from the options."""
-    from ..errors import InputError
-    from ..io import detect_format, read_scans
-    from ..io.depth import camera_for_image
+    from flexreg.errors import InputError
+    from flexreg.io import detect_format, read_scans
+    from flexreg.io.depth import camera_for_image
 
     _, fmt = detect_format(path)
     opts: dict[str, Any] = {}

@@ -9,16 +9,16 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..errors import ConfigError, InputError
-from . import app
-from ._common import console, stage, write_all
+from flexreg.cli._common import console, stage, write_all
+from flexreg.cli.app import app
+from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from ..calibration import CalibrationResult
-    from ..io.intrinsics import CameraIntrinsics
+    from flexreg.calibration.calibrate import CalibrationResult
+    from flexreg.io.intrinsics import CameraIntrinsics
 
 #: header and help of the template written with --export-views
 PAIRS_TEMPLATE = """\
@@ -99,7 +99,7 @@ def _parse_distortion(text: str | None) -> list[float]:
         values = [float(x) for x in text.replace(" ", "").split(",") if x]
     except ValueError:
         raise ConfigError(f"--distortion: expected comma-separated numbers, got {text!r}") from None
-    from ..io.intrinsics import DISTORTION_LENGTHS
+    from flexreg.io.intrinsics import DISTORTION_LENGTHS
 
     if len(values) not in DISTORTION_LENGTHS or not all(math.isfinite(x) for x in values):
         raise ConfigError(
@@ -140,7 +140,7 @@ def _intrinsics(
 ) -> CameraIntrinsics:
     import numpy as np
 
-    from ..io.intrinsics import CameraIntrinsics, read_intrinsics
+    from flexreg.io.intrinsics import CameraIntrinsics, read_intrinsics
 
     if camera is not None:
         intr = read_intrinsics(camera, kitti_camera=kitti_camera)
@@ -163,7 +163,7 @@ def _intrinsics(
 def _png_writer(path: Path, image: NDArray[np.uint8]) -> Any:
     import cv2
 
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     def write_png(tmp: Path) -> None:
         if not cv2.imwrite(str(tmp), image):
@@ -250,16 +250,16 @@ def calibrate_command(
     Correspondences come from --pairs and/or --auto; nothing is written unless everything
     succeeds.
     """
-    from .._version import __version__
-    from ..calibration import (
+    from flexreg._version import __version__
+    from flexreg.calibration.calibrate import (
         CalibrationConfig,
         calibrate,
         overlay_image,
         picking_views,
         read_correspondences,
     )
-    from ..io import read_scan, write_transform_json
-    from ..io.intrinsics import read_extrinsic
+    from flexreg.io import read_scan, write_transform_json
+    from flexreg.io.intrinsics import read_extrinsic
 
     _check_options(
         image=image,
@@ -343,13 +343,13 @@ def calibrate_command(
 
 
 def _text_writer(path: Path, text: str) -> Any:
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     return lambda: atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
 def _errors(T: NDArray[np.float64], T_true: NDArray[np.float64]) -> dict[str, float]:
-    from ..transforms import rotation_error_deg, translation_error_m
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
 
     return {
         "rotation_deg": rotation_error_deg(T, T_true),

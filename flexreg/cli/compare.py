@@ -9,15 +9,15 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..errors import ConfigError
-from . import app
-from ._common import console, err_console, progress_bar, read_input, stage
+from flexreg.cli._common import console, err_console, progress_bar, read_input, stage
+from flexreg.cli.app import app
+from flexreg.errors import ConfigError
 
 if TYPE_CHECKING:
-    from ..benchsuite import BenchResult
-    from ..comparison import Comparison
+    from flexreg.bench.compare import Comparison
+    from flexreg.bench.suite import BenchResult
 
-#: the default of --methods (flexreg.comparison.DEFAULT_METHODS, spelled out so that --help
+#: the default of --methods (flexreg.bench.compare.DEFAULT_METHODS, spelled out so that --help
 #: needs no import)
 DEFAULT_METHODS = "flexreg,icp-point,icp-plane,gicp,fpfh-ransac,kiss-icp"
 
@@ -88,14 +88,14 @@ def compare_command(
     Every method gets a row: a method that fails, crashes or times out says so. Nothing is
     written unless the comparison completes.
     """
-    from ..comparison import (
+    from flexreg.bench.compare import (
         SuccessCriteria,
         compare,
         parse_methods,
         read_ground_truth,
         write_comparison,
     )
-    from ..io import read_transform
+    from flexreg.io import read_transform
 
     chosen = parse_methods(methods)
     _positive("--voxel", voxel, "metres")
@@ -138,7 +138,7 @@ def compare_command(
         console.print(f"wrote {p}", markup=False, soft_wrap=True)
 
 
-#: short console headers of flexreg.comparison.COLUMNS
+#: short console headers of flexreg.bench.compare.COLUMNS
 _SHORT = {
     "method": "method",
     "status": "status",
@@ -157,7 +157,7 @@ def _print_comparison(cmp: Comparison) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from ..comparison import COLUMNS, notes, table_rows
+    from flexreg.bench.compare import COLUMNS, notes, table_rows
 
     t = Table(title=f"{cmp.target} ← {cmp.source}", title_justify="left")
     for c in COLUMNS:
@@ -205,8 +205,8 @@ def bench_command(
     Writes cases.csv, summary.csv / .md, results.json, config.json and plots into
     OUT/bench-<time>/ once everything has run.
     """
-    from ..benchsuite import SUITES, BenchConfig, check_real_data, run_bench, write_bench
-    from ..comparison import parse_methods
+    from flexreg.bench.compare import parse_methods
+    from flexreg.bench.suite import SUITES, BenchConfig, check_real_data, run_bench, write_bench
 
     if suite not in SUITES:
         raise ConfigError(f"--suite: must be one of {', '.join(SUITES)}, got {suite!r}")
@@ -231,7 +231,7 @@ def bench_command(
         command += f" --data {data}"
     if timeout_s is not None:
         command += f" --timeout-s {timeout_s:g}"
-    from ..benchsuite import planned_cases
+    from flexreg.bench.suite import planned_cases
 
     n_cases = len(planned_cases(config))
     with progress_bar() as bar:
@@ -250,7 +250,7 @@ def bench_command(
 def _print_bench(result: BenchResult) -> None:
     from rich.table import Table
 
-    from ..benchsuite import summarise
+    from flexreg.bench.suite import summarise
 
     t = Table(title=f"{result.command} ({result.elapsed_s / 60:.1f} min)", title_justify="left")
     for c in ("suite", "method", "success", "median rot °", "median trans mm", "median s", "MB"):

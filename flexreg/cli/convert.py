@@ -7,12 +7,12 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from ..errors import FlexregError, InputError
-from . import app
-from ._common import console, err_console, progress_bar, read_input
+from flexreg.cli._common import console, err_console, progress_bar, read_input
+from flexreg.cli.app import app
+from flexreg.errors import FlexregError, InputError
 
 if TYPE_CHECKING:
-    from ..projection import RangeImage
+    from flexreg.core.range_image import RangeImage
 
 _KIND_HELP = (
     "flexion, flexion-normalized, flexion-angle, bearing-horizontal, bearing-vertical, "
@@ -35,7 +35,7 @@ def _check_options(
     folder: bool,
 ) -> None:
     """Validate everything that does not need the input file, before anything is read."""
-    from ..images import KINDS
+    from flexreg.stages.feature_images import KINDS
 
     if kind not in KINDS:
         raise InputError("--kind", f"unknown kind {kind!r}; known: {', '.join(KINDS)}")
@@ -74,7 +74,7 @@ def load_range_image(
 ) -> RangeImage:
     """Range image of the first scan of any ``read_scan`` input (depth PNGs: intrinsics from
     the options or the ``<stem>.camera.json`` sidecar)."""
-    from ..projection import range_image
+    from flexreg.stages.projection import range_image
 
     (scan,) = read_input(
         path, pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
@@ -98,8 +98,8 @@ def _convert_one(
     import cv2
     import numpy as np
 
-    from ..images import convert, quantize, value_range
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
+    from flexreg.stages.feature_images import convert, quantize, value_range
 
     if not src.is_file():
         raise InputError(src, "no such file")
@@ -139,7 +139,7 @@ def _convert_one(
 
 
 def _inputs(folder: Path) -> list[Path]:
-    from ..io import FORMATS
+    from flexreg.io import FORMATS
 
     return sorted(
         p

@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..errors import ConfigError, InputError
-from . import app
-from ._common import console, stage, write_all
+from flexreg.cli._common import console, stage, write_all
+from flexreg.cli.app import app
+from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
-    from ..metrics import EvaluationResult
+    from flexreg.odometry.evaluation import EvaluationResult
 
 FORMATS = ("auto", "tum", "kitti")
 CONVENTIONS = ("tools", "paper")
@@ -35,7 +35,7 @@ def _check_options(
     """Validate everything that does not need the input files, before anything is read."""
     if fmt not in FORMATS:
         raise ConfigError(f"--format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    from ..metrics import check_interval
+    from flexreg.odometry.evaluation import check_interval
 
     check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
     if convention not in CONVENTIONS:
@@ -124,9 +124,9 @@ def evaluate_command(
 
     Nothing is written unless the evaluation succeeds.
     """
-    from .._version import __version__
-    from ..io.trajectory import detect_format, read_trajectory
-    from ..metrics import evaluate
+    from flexreg._version import __version__
+    from flexreg.io.trajectory import detect_format, read_trajectory
+    from flexreg.odometry.evaluation import evaluate
 
     _check_options(
         fmt=fmt,
@@ -160,7 +160,7 @@ def evaluate_command(
     # everything is computed before the first file is written
     writers: list[tuple[Path, Any]] = []
     if plot is not None:
-        from ..metrics import plot_evaluation
+        from flexreg.odometry.evaluation import plot_evaluation
 
         with stage("Drawing"):
             fig = plot_evaluation(
@@ -186,7 +186,7 @@ def evaluate_command(
 
 
 def _save_figure(path: Path, fig: Any) -> None:
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
 
@@ -194,7 +194,7 @@ def _save_figure(path: Path, fig: Any) -> None:
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
     import json
 
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     text = json.dumps(doc, indent=2) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
@@ -204,7 +204,7 @@ def _print_table(result: EvaluationResult, fmt: str) -> None:
     from rich.table import Table
     from rich.text import Text
 
-    from ..metrics import interval_label
+    from flexreg.odometry.evaluation import interval_label
 
     a, r = result.ate, result.rpe
     tu = "frames" if fmt == "kitti" else "s"  # KITTI timestamps are frame indices

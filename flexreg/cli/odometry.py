@@ -10,14 +10,14 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..errors import ConfigError, InputError
-from . import app
-from ._common import console, err_console, progress_bar, stage
+from flexreg.cli._common import console, err_console, progress_bar, stage
+from flexreg.cli.app import app
+from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
-    from ..io.sequence import Sequence
-    from ..metrics import EvaluationResult
-    from ..odometry import OdometryResult
+    from flexreg.io.sequence import Sequence
+    from flexreg.odometry.evaluation import EvaluationResult
+    from flexreg.odometry.track import OdometryResult
 
 
 def _check_options(
@@ -43,8 +43,8 @@ def _check_options(
     json_out: Path | None,
 ) -> None:
     """Validate everything that does not need the sequence, before anything is read."""
-    from ..features import METHODS as FEATURES
-    from ..odometry import IMAGES, METHODS
+    from flexreg.odometry.track import IMAGES, METHODS
+    from flexreg.stages.keypoints import METHODS as FEATURES
 
     if image not in IMAGES:
         raise ConfigError(f"--image: unknown feature image {image!r}; known: {', '.join(IMAGES)}")
@@ -79,7 +79,7 @@ def _check_options(
         )
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise ConfigError(f"--rate-hz: must be a positive frame rate, got {rate_hz}")
-    from ..metrics import check_interval
+    from flexreg.odometry.evaluation import check_interval
 
     check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
     if not sequence.exists():
@@ -184,11 +184,11 @@ def odometry_command(
     A frame pair that cannot be solved is reported and bridged (matched against the last good
     frame, else constant velocity). Nothing is written unless the run succeeds.
     """
-    from .._version import __version__
-    from ..io import atomic_write
-    from ..io.sequence import read_sequence
-    from ..io.trajectory import write_trajectory
-    from ..odometry import OdometryConfig, odometry
+    from flexreg._version import __version__
+    from flexreg.io import atomic_write
+    from flexreg.io.sequence import read_sequence
+    from flexreg.io.trajectory import write_trajectory
+    from flexreg.odometry.track import OdometryConfig, odometry
 
     _check_options(
         image=image,
@@ -280,8 +280,8 @@ def _evaluate(
     seq: Sequence, result: OdometryResult, delta: float, delta_unit: str
 ) -> tuple[EvaluationResult | None, str]:
     """ATE/RPE against the sequence's ground truth, or None and why not."""
-    from ..errors import FlexregError
-    from ..metrics import evaluate
+    from flexreg.errors import FlexregError
+    from flexreg.odometry.evaluation import evaluate
 
     if seq.groundtruth is None:
         return None, "no ground truth in the sequence"
@@ -300,7 +300,7 @@ def _print_summary(
 ) -> None:
     from rich.table import Table
 
-    from ..metrics import interval_label
+    from flexreg.odometry.evaluation import interval_label
 
     c = result.config
     t = Table(title="odometry", show_header=False, title_justify="left")

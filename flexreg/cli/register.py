@@ -11,16 +11,16 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..errors import ConfigError, InputError
-from . import app
-from ._common import console, read_input, stage, write_all
+from flexreg.cli._common import console, read_input, stage, write_all
+from flexreg.cli.app import app
+from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from ..pipeline import RegistrationConfig, RegistrationResult
-    from ..scan import Scan
+    from flexreg.core.scan import Scan
+    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
 
 ICP_METHODS = ("point-to-plane", "gicp", "point-to-point")
 #: colours of the merged cloud (Okabe-Ito orange and blue, distinguishable when colour-blind)
@@ -45,8 +45,8 @@ def _check_options(
     merged: Path | None,
 ) -> None:
     """Validate everything that does not need the input files, before anything is read."""
-    from ..features import METHODS
-    from ..images import KINDS
+    from flexreg.stages.feature_images import KINDS
+    from flexreg.stages.keypoints import METHODS
 
     kinds = (*KINDS, "intensity")
     if image not in kinds:
@@ -118,9 +118,9 @@ class _StageSpinners(AbstractContextManager["_StageSpinners"]):
 
 def _match_png(target: Scan, source: Scan, result: RegistrationResult) -> NDArray[np.uint8]:
     """Both feature images (target on top) with the RANSAC inliers drawn as lines."""
-    from ..pipeline import feature_image
-    from ..projection import range_image
-    from ..report import match_image
+    from flexreg.io.info import match_image
+    from flexreg.registration.pipeline import feature_image
+    from flexreg.stages.projection import range_image
 
     ft, _ = feature_image(range_image(target), result.config)
     fs, _ = feature_image(range_image(source), result.config)
@@ -133,8 +133,8 @@ def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
     """Both clouds in the target frame, target and source each in one colour."""
     import numpy as np
 
-    from ..scan import Scan
-    from ..transforms import apply
+    from flexreg.core.scan import Scan
+    from flexreg.core.transforms import apply
 
     colors = np.empty((len(target) + len(source), 3), dtype=np.uint8)
     colors[: len(target)] = TARGET_RGB
@@ -208,9 +208,9 @@ def register_command(
 
     Nothing is written unless registration succeeds.
     """
-    from .._version import __version__
-    from ..io import atomic_write, write_scan, write_transform_json, write_transform_txt
-    from ..pipeline import RegistrationConfig, register
+    from flexreg._version import __version__
+    from flexreg.io import atomic_write, write_scan, write_transform_json, write_transform_txt
+    from flexreg.registration.pipeline import RegistrationConfig, register
 
     _check_options(
         image=image,
@@ -288,8 +288,8 @@ def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
 
     import numpy as np
 
-    from ..io import read_transform
-    from ..transforms import as_transform, invert
+    from flexreg.core.transforms import as_transform, invert
+    from flexreg.io import read_transform
 
     if path.suffix.lower() == ".json" and path.is_file():
         try:
@@ -308,7 +308,7 @@ def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
 
 
 def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str, float]:
-    from ..transforms import rotation_error_deg, translation_error_m
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
 
     return {
         "coarse_rotation_deg": rotation_error_deg(result.T_coarse, T_true),
@@ -326,7 +326,7 @@ def _print_summary(
     import numpy as np
     from rich.table import Table
 
-    from ..transforms import rotation_error_deg, translation_error_m
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
 
     def motion(T: NDArray[np.float64]) -> str:
         rot, dist = rotation_error_deg(T, np.eye(4)), float(np.linalg.norm(T[:3, 3]))

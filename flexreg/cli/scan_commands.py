@@ -6,8 +6,8 @@ from pathlib import Path
 
 import typer
 
-from . import app
-from ._common import console, read_input, stage
+from flexreg.cli._common import console, read_input, stage
+from flexreg.cli.app import app
 
 PinholeOpt = typer.Option(
     None,
@@ -42,7 +42,7 @@ def info(
     """Describe a scan file: format, points, grid, field of view, ranges, pose."""
     import json
 
-    from ..report import scan_summary
+    from flexreg.io.info import scan_summary
 
     with stage(f"Reading {scan.name}"):
         scans = read_input(
@@ -57,7 +57,7 @@ def info(
     if as_json:
         console.print_json(json.dumps(summaries))
         return
-    from ..report import render_scan_summary
+    from flexreg.io.info import render_scan_summary
 
     for s in summaries:
         console.print(render_scan_summary(s))
@@ -91,9 +91,9 @@ def project(
     """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
     import math
 
-    from ..errors import InputError
-    from ..projection import range_image
-    from ..report import write_range_image
+    from flexreg.errors import InputError
+    from flexreg.io.info import write_range_image
+    from flexreg.stages.projection import range_image
 
     if out.suffix.lower() != ".png":
         raise InputError(out, "output must be a .png file")
@@ -113,8 +113,8 @@ def project(
     s = scans[index]
     with stage("Building range image"):
         if resample or not s.has_grid:
-            from ..projection import auto_spherical_camera
-            from ..projection import project as zproject
+            from flexreg.stages.projection import auto_spherical_camera
+            from flexreg.stages.projection import project as zproject
 
             if len(s) == 0:
                 raise InputError(scan, "scan has no points")

@@ -9,15 +9,15 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from . import app
-from ._common import console, err_console, progress_bar
+from flexreg.cli._common import console, err_console, progress_bar
+from flexreg.cli.app import app
 
 if TYPE_CHECKING:
-    from ..synth.dataset import SynthResult
+    from flexreg.synth.dataset import SynthResult
 
 
 def _parse_pair(text: str, sep: str, what: str, option: str) -> tuple[float, float]:
-    from ..errors import ConfigError
+    from flexreg.errors import ConfigError
 
     parts = text.lower().replace(" ", "").split(sep)
     try:
@@ -74,8 +74,8 @@ def synth(
     Writes scene.ply, one file per station, and gt.json with every station pose
     T_world_scanner and the pairwise T_target_source = inv(T_world_target) @ T_world_source.
     """
-    from ..errors import ConfigError
-    from ..synth.dataset import SynthConfig, synthesize
+    from flexreg.errors import ConfigError
+    from flexreg.synth.dataset import SynthConfig, synthesize
 
     w, h = _parse_pair(resolution, "x", "WIDTHxHEIGHT such as 2048x1024", "--resolution")
     if w != int(w) or h != int(h):

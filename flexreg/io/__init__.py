@@ -1,6 +1,6 @@
 """Scan and transform I/O: ``read_scan`` / ``read_scans`` / ``write_scan`` dispatch on the suffix.
 
-Every reader returns whole, validated :class:`~flexreg.scan.Scan` objects or raises
+Every reader returns whole, validated :class:`~flexreg.core.scan.Scan` objects or raises
 :class:`~flexreg.errors.InputError` naming the file and the problem; nothing is half-read.
 
 =============  ==========================================================================
@@ -26,9 +26,9 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
-from ..scan import Scan
-from .transform_io import read_transform, write_transform_json, write_transform_txt
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
+from flexreg.io.transform_io import read_transform, write_transform_json, write_transform_txt
 
 __all__ = [
     "FORMATS",

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera, DepthKind, PinholeCamera, SphericalCamera
-from ..errors import InputError
-from ..scan import Scan
+from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamera
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
 
 TUM_DEPTH_SCALE = 1.0 / 5000.0  # metres per unit of TUM RGB-D depth PNGs
 MM_DEPTH_SCALE = 1.0e-3
@@ -74,7 +74,7 @@ def read_sidecar(path: Path) -> dict[str, Any]:
     dict
         Keyword arguments for :func:`read`: ``camera`` and whichever of the others are given.
     """
-    from ..camera import camera_from_dict
+    from flexreg.core.camera import camera_from_dict
 
     side = sidecar_path(path)
     try:
@@ -113,7 +113,7 @@ def read(
     invalid_values : tuple of int
         Stored values meaning no return (0 always).
     """
-    from ..projection import from_depth, to_scan
+    from flexreg.core.range_image import from_depth, to_scan
 
     if camera is None:
         if not sidecar_path(path).is_file():

@@ -46,9 +46,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..camera import PinholeCamera
-from ..errors import InputError
-from ..transforms import as_transform
+from flexreg.core.camera import PinholeCamera
+from flexreg.core.transforms import as_transform
+from flexreg.errors import InputError
 
 __all__ = [
     "DISTORTION_LENGTHS",
@@ -85,7 +85,7 @@ class CameraIntrinsics:
     ----------
     K : (3, 3) float64
         ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` in pixels; pixel centres at integer
-        coordinates (OpenCV convention, see :mod:`flexreg.camera`).
+        coordinates (OpenCV convention, see :mod:`flexreg.core.camera`).
     distortion : (D,) float64
         OpenCV distortion coefficients, ``D`` in :data:`DISTORTION_LENGTHS` (0: none).
     width, height : int or None

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from ..scan import Scan
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
 
 __all__ = ["read"]
 

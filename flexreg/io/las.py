@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..scan import Scan
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
 
 __all__ = ["read"]
 

@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import camera_from_dict
-from ..errors import InputError
-from ..scan import Scan
+from flexreg.core.camera import camera_from_dict
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
 
 FORMAT_VERSION = 1
 

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..scan import Scan
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
 
 __all__ = ["read", "write"]
 
@@ -358,7 +358,7 @@ def _read_pcd(path: Path, pcd: _PcdHeader) -> Scan:
 
 def _viewpoint_pose(path: Path, vp: list[float]) -> NDArray[np.float64]:
     """``T_world_scanner`` from a PCD ``VIEWPOINT tx ty tz qw qx qy qz``."""
-    from .e57 import _quat_wxyz_to_matrix
+    from flexreg.io.e57 import _quat_wxyz_to_matrix
 
     q = np.asarray(vp[3:], dtype=np.float64)
     norm = float(np.linalg.norm(q))

@@ -30,9 +30,9 @@ import numpy as np
 from numba import prange
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..scan import Scan
-from ..transforms import is_rigid
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import is_rigid
+from flexreg.errors import InputError
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,8 @@ layout              what the folder holds
 ==================  ==========================================================================
 ``tum``             ``depth.txt`` (+ ``rgb.txt``, ``groundtruth.txt``), lines ``timestamp
                     file``; depth PNGs in 1/5000 m; colour associated to depth by timestamp
-                    (:func:`flexreg.metrics.associate`: nearest first, less than ``max_dt_s``
+                    (:func:`flexreg.odometry.evaluation.associate`: nearest first, less than
+                    ``max_dt_s``
                     apart, each used once). ``flexreg synth
                     --rgbd-frames N`` writes this layout to ``<out>/rgbd`` (with a
                     ``camera.json``); its output folder itself is accepted too.
@@ -44,12 +45,12 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera, DepthKind, PinholeCamera, camera_from_dict
-from ..errors import InputError
+from flexreg.core.camera import Camera, DepthKind, PinholeCamera, camera_from_dict
+from flexreg.errors import InputError
 
 if TYPE_CHECKING:
-    from ..projection import RangeImage
-    from .trajectory import Trajectory
+    from flexreg.core.range_image import RangeImage
+    from flexreg.io.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -158,14 +159,15 @@ class Sequence:
         InputError
             The depth file is missing or unreadable, or its size disagrees with the camera.
         """
-        from ..projection import from_depth, range_image
+        from flexreg.core.range_image import from_depth
+        from flexreg.stages.projection import range_image
 
         frame = self.frames[i]
         if self.kind == "scans":
-            from . import read_scan
+            from flexreg.io import read_scan
 
             return range_image(read_scan(frame.depth))
-        from .depth import read_depth_png
+        from flexreg.io.depth import read_depth_png
 
         assert self.camera is not None
         d = read_depth_png(
@@ -314,7 +316,7 @@ def detect_kind(root: Path) -> str:
         return "7scenes"
     if any(n.lower().endswith(".png") for n in names):
         return "depth-folder"
-    from . import FORMATS
+    from flexreg.io import FORMATS
 
     scan_suffixes = set(FORMATS) - {".png"}
     if any(Path(n).suffix.lower() in scan_suffixes for n in names):
@@ -405,7 +407,7 @@ def _read_tum(
     rgb_list = root / "rgb.txt"
     if rgb_list.is_file():
         rgb = read_list(rgb_list)
-        from ..metrics import associate
+        from flexreg.odometry.evaluation import associate
 
         i_depth, i_rgb = associate([d[0] for d in depth], [r[0] for r in rgb], max_dt_s=max_dt_s)
         if len(i_depth) == 0:
@@ -439,7 +441,7 @@ def _read_tum(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from .trajectory import read_trajectory
+        from flexreg.io.trajectory import read_trajectory
 
         gt = read_trajectory(gt_file, "tum")
     return Sequence(
@@ -510,7 +512,7 @@ def _read_7scenes(
     camera, source = _intrinsics(root, numbered[ids[0]], intrinsics, side, SEVEN_SCENES_INTRINSICS)
     gt = None
     if poses:
-        from .trajectory import Trajectory
+        from flexreg.io.trajectory import Trajectory
 
         gt = Trajectory(
             timestamps=np.array([f.timestamp for f in frames], dtype=np.float64),
@@ -531,7 +533,7 @@ def _read_7scenes(
 
 def _read_pose_txt(path: Path) -> NDArray[np.float64]:
     """A 4x4 camera-to-world matrix as 4 lines of 4 numbers (7-Scenes ``pose.txt``)."""
-    from ..transforms import as_transform
+    from flexreg.core.transforms import as_transform
 
     rows: list[list[float]] = []
     for no, raw in enumerate(path.read_text(errors="replace").splitlines(), start=1):
@@ -582,7 +584,7 @@ def _read_depth_folder(
     if not side and intrinsics is None and not _has_intrinsics_file(root):
         sidecar = files[0].with_name(files[0].stem + ".camera.json")
         if sidecar.is_file():
-            from .depth import read_sidecar
+            from flexreg.io.depth import read_sidecar
 
             opts = read_sidecar(files[0])
             side = dict(opts)
@@ -603,7 +605,7 @@ def _read_depth_folder(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from .trajectory import read_trajectory
+        from flexreg.io.trajectory import read_trajectory
 
         gt = read_trajectory(gt_file, "tum")
     return Sequence(
@@ -632,7 +634,7 @@ def _stamp_from_name(stem: str) -> float | None:
 
 
 def _read_scans(root: Path, rate_hz: float, max_frames: int | None) -> Sequence:
-    from . import FORMATS
+    from flexreg.io import FORMATS
 
     suffixes = set(FORMATS) - {".png"}
     files = sorted(
@@ -645,7 +647,7 @@ def _read_scans(root: Path, rate_hz: float, max_frames: int | None) -> Sequence:
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from .trajectory import read_trajectory
+        from flexreg.io.trajectory import read_trajectory
 
         gt = read_trajectory(gt_file, "tum")
     else:
@@ -669,8 +671,8 @@ def _synth_lidar_truth(root: Path, frames: tuple[Frame, ...]) -> Trajectory | No
         by_name = {Path(str(f.get("file", ""))).name: f for f in lidar.get("frames", [])}
         if not all(f.depth.name in by_name for f in frames):
             continue
-        from ..transforms import as_transform
-        from .trajectory import Trajectory
+        from flexreg.core.transforms import as_transform
+        from flexreg.io.trajectory import Trajectory
 
         poses = np.stack(
             [
@@ -784,7 +786,7 @@ def _intrinsics(
 
 def _check_groundtruth(seq: Sequence, max_dt_s: float) -> None:
     """The ground truth must associate with at least 3 frames, or it is of no use."""
-    from ..metrics import associate
+    from flexreg.odometry.evaluation import associate
 
     assert seq.groundtruth is not None
     ig, _ = associate(seq.groundtruth, seq.timestamps, max_dt_s=max_dt_s)

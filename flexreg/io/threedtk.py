@@ -16,7 +16,7 @@ A scanner-written ``.3d`` file is a sequence of 2D scan profiles (for the Kurt3D
 profiles of 360 points, a SICK line scanner pitched from -49 to +68 deg, each profile sweeping
 the azimuth from +90 to -90 deg). A new profile starts where the azimuth ``atan2(x, z)`` jumps
 back by more than 90 deg. The grid is oriented like flexreg's equirectangular images
-(:class:`~flexreg.camera.SphericalCamera`): row 0 is the highest profile (rows run downwards)
+(:class:`~flexreg.core.camera.SphericalCamera`): row 0 is the highest profile (rows run downwards)
 and columns run with increasing azimuth ``atan2(Y, X)`` in the right-handed frame. Profiles or
 points within a profile are reversed as needed; for the Kurt3D sample the profiles are stored
 bottom-up, so rows are the profiles in reverse order and columns keep the file order.
@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
-from ..scan import Scan
-from ..transforms import as_transform
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import as_transform
+from flexreg.errors import InputError
 
 __all__ = ["pose_to_transform", "read", "read_pose"]
 

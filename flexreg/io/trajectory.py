@@ -30,7 +30,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from flexreg.errors import InputError
 
 log = logging.getLogger(__name__)
 
@@ -390,7 +390,7 @@ def write_trajectory(
     pathlib.Path
         ``path``.
     """
-    from . import atomic_write
+    from flexreg.io import atomic_write
 
     p = Path(path)
     if fmt not in FORMATS:

@@ -10,14 +10,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
-from ..transforms import as_transform
+from flexreg.core.transforms import as_transform
+from flexreg.errors import InputError
 
 
 def write_transform_txt(path: str | PathLike[str], T: ArrayLike) -> Path:
     """Write a 4x4 matrix as four whitespace-separated rows (what CloudCompare's
     "Edit > Apply transformation" and ``-APPLY_TRANS`` read). Full float64 precision."""
-    from . import atomic_write
+    from flexreg.io import atomic_write
 
     M = as_transform(T)
     p = Path(path)
@@ -30,7 +30,7 @@ def write_transform_json(
     path: str | PathLike[str], T: ArrayLike, *, key: str = "T_target_source", **metadata: Any
 ) -> Path:
     """Write ``{key: [[4x4]], **metadata}`` as JSON (metadata must be JSON-serialisable)."""
-    from . import atomic_write
+    from flexreg.io import atomic_write
 
     M = as_transform(T)
     doc = {key: M.tolist(), **metadata}

@@ -12,7 +12,7 @@ guaranteed mutual overlap and inter-station distance; :func:`synthesize` writes 
 T_world_source``; scans hold points in the scanner frame with ``T_world_scanner`` as pose.
 """
 
-from .dataset import (
+from flexreg.synth.dataset import (
     SynthConfig,
     SynthResult,
     camera_trajectory,
@@ -20,8 +20,8 @@ from .dataset import (
     smooth_path,
     synthesize,
 )
-from .mesh import Material, MeshBuilder
-from .placement import (
+from flexreg.synth.mesh import Material, MeshBuilder
+from flexreg.synth.placement import (
     FreeMap,
     StationPair,
     free_map,
@@ -31,8 +31,8 @@ from .placement import (
     stream,
     visible_fraction,
 )
-from .scene import RayHits, Scene, read_scene
-from .scenes import (
+from flexreg.synth.scene import RayHits, Scene, read_scene
+from flexreg.synth.scenes import (
     SCENE_KINDS,
     add_mesh_objects,
     courtyard,
@@ -41,7 +41,7 @@ from .scenes import (
     room,
     scene_from_mesh,
 )
-from .sensors import (
+from flexreg.synth.sensors import (
     RGBDConfig,
     RGBDFrame,
     TLSConfig,

@@ -28,13 +28,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._version import __version__
-from ..errors import ConfigError, InputError
-from ..transforms import invert
-from .placement import place_stations, station_overlap, stream
-from .scene import Scene
-from .scenes import SCENE_KINDS, make_scene, scene_from_mesh
-from .sensors import RGBDConfig, TLSConfig, lidar_config, look_at, scan_tls, write_tum_sequence
+from flexreg._version import __version__
+from flexreg.core.transforms import invert
+from flexreg.errors import ConfigError, InputError
+from flexreg.synth.placement import place_stations, station_overlap, stream
+from flexreg.synth.scene import Scene
+from flexreg.synth.scenes import SCENE_KINDS, make_scene, scene_from_mesh
+from flexreg.synth.sensors import (
+    RGBDConfig,
+    TLSConfig,
+    lidar_config,
+    look_at,
+    scan_tls,
+    write_tum_sequence,
+)
 
 FORMATS = ("ptx", "e57", "npz")
 Progress = Callable[[str, int, int], None]
@@ -251,8 +258,8 @@ def smooth_path(
     heading : (n_frames,) float64, radians
         Direction of travel (azimuth from +X).
     """
-    from .placement import free_map
-    from .scenes import as_rng
+    from flexreg.synth.placement import free_map
+    from flexreg.synth.scenes import as_rng
 
     gen, _ = as_rng(rng)
     if step_m <= 0:
@@ -353,7 +360,7 @@ def camera_trajectory(
 ) -> list[NDArray[np.float64]]:
     """Hand-held RGB-D camera poses (x right, y down, z forward) along :func:`smooth_path`,
     looking ahead with a slow pan (+-23 deg) and a downward tilt (11 +- 6 deg)."""
-    from .scenes import as_rng
+    from flexreg.synth.scenes import as_rng
 
     gen, _ = as_rng(rng)
     P, heading = smooth_path(scene, n_frames, step_m=step_m, rng=gen)
@@ -391,7 +398,7 @@ def lidar_trajectory(
 
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     text = json.dumps(doc, indent=2) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
@@ -424,7 +431,7 @@ def synthesize(
     ------
     ConfigError, InputError, DegenerateGeometryError
     """
-    from ..io import write_scan
+    from flexreg.io import write_scan
 
     cfg = config or SynthConfig()
     out = Path(out_dir)

@@ -13,7 +13,7 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .mesh import Material, MeshBuilder, box, cylinder, ellipsoid, frustum, rot_z, tube
+from flexreg.synth.mesh import Material, MeshBuilder, box, cylinder, ellipsoid, frustum, rot_z, tube
 
 # ------------------------------------------------------------------ materials
 PLASTER = Material(0.78, (226, 222, 212))
@@ -730,7 +730,7 @@ def tank(rng: np.random.Generator) -> tuple[MeshBuilder, float]:
         z0 += leg_h
         b.add(frustum([0, 0, z0 - 0.4], [0, 0, z0], 0.15, r, segments=32), mat)
     b.add(cylinder([0, 0, z0], [0, 0, z0 + h], r, segments=40), mat)
-    from .mesh import dome
+    from flexreg.synth.mesh import dome
 
     b.add(dome([0, 0, z0 + h], r, r * rng.uniform(0.2, 0.4), segments=40), mat)
     for z in np.arange(z0 + 1.0, z0 + h, rng.uniform(1.2, 2.0)):  # stiffening rings

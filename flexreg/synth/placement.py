@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import ConfigError, DegenerateGeometryError
-from ..scan import Scan
-from ..transforms import as_transform, invert, rotation_about_axis
-from .scene import Scene
-from .scenes import as_rng, make_scene
-from .sensors import TLSConfig, scan_tls
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import as_transform, invert, rotation_about_axis
+from flexreg.errors import ConfigError, DegenerateGeometryError
+from flexreg.synth.scene import Scene
+from flexreg.synth.scenes import as_rng, make_scene
+from flexreg.synth.sensors import TLSConfig, scan_tls
 
 #: coarse grid used to measure overlap (2 degree steps)
 OVERLAP_GRID = (180, 90)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError
+from flexreg.errors import InputError
 
 if TYPE_CHECKING:
     import open3d as o3d
@@ -223,7 +223,7 @@ class Scene:
         ``red green blue`` (uint8) and ``reflectance`` (float32); identical scenes give
         identical bytes.
         """
-        from ..io import atomic_write
+        from flexreg.io import atomic_write
 
         p = Path(path)
         if p.suffix.lower() != ".ply":

@@ -18,10 +18,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError, InputError
-from . import objects as ob
-from .mesh import Material, MeshBuilder, box, cylinder, ellipsoid, rot_z, tube, wall_boxes
-from .scene import Scene
+from flexreg.errors import ConfigError, InputError
+from flexreg.synth import objects as ob
+from flexreg.synth.mesh import (
+    Material,
+    MeshBuilder,
+    box,
+    cylinder,
+    ellipsoid,
+    rot_z,
+    tube,
+    wall_boxes,
+)
+from flexreg.synth.scene import Scene
 
 SCENE_KINDS = ("room", "courtyard", "hall")
 

@@ -32,12 +32,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..camera import PinholeCamera, SphericalCamera
-from ..errors import ConfigError
-from ..scan import Scan
-from ..transforms import as_transform
-from .scene import RayHits, Scene
-from .scenes import as_rng
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import as_transform
+from flexreg.errors import ConfigError
+from flexreg.synth.scene import RayHits, Scene
+from flexreg.synth.scenes import as_rng
 
 
 # ====================================================================================== TLS
@@ -276,7 +276,7 @@ def scan_tls(
     Scan
         Valid returns in the scanner frame with intensity (and colours if
         ``config.colors``), the native ``(height, width)`` grid and ``grid_index``, the pose
-        ``T_world_scanner`` and the :class:`~flexreg.camera.SphericalCamera` of the grid.
+        ``T_world_scanner`` and the :class:`~flexreg.core.camera.SphericalCamera` of the grid.
     """
     cfg = config or TLSConfig()
     gen, _ = as_rng(rng)
@@ -463,7 +463,7 @@ class RGBDFrame:
 
     def depth_png(self) -> NDArray[np.uint16]:
         """Depth as TUM 16-bit units (5000 per metre), 0 = no reading."""
-        from ..io.depth import TUM_DEPTH_SCALE
+        from flexreg.io.depth import TUM_DEPTH_SCALE
 
         d = np.nan_to_num(self.depth, nan=0.0)
         return np.clip(np.rint(d / TUM_DEPTH_SCALE), 0, 65535).astype(np.uint16)
@@ -586,7 +586,7 @@ def write_tum_sequence(
     import cv2
     from scipy.spatial.transform import Rotation
 
-    from ..io import atomic_write
+    from flexreg.io import atomic_write
 
     cfg = config or RGBDConfig()
     gen, _ = as_rng(rng)

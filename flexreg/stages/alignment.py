@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import DegenerateGeometryError, InputError
+from flexreg.errors import DegenerateGeometryError, InputError
 
 log = logging.getLogger(__name__)
 

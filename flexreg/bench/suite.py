@@ -1,7 +1,7 @@
 """The comparison benchmark behind ``flexreg bench``: flexreg against the baselines on synthetic
 station pairs, on real pairs with a reference, and across resolutions.
 
-Suites (every pair runs through :func:`flexreg.comparison.compare`, each method in its own
+Suites (every pair runs through :func:`flexreg.bench.compare.compare`, each method in its own
 process, wall time and peak memory of the call alone):
 
 - **synthetic**: TLS station pairs from the simulator ``flexreg synth`` uses
@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .comparison import (
+from flexreg.bench.compare import (
     DEFAULT_METHODS,
     Comparison,
     SuccessCriteria,
@@ -59,11 +59,11 @@ from .comparison import (
     parse_methods,
     peak_memory_note,
 )
-from .errors import ConfigError, DegenerateGeometryError, FlexregError, InputError
-from .transforms import invert, rotation_about_axis, rotation_error_deg
+from flexreg.core.transforms import invert, rotation_about_axis, rotation_error_deg
+from flexreg.errors import ConfigError, DegenerateGeometryError, FlexregError, InputError
 
 if TYPE_CHECKING:
-    from .scan import Scan
+    from flexreg.core.scan import Scan
 
 log = logging.getLogger(__name__)
 
@@ -246,8 +246,8 @@ def synthetic_case(
     DegenerateGeometryError
         No placement met the distance and overlap in ``max_attempts`` seeds.
     """
-    from .synth import make_scene, place_stations, scan_tls, station_overlap, stream
-    from .synth.sensors import TLSConfig
+    from flexreg.synth import make_scene, place_stations, scan_tls, station_overlap, stream
+    from flexreg.synth.sensors import TLSConfig
 
     nd, ny = len(config.distance_bins_m), len(config.yaw_bins_deg)
     dbin = distance_bin_m or config.distance_bins_m[index % nd]
@@ -396,7 +396,7 @@ def real_case(name: str, data_dir: str | PathLike[str], criteria: SuccessCriteri
     InputError
         Missing or unreadable files.
     """
-    from .io import read_scan, read_scans
+    from flexreg.io import read_scan, read_scans
 
     if name not in REAL_PAIRS:
         raise ConfigError(f"unknown real pair {name!r}; known: {', '.join(REAL_PAIRS)}")
@@ -437,7 +437,7 @@ def real_case(name: str, data_dir: str | PathLike[str], criteria: SuccessCriteri
 
 
 def _matrix(path: Path) -> NDArray[np.float64]:
-    from .transforms import as_transform
+    from flexreg.core.transforms import as_transform
 
     try:
         M = np.array(np.load(path) if path.suffix == ".npy" else np.loadtxt(path), dtype=float)
@@ -454,7 +454,7 @@ def _matrix(path: Path) -> NDArray[np.float64]:
 
 
 def _kitti_poses(path: Path) -> list[NDArray[np.float64]]:
-    from .transforms import as_transform
+    from flexreg.core.transforms import as_transform
 
     try:
         rows = np.loadtxt(path, ndmin=2)
@@ -1252,7 +1252,7 @@ def load_bench(path: str | PathLike[str]) -> BenchResult:
 
 
 def _json_safe(x: Any) -> Any:
-    from .comparison import _json_safe as safe
+    from flexreg.bench.compare import _json_safe as safe
 
     return safe(x)
 

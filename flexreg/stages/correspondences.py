@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .projection import RangeImage
+from flexreg.core.range_image import RangeImage
 
 
 def lift(

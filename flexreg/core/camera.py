@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from flexreg.errors import InputError
 
 DepthKind = Literal["z", "range"]
 TWO_PI = 2.0 * np.pi

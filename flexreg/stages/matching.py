@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .features import Features
+from flexreg.stages.keypoints import Features
 
 
 def match(

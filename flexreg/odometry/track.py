@@ -12,8 +12,8 @@ matched to the previous frame's, and the relative pose comes from one of two sol
     source frames and ``t`` the unit direction, ``s = median(t . (P_t - R P_s))``.
 ``svd``
     The matched keypoints are lifted to 3D on their depth images
-    (:func:`flexreg.correspondences.lift`) and aligned with 3-point RANSAC and the
-    Kabsch/Umeyama SVD (:func:`flexreg.alignment.ransac_rigid`).
+    (:func:`flexreg.stages.correspondences.lift`) and aligned with 3-point RANSAC and the
+    Kabsch/Umeyama SVD (:func:`flexreg.stages.alignment.ransac_rigid`).
 
 The relative poses ``T_prev_cur`` are chained into ``T_world_frame`` (the first frame is the
 world unless ``initial_pose`` says otherwise). A frame that cannot be solved against its
@@ -38,14 +38,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ConfigError, RegistrationError
-from .features import Features
-from .projection import RangeImage
+from flexreg.core.range_image import RangeImage
+from flexreg.errors import ConfigError, RegistrationError
+from flexreg.stages.keypoints import Features
 
 if TYPE_CHECKING:
-    from .camera import PinholeCamera
-    from .io.sequence import Sequence
-    from .io.trajectory import Trajectory
+    from flexreg.core.camera import PinholeCamera
+    from flexreg.io.sequence import Sequence
+    from flexreg.io.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ class OdometryConfig:
     median : {0, 3, 5}
         Median pre-filter window on the depth before the conversion (paper sec. III-B-1).
     fill_holes : bool
-        Fill isolated no-reading pixels first (:func:`flexreg.projection.fill_holes`).
+        Fill isolated no-reading pixels first (:func:`flexreg.stages.projection.fill_holes`).
     stretch : {None, "clahe", "percentile"}
         Contrast normalisation after the 8-bit mapping (None: the paper's plain eq. 10 scaling).
     features : str
@@ -95,7 +95,7 @@ class OdometryConfig:
         Detect only this far from pixels without a value (0: anywhere on valid pixels).
     support : float
         Also drop keypoints closer to a pixel without a value than this times their diameter
-        (0: keep them; see :func:`flexreg.features.detect_and_describe`).
+        (0: keep them; see :func:`flexreg.stages.keypoints.detect_and_describe`).
     ratio : float
         Lowe's ratio-test threshold on the two nearest neighbours.
     mutual : bool
@@ -138,7 +138,7 @@ class OdometryConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        from .features import METHODS as FEATURES
+        from flexreg.stages.keypoints import METHODS as FEATURES
 
         if self.image not in IMAGES:
             raise ConfigError(f"image: unknown feature image {self.image!r}; known: {_l(IMAGES)}")
@@ -349,8 +349,8 @@ def feature_image(
     valid : (H, W) bool
         Pixels with a defined value (all True for colour).
     """
-    from . import images
-    from .errors import InputError
+    from flexreg.errors import InputError
+    from flexreg.stages import feature_images as images
 
     if config.image == "color":
         if color is None:
@@ -361,7 +361,7 @@ def feature_image(
                 "color", f"expected an (H, W) uint8 grey image, got {g.shape} {g.dtype}"
             )
         return g, np.ones(g.shape, dtype=bool)
-    from .projection import fill_holes
+    from flexreg.stages.projection import fill_holes
 
     img = fill_holes(image) if config.fill_holes else image
     f = images.convert(img, config.image, n=config.n, median=config.median)
@@ -417,17 +417,17 @@ def frame_features(
     index : int
         Frame index recorded in the result.
     detector : cv2.Feature2D, optional
-        A detector built once for many frames (:func:`flexreg.features.create_detector`).
+        A detector built once for many frames (:func:`flexreg.stages.keypoints.create_detector`).
     converted : (image, valid), optional
         The output of :func:`feature_image` when it is already computed (e.g. shared by
         several detectors).
     timings : dict, optional
         Accumulates seconds in ``image`` and ``features``.
     """
-    from .camera import PinholeCamera
-    from .correspondences import lift
-    from .errors import InputError
-    from .features import detect_and_describe
+    from flexreg.core.camera import PinholeCamera
+    from flexreg.errors import InputError
+    from flexreg.stages.correspondences import lift
+    from flexreg.stages.keypoints import detect_and_describe
 
     t = timings if timings is not None else {}
     t0 = time.perf_counter()
@@ -577,8 +577,8 @@ def svd_pose(
     RegistrationError
         Too few 3D matches or inliers, or collinear inliers.
     """
-    from .alignment import ransac_rigid
-    from .errors import DegenerateGeometryError
+    from flexreg.errors import DegenerateGeometryError
+    from flexreg.stages.alignment import ransac_rigid
 
     ok = np.isfinite(target_xyz).all(1) & np.isfinite(source_xyz).all(1)
     if ok.sum() < max(3, min_inliers):
@@ -624,7 +624,7 @@ def solve_pair(
     """
     import cv2
 
-    from .matching import match
+    from flexreg.stages.matching import match
 
     t = timings if timings is not None else {}
     t0 = time.perf_counter()
@@ -671,7 +671,7 @@ def scale_motion(T: NDArray[np.float64], factor: float) -> NDArray[np.float64]:
     """The rigid motion ``T`` continued for ``factor`` times as long at constant velocity:
     ``exp(factor * log(T))`` on SE(3) (a screw motion; ``factor`` 2 gives ``T @ T``).
 
-    >>> from flexreg.transforms import make_transform
+    >>> from flexreg.core.transforms import make_transform
     >>> scale_motion(make_transform(np.eye(3), [0.2, 0.0, 0.0]), 0.5)[:3, 3].round(12).tolist()
     [0.1, 0.0, 0.0]
     """
@@ -724,7 +724,7 @@ def odometry(
     RegistrationError
         Not a single frame pair could be solved (the trajectory would be pure guesswork).
     """
-    from .features import create_detector
+    from flexreg.stages.keypoints import create_detector
 
     if config.image == "color" and not sequence.has_color:
         raise ConfigError(
@@ -791,8 +791,8 @@ def track(
     -------
     OdometryResult
     """
-    from .io.trajectory import Trajectory
-    from .transforms import as_transform, invert
+    from flexreg.core.transforms import as_transform, invert
+    from flexreg.io.trajectory import Trajectory
 
     stamps = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     n = len(stamps)

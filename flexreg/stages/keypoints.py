@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ConfigError, InputError
+from flexreg.errors import ConfigError, InputError
 
 log = logging.getLogger(__name__)
 

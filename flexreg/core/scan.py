@@ -9,11 +9,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
-from .transforms import as_transform
+from flexreg.core.transforms import as_transform
+from flexreg.errors import InputError
 
 if TYPE_CHECKING:
-    from .camera import Camera
+    from flexreg.core.camera import Camera
 
 
 @dataclass(eq=False)

@@ -9,7 +9,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ConfigError, RegistrationError
+from flexreg.errors import ConfigError, RegistrationError
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,8 @@ class IcpResult:
     association : {"nearest", "projective"}
         How source points found their target partners: nearest neighbour (Open3D ICP;
         ``voxel_m`` is the downsampling voxel) or the pixel hit by their ray in the target's
-        range image (:func:`flexreg.projective.projective_icp`, symmetric: ``source_points``
+        range image (:func:`flexreg.stages.refinement.projective.projective_icp`, symmetric:
+        ``source_points``
         counts the sampled points of both scans, ``voxel_m`` is the cell of the source's even
         sampling).
     """

@@ -56,10 +56,11 @@ import numpy as np
 from numba import prange
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ConfigError, InputError
+from flexreg.core.grid import wrap_col
+from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
-    from .projection import RangeImage
+    from flexreg.core.range_image import RangeImage
 
 __all__ = [
     "BEARING_DIRECTIONS",
@@ -118,17 +119,6 @@ def _ok(x: float, y: float, z: float) -> bool:  # pragma: no cover - compiled
         and math.isfinite(z)
         and (x != 0.0 or y != 0.0 or z != 0.0)
     )
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _col(j: int, W: int, wrap: bool) -> int:  # pragma: no cover - compiled
-    """Column ``j`` wrapped into ``[0, W)`` for a wrapping image, else -1 when outside."""
-    if 0 <= j < W:
-        return j
-    if wrap:
-        j = j % W
-        return j
-    return -1
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -298,7 +288,7 @@ def _bearing_kernel(xyz, di, dj, wrap, out):  # pragma: no cover
         for j in range(W):
             if j0 <= j < j1:
                 continue
-            jp = _col(j + dj, W, wrap)
+            jp = wrap_col(j + dj, W, wrap)
             out[i, j] = np.nan if jp < 0 else _bearing_px(xyz, i, j, ip, jp)
 
 
@@ -324,8 +314,8 @@ def _curvature_kernel(xyz, k, wrap, mode, out):  # pragma: no cover
         D = np.empty((5, 3))  # P_u, P_v, P_uu, P_vv, P_uv
         for j in range(W):
             out[i, j] = np.nan
-            jl = _col(j - k, W, wrap)
-            jr = _col(j + k, W, wrap)
+            jl = wrap_col(j - k, W, wrap)
+            jr = wrap_col(j + k, W, wrap)
             if i - k < 0 or i + k >= H or jl < 0 or jr < 0:
                 continue
             good = True
@@ -427,7 +417,7 @@ def _median_slow(rng, i, j, half, wrap, buf):  # pragma: no cover
     cnt = 0
     for a in range(max(0, i - half), min(H, i + half + 1)):
         for b in range(j - half, j + half + 1):
-            bb = _col(b, W, wrap)
+            bb = wrap_col(b, W, wrap)
             if bb < 0:
                 continue
             r = rng[a, bb]
@@ -478,7 +468,7 @@ def _median_kernel(xyz, rng, half, wrap, out):  # pragma: no cover
 
 def _points(data: PointsLike, wrap: bool | None) -> tuple[NDArray[np.floating], bool]:
     """The (H, W, 3) C-contiguous float32/float64 points of ``data`` and the wrap flag."""
-    from .projection import RangeImage
+    from flexreg.core.range_image import RangeImage
 
     if isinstance(data, RangeImage):
         xyz = data.xyz

@@ -10,11 +10,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import PinholeCamera, SphericalCamera
-from .errors import InputError
-from .projection import RangeImage, azimuth_polar_extent
-from .scan import Scan
-from .transforms import is_rigid, rotation_error_deg
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import RangeImage
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import is_rigid, rotation_error_deg
+from flexreg.errors import InputError
+from flexreg.stages.projection import azimuth_polar_extent
 
 PNG_SCALES_M = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1)
 
@@ -49,7 +50,7 @@ def field_of_view_deg(scan: Scan) -> dict[str, Any]:
 
 def scan_summary(scan: Scan) -> dict[str, Any]:
     """JSON-ready facts about a scan (what ``flexreg info`` shows)."""
-    from .io import detect_format
+    from flexreg.io import detect_format
 
     r = np.linalg.norm(scan.points, axis=1)
     d: dict[str, Any] = {
@@ -164,7 +165,7 @@ def write_range_image(
     """
     import cv2
 
-    from .io import atomic_write
+    from flexreg.io import atomic_write
 
     rng = image.range
     if image.n_valid == 0:

@@ -1,10 +1,13 @@
 """``register(target, source, config)``: the whole chain from two scans to ``T_target_source``.
 
-Stages (each public and usable alone): range image (:mod:`flexreg.projection`) -> feature image
-(:func:`feature_image`) -> keypoints and descriptors (:func:`flexreg.features.detect_and_describe`)
--> matches (:func:`flexreg.matching.match`) -> 3D correspondences
-(:func:`flexreg.correspondences.lift`) -> consistency pruning and RANSAC
-(:mod:`flexreg.alignment`) -> ICP refinement (:func:`flexreg.refine.refine_icp`).
+Stages (each public and usable alone): range image (:mod:`flexreg.stages.projection`) -> feature
+image
+(:func:`feature_image`) -> keypoints and descriptors
+(:func:`flexreg.stages.keypoints.detect_and_describe`)
+-> matches (:func:`flexreg.stages.matching.match`) -> 3D correspondences
+(:func:`flexreg.stages.correspondences.lift`) -> consistency pruning and RANSAC
+(:mod:`flexreg.stages.alignment`) -> ICP refinement
+(:func:`flexreg.stages.refinement.icp.refine_icp`).
 """
 
 from __future__ import annotations
@@ -22,17 +25,23 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from .alignment import consistent_subset, ransac_rigid, squared_residuals
-from .camera import PinholeCamera
-from .correspondences import lift
-from .errors import ConfigError, DegenerateGeometryError, RegistrationError
-from .features import Features, detect_and_describe
-from .matching import match
-from .projection import RangeImage, range_image
-from .projective import grid_normals, point_information
-from .refine import IcpResult
-from .scan import Scan
-from .transforms import invert, rotation_about_axis, rotation_error_deg, translation_error_m
+from flexreg.core.camera import PinholeCamera
+from flexreg.core.range_image import RangeImage
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import (
+    invert,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationError
+from flexreg.stages.alignment import consistent_subset, ransac_rigid, squared_residuals
+from flexreg.stages.correspondences import lift
+from flexreg.stages.keypoints import Features, detect_and_describe
+from flexreg.stages.matching import match
+from flexreg.stages.projection import range_image
+from flexreg.stages.refinement.icp import IcpResult
+from flexreg.stages.refinement.projective import grid_normals, point_information
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +53,7 @@ class RegistrationConfig:
     Attributes
     ----------
     image : str
-        Feature image kind (see :data:`flexreg.images.KINDS`), or ``"intensity"``.
+        Feature image kind (see :data:`flexreg.stages.feature_images.KINDS`), or ``"intensity"``.
     n : int
         Flexion / Bearing Angle neighbourhood size (odd).
     median : int
@@ -79,10 +88,11 @@ class RegistrationConfig:
         Randomness (RANSAC sampling); same seed, same transform.
     fill_holes : bool
         Fill isolated no-return pixels before the conversion
-        (:func:`flexreg.projection.fill_holes`).
+        (:func:`flexreg.stages.projection.fill_holes`).
     upright : {"auto", "on", "off"}
         Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
-        (:mod:`flexreg.topview`) and use the best overlays to guide matching. ``"auto"`` uses it
+        (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"`` uses
+        it
         when both scans are panoramas or native grids that look levelled, ``"on"`` requires it.
     max_tilt_rad : float, radians
         Largest tilt of a scan still treated as levelled.
@@ -225,7 +235,7 @@ def feature_image(
     Flexion (or another conversion) of the range image, contrast-normalised as configured;
     ``"intensity"`` uses the scan's intensity instead.
     """
-    from . import images
+    from flexreg.stages import feature_images as images
 
     if config.image == "intensity":
         if image.intensity is None:
@@ -306,11 +316,12 @@ def _polisher(
     target: RangeImage, normals: NDArray[np.float32], sample: NDArray[np.float64], thr: float
 ) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
     """A quick local ICP of a small even sample of the source (``sample``, about 5000 points)
-    against the target's range image (projective, :func:`flexreg.projective.projective_icp`),
+    against the target's range image (projective,
+    :func:`flexreg.stages.refinement.projective.projective_icp`),
     for judging candidates.
 
     ``target`` must have a camera model; ``normals`` are its :func:`grid_normals`."""
-    from .projective import projective_icp
+    from flexreg.stages.refinement.projective import projective_icp
 
     def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
         try:
@@ -333,7 +344,7 @@ def _polisher(
 def _with_camera(image: RangeImage) -> RangeImage:
     """The image itself when it has a camera model; otherwise its points re-projected through
     an equirectangular camera fitted to them, so that free-space checks can look pixels up."""
-    from .projection import auto_spherical_camera, project
+    from flexreg.stages.projection import auto_spherical_camera, project
 
     if image.camera is not None:
         return image
@@ -344,7 +355,7 @@ def _with_camera(image: RangeImage) -> RangeImage:
 def _working_image(x: Scan | RangeImage, max_pixels: int) -> RangeImage:
     """The range image the image stages work on: at most ``max_pixels`` (every k-th row and
     column of larger grids)."""
-    from .projection import downsample_image, from_grid
+    from flexreg.core.range_image import downsample_image, from_grid
 
     def factor(h: int, w: int) -> int:
         return max(1, math.ceil(math.sqrt(h * w / max(1, max_pixels))))
@@ -387,7 +398,7 @@ def upright_priors(
 
     Each scan's vertical is estimated from its surfaces, the plans of the levelled scans are
     overlaid by FFT correlation over yaw and the height offset is read from their horizontal
-    surfaces (:mod:`flexreg.topview`). Accurate to about a plan cell and a degree: a prior for
+    surfaces (:mod:`flexreg.stages.priors`). Accurate to about a plan cell and a degree: a prior for
     guided matching, not a result.
 
     Raises
@@ -396,7 +407,7 @@ def upright_priors(
         A scan is not levelled (tilt above ``config.max_tilt_rad``) or shows too little
         horizontal or vertical surface.
     """
-    from . import topview
+    from flexreg.stages import priors as topview
 
     views = []
     for img in (target, source):
@@ -695,8 +706,8 @@ def _guided_estimate(
     the estimate cannot jump to an unrelated model the way RANSAC on the same matches can.
     A second, tight guided round around the result collects the final matches.
     """
-    from .alignment import COLLINEAR_RATIO, kabsch, spread_ratio
-    from .matching import match_guided
+    from flexreg.stages.alignment import COLLINEAR_RATIO, kabsch, spread_ratio
+    from flexreg.stages.matching import match_guided
 
     def shrink(T: NDArray[np.float64], pairs: NDArray[np.int64], r0: float) -> Any:
         pt, ps = xt[pairs[:, 0]], xs[pairs[:, 1]]
@@ -748,7 +759,8 @@ def refine(
     """ICP refinement of a coarse ``T_target_source``.
 
     **Point-to-plane (default): symmetric projective ICP on both range images**
-    (:func:`flexreg.projective.projective_icp`). About :data:`PROJECTIVE_ICP_POINTS` points,
+    (:func:`flexreg.stages.refinement.projective.projective_icp`). About
+    :data:`PROJECTIVE_ICP_POINTS` points,
     half from each scan, spread evenly over its surfaces (:func:`area_sample`), are paired with
     the other scan's pixel their rays hit, whose plane comes from that image's grid; both scans
     keep their full image resolution. Sampling by area keeps the dense, noisy or self-similar
@@ -779,11 +791,11 @@ def refine(
     target_image : RangeImage, optional
         The target's range image with a camera model, when already at hand (projective path).
     target_normals : (H, W, 3) float32, optional
-        Its :func:`flexreg.projective.grid_normals`, when already at hand.
+        Its :func:`flexreg.stages.refinement.projective.grid_normals`, when already at hand.
     source_image : RangeImage, optional
         The source's range image with a camera model, when already at hand.
     source_normals : (H, W, 3) float32, optional
-        Its :func:`flexreg.projective.grid_normals`, when already at hand.
+        Its :func:`flexreg.stages.refinement.projective.grid_normals`, when already at hand.
     samples : (float, (N, 3) float64, (M, 3) float64), optional
         The projective path's area samples (source cell size, source and target points), when
         already at hand.
@@ -792,12 +804,12 @@ def refine(
     -------
     IcpResult
     """
-    from .refine import refine_icp
+    from flexreg.stages.refinement.icp import refine_icp
 
     sp = _points(source)
     kind: Any = method
     if _projective_refinement(method, voxel_m):
-        from .projective import projective_icp
+        from flexreg.stages.refinement.projective import projective_icp
 
         vt = target_image if target_image is not None else _camera_image(target)
         vs = source_image if source_image is not None else _camera_image(source)
@@ -869,7 +881,7 @@ def _projective_refinement(method: str, voxel_m: float | None) -> bool:
 def _camera_image(target: Scan | RangeImage) -> RangeImage:
     """The range image (with a camera model, holes filled) that :func:`register` checks
     against and refines on."""
-    from .projection import fill_holes
+    from flexreg.stages.projection import fill_holes
 
     return _with_camera(fill_holes(_working_image(target, RegistrationConfig.max_image_pixels)))
 
@@ -1019,7 +1031,7 @@ def register(
     Priors come from two independent routes: global descriptor matching (ratio test, mutual
     check, pairwise-consistency pruning, RANSAC) and, for levelled scanners, plan-view overlays
     (:func:`upright_priors`). Each prior guides a second matching of all keypoints near its
-    predictions (:func:`flexreg.matching.match_guided`) and a least-squares fit with a
+    predictions (:func:`flexreg.stages.matching.match_guided`) and a least-squares fit with a
     shrinking inlier radius. The candidates are judged, after a quick local ICP, by the dense
     free-space check :func:`overlap_score`; the winner is the coarse transform, refined by ICP.
 
@@ -1038,9 +1050,9 @@ def register(
         Too few matches or inliers, degenerate (collinear) inliers, or ICP without overlap;
         the message gives the counts. No transform is returned then.
     """
-    from .alignment import COLLINEAR_RATIO, spread_ratio
-    from .matching import match_guided
-    from .projection import fill_holes
+    from flexreg.stages.alignment import COLLINEAR_RATIO, spread_ratio
+    from flexreg.stages.matching import match_guided
+    from flexreg.stages.projection import fill_holes
 
     if config.upright not in ("auto", "on", "off"):
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.upright!r}")

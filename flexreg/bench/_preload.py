@@ -5,7 +5,7 @@ registries the first time any compiled function runs, which costs about 0.25 s i
 process; and it loads each kernel's machine code from its on-disk cache on that kernel's first
 call, tens of milliseconds apiece. Importing this module does both at import time instead, the
 way Open3D and OpenCV load their compiled code when they are imported. The comparison's fork
-server imports it with the other libraries (:data:`flexreg.comparison._PRELOAD`), so that a
+server imports it with the other libraries (:data:`flexreg.bench.compare._PRELOAD`), so that a
 method's measured call excludes its libraries' start-up alike.
 
 Parallel kernels are left to their first call: loading one starts numba's OpenMP thread pool,

@@ -22,7 +22,7 @@ Conventions. ``T_camera_lidar`` is a 4 x 4 float64 rigid transform that maps lid
 (metres) into the camera frame (OpenCV: x right, y down, z forward):
 ``p_camera = R p_lidar + t``. Its inverse ``T_lidar_camera`` holds the camera's pose in the
 lidar frame. Quaternions are labelled ``xyzw`` (scalar last, SciPy's order) or ``wxyz`` (scalar
-first). Pixels follow :mod:`flexreg.camera`: integer ``(u, v)`` is the centre of pixel
+first). Pixels follow :mod:`flexreg.core.camera`: integer ``(u, v)`` is the centre of pixel
 ``[v, u]``, so the image spans ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``. Pixel coordinates are
 those of the image as given (distorted); the lens model is OpenCV's (see
 :mod:`flexreg.io.intrinsics`).
@@ -42,14 +42,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ConfigError, InputError, RegistrationError
-from .io.intrinsics import CameraIntrinsics
-from .transforms import apply, as_transform, invert
+from flexreg.core.transforms import apply, as_transform, invert
+from flexreg.errors import ConfigError, InputError, RegistrationError
+from flexreg.io.intrinsics import CameraIntrinsics
 
 if TYPE_CHECKING:
-    from .camera import PinholeCamera, SphericalCamera
-    from .projection import RangeImage
-    from .scan import Scan
+    from flexreg.core.camera import PinholeCamera, SphericalCamera
+    from flexreg.core.range_image import RangeImage
+    from flexreg.core.scan import Scan
 
 log = logging.getLogger(__name__)
 
@@ -252,14 +252,14 @@ def panorama_camera(points: ArrayLike) -> SphericalCamera:
     A spinning lidar samples azimuth much more finely than elevation (e.g. 0.17 deg between
     firings, 0.4 deg between rings). The azimuth pitch is the median angular distance of each
     point to its nearest neighbour; the polar pitch makes the pixel count match the points
-    over the covered directions, as :func:`flexreg.projection.auto_spherical_camera` does
+    over the covered directions, as :func:`flexreg.stages.projection.auto_spherical_camera` does
     (whose isotropic pitch this is for a scanner with square sampling). When that function
     recognises evenly spaced rings (one row per ring), its camera is used as it is.
     """
     from scipy.spatial import cKDTree
 
-    from .camera import SphericalCamera
-    from .projection import auto_spherical_camera
+    from flexreg.core.camera import SphericalCamera
+    from flexreg.stages.projection import auto_spherical_camera
 
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     base = auto_spherical_camera(P)
@@ -287,7 +287,7 @@ def _nearest_fill(image: RangeImage, max_px: float) -> RangeImage:
     point, its index and intensity)."""
     from scipy import ndimage
 
-    from .projection import RangeImage
+    from flexreg.core.range_image import RangeImage
 
     v = image.valid
     if v.all() or not v.any():
@@ -310,12 +310,12 @@ def scan_range_image(scan: Scan) -> RangeImage:
 
     A scan with a native grid (PTX, gridded E57, organised PCD, ...) keeps it
     (``flexreg.range_image``) with isolated no-returns filled
-    (:func:`flexreg.projection.fill_holes`). An unstructured cloud (KITTI ``.bin``, most
+    (:func:`flexreg.stages.projection.fill_holes`). An unstructured cloud (KITTI ``.bin``, most
     ``.pcd``) is z-buffered into :func:`panorama_camera`, and each empty pixel within 2 pixels
     of a return shows the nearest return, so every pixel holds a real lidar point. This is the
     grid of the ``panorama.png`` :func:`picking_views` draws.
     """
-    from .projection import fill_holes, project, range_image
+    from flexreg.stages.projection import fill_holes, project, range_image
 
     if scan.has_grid:
         return fill_holes(range_image(scan))
@@ -329,9 +329,9 @@ def panorama_flexion(scan: Scan, *, n: int = 3) -> NDArray[np.float32]:
     first (normalised convolution of the returns' ranges, back-projected along each pixel's
     ray with eq. 7-8), so the sparse rows of a spinning lidar give a readable image.
     """
-    from . import images
-    from .camera import SphericalCamera
-    from .projection import fill_holes, project, range_image
+    from flexreg.core.camera import SphericalCamera
+    from flexreg.stages import feature_images as images
+    from flexreg.stages.projection import fill_holes, project, range_image
 
     if scan.has_grid:
         return images.flexion(fill_holes(range_image(scan)), n=n)
@@ -463,7 +463,7 @@ def _lift_grid(
     image: RangeImage, rowcol: NDArray[np.float64], lines: NDArray[np.int64], p: Path
 ) -> NDArray[np.float64]:
     """3D points of ``(row, col)`` range-image pixels; integer ones exactly, others bilinearly."""
-    from .correspondences import lift
+    from flexreg.stages.correspondences import lift
 
     H, W = image.shape
     out = np.empty((len(rowcol), 3))
@@ -925,7 +925,7 @@ class FlexionView:
 def _working_camera(intrinsics: CameraIntrinsics, scale: float) -> tuple[PinholeCamera, float]:
     """The distortion-free camera of an image resized by ``scale`` (``cv2.resize`` pixel
     mapping ``u' = (u + 0.5) s - 0.5``)."""
-    from .camera import PinholeCamera
+    from flexreg.core.camera import PinholeCamera
 
     if intrinsics.size is None:
         raise InputError(intrinsics.source, "image size unknown; check against the image first")
@@ -949,10 +949,10 @@ def auto_scale(scan: Scan, intrinsics: CameraIntrinsics) -> float:
     """Working scale at which the lidar's points are about 1.75 pixels apart in the camera.
 
     The lidar's mean angular point spacing comes from the automatic equirectangular camera
-    (:func:`flexreg.projection.auto_spherical_camera`, one pixel per point over the covered
+    (:func:`flexreg.stages.projection.auto_spherical_camera`, one pixel per point over the covered
     directions); the camera's angular pixel pitch is ``1 / f``.
     """
-    from .projection import auto_spherical_camera
+    from flexreg.stages.projection import auto_spherical_camera
 
     step = auto_spherical_camera(scan.points).dphi
     f = math.sqrt(intrinsics.fx * intrinsics.fy)
@@ -990,7 +990,8 @@ def render_flexion_view(
     """Render the scan as a Flexion image seen from the camera.
 
     The scan is mapped into the camera frame with ``T_camera_lidar`` and z-buffered into the
-    distortion-free camera scaled by ``scale`` (:func:`flexreg.projection.project`); the sparse
+    distortion-free camera scaled by ``scale`` (:func:`flexreg.stages.projection.project`); the
+    sparse
     depth is densified by normalised convolution (Gaussian sigma 1, 2, 4 px), back-projected
     (paper eq. 2) and converted to Flexion n x n (eq. 11-13). A lidar is much sparser than a
     camera, so the working scale is chosen (:func:`auto_scale`) to make its points about 1.75
@@ -1012,9 +1013,9 @@ def render_flexion_view(
     -------
     FlexionView
     """
-    from . import images
-    from .projection import project
-    from .scan import Scan as ScanT
+    from flexreg.core.scan import Scan as ScanT
+    from flexreg.stages import feature_images as images
+    from flexreg.stages.projection import project
 
     T = as_transform(T_camera_lidar, name="T_camera_lidar")
     s = auto_scale(scan, intrinsics) if scale is None else float(scale)
@@ -1296,7 +1297,7 @@ def calibrate_auto(
     CalibrationError
         No round produced a pose that beats the initial guess, or the rounds disagree.
     """
-    from .transforms import rotation_error_deg, translation_error_m
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
 
     t_start = time.perf_counter()
     T0 = as_transform(T_init, name="initial guess")
@@ -1623,7 +1624,7 @@ def picking_views(
     """
     import cv2
 
-    from . import images
+    from flexreg.stages import feature_images as images
 
     cam = _as_bgr(image)
     H, W = cam.shape[:2]

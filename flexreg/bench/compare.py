@@ -1,11 +1,13 @@
 """flexreg and the baselines side by side on one scan pair.
 
-:func:`compare` runs each method (``flexreg`` = :func:`flexreg.pipeline.register`, the others
+:func:`compare` runs each method (``flexreg`` = :func:`flexreg.registration.pipeline.register`, the
+others
 from :mod:`flexreg.baselines`) on the same two scans and measures, per method:
 
 - **errors** against a known ``T_target_source`` (:func:`read_ground_truth`): rotation angle of
-  ``R_est^T R_gt`` in degrees (:func:`flexreg.transforms.rotation_error_deg`) and distance of the
-  translations in metres (:func:`flexreg.transforms.translation_error_m`), of the final
+  ``R_est^T R_gt`` in degrees (:func:`flexreg.core.transforms.rotation_error_deg`) and distance of
+  the
+  translations in metres (:func:`flexreg.core.transforms.translation_error_m`), of the final
   transform and, for methods with a global stage (flexreg, fpfh-ransac), of the coarse
   transform before their ICP refinement;
 - **success**: the final transform within ``SuccessCriteria.rotation_deg`` (default 0.5°) *and*
@@ -49,12 +51,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .baselines import BASELINES, GLOBAL, available_baselines, default_voxel, get_baseline
-from .errors import ConfigError, FlexregError, InputError, RegistrationError
-from .transforms import as_transform, invert, rotation_error_deg, translation_error_m
+from flexreg.baselines import BASELINES, GLOBAL, available_baselines, default_voxel, get_baseline
+from flexreg.core.transforms import as_transform, invert, rotation_error_deg, translation_error_m
+from flexreg.errors import ConfigError, FlexregError, InputError, RegistrationError
 
 if TYPE_CHECKING:
-    from .pipeline import RegistrationConfig, RegistrationResult
+    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
 
 log = logging.getLogger(__name__)
 
@@ -118,7 +120,7 @@ def read_ground_truth(
         Missing or unreadable file, no matching entry, or a matrix that is not a rigid
         transform (non-orthonormal rotation block, reflection, bad last row, NaN).
     """
-    from .io import read_transform
+    from flexreg.io import read_transform
 
     p = Path(path)
     if not p.is_file():
@@ -168,7 +170,7 @@ def run_method(
     its own thresholds). FPFH + RANSAC runs its RANSAC on all cores, as Open3D does by default:
     its rows are the fastest configuration users get, not bit-reproducible from run to run."""
     if name == "flexreg":
-        from .pipeline import RegistrationConfig, register
+        from flexreg.registration.pipeline import RegistrationConfig, register
 
         return register(target, source, config or RegistrationConfig(seed=seed))
     options: dict[str, Any] = {"voxel_m": voxel_m, "seed": seed}
@@ -297,17 +299,17 @@ def _child(
 
 
 #: every module a method imports on its first call (imports are not part of the measured time),
-#: and numba's deferred start-up (:mod:`flexreg._startup`)
+#: and numba's deferred start-up (:mod:`flexreg.bench._preload`)
 _PRELOAD = [
-    "flexreg.comparison",
-    "flexreg._startup",
-    "flexreg.pipeline",
-    "flexreg.alignment",
-    "flexreg.images",
-    "flexreg.matching",
-    "flexreg.projective",
-    "flexreg.refine",
-    "flexreg.topview",
+    "flexreg.bench.compare",
+    "flexreg.bench._preload",
+    "flexreg.registration.pipeline",
+    "flexreg.stages.alignment",
+    "flexreg.stages.feature_images",
+    "flexreg.stages.matching",
+    "flexreg.stages.refinement.projective",
+    "flexreg.stages.refinement.icp",
+    "flexreg.stages.priors",
     "flexreg.baselines.open3d_icp",
     "flexreg.baselines.fpfh",
     "flexreg.baselines.kiss",
@@ -804,7 +806,7 @@ def compare(
     RegistrationError
         No method found an overlap (``require_overlap``).
     """
-    from .baselines._common import as_points
+    from flexreg.baselines._common import as_points
 
     chosen = parse_methods(methods)
     if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0):
@@ -1065,7 +1067,7 @@ def write_comparison(cmp: Comparison, out_dir: str | PathLike[str]) -> list[Path
 def write_files(writers: list[tuple[Path, Callable[[Path], object]]]) -> list[Path]:
     """Write each file atomically (temporary name, then rename). On any failure, the files
     already written here are removed again, and so are the folders created for them."""
-    from .io import atomic_write
+    from flexreg.io import atomic_write
 
     done: list[Path] = []
     created: list[Path] = []

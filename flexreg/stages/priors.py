@@ -16,7 +16,7 @@ that makes panoramic feature matching fail across wide baselines. This module
 
 The result, :func:`upright_hypotheses`, is a short list of ``T_target_source`` candidates,
 best first; the registration pipeline uses them to guide feature matching and verifies them
-against the data (:mod:`flexreg.pipeline`).
+against the data (:mod:`flexreg.registration.pipeline`).
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import DegenerateGeometryError
-from .projection import RangeImage
+from flexreg.core.range_image import RangeImage
+from flexreg.errors import DegenerateGeometryError
 
 log = logging.getLogger(__name__)
 

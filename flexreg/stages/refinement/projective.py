@@ -27,11 +27,11 @@ import numpy as np
 from numba import prange
 from numpy.typing import NDArray
 
-from .camera import PinholeCamera, SphericalCamera
-from .errors import ConfigError, RegistrationError
-from .images import _col
-from .projection import RangeImage
-from .transforms import rotation_about_axis
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.grid import wrap_col
+from flexreg.core.range_image import RangeImage
+from flexreg.core.transforms import rotation_about_axis
+from flexreg.errors import ConfigError, RegistrationError
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +85,7 @@ def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
                 if ii < 0 or ii >= H:
                     continue
                 for dj in range(-1, 2):
-                    jj = _col(j + dj, W, wrap)
+                    jj = wrap_col(j + dj, W, wrap)
                     if jj >= 0 and math.isfinite(raw[ii, jj, 0]):
                         c = (
                             raw[ii, jj, 0] * raw[i, j, 0]
@@ -222,7 +222,7 @@ def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
     (H, W, 3) float32
         Unit normals, oriented towards the scanner; NaN where unknown.
     """
-    from .topview import _normals_area
+    from flexreg.stages.priors import _normals_area
 
     xyz = np.where(image.valid[..., None], image.xyz, np.nan)
     H, W = xyz.shape[:2]

@@ -31,9 +31,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ConfigError, DegenerateGeometryError, InputError
-from .io.trajectory import Trajectory
-from .transforms import rotation_error_deg
+from flexreg.core.transforms import rotation_error_deg
+from flexreg.errors import ConfigError, DegenerateGeometryError, InputError
+from flexreg.io.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -194,7 +194,8 @@ def align_umeyama(
     ``S = diag(1, 1, det(U) det(V))`` (eqs. 39-40), ``s = tr(D S) / sigma_source^2`` (eq. 42,
     or 1 without scale) and ``t = mu_target - s R mu_source`` (eq. 41).
 
-    Unlike :func:`flexreg.alignment.kabsch`, which refuses collinear correspondences because a
+    Unlike :func:`flexreg.stages.alignment.kabsch`, which refuses collinear correspondences because
+    a
     registration must determine the rotation, a trajectory that runs along a straight line is
     accepted here: the residual, which is what ATE needs, is the same for every rotation about
     that line (one of them is returned).
@@ -752,7 +753,7 @@ def rpe(
 
 def _invert_all(T: NDArray[np.float64]) -> NDArray[np.float64]:
     """Inverse of each rigid transform of a (K, 4, 4) stack (``R^T``, ``-R^T t``; as
-    :func:`flexreg.transforms.invert` does for one)."""
+    :func:`flexreg.core.transforms.invert` does for one)."""
     Rt = T[:, :3, :3].transpose(0, 2, 1)
     out = np.zeros_like(T)
     out[:, :3, :3] = Rt

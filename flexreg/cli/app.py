@@ -1,0 +1,90 @@
+"""The ``flexreg`` application object, its root options, and :func:`run` (errors -> one line).
+
+Command modules import :data:`app` from here and register themselves on it; the package face
+(``flexreg.cli``) imports them all. Known errors become one line ``error: <file>: <problem>``
+and exit status 1.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+
+from flexreg._version import __version__
+from flexreg.cli._common import err_console
+from flexreg.errors import FlexregError
+
+app = typer.Typer(
+    name="flexreg",
+    help="Register 3D scans through 2D Flexion images.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        print(f"flexreg {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
+    verbose: int = typer.Option(
+        0, "--verbose", "-v", count=True, help="More log output (-vv: debug)."
+    ),
+) -> None:
+    """Register 3D scans through 2D Flexion images."""
+    import logging
+
+    from rich.logging import RichHandler
+
+    level = logging.WARNING - 10 * min(verbose, 2)
+    logging.basicConfig(
+        level=level,
+        handlers=[RichHandler(console=err_console, show_path=False)],
+        format="%(message)s",
+    )
+
+
+def _click_classes(name: str) -> tuple[type[BaseException], ...]:
+    """Click's exception class ``name`` and typer's own copy of it (recent typer releases
+    ship their own click), so usage errors from either are caught."""
+    classes: list[type[BaseException]] = [getattr(click.exceptions, name)]
+    try:
+        from typer._click import exceptions as tce
+
+        classes.append(getattr(tce, name))
+    except (ImportError, AttributeError):
+        pass
+    return tuple(classes)
+
+
+def run(argv: list[str] | None = None) -> int:
+    """Run the CLI and return its exit status (0 ok, 1 known error, 2 usage error)."""
+    try:
+        rv = app(args=argv, standalone_mode=False)
+    except FlexregError as e:
+        err_console.print(f"error: {e}", markup=False, highlight=False, soft_wrap=True)
+        return 1
+    except _click_classes("Abort"):
+        err_console.print("aborted", markup=False)
+        return 130
+    except _click_classes("ClickException") as e:
+        e.show()  # type: ignore[attr-defined]
+        return int(e.exit_code)  # type: ignore[attr-defined]
+    except KeyboardInterrupt:
+        return 130
+    return rv if isinstance(rv, int) else 0
+
+
+def main() -> None:
+    """Console-script entry point."""
+    sys.exit(run())

@@ -1,0 +1,220 @@
+"""The range image: an organised view of a scan, every pixel holding the scanner's own point.
+
+:class:`RangeImage` is the central data structure: ``xyz`` keeps the 3D point of every pixel
+(never a resampled one), ``index`` maps each pixel back to the scan's point, ``valid`` marks
+returns, and ``camera`` (when known) relates pixels and rays (paper eq. 1-8). The builders here
+need no algorithm: a native grid, a depth image with its camera, a pixel -> point index map.
+The z-buffer projection of unstructured clouds is a stage (:mod:`flexreg.stages.projection`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamera
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
+
+__all__ = ["RangeImage", "downsample_image", "from_depth", "from_grid", "from_index", "to_scan"]
+
+
+@dataclass(eq=False)
+class RangeImage:
+    """An organised view of a scan.
+
+    Attributes
+    ----------
+    xyz : (H, W, 3) float64, metres
+        Scanner-frame point of each pixel; NaN where invalid.
+    valid : (H, W) bool
+        Pixels that hold a return.
+    index : (H, W) int64
+        Index into the source scan's ``points`` of the point each pixel shows; -1 where invalid
+        (or where the image was not made from a scan).
+    camera : PinholeCamera or SphericalCamera or None
+        Model relating pixels and rays; ``None`` for a native scanner grid whose geometry is only
+        implied by its points.
+    intensity : (H, W) float32 or None
+        Per-pixel intensity, NaN where invalid.
+    """
+
+    xyz: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+    index: NDArray[np.int64]
+    camera: Camera | None = None
+    intensity: NDArray[np.float32] | None = None
+
+    def __post_init__(self) -> None:
+        H, W = self.valid.shape
+        if self.xyz.shape != (H, W, 3) or self.index.shape != (H, W):
+            raise InputError("range image", "xyz, valid and index shapes disagree")
+
+    def __repr__(self) -> str:
+        cam = type(self.camera).__name__ if self.camera is not None else "native grid"
+        return f"RangeImage({self.height}x{self.width}, {self.n_valid} valid, {cam})"
+
+    @property
+    def height(self) -> int:
+        return int(self.valid.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.valid.shape[1])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)``."""
+        return (self.height, self.width)
+
+    @property
+    def n_valid(self) -> int:
+        return int(np.count_nonzero(self.valid))
+
+    @property
+    def wraps(self) -> bool:
+        """True for a full-turn equirectangular image (columns wrap around)."""
+        return isinstance(self.camera, SphericalCamera) and self.camera.wraps
+
+    @property
+    def range(self) -> NDArray[np.float32]:
+        """(H, W) float32 Euclidean range in metres, NaN where invalid."""
+        with np.errstate(invalid="ignore"):
+            r = np.sqrt(np.einsum("ijk,ijk->ij", self.xyz, self.xyz)).astype(np.float32)
+        r[~self.valid] = np.nan
+        return r
+
+    def depth_z(self) -> NDArray[np.float32]:
+        """(H, W) float32 orthographic depth ``Z`` in metres (pinhole images), NaN where invalid."""
+        z = self.xyz[..., 2].astype(np.float32)
+        z[~self.valid] = np.nan
+        return z
+
+    def gather(self, values: NDArray[np.generic], fill: float = np.nan) -> NDArray[np.generic]:
+        """Per-point values of the source scan laid out on the image, ``fill`` where invalid."""
+        values = np.asarray(values)
+        out = np.full(self.shape + values.shape[1:], fill, dtype=np.result_type(values, type(fill)))
+        m = self.index >= 0
+        out[m] = values[self.index[m]]
+        return out
+
+
+def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
+    """Range image on the scan's native grid, without resampling.
+
+    Parameters
+    ----------
+    scan : Scan
+        Must carry ``grid_shape`` and ``grid_index`` (PTX, gridded E57, organised PCD, 3DTK,
+        depth images, synthetic stations).
+    stride : int
+        Keep every ``stride``-th row and column (as :func:`downsample_image`, without building
+        the full-size image first).
+    """
+    if scan.grid_shape is None or scan.grid_index is None:
+        raise InputError(scan.path or scan.name, "scan has no native grid; project it instead")
+    H, W = scan.grid_shape
+    r, c = scan.grid_index[:, 0], scan.grid_index[:, 1]
+    index = np.full((H, W), -1, dtype=np.int64)
+    index[r, c] = np.arange(len(scan), dtype=np.int64)
+    if stride == 1:
+        return from_index(scan, index, scan.camera)
+    return from_index(
+        scan,
+        np.ascontiguousarray(index[::stride, ::stride]),
+        _subsampled_camera(scan.camera, H, W, stride),
+    )
+
+
+def from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> RangeImage:
+    """Range image whose pixels show ``scan.points[index]`` (``index`` (H, W) int64, -1 where
+    there is no return), with the scan's intensities."""
+    valid = index >= 0
+    xyz = np.full((*index.shape, 3), np.nan)
+    xyz[valid] = scan.points[index[valid]]
+    intensity = None
+    if scan.intensity is not None:
+        intensity = np.full(index.shape, np.nan, dtype=np.float32)
+        intensity[valid] = scan.intensity[index[valid]]
+    return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera, intensity=intensity)
+
+
+def from_depth(
+    depth_m: NDArray[np.floating], camera: Camera, *, depth_kind: DepthKind | None = None
+) -> RangeImage:
+    """Range image from a depth or range map and its camera (eq. 2 or eq. 7-8).
+
+    Parameters
+    ----------
+    depth_m : (H, W) float, metres
+        0, negative or NaN mark no return.
+    camera : PinholeCamera or SphericalCamera
+        Its size must match the image.
+    depth_kind : {"z", "range"}, optional
+        Orthographic depth or Euclidean range; default ``"z"`` for pinhole, ``"range"`` for
+        spherical (a spherical camera only accepts ``"range"``).
+    """
+    d = np.asarray(depth_m, dtype=np.float64)
+    if d.shape != camera.shape:
+        raise InputError(
+            "depth image",
+            f"size {d.shape[1]}x{d.shape[0]} does not match the camera's "
+            f"{camera.width}x{camera.height}",
+        )
+    valid = np.isfinite(d) & (d > 0)
+    v, u = np.mgrid[0 : d.shape[0], 0 : d.shape[1]].astype(np.float64)
+    if isinstance(camera, PinholeCamera):
+        xyz = camera.backproject(u, v, np.where(valid, d, np.nan), depth_kind=depth_kind or "z")
+    else:
+        if depth_kind not in (None, "range"):
+            raise InputError("depth_kind", "an equirectangular image stores range, not z")
+        xyz = camera.backproject(u, v, np.where(valid, d, np.nan))
+    index = np.full(d.shape, -1, dtype=np.int64)
+    index[valid] = np.arange(int(valid.sum()), dtype=np.int64)
+    return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera)
+
+
+def _subsampled_camera(camera: Camera | None, H: int, W: int, f: int) -> Camera | None:
+    """The camera of every ``f``-th row and column of an H x W image (pixel ``(u', v')`` is the
+    original ``(f u', f v')``), or None when the size is not a multiple of ``f``."""
+    c = camera
+    if c is None or H % f or W % f:
+        return None
+    if isinstance(c, SphericalCamera):
+        return SphericalCamera(W // f, H // f, c.phi_min, c.phi_max, c.theta_min, c.theta_max)
+    if isinstance(c, PinholeCamera):
+        return PinholeCamera(
+            c.fx / f, c.fy / f, c.cx / f, c.cy / f, W // f, H // f, skew=c.skew / f
+        )
+    return None
+
+
+def downsample_image(image: RangeImage, factor: int) -> RangeImage:
+    """Every ``factor``-th row and column of a range image (points kept, not averaged).
+
+    The camera is scaled to match when the image size is a multiple of ``factor`` (pixel
+    ``(u', v')`` is the original ``(factor u', factor v')``); otherwise the result is a native
+    grid without a camera model.
+    """
+    f = int(factor)
+    if f < 1:
+        raise InputError("factor", f"must be a positive integer, got {factor}")
+    if f == 1:
+        return image
+    return RangeImage(
+        xyz=np.ascontiguousarray(image.xyz[::f, ::f]),
+        valid=np.ascontiguousarray(image.valid[::f, ::f]),
+        index=np.ascontiguousarray(image.index[::f, ::f]),
+        camera=_subsampled_camera(image.camera, image.height, image.width, f),
+        intensity=None if image.intensity is None else image.intensity[::f, ::f].copy(),
+    )
+
+
+def to_scan(image: RangeImage, **kwargs: Any) -> Scan:
+    """The valid pixels of a range image as a gridded :class:`Scan` (row-major point order)."""
+    return Scan.from_organized(
+        image.xyz, image.valid, intensity=image.intensity, camera=image.camera, **kwargs
+    )

@@ -31,9 +31,11 @@ from numpy.typing import NDArray
 from flexreg._version import __version__
 from flexreg.core.transforms import invert
 from flexreg.errors import ConfigError, InputError
-from flexreg.synth.placement import place_stations, station_overlap, stream
+from flexreg.io import atomic_write, write_scan
+from flexreg.synth.placement import free_map, place_stations, station_overlap, stream
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import SCENE_KINDS, make_scene, scene_from_mesh
+from flexreg.synth.seeding import as_rng
 from flexreg.synth.sensors import (
     RGBDConfig,
     TLSConfig,
@@ -258,9 +260,6 @@ def smooth_path(
     heading : (n_frames,) float64, radians
         Direction of travel (azimuth from +X).
     """
-    from flexreg.synth.placement import free_map
-    from flexreg.synth.scenes import as_rng
-
     gen, _ = as_rng(rng)
     if step_m <= 0:
         raise ConfigError(f"step must be positive, got {step_m}")
@@ -360,8 +359,6 @@ def camera_trajectory(
 ) -> list[NDArray[np.float64]]:
     """Hand-held RGB-D camera poses (x right, y down, z forward) along :func:`smooth_path`,
     looking ahead with a slow pan (+-23 deg) and a downward tilt (11 +- 6 deg)."""
-    from flexreg.synth.scenes import as_rng
-
     gen, _ = as_rng(rng)
     P, heading = smooth_path(scene, n_frames, step_m=step_m, rng=gen)
     phase = gen.uniform(0, 2 * math.pi, size=2)
@@ -398,8 +395,6 @@ def lidar_trajectory(
 
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
-    from flexreg.io import atomic_write
-
     text = json.dumps(doc, indent=2) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
@@ -431,8 +426,6 @@ def synthesize(
     ------
     ConfigError, InputError, DegenerateGeometryError
     """
-    from flexreg.io import write_scan
-
     cfg = config or SynthConfig()
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

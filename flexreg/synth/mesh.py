@@ -81,6 +81,12 @@ def box(lo: ArrayLike, hi: ArrayLike) -> Mesh:
     return lo_ + _BOX_CORNERS * (hi_ - lo_), _BOX_TRIANGLES.copy()
 
 
+def hexahedron(corners: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Convex hexahedron from 8 corners ordered like :func:`box`'s."""
+    _, T = box([0, 0, 0], [1, 1, 1])
+    return np.asarray(corners, dtype=np.float64).reshape(8, 3), T
+
+
 def _frame(tangent: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Two unit vectors ``u, v`` with ``(u, v, tangent)`` right-handed and orthonormal."""
     t = tangent / np.linalg.norm(tangent)

@@ -20,7 +20,8 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform, invert, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError
 from flexreg.synth.scene import Scene
-from flexreg.synth.scenes import as_rng, make_scene
+from flexreg.synth.scenes import make_scene
+from flexreg.synth.seeding import as_rng
 from flexreg.synth.sensors import TLSConfig, scan_tls
 
 #: coarse grid used to measure overlap (2 degree steps)

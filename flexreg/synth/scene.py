@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flexreg.errors import InputError
+from flexreg.io import atomic_write
 
 if TYPE_CHECKING:
     import open3d as o3d
@@ -223,8 +224,6 @@ class Scene:
         ``red green blue`` (uint8) and ``reflectance`` (float32); identical scenes give
         identical bytes.
         """
-        from flexreg.io import atomic_write
-
         p = Path(path)
         if p.suffix.lower() != ".ply":
             raise InputError(p, "scene meshes are written as .ply")

@@ -21,6 +21,7 @@ TLS measurement model (per pixel of the equirectangular grid, paper eq. 3-8):
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -31,13 +32,16 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
 
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform
 from flexreg.errors import ConfigError
+from flexreg.io import atomic_write
+from flexreg.io.depth import TUM_DEPTH_SCALE
 from flexreg.synth.scene import RayHits, Scene
-from flexreg.synth.scenes import as_rng
+from flexreg.synth.seeding import as_rng
 
 
 # ====================================================================================== TLS
@@ -463,8 +467,6 @@ class RGBDFrame:
 
     def depth_png(self) -> NDArray[np.uint16]:
         """Depth as TUM 16-bit units (5000 per metre), 0 = no reading."""
-        from flexreg.io.depth import TUM_DEPTH_SCALE
-
         d = np.nan_to_num(self.depth, nan=0.0)
         return np.clip(np.rint(d / TUM_DEPTH_SCALE), 0, 65535).astype(np.uint16)
 
@@ -583,10 +585,7 @@ def write_tum_sequence(
     list of Path
         Every file written.
     """
-    import cv2
-    from scipy.spatial.transform import Rotation
-
-    from flexreg.io import atomic_write
+    import cv2  # heavy: only for writing PNG files
 
     cfg = config or RGBDConfig()
     gen, _ = as_rng(rng)
@@ -618,7 +617,6 @@ def write_tum_sequence(
         gt_lines.append(f"{ts} " + " ".join(f"{v:.9f}" for v in (*t, *q)))
         if progress is not None:
             progress(i + 1, len(poses))
-    import json
 
     def _write_text(path: Path, text: str) -> None:
         atomic_write(path, lambda tmp: tmp.write_text(text))

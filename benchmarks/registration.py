@@ -218,8 +218,6 @@ def speed_run(
     resolution: tuple[int, int], config: RegistrationConfig, repeats: int
 ) -> dict[str, Any]:
     """Two large room stations (seed 0): ``register`` with and without refinement."""
-    from dataclasses import replace
-
     from flexreg.synth import station_pair
 
     t0 = time.perf_counter()
@@ -244,7 +242,7 @@ def speed_run(
         runs = []
         for _ in range(repeats):
             rec = timed_register(
-                p.target, p.source, replace(config, refine=refined), p.T_target_source
+                p.target, p.source, config.replace(refine=refined), p.T_target_source
             )
             runs.append(rec)
             state = (

@@ -14,7 +14,7 @@ one validator per rule), so a bad value is refused in one place, with the field'
 >>> Demo(n=1)
 Traceback (most recent call last):
 ...
-flexreg.errors.ConfigError: n: Input should be greater than or equal to 3 (got 1)
+flexreg.errors.ConfigError: n: must be at least 3 (got 1)
 >>> load_config(Demo, overrides=parse_sets(["n=9", "label=none"]))
 Demo(n=9, label=None)
 >>> print(to_toml(Demo()), end="")
@@ -40,9 +40,19 @@ import typing
 from collections.abc import Iterable, Mapping
 from os import PathLike
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    GetCoreSchemaHandler,
+    GetJsonSchemaHandler,
+    ValidationError,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError, core_schema
 
 from flexreg.errors import ConfigError
 
@@ -51,7 +61,18 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["Config", "load_config", "parse_sets", "to_toml"]
+__all__ = [
+    "Config",
+    "Finite",
+    "OddSize",
+    "Positive",
+    "Seed",
+    "load_config",
+    "odd",
+    "one_of",
+    "parse_sets",
+    "to_toml",
+]
 
 C = TypeVar("C", bound="Config")
 
@@ -70,27 +91,183 @@ def _allows_none(annotation: Any) -> bool:
     return False
 
 
-def _one_line(e: ValidationError, where: str | None = None) -> str:
-    """The first problem of a pydantic error as ``[where: ]field: message (got value)``."""
+#: unit words for the field-name suffixes used in flexreg (``threshold_m`` -> metres)
+_UNITS = {"m": "metres", "px": "pixels", "deg": "degrees", "rad": "radians", "s": "seconds"}
+
+
+def _unit(field: str) -> str:
+    suffix = field.rpartition("_")[2]
+    return f" of {_UNITS[suffix]}" if "_" in field and suffix in _UNITS else ""
+
+
+def _number(x: Any) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def _bounds(cls: type[BaseModel] | None, field: str) -> dict[str, Any]:
+    """The numeric bounds of ``field`` (JSON-schema keywords), also inside ``X | None``."""
+    if cls is None:
+        return {}
+    try:
+        prop = cls.model_json_schema()["properties"][field]
+    except Exception:  # a message helper never fails its caller
+        return {}
+    keys = ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum", "type")
+    for schema in (prop, *prop.get("anyOf", ())):
+        if schema.get("type") in ("integer", "number"):
+            return {k: schema[k] for k in keys if k in schema}
+    return {}
+
+
+def _range_text(bounds: dict[str, Any], field: str) -> str:
+    """``must be in (0, 1]``, ``must be a positive number of metres``, ``must be at least 8``."""
+    lo = ("(", bounds["exclusiveMinimum"]) if "exclusiveMinimum" in bounds else None
+    lo = ("[", bounds["minimum"]) if "minimum" in bounds else lo
+    hi = (")", bounds["exclusiveMaximum"]) if "exclusiveMaximum" in bounds else None
+    hi = ("]", bounds["maximum"]) if "maximum" in bounds else hi
+    kind = "integer" if bounds.get("type") == "integer" else "number"
+    if lo and hi:
+        return f"must be in {lo[0]}{_number(lo[1])}, {_number(hi[1])}{hi[0]}"
+    if lo == ("(", 0):
+        return f"must be a positive {kind}{_unit(field)}"
+    if lo == ("[", 0):
+        return f"must be a non-negative {kind}{_unit(field)}"
+    if lo:
+        return f"must be {'at least' if lo[0] == '[' else 'greater than'} {_number(lo[1])}"
+    if hi:
+        return f"must be {'at most' if hi[0] == ']' else 'less than'} {_number(hi[1])}"
+    return "is out of range"
+
+
+_RANGE_ERRORS = ("greater_than", "greater_than_equal", "less_than", "less_than_equal")
+#: pydantic error types whose message names the allowed values already (no "got" needed)
+_NO_GOT = ("missing", "extra_forbidden", "unknown_choice")
+
+
+def _message(err: Any, field: str, cls: type[BaseModel] | None) -> str:
+    """One pydantic error as a short rule: ``must be in (0, 1]``, ``must be one of a, b``."""
+    kind = err.get("type")
+    got = err.get("input")
+    if kind in _RANGE_ERRORS:
+        return _range_text(_bounds(cls, field) or _ctx_bounds(err, got), field)
+    if kind == "finite_number":
+        return f"must be a finite number{_unit(field)}"
+    if kind == "extra_forbidden":
+        known = ", ".join(cls.model_fields) if cls is not None else ""
+        return "unknown setting" + (f"; known: {known}" if known else "")
+    if kind == "missing":
+        return "required"
+    msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
+    if msg.startswith("Input should be "):
+        msg = "must be " + msg.removeprefix("Input should be ")
+    return msg
+
+
+def _ctx_bounds(err: Any, got: Any) -> dict[str, Any]:
+    names = {"gt": "exclusiveMinimum", "ge": "minimum", "lt": "exclusiveMaximum", "le": "maximum"}
+    out = {names[k]: v for k, v in (err.get("ctx") or {}).items() if k in names}
+    out["type"] = "integer" if isinstance(got, int) else "number"
+    return out
+
+
+def _one_line(
+    e: ValidationError,
+    where: str | None = None,
+    cls: type[BaseModel] | None = None,
+    names: Mapping[str, str] | None = None,
+) -> str:
+    """The first problem of a pydantic error as ``[where: ]field: rule (got value)``; ``names``
+    renames fields (for instance to the command-line option that set them)."""
     err = e.errors(include_url=False)[0]
     field = ".".join(str(p) for p in err.get("loc", ())) or "value"
-    msg = str(err.get("msg", "invalid value"))
-    msg = msg.removeprefix("Value error, ")
     got = err.get("input")
-    text = f"{field}: {msg}"
-    if err.get("type") not in ("missing", "extra_forbidden") and not isinstance(got, dict):
+    text = f"{(names or {}).get(field, field)}: {_message(err, field, cls)}"
+    if err.get("type") not in _NO_GOT and not isinstance(got, dict):
         text += f" (got {got!r})"
     if len(e.errors()) > 1:
         text += f"; and {len(e.errors()) - 1} more"
     return f"{where}: {text}" if where else text
 
 
+# ------------------------------------------------------------------------ shared field types
+
+
+class _OneOf:
+    """Field metadata: the value must be one of ``values`` (see :func:`one_of`)."""
+
+    def __init__(self, values: Iterable[Any], noun: str | None) -> None:
+        self.values = tuple(values)
+        self.noun = noun
+
+    def _check(self, value: Any) -> Any:
+        if value in self.values and not isinstance(value, bool):
+            return value
+        known = ", ".join(str(v) for v in self.values)
+        if self.noun is None:
+            raise PydanticCustomError("choice", "must be one of {known}", {"known": known})
+        raise PydanticCustomError(
+            "unknown_choice",
+            "unknown {noun} {got}; known: {known}",
+            {"noun": self.noun, "got": repr(value), "known": known},
+        )
+
+    def __get_pydantic_core_schema__(
+        self, source: Any, handler: GetCoreSchemaHandler
+    ) -> core_schema.CoreSchema:
+        return core_schema.no_info_after_validator_function(self._check, handler(source))
+
+    def __get_pydantic_json_schema__(
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+    ) -> dict[str, Any]:
+        out = dict(handler(schema))
+        out["enum"] = list(self.values)
+        return out
+
+
+def one_of(values: Iterable[Any], noun: str | None = None) -> Any:
+    """Metadata for ``Annotated[str, one_of(...)]``: the value must be one of ``values``.
+
+    The message lists them: ``must be one of a, b`` or, with a ``noun``, ``unknown feature
+    image 'x'; known: a, b``. The JSON schema carries them as an ``enum``.
+
+    >>> class Demo(Config):
+    ...     method: Annotated[str, one_of(("essential", "svd"))] = "svd"
+    >>> Demo(method="pnp")
+    Traceback (most recent call last):
+    ...
+    flexreg.errors.ConfigError: method: must be one of essential, svd (got 'pnp')
+    """
+    return _OneOf(values, noun)
+
+
+def odd(minimum: int = 3, noun: str = "size") -> Any:
+    """Metadata for ``Annotated[int, odd(...)]``: an odd integer of at least ``minimum``."""
+    rule = f"must be an odd {noun} {minimum}, {minimum + 2}, {minimum + 4}, ..."
+
+    def check(value: int) -> int:
+        if value < minimum or value % 2 == 0:
+            raise PydanticCustomError("odd", rule)
+        return value
+
+    return AfterValidator(check)
+
+
+#: An odd window or grid size n >= 3 (Flexion n x n, Bearing Angle neighbourhoods).
+OddSize = Annotated[int, odd(3, "grid size")]
+#: A seed of the random generators (same seed, same result).
+Seed = Annotated[int, Field(ge=0)]
+#: A finite number > 0 (thresholds, sizes, times).
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+#: Any finite number.
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
 class Config(BaseModel):
     """Base of every configuration: frozen, unknown keys refused, defaults validated.
 
     Invalid values raise :class:`~flexreg.errors.ConfigError` with one line naming the field
-    and the rule (``n: must be odd (got 4)``). ``"none"``/``"null"`` (any case) stand for None
-    in fields that allow None, since TOML has no null.
+    and the rule (``n: must be an odd grid size 3, 5, 7, ... (got 4)``). ``"none"``/``"null"``
+    (any case) stand for None in fields that allow None, since TOML has no null.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", validate_default=True)
@@ -99,7 +276,7 @@ class Config(BaseModel):
         try:
             super().__init__(**data)
         except ValidationError as e:
-            raise ConfigError(_one_line(e)) from None
+            raise ConfigError(_one_line(e, cls=type(self))) from None
 
     @model_validator(mode="before")
     @classmethod
@@ -146,6 +323,8 @@ def load_config(
     cls: type[C],
     path: str | PathLike[str] | None = None,
     overrides: Mapping[str, Any] | None = None,
+    *,
+    names: Mapping[str, str] | None = None,
 ) -> C:
     """Build a ``cls`` from its defaults, a file, then overrides (later wins).
 
@@ -158,6 +337,9 @@ def load_config(
     overrides : mapping, optional
         Field name -> value (for instance from :func:`parse_sets` or command-line options);
         a value of None overrides nothing.
+    names : mapping, optional
+        Field name -> how messages call a value given in ``overrides`` (the command line passes
+        its option names, ``{"n": "--n"}``).
 
     Raises
     ------
@@ -175,7 +357,8 @@ def load_config(
     except ValidationError as e:
         loc = e.errors(include_url=False)[0].get("loc", ())
         in_file = bool(loc) and loc[0] in data and loc[0] not in extra
-        raise ConfigError(_one_line(e, where if in_file else None)) from None
+        line = _one_line(e, where if in_file else None, cls, None if in_file else names)
+        raise ConfigError(line) from None
 
 
 def _parse_value(text: str) -> Any:

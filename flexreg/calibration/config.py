@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Annotated
 
-from flexreg.errors import ConfigError
+from pydantic import Field
+
+from flexreg.config import Config, OddSize, Positive, Seed, odd
 
 
-@dataclass(frozen=True)
-class CalibrationConfig:
+class CalibrationConfig(Config):
     """Settings of :func:`calibrate` (saved with every result).
 
     Attributes
@@ -20,28 +19,29 @@ class CalibrationConfig:
     confidence : float
         RANSAC confidence in (0, 1).
     max_iterations : int
-        RANSAC iteration cap.
+        RANSAC iteration cap (>= 1).
     refine : bool
         Levenberg-Marquardt refinement on the inliers after RANSAC.
     seed : int
         Seed of OpenCV's USAC random generator (same seed, same result).
-    init_rotation_deg, init_translation_m : float
-        Automatic mode: how far the initial guess may be off (degrees, metres); sets the
-        first search radius, and corrections beyond twice these are not accepted.
+    init_rotation_deg, init_translation_m : float, degrees and metres
+        Automatic mode: how far the initial guess may be off; sets the first search radius,
+        and corrections beyond twice these are not accepted.
     auto_scale : float or None
-        Automatic mode: scale of the working images relative to the camera image; None picks
-        it from the lidar's angular density (about 1.75 pixels per lidar point spacing).
+        Automatic mode: scale of the working images relative to the camera image, in (0, 1];
+        None picks it from the lidar's angular density (about 1.75 pixels per lidar point
+        spacing).
     auto_rounds : int
         Automatic mode: match-and-solve rounds, each with a smaller search radius.
-    patch_px : int
-        Automatic mode: side of the matched patches in working pixels (odd).
+    patch_px : int, working pixels
+        Automatic mode: side of the matched patches (odd, >= 7).
     max_keypoints : int
         Automatic mode: patches per round (strongest corners of the Flexion view).
     min_ncc : float
-        Automatic mode: lowest normalised cross-correlation of a kept match.
+        Automatic mode: lowest normalised cross-correlation of a kept match, in (-1, 1).
     min_inliers : int
         Automatic mode: fewest PnP inliers for a round's result to be considered.
-    max_spread_deg : float
+    max_spread_deg : float, degrees
         Automatic mode: largest median rotation between the chosen pose and the other rounds'
         poses (rounds 2, 3, ...); beyond it the matches are judged unreliable and the mode
         refuses.
@@ -49,48 +49,18 @@ class CalibrationConfig:
         Grid size n of the Flexion n x n images (odd, >= 3).
     """
 
-    threshold_px: float = 3.0
-    confidence: float = 0.9999
-    max_iterations: int = 10000
+    threshold_px: Positive = 3.0
+    confidence: float = Field(0.9999, gt=0, lt=1)
+    max_iterations: int = Field(10000, ge=1)
     refine: bool = True
-    seed: int = 0
-    init_rotation_deg: float = 2.0
-    init_translation_m: float = 0.10
-    auto_scale: float | None = None
-    auto_rounds: int = 6
-    patch_px: int = 21
-    max_keypoints: int = 800
-    min_ncc: float = 0.3
-    min_inliers: int = 12
-    max_spread_deg: float = 1.0
-    flexion_n: int = 3
-
-    def __post_init__(self) -> None:
-        def positive(name: str, value: float) -> None:
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"{name} must be a positive number, got {value!r}")
-
-        positive("threshold_px", self.threshold_px)
-        positive("init_rotation_deg", self.init_rotation_deg)
-        positive("init_translation_m", self.init_translation_m)
-        positive("max_spread_deg", self.max_spread_deg)
-        if not 0 < self.confidence < 1:
-            raise ConfigError(f"confidence must be in (0, 1), got {self.confidence!r}")
-        for name in ("max_iterations", "auto_rounds", "max_keypoints", "min_inliers"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"{name} must be a positive integer, got {v!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if self.auto_scale is not None and not (0 < self.auto_scale <= 1):
-            raise ConfigError(f"auto_scale must be in (0, 1], got {self.auto_scale!r}")
-        if self.patch_px < 7 or self.patch_px % 2 == 0:
-            raise ConfigError(f"patch_px must be an odd size >= 7, got {self.patch_px!r}")
-        if not -1 < self.min_ncc < 1:
-            raise ConfigError(f"min_ncc must be in (-1, 1), got {self.min_ncc!r}")
-        if self.flexion_n < 3 or self.flexion_n % 2 == 0:
-            raise ConfigError(f"flexion_n must be an odd grid size >= 3, got {self.flexion_n!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict of all fields."""
-        return asdict(self)
+    seed: Seed = 0
+    init_rotation_deg: Positive = 2.0
+    init_translation_m: Positive = 0.10
+    auto_scale: Annotated[float, Field(gt=0, le=1)] | None = None
+    auto_rounds: int = Field(6, ge=1)
+    patch_px: Annotated[int, odd(7)] = 21
+    max_keypoints: int = Field(800, ge=1)
+    min_ncc: float = Field(0.3, gt=-1, lt=1)
+    min_inliers: int = Field(12, ge=1)
+    max_spread_deg: Positive = 1.0
+    flexion_n: OddSize = 3

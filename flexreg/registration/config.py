@@ -3,12 +3,25 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
-from typing import Any
+import typing
+from typing import Annotated
+
+from pydantic import Field
+
+from flexreg.config import Config, OddSize, Positive, Seed, one_of
+from flexreg.stages.feature_images import KINDS
+from flexreg.stages.keypoints import METHODS
+from flexreg.stages.refinement.icp import IcpMethod
+
+#: feature images :func:`register` accepts: every kind of :data:`KINDS`, or the scan's intensity
+IMAGES: tuple[str, ...] = (*KINDS, "intensity")
+ICP_METHODS: tuple[str, ...] = typing.get_args(IcpMethod)
+STRETCHES: tuple[str, ...] = ("clahe", "percentile")
+MEDIANS: tuple[int, ...] = (0, 3, 5)
+UPRIGHT: tuple[str, ...] = ("auto", "on", "off")
 
 
-@dataclass(frozen=True)
-class RegistrationConfig:
+class RegistrationConfig(Config):
     """Every knob of :func:`register`; saved with each result.
 
     Attributes
@@ -16,34 +29,34 @@ class RegistrationConfig:
     image : str
         Feature image kind (see :data:`flexreg.stages.feature_images.KINDS`), or ``"intensity"``.
     n : int
-        Flexion / Bearing Angle neighbourhood size (odd).
-    median : int
-        Median pre-filter window (0, 3 or 5).
-    stretch : str or None
-        Contrast normalisation before detection: ``"clahe"``, ``"percentile"`` or None.
+        Flexion / Bearing Angle neighbourhood size (odd, >= 3).
+    median : {0, 3, 5}
+        Median pre-filter window (0: off).
+    stretch : {"clahe", "percentile"} or None
+        Contrast normalisation before detection (None: none).
     features : str
         Detector/descriptor: sift, orb, akaze, kaze, brisk (surf on nonfree OpenCV).
     max_features : int
-        Strongest keypoints kept per image.
+        Strongest keypoints kept per image (>= 8).
     ratio : float
-        Lowe's ratio-test threshold.
+        Lowe's ratio-test threshold, in (0, 1].
     mutual : bool
         Mutual nearest-neighbour check.
-    threshold_m : float or None
+    threshold_m : float or None, metres
         RANSAC inlier distance; derived from the scans' pixel footprint when None.
-    threshold_px : float
+    threshold_px : float, pixel footprints
         Derived threshold in pixel footprints (keypoint localisation error).
     consistency : bool
         Prune correspondences by pairwise-distance consistency before RANSAC.
     min_inliers : int
-        Fewer RANSAC inliers raise :class:`RegistrationError`.
+        Fewer RANSAC inliers raise :class:`RegistrationError` (>= 3).
     confidence, max_iterations : float, int
-        RANSAC stopping.
+        RANSAC stopping: confidence in (0, 1), iteration cap >= 1.
     refine : bool
         Refine with ICP.
-    icp : str
-        ``"point-to-plane"``, ``"gicp"`` or ``"point-to-point"``.
-    voxel_m : float or None
+    icp : {"point-to-plane", "gicp", "point-to-point"}
+        ICP variant.
+    voxel_m : float or None, metres
         ICP voxel; derived from point spacing when None.
     seed : int
         Randomness (RANSAC sampling); same seed, same transform.
@@ -52,11 +65,11 @@ class RegistrationConfig:
         (:func:`flexreg.stages.projection.fill_holes`).
     upright : {"auto", "on", "off"}
         Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
-        (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"`` uses
-        it
-        when both scans are panoramas or native grids that look levelled, ``"on"`` requires it.
+        (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"``
+        uses it when both scans are panoramas or native grids that look levelled, ``"on"``
+        requires it.
     max_tilt_rad : float, radians
-        Largest tilt of a scan still treated as levelled.
+        Largest tilt of a scan still treated as levelled, in [0, pi/2).
     plan_cell_m : float, metres
         Plan-view cell size.
     plan_hypotheses : int
@@ -64,44 +77,41 @@ class RegistrationConfig:
     guided_radius_m, guided_radius_per_m : float
         Guided matching search radius around a prior's prediction: metres plus metres per
         metre of range.
+    min_overlap : float
+        Smallest share of the source's points the result must explain, in [0, 1] (see
+        :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
     max_image_pixels : int
         Larger range images are subsampled (every k-th row and column) before the image
         stages; ICP still uses every point.
     polish : bool
         Judge each candidate after a quick local ICP on small subsets of the scans.
-    min_overlap : float
-        Smallest share of the source's points the result must explain (see
-        :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
     """
 
-    image: str = "flexion"
-    n: int = 5
-    median: int = 3
-    stretch: str | None = "clahe"
-    features: str = "sift"
-    max_features: int = 8000
-    ratio: float = 0.85
+    image: Annotated[str, one_of(IMAGES, "feature image")] = "flexion"
+    n: OddSize = 5
+    median: Annotated[int, one_of(MEDIANS)] = 3
+    stretch: Annotated[str, one_of(STRETCHES)] | None = "clahe"
+    features: Annotated[str, one_of(METHODS, "method")] = "sift"
+    max_features: int = Field(8000, ge=8)
+    ratio: float = Field(0.85, gt=0, le=1)
     mutual: bool = True
-    threshold_m: float | None = None
-    threshold_px: float = 3.0
+    threshold_m: Positive | None = None
+    threshold_px: Positive = 3.0
     consistency: bool = True
-    min_inliers: int = 10
-    confidence: float = 0.9999
-    max_iterations: int = 50_000
+    min_inliers: int = Field(10, ge=3)
+    confidence: float = Field(0.9999, gt=0, lt=1)
+    max_iterations: int = Field(50_000, ge=1)
     refine: bool = True
-    icp: str = "point-to-plane"
-    voxel_m: float | None = None
-    seed: int = 0
+    icp: Annotated[str, one_of(ICP_METHODS, "method")] = "point-to-plane"
+    voxel_m: Positive | None = None
+    seed: Seed = 0
     fill_holes: bool = True
-    upright: str = "auto"
-    max_tilt_rad: float = math.radians(10.0)
-    plan_cell_m: float = 0.25
-    plan_hypotheses: int = 3
-    guided_radius_m: float = 0.25
-    guided_radius_per_m: float = 0.02
-    min_overlap: float = 0.1
-    max_image_pixels: int = 2_500_000
+    upright: Annotated[str, one_of(UPRIGHT)] = "auto"
+    max_tilt_rad: float = Field(math.radians(10.0), ge=0, lt=math.pi / 2)
+    plan_cell_m: Positive = 0.25
+    plan_hypotheses: int = Field(3, ge=1)
+    guided_radius_m: Positive = 0.25
+    guided_radius_per_m: float = Field(0.02, ge=0, allow_inf_nan=False)
+    min_overlap: float = Field(0.1, ge=0, le=1)
+    max_image_pixels: int = Field(2_500_000, ge=1)
     polish: bool = True
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)

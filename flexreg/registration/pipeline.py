@@ -784,7 +784,7 @@ def _camera_image(target: Scan | RangeImage) -> RangeImage:
     against and refines on."""
     from flexreg.stages.projection import fill_holes
 
-    return _with_camera(fill_holes(_working_image(target, RegistrationConfig.max_image_pixels)))
+    return _with_camera(fill_holes(_working_image(target, RegistrationConfig().max_image_pixels)))
 
 
 @dataclass(eq=False)

@@ -227,7 +227,7 @@ def test_bench_pair_that_cannot_be_loaded_is_a_row(shared_data, tmp_path, monkey
 
 
 def test_bench_writes_nothing_when_writing_fails(shared_data, tmp_path, monkeypatch):
-    import flexreg.bench.suite as bs
+    import flexreg.bench.results as bs
 
     def full_disk(*_args, **_kwargs):
         raise OSError(28, "No space left on device")

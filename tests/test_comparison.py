@@ -1,5 +1,6 @@
-"""flexreg.bench.compare: ground-truth parsing, success and fit on hand-computed cases, measured
-calls (failures, crashes and timeouts become rows), a compare run and its files."""
+"""flexreg.bench (compare, measure, methods, results) and flexreg.io.read_ground_truth:
+ground-truth parsing, success and fit on hand-computed cases, measured calls (failures, crashes
+and timeouts become rows), a compare run and its files."""
 
 from __future__ import annotations
 
@@ -11,20 +12,16 @@ import cv2
 import numpy as np
 import pytest
 
-import flexreg.bench.compare as comparison
+import flexreg.bench.measure as measure
+import flexreg.bench.results as results
 from flexreg import ConfigError, InputError, RegistrationError, read_scans
-from flexreg.bench.compare import (
-    FitEvaluator,
-    SuccessCriteria,
-    compare,
-    measure_call,
-    parse_methods,
-    read_ground_truth,
-    run_isolated,
-    to_markdown,
-    write_comparison,
-)
+from flexreg.bench.compare import FitEvaluator, SuccessCriteria, compare
+from flexreg.bench.measure import measure_call, preload_modules, run_isolated
+from flexreg.bench.methods import parse_methods
+from flexreg.bench.results import write_comparison
+from flexreg.bench.tables import to_markdown
 from flexreg.core.transforms import apply, invert, make_transform, rotation_about_axis
+from flexreg.io.transform_io import read_ground_truth
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +137,7 @@ def test_measure_call_statuses_time_and_memory():
     m = measure_call(allocate)  # type: ignore[arg-type]
     assert m.status == "ok" and m.result == 40_000_000.0
     assert m.time_s >= 0.05
-    if comparison._reset_high_water_mark():  # Linux: the kernel's peak resident size
+    if measure.reset_high_water_mark():  # Linux: the kernel's peak resident size
         assert 280 < m.peak_memory_mb < 1000
 
 
@@ -220,7 +217,7 @@ def test_write_comparison_leaves_nothing_when_a_file_fails(bunny, tmp_path, monk
     def broken_plot(*_args, **_kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(comparison, "plot_comparison", broken_plot)
+    monkeypatch.setattr(results, "plot_comparison", broken_plot)
     out = tmp_path / "report"
     with pytest.raises(InputError, match="No space left"):
         write_comparison(cmp, out)
@@ -232,14 +229,11 @@ def test_fork_server_preloads_importable_modules():
     first measured call its import time)."""
     import importlib
 
-    from flexreg.bench.compare import _PRELOAD
-
-    for name in _PRELOAD:
+    modules = preload_modules()
+    for name in modules:
         if name.startswith("flexreg"):
             importlib.import_module(name)
-    assert (
-        "flexreg.bench._preload" in _PRELOAD and "flexreg.stages.refinement.projective" in _PRELOAD
-    )
+    assert "flexreg.bench._preload" in modules and "flexreg.stages.refinement.projective" in modules
 
 
 def test_startup_loads_cached_serial_kernels_without_compiling():

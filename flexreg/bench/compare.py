@@ -1,15 +1,14 @@
 """flexreg and the baselines side by side on one scan pair.
 
-:func:`compare` runs each method (``flexreg`` = :func:`flexreg.registration.pipeline.register`, the
-others
-from :mod:`flexreg.baselines`) on the same two scans and measures, per method:
+:func:`compare` runs each method (``flexreg`` = :func:`flexreg.registration.pipeline.register`,
+the others from :mod:`flexreg.baselines`; see :mod:`flexreg.bench.methods`) on the same two
+scans and measures, per method:
 
-- **errors** against a known ``T_target_source`` (:func:`read_ground_truth`): rotation angle of
-  ``R_est^T R_gt`` in degrees (:func:`flexreg.core.transforms.rotation_error_deg`) and distance of
-  the
-  translations in metres (:func:`flexreg.core.transforms.translation_error_m`), of the final
-  transform and, for methods with a global stage (flexreg, fpfh-ransac), of the coarse
-  transform before their ICP refinement;
+- **errors** against a known ``T_target_source`` (:func:`flexreg.io.read_ground_truth`):
+  rotation angle of ``R_est^T R_gt`` in degrees (:func:`flexreg.core.transforms.rotation_error_deg`)
+  and distance of the translations in metres (:func:`flexreg.core.transforms.translation_error_m`),
+  of the final transform and, for methods with a global stage (flexreg, fpfh-ransac), of the
+  coarse transform before their ICP refinement;
 - **success**: the final transform within ``SuccessCriteria.rotation_deg`` (default 0.5°) *and*
   ``SuccessCriteria.translation_m`` (default 5 cm) of the truth; *coarse success* applies the
   same limits to the transform before refinement (global methods only);
@@ -17,410 +16,67 @@ from :mod:`flexreg.baselines`) on the same two scans and measures, per method:
   the method's transform, the share with a target point within ``fit_distance_m`` (the scale
   voxel, see :func:`flexreg.baselines.default_voxel`) -- *fitness*, denominator stated -- and
   the RMS distance of those points (*inlier RMSE*);
-- **wall time** of the method's call alone (scans already in memory; a process's start-up,
-  imports and data transfer excluded) and **peak memory**: the increase of the resident set
-  size during the call (Linux: the kernel's high-water mark ``VmHWM``, reset through
-  ``/proc/self/clear_refs`` just before the call, minus the resident size then; elsewhere the
-  Python-heap peak from :mod:`tracemalloc`, which misses native allocations).
+- **wall time** of the method's call alone and **peak memory** (:mod:`flexreg.bench.measure`).
 
 By default each method runs in its own process (``multiprocessing`` forkserver), so that a
 crash, a hang (``timeout_s``) or memory kept by one method's allocator cannot touch the others;
 a method that fails (raises a :class:`~flexreg.errors.FlexregError`), raises anything else,
-dies or times out is a row saying so, never a missing row.
+dies or times out is a row saying so, never a missing row. Tables are in
+:mod:`flexreg.bench.tables`, the figure in :mod:`flexreg.bench.plots`, the files in
+:mod:`flexreg.bench.results`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import json
 import logging
 import math
-import multiprocessing
 import os
-import platform
 import tempfile
-import time
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
-from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
-from flexreg.baselines import BASELINES, GLOBAL, available_baselines, default_voxel, get_baseline
-from flexreg.core.transforms import as_transform, invert, rotation_error_deg, translation_error_m
-from flexreg.errors import ConfigError, FlexregError, InputError, RegistrationError
+from flexreg.baselines import default_voxel
+from flexreg.baselines._common import as_points
+from flexreg.bench.measure import (
+    Measured,
+    isolation_note,
+    machine_info,
+    measure_call,
+    measure_isolated,
+    peak_memory_note,
+    save_pair,
+)
+from flexreg.bench.methods import DEFAULT_METHODS, GLOBAL_METHODS, parse_methods, run_method
+from flexreg.core.transforms import as_transform, rotation_error_deg, translation_error_m
+from flexreg.errors import ConfigError, InputError, RegistrationError
+from flexreg.registration.config import RegistrationConfig
 
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
+__all__ = [
+    "FIT_SOURCE_POINTS",
+    "FIT_TARGET_POINTS",
+    "MIN_OVERLAP_FITNESS",
+    "Comparison",
+    "FitEvaluator",
+    "MethodRun",
+    "SuccessCriteria",
+    "compare",
+    "make_row",
+]
 
 log = logging.getLogger(__name__)
 
-#: every method name :func:`compare` knows (``small-gicp`` only runs when installed)
-METHODS: tuple[str, ...] = ("flexreg", *BASELINES)
-#: the methods compared unless told otherwise
-DEFAULT_METHODS: tuple[str, ...] = (
-    "flexreg",
-    "icp-point",
-    "icp-plane",
-    "gicp",
-    "fpfh-ransac",
-    "kiss-icp",
-)
-#: methods with a global (coarse) stage before their refinement
-GLOBAL_METHODS: frozenset[str] = frozenset({"flexreg", *GLOBAL})
 #: source points (evenly spaced) and target points (every k-th) the common fit uses
 FIT_SOURCE_POINTS = 20_000
 FIT_TARGET_POINTS = 1_000_000
 #: a pair whose source lies less than this share on the target (common fit) has no overlap
 MIN_OVERLAP_FITNESS = 0.01
-
-STATUSES = ("ok", "failed", "error", "crashed", "timeout")
-
-
-# ------------------------------------------------------------------ methods and inputs
-
-
-def parse_methods(spec: str | Sequence[str]) -> tuple[str, ...]:
-    """Method names from ``"flexreg,icp-plane"`` (or a sequence), in order, without repeats.
-
-    Raises
-    ------
-    ConfigError
-        Empty list, an unknown name, or a baseline whose optional package is missing.
-    """
-    parts = spec.split(",") if isinstance(spec, str) else list(spec)
-    names = list(dict.fromkeys(p.strip() for p in parts if p.strip()))
-    if not names:
-        raise ConfigError(f"no method given; known: {', '.join(METHODS)}")
-    for name in names:
-        if name not in METHODS:
-            raise ConfigError(f"unknown method {name!r}; known: {', '.join(METHODS)}")
-        if name != "flexreg" and name not in available_baselines():
-            get_baseline(name)  # raises the "needs the optional package" error
-    return tuple(names)
-
-
-def read_ground_truth(
-    path: str | PathLike[str], *, target: str | None = None, source: str | None = None
-) -> NDArray[np.float64]:
-    """A known ``T_target_source`` from a file.
-
-    Accepted: JSON ``{"T_target_source": [[4x4]], ...}`` (what ``flexreg register`` writes),
-    a ``flexreg synth`` ``gt.json`` (its ``pairs`` entry for the stems ``target`` and
-    ``source``, inverted if listed the other way round), or a 4x4 text matrix.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, no matching entry, or a matrix that is not a rigid
-        transform (non-orthonormal rotation block, reflection, bad last row, NaN).
-    """
-    from flexreg.io import read_transform
-
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "no such file")
-    if p.suffix.lower() == ".json":
-        try:
-            doc = json.loads(p.read_text(errors="replace"))
-        except json.JSONDecodeError as e:
-            raise InputError(p, f"invalid JSON: {e.msg} (line {e.lineno})") from None
-        if isinstance(doc, dict) and "T_target_source" not in doc and "pairs" in doc:
-            for pair in doc["pairs"]:
-                names = (pair.get("target"), pair.get("source"))
-                T = pair.get("T_target_source")
-                if names == (target, source):
-                    return _rigid(T, p)
-                if names == (source, target):
-                    return invert(_rigid(T, p))
-            raise InputError(p, f"no pair {target} / {source} in its 'pairs'")
-        if isinstance(doc, dict) and "T_target_source" not in doc:
-            raise InputError(p, "no 'T_target_source' entry")
-        return _rigid(doc["T_target_source"] if isinstance(doc, dict) else doc, p)
-    return _rigid(read_transform(p), p)
-
-
-def _rigid(T: Any, path: Path) -> NDArray[np.float64]:
-    try:
-        return as_transform(T, name=str(path), rigid=True)
-    except (TypeError, ValueError) as e:
-        if isinstance(e, InputError):
-            raise
-        raise InputError(path, f"not a 4x4 matrix of numbers ({e})") from None
-
-
-def run_method(
-    name: str,
-    target: Any,
-    source: Any,
-    *,
-    T_init: ArrayLike | None = None,
-    voxel_m: float | None = None,
-    seed: int = 0,
-    config: RegistrationConfig | None = None,
-) -> RegistrationResult:
-    """Run one method by name: ``flexreg`` (``register`` with ``config`` or the default
-    configuration and ``seed``) or a baseline. ``T_init`` goes to the local methods only
-    (flexreg and fpfh-ransac are global); ``voxel_m`` to the baselines only (flexreg derives
-    its own thresholds). FPFH + RANSAC runs its RANSAC on all cores, as Open3D does by default:
-    its rows are the fastest configuration users get, not bit-reproducible from run to run."""
-    if name == "flexreg":
-        from flexreg.registration.pipeline import RegistrationConfig, register
-
-        return register(target, source, config or RegistrationConfig(seed=seed))
-    options: dict[str, Any] = {"voxel_m": voxel_m, "seed": seed}
-    if name not in GLOBAL and T_init is not None:
-        options["T_init"] = T_init
-    if name == "fpfh-ransac":
-        # as Open3D runs it by default (all cores): fast, but not bit-reproducible
-        options["ransac_threads"] = None
-    return get_baseline(name)(target, source, **options)
-
-
-# ------------------------------------------------------------------ measuring one call
-
-
-@dataclass(eq=False)
-class Measured:
-    """Outcome of one measured call.
-
-    Attributes
-    ----------
-    status : {"ok", "failed", "error", "crashed", "timeout"}
-        ``failed``: the method raised a :class:`FlexregError` (it reports that it could not
-        register); ``error``: it raised another exception; ``crashed``: its process died;
-        ``timeout``: no result within the time limit.
-    result : RegistrationResult or None
-    message : str or None
-        The error message (``"Type: message"`` for ``error``).
-    time_s : float, seconds
-        Wall time of the call (the limit for ``timeout``).
-    peak_memory_mb : float or None, MiB
-        Increase of the peak memory during the call (see :data:`PEAK_MEMORY_NOTE`).
-    """
-
-    status: str
-    result: RegistrationResult | None
-    message: str | None
-    time_s: float
-    peak_memory_mb: float | None
-
-
-def _read_status_kib(key: str) -> int | None:
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith(key + ":"):
-                    return int(line.split()[1])
-    except OSError:
-        return None
-    return None
-
-
-def _reset_high_water_mark() -> bool:
-    """Reset the kernel's peak-RSS counter of this process (Linux); False if impossible."""
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-    except OSError:
-        return False
-    return _read_status_kib("VmHWM") is not None
-
-
-def peak_memory_note() -> str:
-    """How peak memory is measured on this machine (stated with every result)."""
-    if _reset_high_water_mark():
-        return (
-            "increase of the resident set size during the call: kernel high-water mark VmHWM "
-            "(reset via /proc/self/clear_refs right before the call) minus the resident size then"
-        )
-    return (
-        "Python-heap peak during the call (tracemalloc); native allocations (Open3D, KISS-ICP, "
-        "OpenCV) are not counted on this platform"
-    )
-
-
-def measure_call(fn: Callable[[], RegistrationResult]) -> Measured:
-    """Call ``fn()`` in this process: wall time, peak memory increase, and the outcome
-    (exceptions become ``failed``/``error`` statuses, never propagate)."""
-    import tracemalloc
-
-    hwm = _reset_high_water_mark()
-    rss0 = _read_status_kib("VmRSS") if hwm else None
-    if not hwm:
-        tracemalloc.start()
-    status, result, message = "ok", None, None
-    t0 = time.perf_counter()
-    try:
-        result = fn()
-    except FlexregError as e:
-        status, message = "failed", str(e)
-    except Exception as e:
-        status, message = "error", f"{type(e).__name__}: {e}"
-        log.debug("method raised:\n%s", traceback.format_exc())
-    elapsed = time.perf_counter() - t0
-    if hwm and rss0 is not None:
-        peak = _read_status_kib("VmHWM")
-        peak_mb = None if peak is None else max(0, peak - rss0) / 1024.0
-    else:
-        _, peak_b = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
-        peak_mb = peak_b / 2**20
-    return Measured(status, result, message, elapsed, peak_mb)
-
-
-def _child(
-    conn: Any,
-    fn: Callable[..., Any],
-    args: tuple[Any, ...],
-    kwargs: dict[str, Any],
-    pair_file: str | None = None,
-) -> None:
-    """Process entry point: measure ``fn(*args, **kwargs)`` and send the :class:`Measured`.
-
-    With ``pair_file``, ``(target, source)`` are read from it first (not measured) and
-    appended to ``args``."""
-    if pair_file is not None:
-        import pickle
-
-        with open(pair_file, "rb") as f:
-            args = (*args, *pickle.load(f))
-    m = measure_call(partial(fn, *args, **kwargs))
-    try:
-        conn.send(m)
-    except Exception as e:  # an unpicklable result still reports something
-        conn.send(Measured("error", None, f"result not transferable: {e}", m.time_s, None))
-    conn.close()
-
-
-#: every module a method imports on its first call (imports are not part of the measured time),
-#: and numba's deferred start-up (:mod:`flexreg.bench._preload`)
-_PRELOAD = [
-    "flexreg.bench.compare",
-    "flexreg.bench._preload",
-    "flexreg.registration.pipeline",
-    "flexreg.stages.alignment",
-    "flexreg.stages.feature_images",
-    "flexreg.stages.matching",
-    "flexreg.stages.refinement.projective",
-    "flexreg.stages.refinement.icp",
-    "flexreg.stages.priors",
-    "flexreg.baselines.open3d_icp",
-    "flexreg.baselines.fpfh",
-    "flexreg.baselines.kiss",
-    "kiss_icp.config",
-    "kiss_icp.kiss_icp",
-    "open3d",
-    "cv2",
-    "scipy.fft",
-    "scipy.ndimage",
-    "scipy.spatial",
-]
-
-
-def _context() -> Any:
-    """The multiprocessing context for isolated runs: a fork server that has imported the
-    heavy modules but run nothing (so its children start in a fraction of a second and
-    inherit no thread pools), or spawn where there is no fork server."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(_PRELOAD)
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def measure_isolated(
-    name: str,
-    target: Any,
-    source: Any,
-    *,
-    timeout_s: float | None = None,
-    pair_file: str | PathLike[str] | None = None,
-    **options: Any,
-) -> Measured:
-    """:func:`run_method` in a separate process, measured there (see :func:`run_isolated`).
-
-    With ``pair_file`` (written by :func:`save_pair`), the process reads ``(target, source)``
-    from that file before the measured call instead of receiving them through a pipe, which
-    is much faster for scans of tens of millions of points read by several methods.
-    """
-    if pair_file is not None:
-        return run_isolated(
-            run_method, (name,), options, timeout_s=timeout_s, pair_file=str(pair_file)
-        )
-    return run_isolated(run_method, (name, target, source), options, timeout_s=timeout_s)
-
-
-def save_pair(target: Any, source: Any, path: str | PathLike[str]) -> Path:
-    """Pickle ``(target, source)`` to ``path`` for :func:`measure_isolated`."""
-    import pickle
-
-    p = Path(path)
-    with open(p, "wb") as f:
-        pickle.dump((target, source), f, protocol=pickle.HIGHEST_PROTOCOL)
-    return p
-
-
-def run_isolated(
-    fn: Callable[..., Any],
-    args: tuple[Any, ...] = (),
-    kwargs: dict[str, Any] | None = None,
-    *,
-    timeout_s: float | None = None,
-    pair_file: str | None = None,
-) -> Measured:
-    """Measure ``fn(*args, **kwargs)`` (:func:`measure_call`) in a separate process.
-
-    ``fn`` must be importable by name (a module-level function). With ``pair_file`` (see
-    :func:`save_pair`) the pickled ``(target, source)`` are read from it in the process,
-    before the measured call, and appended to ``args``. A process that dies becomes
-    ``crashed`` (with its signal or exit code), one that sends nothing within ``timeout_s``
-    seconds is killed and becomes ``timeout``.
-    """
-    ctx = _context()
-    recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(send, fn, args, kwargs or {}, pair_file), daemon=True)
-    t0 = time.perf_counter()
-    proc.start()
-    send.close()
-    try:
-        ready = recv.poll(timeout_s)
-        msg: Measured | None = None
-        if ready:
-            try:
-                msg = recv.recv()
-            except (EOFError, OSError):
-                msg = None
-        if not ready:
-            proc.kill()
-            proc.join()
-            limit = float(timeout_s) if timeout_s is not None else time.perf_counter() - t0
-            return Measured("timeout", None, f"no result within {limit:g} s", limit, None)
-        proc.join(30)
-        if msg is None:
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
-            code = proc.exitcode
-            how = (
-                f"killed by signal {-code}"
-                if code is not None and code < 0
-                else f"exit status {code}"
-            )
-            return Measured(
-                "crashed", None, f"process died ({how})", time.perf_counter() - t0, None
-            )
-        return msg
-    finally:
-        recv.close()
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
 
 
 # ------------------------------------------------------------------ criteria, fit, rows
@@ -478,8 +134,6 @@ class FitEvaluator:
     def __init__(
         self, target: NDArray[np.float64], source: NDArray[np.float64], distance_m: float
     ) -> None:
-        from scipy.spatial import cKDTree
-
         if not (math.isfinite(distance_m) and distance_m > 0):
             raise ConfigError(f"fit distance must be positive, got {distance_m}")
         t = target[:: max(1, math.ceil(len(target) / FIT_TARGET_POINTS))]
@@ -707,37 +361,7 @@ class Comparison:
         }
 
 
-def machine_info() -> dict[str, Any]:
-    """Cores, CPU, Python and library versions, load average (for the protocol)."""
-    import open3d
-
-    info: dict[str, Any] = {
-        "cores": os.cpu_count(),
-        "cpu": _cpu_name(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "open3d": open3d.__version__,
-    }
-    try:
-        from importlib.metadata import version
-
-        info["kiss_icp"] = version("kiss-icp")
-    except Exception:
-        info["kiss_icp"] = None
-    if hasattr(os, "getloadavg"):
-        info["load_average"] = list(os.getloadavg())
-    return info
-
-
-def _cpu_name() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+# ------------------------------------------------------------------ the comparison
 
 
 def compare(
@@ -764,7 +388,7 @@ def compare(
     target, source : Scan (or RangeImage / (N, 3) array for the baselines)
         Points in their own scanner frames.
     methods : str or sequence of str
-        Names (:data:`METHODS`), e.g. ``"flexreg,icp-plane"``.
+        Names (:data:`flexreg.bench.methods.METHODS`), e.g. ``"flexreg,icp-plane"``.
     T_gt : (4, 4) float, optional
         Ground truth ``T_target_source``; without it there are no errors and no success.
     T_init : (4, 4) float, optional
@@ -806,13 +430,8 @@ def compare(
     RegistrationError
         No method found an overlap (``require_overlap``).
     """
-    from flexreg.baselines._common import as_points
-
     chosen = parse_methods(methods)
-    if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0):
-        raise ConfigError(f"time limit must be a positive number of seconds, got {timeout_s}")
-    if voxel_m is not None and not (math.isfinite(voxel_m) and voxel_m > 0):
-        raise ConfigError(f"voxel must be a positive number of metres, got {voxel_m}")
+    _check_limits(timeout_s, voxel_m)
     Tg = None if T_gt is None else as_transform(T_gt, name="ground truth")
     Ti = None if T_init is None else as_transform(T_init, name="initial guess")
     pt = as_points(target, name=names[0])
@@ -831,10 +450,10 @@ def compare(
                 f"{fit.denominator}",
             )
     machine = machine_info()
-    runs: list[MethodRun] = []
     options: dict[str, Any] = {"T_init": Ti, "voxel_m": voxel_m, "seed": seed}
     if flexreg_config is not None:
         options["config"] = flexreg_config
+    runs: list[MethodRun] = []
     with tempfile.TemporaryDirectory(prefix="flexreg-compare-") as tmp:
         pair_file = save_pair(target, source, Path(tmp) / "pair.pickle") if isolate else None
         for i, name in enumerate(chosen):
@@ -854,17 +473,8 @@ def compare(
             runs.append(row)
     if progress is not None:
         progress("", len(chosen), len(chosen))
-    best = max((r.fitness or 0.0 for r in runs if r.ok), default=0.0)
-    if require_overlap and best < MIN_OVERLAP_FITNESS:
-        outcome = "; ".join(
-            f"{r.method}: "
-            + (f"{r.status} ({r.message})" if not r.ok else f"fitness {r.fitness or 0.0:.3f}")
-            for r in runs
-        )
-        raise RegistrationError(
-            f"no overlap found between {names[0]} and {names[1]}: no method put "
-            f"{100 * MIN_OVERLAP_FITNESS:g}% of the source on the target ({outcome})"
-        )
+    if require_overlap:
+        _require_some_overlap(runs, names)
     machine["load_average_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     return Comparison(
         target=names[0],
@@ -878,9 +488,7 @@ def compare(
         fit_denominator=fit.denominator,
         peak_memory=peak_memory_note(),
         isolation=(
-            f"each method in its own process ({_context().get_start_method()})"
-            if isolate
-            else "all methods in one process, one after the other"
+            isolation_note() if isolate else "all methods in one process, one after the other"
         ),
         points=(len(pt), len(ps)),
         seed=seed,
@@ -888,250 +496,25 @@ def compare(
     )
 
 
-# ------------------------------------------------------------------ rendering
-
-COLUMNS: tuple[str, ...] = (
-    "method",
-    "status",
-    "rotation error (°)",
-    "translation error (m)",
-    "success",
-    "coarse error (° / m)",
-    "inlier RMSE (m)",
-    "fitness",
-    "time (s)",
-    "peak memory (MB)",
-)
+def _check_limits(timeout_s: float | None, voxel_m: float | None) -> None:
+    if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise ConfigError(f"time limit must be a positive number of seconds, got {timeout_s}")
+    if voxel_m is not None and not (math.isfinite(voxel_m) and voxel_m > 0):
+        raise ConfigError(f"voxel must be a positive number of metres, got {voxel_m}")
 
 
-def _num(x: float | None, fmt: str) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "–"
-    return format(x, fmt)
-
-
-def _yes(x: bool | None) -> str:
-    return "–" if x is None else ("yes" if x else "no")
-
-
-def table_rows(cmp: Comparison) -> list[dict[str, str]]:
-    """One dict of formatted cells per method (keys :data:`COLUMNS`), for every renderer."""
-    rows = []
-    for r in cmp.runs:
-        status = r.status if r.ok else f"{r.status}: {r.message or ''}".strip()
-        coarse = (
-            f"{_num(r.coarse_rotation_error_deg, '.3f')} / "
-            f"{_num(r.coarse_translation_error_m, '.3f')}"
-            if r.coarse_rotation_error_deg is not None
-            else "–"
-        )
-        rows.append(
-            {
-                "method": r.method,
-                "status": status,
-                "rotation error (°)": _num(r.rotation_error_deg, ".4f"),
-                "translation error (m)": _num(r.translation_error_m, ".4f"),
-                "success": _yes(r.success),
-                "coarse error (° / m)": coarse,
-                "inlier RMSE (m)": _num(r.inlier_rmse_m, ".4f"),
-                "fitness": _num(r.fitness, ".3f"),
-                "time (s)": _num(r.time_s, ".2f"),
-                "peak memory (MB)": _num(r.peak_memory_mb, ".0f"),
-            }
-        )
-    return rows
-
-
-def notes(cmp: Comparison) -> list[str]:
-    """What the columns mean, for the Markdown and the console."""
-    out = [
-        f"Scans: target {cmp.target} ({cmp.points[0]:,} points), source {cmp.source} "
-        f"({cmp.points[1]:,} points).",
-        "Success: final transform "
-        + cmp.criteria.label()
-        + " of the ground truth; coarse error = the transform before refinement (global "
-        "methods: flexreg, fpfh-ransac)."
-        + ("" if cmp.T_gt is not None else " No ground truth given: no errors, no success."),
-        f"Fitness: share of {cmp.fit_denominator}; inlier RMSE over those points.",
-        f"Scale voxel {cmp.scale_m:.4g} m ({cmp.scale_source}); local methods start from "
-        + ("the given initial guess." if cmp.T_init is not None else "the identity."),
-        "Time: wall time of each method's call alone (scans in memory); peak memory: "
-        + cmp.peak_memory
-        + f"; {cmp.isolation}.",
-    ]
-    return out
-
-
-def to_markdown(cmp: Comparison, *, figure: str | None = None) -> str:
-    """The comparison as a Markdown table with its notes (and the bar chart, if given)."""
-    rows = table_rows(cmp)
-    lines = [
-        "| " + " | ".join(COLUMNS) + " |",
-        "|---|---|" + "---:|" * 3 + "---|" + "---:|" * 4,
-    ]
-    for row in rows:
-        cells = [row[c].replace("|", "\\|") for c in COLUMNS]
-        lines.append("| " + " | ".join(cells) + " |")
-    lines += [""] + [f"- {n}" for n in notes(cmp)]
-    if figure:
-        lines += ["", f"![errors, time and memory per method]({figure})"]
-    return "\n".join(lines) + "\n"
-
-
-def plot_comparison(cmp: Comparison, path: str | PathLike[str]) -> Path:
-    """Bar chart PNG: rotation and translation error (log scale, success limits dashed), time
-    and peak memory per method. Failed methods are marked instead of drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = [r.method for r in cmp.runs]
-    x = np.arange(len(names))
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), dpi=110)
-    colour = {True: "#009E73", False: "#D55E00", None: "#56B4E9"}
-    panels = (
-        (axes[0, 0], "rotation error (°)", [r.rotation_error_deg for r in cmp.runs], True),
-        (axes[0, 1], "translation error (m)", [r.translation_error_m for r in cmp.runs], True),
-        (axes[1, 0], "time (s)", [r.time_s if r.ok else None for r in cmp.runs], False),
-        (axes[1, 1], "peak memory (MB)", [r.peak_memory_mb for r in cmp.runs], False),
+def _require_some_overlap(runs: list[MethodRun], names: tuple[str, str]) -> None:
+    """Raise :class:`RegistrationError` when no method put :data:`MIN_OVERLAP_FITNESS` of the
+    source on the target."""
+    best = max((r.fitness or 0.0 for r in runs if r.ok), default=0.0)
+    if best >= MIN_OVERLAP_FITNESS:
+        return
+    outcome = "; ".join(
+        f"{r.method}: "
+        + (f"{r.status} ({r.message})" if not r.ok else f"fitness {r.fitness or 0.0:.3f}")
+        for r in runs
     )
-    for ax, label, values, log_scale in panels:
-        vals = [v if v is not None and math.isfinite(v) else None for v in values]
-        heights = [v if v is not None else 0.0 for v in vals]
-        if log_scale:
-            heights = [
-                max(h, 1e-6) if v is not None else 0.0 for h, v in zip(heights, vals, strict=True)
-            ]
-        ax.bar(x, heights, color=[colour[r.success] for r in cmp.runs])
-        for xi, (v, r) in enumerate(zip(vals, cmp.runs, strict=True)):
-            if v is None:
-                text = r.status if not r.ok else "no ground truth"
-                ax.text(
-                    xi,
-                    0.5,
-                    text,
-                    rotation=90,
-                    ha="center",
-                    va="center",
-                    fontsize=8,
-                    transform=ax.get_xaxis_transform(),
-                )
-        if log_scale and any(v is not None for v in vals):
-            ax.set_yscale("log")
-        if label.startswith("rotation"):
-            ax.axhline(cmp.criteria.rotation_deg, color="0.3", ls="--", lw=0.8)
-        if label.startswith("translation"):
-            ax.axhline(cmp.criteria.translation_m, color="0.3", ls="--", lw=0.8)
-        ax.set_ylabel(label)
-        ax.set_xticks(x)
-        ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
-        ax.grid(True, axis="y", alpha=0.3)
-    title = f"{Path(cmp.target).name} ← {Path(cmp.source).name}"
-    if cmp.T_gt is not None:
-        title += f"  (green: success {cmp.criteria.label()}, orange: not; dashed: limits)"
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p)
-    plt.close(fig)
-    return p
-
-
-def write_comparison(cmp: Comparison, out_dir: str | PathLike[str]) -> list[Path]:
-    """Write ``comparison.json``, ``comparison.md`` and ``comparison.png`` into ``out_dir``
-    (created). Each file is written under a temporary name and renamed; if one fails, those
-    already written here are removed again.
-
-    Raises
-    ------
-    InputError
-        ``out_dir`` exists and is not a folder, or a file cannot be written.
-    """
-
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
-    doc = json.dumps(_json_safe(cmp.to_dict()), indent=2) + "\n"
-    md = f"# {Path(cmp.target).name} ← {Path(cmp.source).name}\n\n" + to_markdown(
-        cmp, figure="comparison.png"
+    raise RegistrationError(
+        f"no overlap found between {names[0]} and {names[1]}: no method put "
+        f"{100 * MIN_OVERLAP_FITNESS:g}% of the source on the target ({outcome})"
     )
-    writers: list[tuple[Path, Callable[[Path], object]]] = [
-        (out / "comparison.json", lambda tmp: tmp.write_text(doc)),
-        (out / "comparison.md", lambda tmp: tmp.write_text(md)),
-        (out / "comparison.png", lambda tmp: plot_comparison(cmp, tmp)),
-    ]
-    return write_files(writers)
-
-
-def write_files(writers: list[tuple[Path, Callable[[Path], object]]]) -> list[Path]:
-    """Write each file atomically (temporary name, then rename). On any failure, the files
-    already written here are removed again, and so are the folders created for them."""
-    from flexreg.io import atomic_write
-
-    done: list[Path] = []
-    created: list[Path] = []
-    try:
-        for path, write in writers:
-            missing = [d for d in (path.parent, *path.parent.parents) if not d.exists()]
-            created += [d for d in reversed(missing) if d not in created]
-            try:
-                atomic_write(path, write)
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        for d in reversed(created):
-            with contextlib.suppress(OSError):
-                d.rmdir()  # only if empty
-        raise
-    return done
-
-
-def _json_safe(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _json_safe(x.tolist())
-    if isinstance(x, np.generic):
-        return _json_safe(x.item())
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, Path):
-        return str(x)
-    return x
-
-
-__all__ = [
-    "COLUMNS",
-    "DEFAULT_METHODS",
-    "GLOBAL_METHODS",
-    "METHODS",
-    "MIN_OVERLAP_FITNESS",
-    "Comparison",
-    "FitEvaluator",
-    "Measured",
-    "MethodRun",
-    "SuccessCriteria",
-    "compare",
-    "machine_info",
-    "make_row",
-    "measure_call",
-    "measure_isolated",
-    "notes",
-    "parse_methods",
-    "peak_memory_note",
-    "plot_comparison",
-    "read_ground_truth",
-    "run_isolated",
-    "run_method",
-    "save_pair",
-    "table_rows",
-    "to_markdown",
-    "write_comparison",
-    "write_files",
-]

@@ -15,7 +15,7 @@ from flexreg.errors import ConfigError
 
 if TYPE_CHECKING:
     from flexreg.bench.compare import Comparison
-    from flexreg.bench.suite import BenchResult
+    from flexreg.bench.types import BenchResult
 
 #: the default of --methods (flexreg.bench.compare.DEFAULT_METHODS, spelled out so that --help
 #: needs no import)
@@ -88,14 +88,11 @@ def compare_command(
     Every method gets a row: a method that fails, crashes or times out says so. Nothing is
     written unless the comparison completes.
     """
-    from flexreg.bench.compare import (
-        SuccessCriteria,
-        compare,
-        parse_methods,
-        read_ground_truth,
-        write_comparison,
-    )
+    from flexreg.bench.compare import SuccessCriteria, compare
+    from flexreg.bench.methods import parse_methods
+    from flexreg.bench.results import write_comparison
     from flexreg.io import read_transform
+    from flexreg.io.transform_io import read_ground_truth
 
     chosen = parse_methods(methods)
     _positive("--voxel", voxel, "metres")
@@ -157,7 +154,7 @@ def _print_comparison(cmp: Comparison) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from flexreg.bench.compare import COLUMNS, notes, table_rows
+    from flexreg.bench.tables import COLUMNS, notes, table_rows
 
     t = Table(title=f"{cmp.target} ← {cmp.source}", title_justify="left")
     for c in COLUMNS:
@@ -205,8 +202,10 @@ def bench_command(
     Writes cases.csv, summary.csv / .md, results.json, config.json and plots into
     OUT/bench-<time>/ once everything has run.
     """
-    from flexreg.bench.compare import parse_methods
-    from flexreg.bench.suite import SUITES, BenchConfig, check_real_data, run_bench, write_bench
+    from flexreg.bench.methods import parse_methods
+    from flexreg.bench.results import write_bench
+    from flexreg.bench.suite import check_real_data, run_bench
+    from flexreg.bench.types import SUITES, BenchConfig
 
     if suite not in SUITES:
         raise ConfigError(f"--suite: must be one of {', '.join(SUITES)}, got {suite!r}")
@@ -250,7 +249,7 @@ def bench_command(
 def _print_bench(result: BenchResult) -> None:
     from rich.table import Table
 
-    from flexreg.bench.suite import summarise
+    from flexreg.bench.summary import summarise
 
     t = Table(title=f"{result.command} ({result.elapsed_s / 60:.1f} min)", title_justify="left")
     for c in ("suite", "method", "success", "median rot °", "median trans mm", "median s", "MB"):

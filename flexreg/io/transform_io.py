@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexreg.core.transforms import as_transform
+from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import InputError
 
 
@@ -78,3 +78,83 @@ def read_transform(
     if len(rows) != 4 or any(len(r) != 4 for r in rows):
         raise InputError(p, "expected 4 rows of 4 numbers")
     return as_transform(rows, name=str(p))
+
+def read_ground_truth(
+    path: str | PathLike[str],
+    *,
+    target: str | None = None,
+    source: str | None = None,
+    reorthonormalize: float = 0.0,
+) -> NDArray[np.float64]:
+    """A known ``T_target_source`` from a file.
+
+    Accepted: JSON ``{"T_target_source": [[4x4]], ...}`` (what ``flexreg register`` writes),
+    a ``flexreg synth`` ``gt.json`` (its ``pairs`` entry for the stems ``target`` and
+    ``source``, inverted if listed the other way round), a ``.npy`` 4x4 array, or a 4x4 text
+    matrix (:func:`read_transform`).
+
+    Parameters
+    ----------
+    path : path-like
+    target, source : str, optional
+        Stems of the scans, to pick a pair of a ``gt.json``.
+    reorthonormalize : float
+        A rotation block this close to a rotation (largest element difference) is replaced by
+        the nearest rotation (SVD), for references stored with few digits (3DMatch's
+        ``gt.npy`` is orthonormal to 7e-5 only); anything further is refused. 0: never.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, no matching entry, or a matrix that is not a rigid
+        transform (non-orthonormal rotation block, reflection, bad last row, NaN).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "no such file")
+    suffix = p.suffix.lower()
+    if suffix == ".json":
+        T, inverted = _ground_truth_entry(p, target, source)
+        M = _rigid(T, p, reorthonormalize)
+        return invert(M) if inverted else M
+    if suffix == ".npy":
+        try:
+            T = np.load(p)
+        except (OSError, ValueError) as e:
+            raise InputError(p, f"cannot read the transform ({e})") from None
+        return _rigid(T, p, reorthonormalize)
+    return _rigid(read_transform(p), p, reorthonormalize)
+
+
+def _ground_truth_entry(p: Path, target: str | None, source: str | None) -> tuple[Any, bool]:
+    """The matrix of a ground-truth JSON file, and whether it maps the other way round."""
+    try:
+        doc = json.loads(p.read_text(errors="replace"))
+    except json.JSONDecodeError as e:
+        raise InputError(p, f"invalid JSON: {e.msg} (line {e.lineno})") from None
+    if isinstance(doc, dict) and "T_target_source" not in doc and "pairs" in doc:
+        for pair in doc["pairs"]:
+            names = (pair.get("target"), pair.get("source"))
+            if names == (target, source):
+                return pair.get("T_target_source"), False
+            if names == (source, target):
+                return pair.get("T_target_source"), True
+        raise InputError(p, f"no pair {target} / {source} in its 'pairs'")
+    if isinstance(doc, dict) and "T_target_source" not in doc:
+        raise InputError(p, "no 'T_target_source' entry")
+    return (doc["T_target_source"] if isinstance(doc, dict) else doc), False
+
+
+def _rigid(T: Any, path: Path, reorthonormalize: float = 0.0) -> NDArray[np.float64]:
+    try:
+        M = np.array(T, dtype=float)
+        if reorthonormalize > 0 and M.shape == (4, 4) and np.isfinite(M).all():
+            U, _, Vt = np.linalg.svd(M[:3, :3])
+            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+            if np.abs(R - M[:3, :3]).max() < reorthonormalize:
+                M[:3, :3] = R
+        return as_transform(M, name=str(path), rigid=True)
+    except (TypeError, ValueError) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(path, f"not a 4x4 matrix of numbers ({e})") from None

@@ -352,8 +352,12 @@ def load_config(
         data.update(_read_mapping(Path(path)))
         where = str(path)
     extra = {k: v for k, v in (overrides or {}).items() if v is not None}
+    # pydantic's own initialiser, not Config.__init__ (and not model_validate, which calls it):
+    # the raw ValidationError says where each bad value came from
+    config = cls.__new__(cls)
     try:
-        return cls.model_validate({**data, **extra})
+        BaseModel.__init__(config, **{**data, **extra})
+        return config
     except ValidationError as e:
         loc = e.errors(include_url=False)[0].get("loc", ())
         in_file = bool(loc) and loc[0] in data and loc[0] not in extra

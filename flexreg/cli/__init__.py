@@ -10,6 +10,7 @@ from __future__ import annotations
 from flexreg.cli import (  # noqa: F401  (each module registers its commands on `app`)
     calibrate,
     compare,
+    config_cmd,
     convert,
     evaluate,
     odometry,

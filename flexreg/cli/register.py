@@ -3,7 +3,6 @@ cloud)."""
 
 from __future__ import annotations
 
-import math
 from contextlib import AbstractContextManager
 from pathlib import Path
 from types import TracebackType
@@ -13,75 +12,39 @@ import typer
 
 from flexreg.cli._common import console, read_input, stage, write_all
 from flexreg.cli.app import app
-from flexreg.errors import ConfigError, InputError
+from flexreg.cli.options import (
+    CONFIG_OPTION,
+    SET_OPTION,
+    build_config,
+    check_outputs,
+    with_default,
+)
+from flexreg.errors import InputError
+from flexreg.registration.config import RegistrationConfig
 
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
     from flexreg.core.scan import Scan
-    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
+    from flexreg.registration.pipeline import RegistrationResult
 
-ICP_METHODS = ("point-to-plane", "gicp", "point-to-point")
 #: colours of the merged cloud (Okabe-Ito orange and blue, distinguishable when colour-blind)
 TARGET_RGB = (230, 159, 0)
 SOURCE_RGB = (0, 114, 178)
-
-
-def _check_options(
-    *,
-    image: str,
-    n: int,
-    features: str,
-    icp: str,
-    voxel: float | None,
-    threshold: float | None,
-    seed: int,
-    upright: str,
-    inputs: tuple[Path, Path],
-    out: Path,
-    txt: Path | None,
-    matches: Path | None,
-    merged: Path | None,
-) -> None:
-    """Validate everything that does not need the input files, before anything is read."""
-    from flexreg.stages.feature_images import KINDS
-    from flexreg.stages.keypoints import METHODS
-
-    kinds = (*KINDS, "intensity")
-    if image not in kinds:
-        raise ConfigError(f"--image: unknown feature image {image!r}; known: {', '.join(kinds)}")
-    if n < 3 or n % 2 == 0:
-        raise ConfigError(f"--n: must be an odd grid size 3, 5, 7, ..., got {n}")
-    if features not in METHODS:
-        raise ConfigError(f"--features: unknown method {features!r}; known: {', '.join(METHODS)}")
-    if icp not in ICP_METHODS:
-        raise ConfigError(f"--icp: unknown method {icp!r}; known: {', '.join(ICP_METHODS)}")
-    for option, value in (("--voxel", voxel), ("--threshold", threshold)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise ConfigError(f"{option}: must be a positive number of metres, got {value}")
-    if seed < 0:
-        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
-    if upright not in ("auto", "on", "off"):
-        raise ConfigError(f"--upright: must be auto, on or off, got {upright!r}")
-    suffixes = (
-        ("--out", out, ".json"),
-        ("--matches", matches, ".png"),
-        ("--merged", merged, ".ply"),
-    )
-    for option, path, suffix in suffixes:
-        if path is not None and path.suffix.lower() != suffix:
-            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
-    named = (("--out", out), ("--txt", txt), ("--matches", matches), ("--merged", merged))
-    outputs = [(option, path) for option, path in named if path is not None]
-    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
-    for option, path in outputs:
-        if path.is_dir():
-            raise ConfigError(f"{option}: {path}: is a folder, not a file")
-        key = path.resolve()
-        if key in seen:
-            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
-        seen[key] = option
+#: options that set a field of RegistrationConfig (option -> field)
+OPTIONS = {
+    "--image": "image",
+    "--n": "n",
+    "--features": "features",
+    "--refine": "refine",
+    "--icp": "icp",
+    "--voxel": "voxel_m",
+    "--threshold": "threshold_m",
+    "--seed": "seed",
+    "--upright": "upright",
+}
+_C = RegistrationConfig
 
 
 class _StageSpinners(AbstractContextManager["_StageSpinners"]):
@@ -118,9 +81,9 @@ class _StageSpinners(AbstractContextManager["_StageSpinners"]):
 
 def _match_png(target: Scan, source: Scan, result: RegistrationResult) -> NDArray[np.uint8]:
     """Both feature images (target on top) with the RANSAC inliers drawn as lines."""
-    from flexreg.io.info import match_image
     from flexreg.registration.pipeline import feature_image
     from flexreg.stages.projection import range_image
+    from flexreg.viz.draw import match_image
 
     ft, _ = feature_image(range_image(target), result.config)
     fs, _ = feature_image(range_image(source), result.config)
@@ -160,18 +123,32 @@ def register_command(
     txt: Path | None = typer.Option(
         None, "--txt", help="Also write the 4x4 matrix as text (CloudCompare style)."
     ),
-    image: str = typer.Option(
-        "flexion", "--image", help="Feature image: flexion, bearing-*, range, ... or intensity."
+    image: str | None = typer.Option(
+        None,
+        "--image",
+        help=with_default(
+            _C, "image", "Feature image: flexion, bearing-*, range, ... or intensity."
+        ),
     ),
-    n: int = typer.Option(5, "--n", help="Odd grid size n of Flexion n x n."),
-    features: str = typer.Option(
-        "sift", "--features", help="Detector/descriptor: sift, orb, akaze, kaze, brisk, surf."
+    n: int | None = typer.Option(
+        None, "--n", help=with_default(_C, "n", "Odd grid size n of Flexion n x n.")
     ),
-    refine: bool = typer.Option(
-        True, "--refine/--no-refine", help="Refine the RANSAC transform with ICP."
+    features: str | None = typer.Option(
+        None,
+        "--features",
+        help=with_default(
+            _C, "features", "Detector/descriptor: sift, orb, akaze, kaze, brisk, surf."
+        ),
     ),
-    icp: str = typer.Option(
-        "point-to-plane", "--icp", help="ICP variant: point-to-plane, gicp or point-to-point."
+    refine: bool | None = typer.Option(
+        None,
+        "--refine/--no-refine",
+        help=with_default(_C, "refine", "Refine the RANSAC transform with ICP."),
+    ),
+    icp: str | None = typer.Option(
+        None,
+        "--icp",
+        help=with_default(_C, "icp", "ICP variant: point-to-plane, gicp or point-to-point."),
     ),
     voxel: float | None = typer.Option(
         None, "--voxel", metavar="METRES", help="ICP voxel size, metres (default: from spacing)."
@@ -190,12 +167,20 @@ def register_command(
         "--merged",
         help="Write a .ply of both clouds in the target frame (target orange, source blue).",
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed; the same seed gives the same T."),
-    upright: str = typer.Option(
-        "auto",
+    seed: int | None = typer.Option(
+        None,
+        "--seed",
+        help=with_default(_C, "seed", "Random seed; the same seed gives the same T."),
+    ),
+    upright: str | None = typer.Option(
+        None,
         "--upright",
-        help="Levelled-scanner plan-view prior: auto (when both scans look levelled), on "
-        "(required) or off.",
+        help=with_default(
+            _C,
+            "upright",
+            "Levelled-scanner plan-view prior: auto (when both scans look levelled), on "
+            "(required) or off.",
+        ),
     ),
     truth: Path | None = typer.Option(
         None,
@@ -203,31 +188,20 @@ def register_command(
         help="Known T_target_source (.json or 4x4 .txt; a 'flexreg synth' gt.json works): "
         "report the errors in degrees and metres and store them in the output JSON.",
     ),
+    config_file: Path | None = CONFIG_OPTION,
+    sets: list[str] | None = SET_OPTION,
 ) -> None:
     """Register SOURCE onto TARGET through feature images; write T_target_source.
 
     Nothing is written unless registration succeeds.
     """
-    from flexreg._version import __version__
-    from flexreg.io import atomic_write, write_scan, write_transform_json, write_transform_txt
-    from flexreg.registration.pipeline import RegistrationConfig, register
+    from flexreg.registration.pipeline import register
 
-    _check_options(
-        image=image,
-        n=n,
-        features=features,
-        icp=icp,
-        voxel=voxel,
-        threshold=threshold,
-        seed=seed,
-        upright=upright,
-        inputs=(target, source),
-        out=out,
-        txt=txt,
-        matches=matches,
-        merged=merged,
-    )
-    config = RegistrationConfig(
+    config = build_config(
+        RegistrationConfig,
+        config_file,
+        sets,
+        OPTIONS,
         image=image,
         n=n,
         features=features,
@@ -238,17 +212,44 @@ def register_command(
         seed=seed,
         upright=upright,
     )
+    outputs = [
+        ("--out", out, ".json"),
+        ("--txt", txt, None),
+        ("--matches", matches, ".png"),
+        ("--merged", merged, ".ply"),
+    ]
+    check_outputs(outputs, inputs=(target, source))
     T_true = None if truth is None else read_truth(truth, target, source)
     scans = []
     for path in (target, source):
         with stage(f"Reading {path.name}"):
             (scan,) = read_input(path)
         scans.append(scan)
-    tscan, sscan = scans
     with _StageSpinners() as spinners:
-        result = register(tscan, sscan, config, progress=spinners)
+        result = register(scans[0], scans[1], config, progress=spinners)
+    errors = None if T_true is None else _errors(result, T_true)
+    meta = {"target": str(target), "source": str(source), "truth": truth, "errors": errors}
+    writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
+    write_all(writers)
+    _print_summary(result, config, errors)
+    for path, _ in writers:
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
 
-    # everything is computed before the first file is written
+
+def _writers(
+    tscan: Scan,
+    sscan: Scan,
+    result: RegistrationResult,
+    inputs: dict[str, Any],
+    out: Path,
+    txt: Path | None,
+    matches: Path | None,
+    merged: Path | None,
+) -> list[tuple[Path, Any]]:
+    """Compute every output (before the first file is written); the JSON comes last."""
+    from flexreg._version import __version__
+    from flexreg.io import atomic_write, write_scan, write_transform_json, write_transform_txt
+
     T = result.T_target_source
     writers: list[tuple[Path, Any]] = []
     if merged is not None:
@@ -263,15 +264,12 @@ def register_command(
         writers.append((txt, lambda: write_transform_txt(txt, T)))
     meta = result.to_dict()
     meta.pop("T_target_source", None)
-    meta = {"target": str(target), "source": str(source), **meta, "flexreg_version": __version__}
-    errors = None if T_true is None else _errors(result, T_true)
-    if errors is not None:
-        meta["error_vs_truth"] = {"truth": str(truth), **errors}
+    meta = {"target": inputs["target"], "source": inputs["source"], **meta}
+    meta["flexreg_version"] = __version__
+    if inputs["errors"] is not None:
+        meta["error_vs_truth"] = {"truth": str(inputs["truth"]), **inputs["errors"]}
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
-    write_all(writers)
-    _print_summary(result, config, errors)
-    for path, _ in writers:
-        console.print(f"wrote {path}", markup=False, soft_wrap=True)
+    return writers
 
 
 def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:

@@ -1,0 +1,72 @@
+"""`flexreg config show NAME`: a command's configuration defaults as TOML, JSON or JSON schema.
+
+``flexreg config show register > run.toml`` writes a starting file for ``--config run.toml``;
+it reads back to exactly the defaults.
+"""
+
+from __future__ import annotations
+
+import json
+
+import typer
+
+from flexreg.calibration.config import CalibrationConfig
+from flexreg.cli.app import app
+from flexreg.config import Config, to_toml
+from flexreg.errors import ConfigError
+from flexreg.odometry.config import EvaluationConfig, OdometryConfig
+from flexreg.registration.config import RegistrationConfig
+
+#: command -> the configuration its --config and --set fill in
+CONFIGS: dict[str, type[Config]] = {
+    "register": RegistrationConfig,
+    "calibrate": CalibrationConfig,
+    "odometry": OdometryConfig,
+    "evaluate": EvaluationConfig,
+}
+
+config_app = typer.Typer(
+    help="Configurations of the commands: defaults, file format, fields.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+app.add_typer(config_app, name="config")
+
+
+def add_config(command: str, cls: type[Config]) -> None:
+    """Make ``cls`` known to ``flexreg config show COMMAND`` (for commands whose configuration
+    lives beside the command)."""
+    CONFIGS[command] = cls
+
+
+@config_app.command("show")
+def show_command(
+    name: str = typer.Argument(
+        ..., metavar="NAME", help="Command: register, calibrate, odometry, evaluate, compare, ..."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of TOML."),
+    as_toml: bool = typer.Option(False, "--toml", help="Print TOML (the default)."),
+    schema: bool = typer.Option(
+        False, "--schema", help="Print the JSON schema (fields, types, allowed values, ranges)."
+    ),
+) -> None:
+    """Print the defaults of NAME's configuration (TOML unless --json or --schema).
+
+    Save it, edit it, and pass it back with --config FILE; --set KEY=VALUE changes single
+    fields on the command line.
+    """
+    cls = CONFIGS.get(name)
+    if cls is None:
+        raise ConfigError(f"NAME: unknown command {name!r}; known: {', '.join(CONFIGS)}")
+    if as_json + as_toml + schema > 1:
+        raise ConfigError("--toml, --json, --schema: give at most one")
+    if schema:
+        print(json.dumps(cls.model_json_schema(), indent=2))
+    elif as_json:
+        print(json.dumps(cls().to_dict(), indent=2))
+    else:
+        header = (
+            f"flexreg {name}: default configuration ({cls.__name__}).\n"
+            f"Use with: flexreg {name} ... --config FILE [--set KEY=VALUE ...]"
+        )
+        print(to_toml(cls(), header=header), end="")

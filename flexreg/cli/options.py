@@ -1,0 +1,143 @@
+"""Options shared by the commands: ``--config FILE``, repeatable ``--set KEY=VALUE``, the
+options that alias configuration fields, and the checks of output paths.
+
+Every command that runs an application builds its configuration the same way
+(:func:`build_config`): the defaults, then the ``--config`` file (TOML, or a result JSON whose
+``"config"`` it reruns), then the command's own options and ``--set`` (the same field given
+both ways is refused). Values are checked by the configuration itself; only output paths are
+checked here, before any input is read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import typer
+
+from flexreg.config import Config, load_config, parse_sets
+from flexreg.errors import ConfigError
+
+C = TypeVar("C", bound=Config)
+
+
+#: ``--config FILE`` (declare as ``config_file: Path | None = CONFIG_OPTION``)
+CONFIG_OPTION: Any = typer.Option(
+    None,
+    "--config",
+    metavar="FILE",
+    help="Settings from a TOML file ('flexreg config show NAME' writes one) or a result "
+    "JSON (reruns its 'config'). Options and --set override it.",
+)
+#: repeatable ``--set KEY=VALUE`` (declare as ``sets: list[str] | None = SET_OPTION``)
+SET_OPTION: Any = typer.Option(
+    None,
+    "--set",
+    metavar="KEY=VALUE",
+    help="Set any configuration field (repeatable), e.g. --set ratio=0.8; "
+    "'flexreg config show NAME' lists the fields.",
+)
+
+
+def with_default(cls: type[Config], field: str, text: str) -> str:
+    """Help text of an option that aliases ``field``, ending with the field's default (the
+    option itself defaults to None: left out, it overrides nothing)."""
+    default = cls.model_fields[field].default
+    if default is None:
+        return text
+    shown = ("yes" if default else "no") if isinstance(default, bool) else f"{default}"
+    return f"{text} [default: {shown}]"
+
+
+def build_config(
+    cls: type[C],
+    config_file: Path | None,
+    sets: Sequence[str] | None,
+    options: Mapping[str, str],
+    **values: Any,
+) -> C:
+    """The command's configuration: defaults < ``config_file`` < options and ``--set``.
+
+    Parameters
+    ----------
+    cls : type of Config
+    config_file : Path or None
+        The ``--config`` file.
+    sets : sequence of str or None
+        The ``--set KEY=VALUE`` items.
+    options : mapping
+        Option name -> field it sets (``{"--voxel": "voxel_m"}``), declared once per command.
+    **values
+        Field -> the value of its option (None: the option was left out).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the option, ``--set KEY`` or ``FILE: KEY`` at fault and the rule.
+    """
+    option_of = {field: option for option, field in options.items()}
+    unknown = set(values) - set(option_of)
+    if unknown:  # a programming error in a command, not a user error
+        raise TypeError(f"values without an option: {', '.join(sorted(unknown))}")
+    given = {field: v for field, v in values.items() if v is not None}
+    overrides = parse_sets(sets or ())
+    for field in given:
+        if field in overrides:
+            raise ConfigError(
+                f"{option_of[field]}: also given as --set {field}=...; give it one way"
+            )
+    names = {field: option_of[field] for field in given}
+    names.update({key: f"--set {key}" for key in overrides})
+    return load_config(cls, config_file, {**given, **overrides}, names=names)
+
+
+def check_outputs(
+    outputs: Sequence[tuple[str, Path | None, str | None]],
+    *,
+    inputs: Iterable[Path] = (),
+    input_folders: Iterable[Path] = (),
+) -> None:
+    """Refuse unusable output paths before anything is read or computed.
+
+    Parameters
+    ----------
+    outputs : sequence of (option, path or None, suffix or None)
+        Each output file, with the suffix it must have (None: any).
+    inputs : iterable of Path
+        Input files no output may overwrite.
+    input_folders : iterable of Path
+        Input folders whose existing files no output may overwrite.
+
+    Raises
+    ------
+    ConfigError
+        ``--out: T.txt: must be a .json file``, ``... is a folder, not a file``,
+        ``... is also an input`` / ``is also --txt``.
+    """
+    given = [(option, path, suffix) for option, path, suffix in outputs if path is not None]
+    for option, path, suffix in given:
+        if suffix is not None and path.suffix.lower() != suffix:
+            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
+    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
+    folders = [f.resolve() for f in input_folders]
+    for option, path, _ in given:
+        if path.is_dir():
+            raise ConfigError(f"{option}: {path}: is a folder, not a file")
+        key = path.resolve()
+        if key in seen:
+            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
+        if path.exists() and any(f in key.parents for f in folders):
+            raise ConfigError(f"{option}: {path}: would overwrite a file of the input")
+        seen[key] = option
+
+
+def check_out_folder(option: str, folder: Path | None, inputs: Iterable[Path] = ()) -> None:
+    """Refuse an output folder that is a file or one of the inputs."""
+    if folder is None:
+        return
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{option}: {folder}: exists and is not a folder")
+    for p in inputs:
+        if p.resolve() == folder.resolve():
+            raise ConfigError(f"{option}: {folder}: is also an input")

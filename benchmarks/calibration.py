@@ -56,7 +56,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from flexreg import read_scan  # noqa: E402
-from flexreg.calibration.calibrate import (  # noqa: E402
+from flexreg.calibration import (  # noqa: E402
     CalibrationConfig,
     CalibrationError,
     Correspondences2D3D,

@@ -38,5 +38,9 @@ class RegistrationError(FlexregError):
     """Registration could not produce a trustworthy transform."""
 
 
+class CalibrationError(RegistrationError):
+    """The 2D-3D correspondences do not determine a trustworthy camera-lidar extrinsic."""
+
+
 class ConfigError(FlexregError, ValueError):
     """An invalid option or configuration value."""

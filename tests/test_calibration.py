@@ -14,7 +14,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from flexreg import InputError, Scan, read_scan
-from flexreg.calibration.calibrate import (
+from flexreg.calibration import (
     CalibrationConfig,
     CalibrationError,
     Correspondences2D3D,

@@ -15,7 +15,7 @@ import pytest
 from conftest import one_error_line, run_cli
 
 from flexreg import __version__, read_scan
-from flexreg.calibration.calibrate import project_points, scan_range_image
+from flexreg.calibration import project_points, scan_range_image
 from flexreg.core.transforms import (
     make_transform,
     rotation_about_axis,

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from flexreg.calibration.calibrate import CalibrationResult
+    from flexreg.calibration import CalibrationResult
     from flexreg.io.intrinsics import CameraIntrinsics
 
 #: header and help of the template written with --export-views
@@ -251,7 +251,7 @@ def calibrate_command(
     succeeds.
     """
     from flexreg._version import __version__
-    from flexreg.calibration.calibrate import (
+    from flexreg.calibration import (
         CalibrationConfig,
         calibrate,
         overlay_image,

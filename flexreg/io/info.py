@@ -1,4 +1,4 @@
-"""Summaries and file outputs: one place that renders results as dicts, tables and files."""
+"""Summaries and file outputs: scan facts as dicts and tables, range images as files."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid, rotation_error_deg
 from flexreg.errors import InputError
+from flexreg.io import atomic_write, detect_format
 from flexreg.stages.projection import azimuth_polar_extent
 
 PNG_SCALES_M = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1)
@@ -50,8 +50,6 @@ def field_of_view_deg(scan: Scan) -> dict[str, Any]:
 
 def scan_summary(scan: Scan) -> dict[str, Any]:
     """JSON-ready facts about a scan (what ``flexreg info`` shows)."""
-    from flexreg.io import detect_format
-
     r = np.linalg.norm(scan.points, axis=1)
     d: dict[str, Any] = {
         "path": None if scan.path is None else str(scan.path),
@@ -165,8 +163,6 @@ def write_range_image(
     """
     import cv2
 
-    from flexreg.io import atomic_write
-
     rng = image.range
     if image.n_valid == 0:
         raise InputError(out, "range image has no valid pixel; nothing to write")
@@ -212,61 +208,3 @@ def write_range_image(
         atomic_write(side, lambda tmp: tmp.write_text(json.dumps(doc, indent=2) + "\n"))
         files.append(side)
     return {"png_scale_m": png_scale_m, "files": [str(f) for f in files]}
-
-
-def match_image(
-    target_image: NDArray[np.uint8],
-    source_image: NDArray[np.uint8],
-    target_xy: NDArray[np.floating],
-    source_xy: NDArray[np.floating],
-    *,
-    max_lines: int = 300,
-) -> NDArray[np.uint8]:
-    """Two feature images stacked vertically (target on top) with matches drawn as lines.
-
-    Parameters
-    ----------
-    target_image, source_image : (H1, W1), (H2, W2) uint8
-        Grey feature images; the narrower one is padded on the right with black.
-    target_xy, source_xy : (K, 2) float, pixels
-        Matched keypoints ``(u, v)`` = (column, row) in each image, row by row.
-    max_lines : int
-        At most this many matches are drawn, evenly spaced through the list (deterministic).
-
-    Returns
-    -------
-    (H1 + H2, max(W1, W2), 3) uint8
-        BGR image for ``cv2.imwrite``.
-
-    >>> a, b = np.zeros((2, 4), np.uint8), np.zeros((3, 5), np.uint8)
-    >>> match_image(a, b, [[1.0, 1.0]], [[2.0, 2.0]]).shape
-    (5, 5, 3)
-    """
-    import cv2
-
-    a, b = np.asarray(target_image, dtype=np.uint8), np.asarray(source_image, dtype=np.uint8)
-    (h1, w1), (h2, w2) = a.shape, b.shape
-    canvas = np.zeros((h1 + h2, max(w1, w2)), dtype=np.uint8)
-    canvas[:h1, :w1] = a
-    canvas[h1:, :w2] = b
-    out = np.ascontiguousarray(cv2.cvtColor(canvas, cv2.COLOR_GRAY2BGR), dtype=np.uint8)
-    pt = np.asarray(target_xy, dtype=np.float64).reshape(-1, 2)
-    ps = np.asarray(source_xy, dtype=np.float64).reshape(-1, 2)
-    if len(pt) != len(ps):
-        raise InputError("match_image", f"{len(pt)} target but {len(ps)} source keypoints")
-    k = len(pt)
-    if k > max_lines:
-        keep = np.unique(np.linspace(0, k - 1, max(max_lines, 1)).round().astype(np.int64))
-        pt, ps = pt[keep], ps[keep]
-    if k == 0:
-        return out
-    hues = np.linspace(0, 180, len(pt), endpoint=False).astype(np.uint8)
-    hsv = np.stack([hues, np.full_like(hues, 255), np.full_like(hues, 255)], axis=1)
-    colours = cv2.cvtColor(hsv[None], cv2.COLOR_HSV2BGR)[0].tolist()
-    for (u1, v1), (u2, v2), c in zip(pt, ps, colours, strict=True):
-        p1 = (round(u1), round(v1))
-        p2 = (round(u2), round(v2) + h1)
-        cv2.line(out, p1, p2, c, 1, cv2.LINE_AA)
-        cv2.circle(out, p1, 3, c, 1, cv2.LINE_AA)
-        cv2.circle(out, p2, 3, c, 1, cv2.LINE_AA)
-    return out

@@ -12,8 +12,8 @@ guaranteed mutual overlap and inter-station distance; :func:`synthesize` writes 
 T_world_source``; scans hold points in the scanner frame with ``T_world_scanner`` as pose.
 """
 
+from flexreg.synth.config import RGBDConfig, SynthConfig, TLSConfig
 from flexreg.synth.dataset import (
-    SynthConfig,
     SynthResult,
     camera_trajectory,
     lidar_trajectory,
@@ -42,9 +42,7 @@ from flexreg.synth.scenes import (
     scene_from_mesh,
 )
 from flexreg.synth.sensors import (
-    RGBDConfig,
     RGBDFrame,
-    TLSConfig,
     lidar_config,
     look_at,
     render_rgbd,

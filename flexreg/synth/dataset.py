@@ -20,7 +20,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -32,135 +32,22 @@ from flexreg._version import __version__
 from flexreg.core.transforms import invert
 from flexreg.errors import ConfigError, InputError
 from flexreg.io import atomic_write, write_scan
+from flexreg.synth.config import RGBDConfig, SynthConfig
 from flexreg.synth.placement import free_map, place_stations, station_overlap, stream
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import SCENE_KINDS, make_scene, scene_from_mesh
 from flexreg.synth.seeding import as_rng
 from flexreg.synth.sensors import (
-    RGBDConfig,
-    TLSConfig,
     lidar_config,
     look_at,
     scan_tls,
     write_tum_sequence,
 )
 
-FORMATS = ("ptx", "e57", "npz")
 Progress = Callable[[str, int, int], None]
 
 # stream ids (see placement.stream)
 _PLACEMENT, _TRAJECTORY, _RGBD, _LIDAR_TRAJ, _LIDAR, _STATION = 0, 1, 2, 3, 4, 100
-
-
-@dataclass(frozen=True)
-class SynthConfig:
-    """Everything ``flexreg synth`` needs; saved in ``gt.json``.
-
-    Attributes
-    ----------
-    scene : str
-        ``"room"``, ``"courtyard"``, ``"hall"``, or the path of a mesh file to scan.
-    stations : int
-        Number of TLS stations (>= 1).
-    width, height : int
-        Station grid (azimuth columns x polar rows).
-    noise_m : float, metres
-        Constant part of the range noise sigma.
-    seed : int
-    format : {"ptx", "e57", "npz"}
-    rgbd_frames, lidar_frames : int
-        Length of the optional RGB-D sequence and spinning-lidar sequence.
-    min_overlap : float
-    distance_range_m : (float, float), metres
-    max_tilt_rad : float, radians
-    mixed_pixels : bool
-    mesh_scale : float
-        Scale of a mesh scene to metres.
-    mesh_up_axis : {"x", "y", "z"}
-        Up axis of a mesh scene.
-    size_m : (float, float) or None
-        Floor size of a procedural scene.
-    embed_poses : bool
-        Write each station's true pose into its file instead of the identity.
-    """
-
-    scene: str = "room"
-    stations: int = 2
-    width: int = 2048
-    height: int = 1024
-    noise_m: float = 0.003
-    seed: int = 0
-    format: str = "ptx"
-    rgbd_frames: int = 0
-    lidar_frames: int = 0
-    min_overlap: float = 0.5
-    distance_range_m: tuple[float, float] = (2.0, 10.0)
-    max_tilt_rad: float = math.radians(3.0)
-    mixed_pixels: bool = True
-    mesh_scale: float = 1.0
-    mesh_up_axis: str = "z"
-    size_m: tuple[float, float] | None = None
-    embed_poses: bool = False
-
-    def __post_init__(self) -> None:
-        if self.scene not in SCENE_KINDS:
-            p = Path(self.scene)
-            if not p.is_file():
-                raise ConfigError(
-                    f"scene must be one of {', '.join(SCENE_KINDS)} or an existing mesh file, "
-                    f"got {self.scene!r}"
-                )
-        if (
-            isinstance(self.stations, bool)
-            or int(self.stations) != self.stations
-            or self.stations < 1
-        ):
-            raise ConfigError(f"stations must be a positive integer, got {self.stations}")
-        if self.stations > 200:
-            raise ConfigError(f"at most 200 stations, got {self.stations}")
-        if not (8 <= int(self.width) <= 20000 and 4 <= int(self.height) <= 10000):
-            raise ConfigError(
-                f"resolution must be within 8x4 .. 20000x10000, got {self.width}x{self.height}"
-            )
-        if not (np.isfinite(self.noise_m) and 0 <= self.noise_m <= 1.0):
-            raise ConfigError(f"range noise must be 0..1000 mm, got {self.noise_m * 1000:g} mm")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if self.format not in FORMATS:
-            raise ConfigError(f"format must be one of {', '.join(FORMATS)}, got {self.format!r}")
-        for name in ("rgbd_frames", "lidar_frames"):
-            v = getattr(self, name)
-            if int(v) != v or not 0 <= v <= 100000:
-                raise ConfigError(f"{name.replace('_', '-')} must be an integer 0..100000, got {v}")
-        if not 0 <= self.min_overlap <= 1:
-            raise ConfigError(f"min overlap must be within 0..1, got {self.min_overlap}")
-        d0, d1 = self.distance_range_m
-        if not (0 < d0 <= d1):
-            raise ConfigError(f"distance range must satisfy 0 < min <= max, got {d0:g}..{d1:g} m")
-        if not 0 <= self.max_tilt_rad <= math.radians(30):
-            raise ConfigError(
-                f"max tilt must be 0..30 deg, got {math.degrees(self.max_tilt_rad):g} deg"
-            )
-        if not (np.isfinite(self.mesh_scale) and self.mesh_scale > 0):
-            raise ConfigError(f"mesh scale must be positive, got {self.mesh_scale}")
-        if self.mesh_up_axis not in ("x", "y", "z"):
-            raise ConfigError(f"mesh up axis must be x, y or z, got {self.mesh_up_axis!r}")
-
-    def tls_config(self) -> TLSConfig:
-        """Sensor model of the stations."""
-        return TLSConfig(
-            width=int(self.width),
-            height=int(self.height),
-            range_noise_m=float(self.noise_m),
-            mixed_pixel_prob=0.5 if self.mixed_pixels else 0.0,
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["distance_range_m"] = list(self.distance_range_m)
-        d["size_m"] = None if self.size_m is None else list(self.size_m)
-        d["max_tilt_deg"] = round(math.degrees(self.max_tilt_rad), 9)
-        return d
 
 
 @dataclass(eq=False)

@@ -10,7 +10,7 @@ the other one measured.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -19,10 +19,11 @@ from numpy.typing import ArrayLike, NDArray
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform, invert, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError
+from flexreg.synth.config import TLSConfig
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import make_scene
 from flexreg.synth.seeding import as_rng
-from flexreg.synth.sensors import TLSConfig, scan_tls
+from flexreg.synth.sensors import scan_tls
 
 #: coarse grid used to measure overlap (2 degree steps)
 OVERLAP_GRID = (180, 90)
@@ -96,8 +97,7 @@ def free_map(
 
 def _coarse_config(config: TLSConfig) -> TLSConfig:
     w, h = OVERLAP_GRID
-    return replace(
-        config,
+    return config.replace(
         width=w,
         height=h,
         range_noise_m=0.0,

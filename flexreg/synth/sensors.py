@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import lru_cache
 from os import PathLike
 from pathlib import Path
@@ -40,116 +40,11 @@ from flexreg.core.transforms import as_transform
 from flexreg.errors import ConfigError
 from flexreg.io import atomic_write
 from flexreg.io.depth import TUM_DEPTH_SCALE
+from flexreg.synth.config import RGBDConfig, TLSConfig
 from flexreg.synth.scene import RayHits, Scene
 from flexreg.synth.seeding import as_rng
 
-
 # ====================================================================================== TLS
-@dataclass(frozen=True)
-class TLSConfig:
-    """Terrestrial laser scanner (or spinning lidar) model on an equirectangular grid.
-
-    Attributes
-    ----------
-    width, height : int
-        Grid size: columns (azimuth) x rows (polar angle).
-    phi_min, phi_max : float, radians
-        Azimuth field of view (full turn by default).
-    theta_min, theta_max : float, radians
-        Polar field of view, from +Z (zenith) down.
-    range_noise_m : float, metres
-        Constant part of the range noise standard deviation.
-    range_noise_per_m : float
-        Range-proportional part (metres of sigma per metre of range; 1e-5 = 10 ppm).
-    min_range_m, max_range_m : float, metres
-        Returns outside this interval are lost.
-    max_incidence_rad : float, radians
-        Returns at a larger incidence angle (grazing) are lost.
-    tripod_cone_rad : float, radians
-        Half-angle of the blind cone straight down (tripod and scanner body); 0 disables it.
-    dropout_rate : float
-        Probability that a return is randomly lost.
-    mixed_pixel_prob : float
-        Probability that a pixel at a depth edge becomes a mixed pixel; 0 disables them.
-    mixed_pixel_jump_m : float, metres
-        Minimal range jump to a neighbour that makes a depth edge (or 2 % of the range).
-    intensity_range_scale_m : float, metres
-        Range at which the intensity has fallen to 1/e.
-    intensity_speckle : float
-        Relative standard deviation of the multiplicative intensity noise.
-    min_intensity : float
-        Returns with a lower intensity are lost (dark surfaces far away or at grazing angles).
-    colors : bool
-        Also give each point the scene colour under simple shading (as a TLS camera would).
-    """
-
-    width: int = 2048
-    height: int = 1024
-    phi_min: float = -math.pi
-    phi_max: float = math.pi
-    theta_min: float = 0.0
-    theta_max: float = math.pi
-    range_noise_m: float = 0.003
-    range_noise_per_m: float = 1e-5
-    min_range_m: float = 0.4
-    max_range_m: float = 150.0
-    max_incidence_rad: float = math.radians(86.0)
-    tripod_cone_rad: float = math.radians(30.0)
-    dropout_rate: float = 0.002
-    mixed_pixel_prob: float = 0.5
-    mixed_pixel_jump_m: float = 0.1
-    intensity_range_scale_m: float = 80.0
-    intensity_speckle: float = 0.04
-    min_intensity: float = 0.004
-    colors: bool = False
-
-    def __post_init__(self) -> None:
-        if int(self.width) < 4 or int(self.height) < 2:
-            raise ConfigError(
-                f"scanner grid must be at least 4 x 2, got {self.width} x {self.height}"
-            )
-        for name in (
-            "range_noise_m",
-            "range_noise_per_m",
-            "dropout_rate",
-            "mixed_pixel_prob",
-            "intensity_speckle",
-            "min_intensity",
-            "tripod_cone_rad",
-            "min_range_m",
-        ):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ConfigError(f"{name} must be a finite number >= 0, got {v}")
-        for name in ("dropout_rate", "mixed_pixel_prob"):
-            if getattr(self, name) > 1:
-                raise ConfigError(f"{name} is a probability, got {getattr(self, name)}")
-        if not (self.max_range_m > self.min_range_m):
-            raise ConfigError(
-                f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})"
-            )
-        if not 0 < self.max_incidence_rad <= math.pi / 2:
-            raise ConfigError(
-                f"max_incidence_rad must be in (0, pi/2], got {self.max_incidence_rad}"
-            )
-        if not (self.intensity_range_scale_m > 0 and self.mixed_pixel_jump_m > 0):
-            raise ConfigError("intensity_range_scale_m and mixed_pixel_jump_m must be positive")
-        self.camera()  # validates the angular field of view
-
-    def camera(self) -> SphericalCamera:
-        """The equirectangular camera of this grid (raises ``InputError`` for a bad FoV)."""
-        return SphericalCamera(
-            int(self.width),
-            int(self.height),
-            float(self.phi_min),
-            float(self.phi_max),
-            float(self.theta_min),
-            float(self.theta_max),
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict of all fields."""
-        return asdict(self)
 
 
 def lidar_config(
@@ -373,76 +268,6 @@ def scan_lidar(
 
 
 # ====================================================================================== RGB-D
-@dataclass(frozen=True)
-class RGBDConfig:
-    """Pinhole RGB-D camera (Kinect/TUM-like by default).
-
-    Attributes
-    ----------
-    width, height : int
-    fx, fy, cx, cy : float
-        Intrinsics in pixels (paper eq. 1).
-    depth_noise_m : float, metres
-        Constant part of the depth noise standard deviation.
-    depth_noise_quadratic : float, 1/metres
-        Quadratic part: ``sigma = depth_noise_m + depth_noise_quadratic * z**2``.
-    min_depth_m, max_depth_m : float, metres
-    max_incidence_rad : float, radians
-    dropout_rate : float
-        Probability of a random missing depth pixel.
-    edge_dropout_prob : float
-        Probability that a pixel at a depth edge has no depth (structured-light shadows).
-    colour : bool
-        Colour (RGB) or grey images.
-    image_noise : float
-        Standard deviation of the image noise, in 8-bit grey levels.
-    rate_hz : float
-        Frame rate of sequences (timestamps).
-    speed_mps : float, metres per second
-        Mean speed along a sequence's trajectory.
-    """
-
-    width: int = 640
-    height: int = 480
-    fx: float = 525.0
-    fy: float = 525.0
-    cx: float = 319.5
-    cy: float = 239.5
-    depth_noise_m: float = 0.001
-    depth_noise_quadratic: float = 0.0015
-    min_depth_m: float = 0.4
-    max_depth_m: float = 8.0
-    max_incidence_rad: float = math.radians(80.0)
-    dropout_rate: float = 0.005
-    edge_dropout_prob: float = 0.5
-    colour: bool = True
-    image_noise: float = 2.0
-    rate_hz: float = 30.0
-    speed_mps: float = 0.4
-
-    def __post_init__(self) -> None:
-        if not (self.max_depth_m > self.min_depth_m >= 0):
-            raise ConfigError(
-                f"need 0 <= min_depth_m < max_depth_m, got {self.min_depth_m}, {self.max_depth_m}"
-            )
-        if self.max_depth_m * 5000 > 65535:
-            raise ConfigError(
-                f"max_depth_m {self.max_depth_m} does not fit 16-bit TUM depth (13.1 m)"
-            )
-        if not (self.rate_hz > 0 and self.speed_mps > 0):
-            raise ConfigError("rate_hz and speed_mps must be positive")
-        for name in ("dropout_rate", "edge_dropout_prob"):
-            v = getattr(self, name)
-            if not 0 <= v <= 1:
-                raise ConfigError(f"{name} is a probability, got {v}")
-        self.camera()
-
-    def camera(self) -> PinholeCamera:
-        """The pinhole camera of these intrinsics."""
-        return PinholeCamera(self.fx, self.fy, self.cx, self.cy, int(self.width), int(self.height))
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 @dataclass(eq=False)

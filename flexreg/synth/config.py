@@ -1,0 +1,319 @@
+"""Every knob of the synthetic data: the data set (:class:`SynthConfig`), the laser scanner and
+spinning lidar (:class:`TLSConfig`) and the RGB-D camera (:class:`RGBDConfig`), validated in
+one place (each rule once, on its field)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import Field, ValidationInfo, field_validator, model_validator
+
+from flexreg.config import Config, Positive, Seed, one_of
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.io.depth import TUM_DEPTH_SCALE
+from flexreg.synth.scenes import SCENE_KINDS
+
+__all__ = ["FORMATS", "RGBDConfig", "SynthConfig", "TLSConfig"]
+
+#: station file formats of a data set
+FORMATS = ("ptx", "e57", "npz")
+
+#: a finite number >= 0 (noise levels, ranges, angles)
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+#: a probability in [0, 1]
+Probability = Annotated[float, Field(ge=0, le=1)]
+
+
+# ====================================================================================== TLS
+class TLSConfig(Config):
+    """Terrestrial laser scanner (or spinning lidar) model on an equirectangular grid.
+
+    Attributes
+    ----------
+    width, height : int
+        Grid size: columns (azimuth) x rows (polar angle), at least 4 x 2.
+    phi_min, phi_max : float, radians
+        Azimuth field of view (full turn by default).
+    theta_min, theta_max : float, radians
+        Polar field of view, from +Z (zenith) down.
+    range_noise_m : float, metres
+        Constant part of the range noise standard deviation.
+    range_noise_per_m : float
+        Range-proportional part (metres of sigma per metre of range; 1e-5 = 10 ppm).
+    min_range_m, max_range_m : float, metres
+        Returns outside this interval are lost.
+    max_incidence_rad : float, radians
+        Returns at a larger incidence angle (grazing) are lost; in (0, pi/2].
+    tripod_cone_rad : float, radians
+        Half-angle of the blind cone straight down (tripod and scanner body); 0 disables it.
+    dropout_rate : float
+        Probability that a return is randomly lost.
+    mixed_pixel_prob : float
+        Probability that a pixel at a depth edge becomes a mixed pixel; 0 disables them.
+    mixed_pixel_jump_m : float, metres
+        Minimal range jump to a neighbour that makes a depth edge (or 2 % of the range).
+    intensity_range_scale_m : float, metres
+        Range at which the intensity has fallen to 1/e.
+    intensity_speckle : float
+        Relative standard deviation of the multiplicative intensity noise.
+    min_intensity : float
+        Returns with a lower intensity are lost (dark surfaces far away or at grazing angles).
+    colors : bool
+        Also give each point the scene colour under simple shading (as a TLS camera would).
+    """
+
+    width: int = Field(2048, ge=4)
+    height: int = Field(1024, ge=2)
+    phi_min: float = -math.pi
+    phi_max: float = math.pi
+    theta_min: float = 0.0
+    theta_max: float = math.pi
+    range_noise_m: NonNegative = 0.003
+    range_noise_per_m: NonNegative = 1e-5
+    min_range_m: NonNegative = 0.4
+    max_range_m: float = 150.0
+    max_incidence_rad: float = Field(math.radians(86.0), gt=0, le=math.pi / 2)
+    tripod_cone_rad: NonNegative = math.radians(30.0)
+    dropout_rate: Probability = 0.002
+    mixed_pixel_prob: Probability = 0.5
+    mixed_pixel_jump_m: Positive = 0.1
+    intensity_range_scale_m: Positive = 80.0
+    intensity_speckle: NonNegative = 0.04
+    min_intensity: NonNegative = 0.004
+    colors: bool = False
+
+    @field_validator("max_range_m")
+    @classmethod
+    def _beyond_min_range(cls, v: float, info: ValidationInfo) -> float:
+        lo = info.data.get("min_range_m")
+        if lo is not None and not v > lo:
+            raise ValueError(f"must exceed min_range_m ({lo:g})")
+        return v
+
+    @model_validator(mode="after")
+    def _field_of_view(self) -> TLSConfig:
+        self.camera()  # raises for a bad angular field of view
+        return self
+
+    def camera(self) -> SphericalCamera:
+        """The equirectangular camera of this grid."""
+        return SphericalCamera(
+            int(self.width),
+            int(self.height),
+            float(self.phi_min),
+            float(self.phi_max),
+            float(self.theta_min),
+            float(self.theta_max),
+        )
+
+
+# ====================================================================================== RGB-D
+class RGBDConfig(Config):
+    """Pinhole RGB-D camera (Kinect/TUM-like by default).
+
+    Attributes
+    ----------
+    width, height : int
+    fx, fy, cx, cy : float
+        Intrinsics in pixels (paper eq. 1).
+    depth_noise_m : float, metres
+        Constant part of the depth noise standard deviation.
+    depth_noise_quadratic : float, 1/metres
+        Quadratic part: ``sigma = depth_noise_m + depth_noise_quadratic * z**2``.
+    min_depth_m, max_depth_m : float, metres
+        ``0 <= min_depth_m < max_depth_m``; the maximum must fit 16-bit TUM depth (13.1 m).
+    max_incidence_rad : float, radians
+    dropout_rate : float
+        Probability of a random missing depth pixel.
+    edge_dropout_prob : float
+        Probability that a pixel at a depth edge has no depth (structured-light shadows).
+    colour : bool
+        Colour (RGB) or grey images.
+    image_noise : float
+        Standard deviation of the image noise, in 8-bit grey levels.
+    rate_hz : float
+        Frame rate of sequences (timestamps).
+    speed_mps : float, metres per second
+        Mean speed along a sequence's trajectory.
+    """
+
+    width: int = 640
+    height: int = 480
+    fx: float = 525.0
+    fy: float = 525.0
+    cx: float = 319.5
+    cy: float = 239.5
+    depth_noise_m: float = 0.001
+    depth_noise_quadratic: float = 0.0015
+    min_depth_m: float = Field(0.4, ge=0)
+    max_depth_m: float = 8.0
+    max_incidence_rad: float = math.radians(80.0)
+    dropout_rate: Probability = 0.005
+    edge_dropout_prob: Probability = 0.5
+    colour: bool = True
+    image_noise: float = 2.0
+    rate_hz: Positive = 30.0
+    speed_mps: Positive = 0.4
+
+    @field_validator("max_depth_m")
+    @classmethod
+    def _depth_range(cls, v: float, info: ValidationInfo) -> float:
+        lo = info.data.get("min_depth_m")
+        if lo is not None and not v > lo:
+            raise ValueError(f"must exceed min_depth_m ({lo:g})")
+        if v / TUM_DEPTH_SCALE > 65535:
+            raise ValueError("does not fit 16-bit TUM depth (13.1 m)")
+        return v
+
+    @model_validator(mode="after")
+    def _intrinsics(self) -> RGBDConfig:
+        self.camera()  # raises for bad intrinsics
+        return self
+
+    def camera(self) -> PinholeCamera:
+        """The pinhole camera of these intrinsics."""
+        return PinholeCamera(self.fx, self.fy, self.cx, self.cy, int(self.width), int(self.height))
+
+
+# ====================================================================================== data set
+class SynthConfig(Config):
+    """Everything ``flexreg synth`` needs; saved in ``gt.json``.
+
+    Attributes
+    ----------
+    scene : str
+        ``"room"``, ``"courtyard"``, ``"hall"``, or the path of a mesh file to scan.
+    stations : int
+        Number of TLS stations (1..200).
+    width, height : int
+        Station grid (azimuth columns x polar rows), within 8x4 .. 20000x10000.
+    noise_m : float, metres
+        Constant part of the range noise sigma (0..1 m).
+    seed : int
+    format : {"ptx", "e57", "npz"}
+    rgbd_frames, lidar_frames : int
+        Length of the optional RGB-D sequence and spinning-lidar sequence (0..100000).
+    min_overlap : float
+        Minimal mutual overlap of a station with its neighbour, 0..1.
+    distance_range_m : (float, float), metres
+        ``0 < min <= max`` distance between neighbouring stations.
+    max_tilt_rad : float, radians
+        Maximal station tilt, 0..30 degrees. (A result's ``max_tilt_deg`` is accepted too.)
+    mixed_pixels : bool
+    mesh_scale : float
+        Scale of a mesh scene to metres.
+    mesh_up_axis : {"x", "y", "z"}
+        Up axis of a mesh scene.
+    size_m : (float, float) or None
+        Floor size of a procedural scene.
+    embed_poses : bool
+        Write each station's true pose into its file instead of the identity.
+    """
+
+    scene: str = "room"
+    stations: int = 2
+    width: int = 2048
+    height: int = 1024
+    noise_m: float = 0.003
+    seed: Seed = 0
+    format: str = "ptx"
+    rgbd_frames: int = Field(0, ge=0, le=100000)
+    lidar_frames: int = Field(0, ge=0, le=100000)
+    min_overlap: float = 0.5
+    distance_range_m: tuple[float, float] = (2.0, 10.0)
+    max_tilt_rad: float = math.radians(3.0)
+    mixed_pixels: bool = True
+    mesh_scale: Positive = 1.0
+    mesh_up_axis: Annotated[str, one_of(("x", "y", "z"))] = "z"
+    size_m: tuple[float, float] | None = None
+    embed_poses: bool = False
+
+    @model_validator(mode="before")
+    @classmethod
+    def _tilt_in_degrees(cls, data: Any) -> Any:
+        """Accept the ``max_tilt_deg`` that :meth:`to_dict` adds (a result file's config)."""
+        if isinstance(data, dict) and "max_tilt_deg" in data:
+            data = dict(data)
+            deg = data.pop("max_tilt_deg")
+            data.setdefault("max_tilt_rad", math.radians(float(deg)))
+        return data
+
+    @field_validator("scene")
+    @classmethod
+    def _scene(cls, v: str) -> str:
+        if v not in SCENE_KINDS and not Path(v).is_file():
+            raise ValueError(
+                f"scene must be one of {', '.join(SCENE_KINDS)} or an existing mesh file"
+            )
+        return v
+
+    @field_validator("stations", mode="before")
+    @classmethod
+    def _stations(cls, v: Any) -> Any:
+        if isinstance(v, bool) or int(v) != v or v < 1:
+            raise ValueError("stations must be a positive integer")
+        if v > 200:
+            raise ValueError("at most 200 stations")
+        return v
+
+    @field_validator("height")
+    @classmethod
+    def _resolution(cls, v: int, info: ValidationInfo) -> int:
+        w = info.data.get("width", 8)
+        if not (8 <= int(w) <= 20000 and 4 <= int(v) <= 10000):
+            raise ValueError(f"resolution must be within 8x4 .. 20000x10000, got {w}x{v}")
+        return v
+
+    @field_validator("noise_m")
+    @classmethod
+    def _noise(cls, v: float) -> float:
+        if not (np.isfinite(v) and 0 <= v <= 1.0):
+            raise ValueError(f"range noise must be 0..1000 mm, got {v * 1000:g} mm")
+        return v
+
+    @field_validator("format")
+    @classmethod
+    def _format(cls, v: str) -> str:
+        if v not in FORMATS:
+            raise ValueError(f"format must be one of {', '.join(FORMATS)}")
+        return v
+
+    @field_validator("min_overlap")
+    @classmethod
+    def _overlap(cls, v: float) -> float:
+        if not 0 <= v <= 1:
+            raise ValueError("min overlap must be within 0..1")
+        return v
+
+    @field_validator("distance_range_m")
+    @classmethod
+    def _distance_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        d0, d1 = v
+        if not (0 < d0 <= d1):
+            raise ValueError(f"distance range must satisfy 0 < min <= max, got {d0:g}..{d1:g} m")
+        return v
+
+    @field_validator("max_tilt_rad")
+    @classmethod
+    def _tilt(cls, v: float) -> float:
+        if not 0 <= v <= math.radians(30):
+            raise ValueError(f"max tilt must be 0..30 deg, got {math.degrees(v):g} deg")
+        return v
+
+    def tls_config(self) -> TLSConfig:
+        """Sensor model of the stations."""
+        return TLSConfig(
+            width=int(self.width),
+            height=int(self.height),
+            range_noise_m=float(self.noise_m),
+            mixed_pixel_prob=0.5 if self.mixed_pixels else 0.0,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of every field, plus ``max_tilt_deg`` for readers."""
+        d = super().to_dict()
+        d["max_tilt_deg"] = round(math.degrees(self.max_tilt_rad), 9)
+        return d

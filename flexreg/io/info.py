@@ -88,7 +88,7 @@ def scan_summary(scan: Scan) -> dict[str, Any]:
 
 def render_scan_summary(d: dict[str, Any]) -> Any:
     """A rich table of :func:`scan_summary` output."""
-    from rich.table import Table
+    from rich.table import Table  # heavy: rich loads only for the console table
 
     t = Table(title=f"{d['name']}  ({d['format']})", show_header=False, title_justify="left")
     t.add_column(style="bold")
@@ -161,7 +161,7 @@ def write_range_image(
     dict
         ``{"png_scale_m": float, "files": [paths written]}``.
     """
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a PNG is written
 
     rng = image.range
     if image.n_valid == 0:

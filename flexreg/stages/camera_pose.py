@@ -86,7 +86,7 @@ class PnPResult:
 def to_rvec_tvec(T: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """OpenCV's ``(rvec (3,), tvec (3,))`` of a rigid transform (Rodrigues rotation vector,
     radians)."""
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a pose is computed
 
     rvec, _ = cv2.Rodrigues(np.ascontiguousarray(T[:3, :3]))
     return np.asarray(rvec, dtype=np.float64).reshape(3), np.array(T[:3, 3], dtype=np.float64)
@@ -94,7 +94,7 @@ def to_rvec_tvec(T: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[n
 
 def from_rvec_tvec(rvec: ArrayLike, tvec: ArrayLike) -> NDArray[np.float64]:
     """(4, 4) float64 rigid transform from OpenCV's rotation vector and translation."""
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a pose is computed
 
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     T = np.eye(4)
@@ -139,7 +139,7 @@ def project_points(
     >>> uv.round(6).tolist(), z.tolist()
     ([[345.0, 190.0]], [2.0])
     """
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a pose is computed
 
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     T = np.asarray(T_camera_lidar, dtype=np.float64)
@@ -173,7 +173,7 @@ def distort_pixels(uv: NDArray[np.float64], intrinsics: Lens) -> NDArray[np.floa
     (N, 2) float64, pixels
         ``uv`` itself when the lens has no distortion.
     """
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a pose is computed
 
     d = np.array(intrinsics.distortion, dtype=np.float64)
     if not np.any(d != 0) or len(uv) == 0:
@@ -255,7 +255,7 @@ def solve_pnp(
         RANSAC finds no pose with at least :data:`MIN_CORRESPONDENCES` inliers in front of the
         camera.
     """
-    import cv2
+    import cv2  # heavy: OpenCV loads only when a pose is computed
 
     t0 = time.perf_counter()
     c = correspondences

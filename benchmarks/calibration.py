@@ -40,8 +40,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import statistics
 import sys
 import time
@@ -56,6 +54,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from flexreg import read_scan  # noqa: E402
+from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 from flexreg.calibration import (  # noqa: E402
     CalibrationConfig,
     CalibrationError,
@@ -464,30 +463,73 @@ def overlay_figures(
     return paths
 
 
-def update_docs(text: str, path: Path = DOC) -> None:
-    doc = path.read_text()
-    if BEGIN not in doc or END not in doc:
-        raise SystemExit(f"{path}: markers {BEGIN} / {END} missing")
-    start = doc.index(BEGIN) + len(BEGIN)
-    end = doc.index(END)
-    path.write_text(doc[:start] + "\n" + text.rstrip("\n") + "\n" + doc[end:])
+def synthetic_section(
+    state: dict[str, Any], datasets: dict[str, dict[str, Any]], *, rigs_per_scene: int, trials: int
+) -> None:
+    """PnP on synthetic rigs with 20-200 pairs, 30 % outliers; keeps the last rig for the
+    figures."""
+    print("synthetic rigs", flush=True)
+    rigs = []
+    for kind in ("room", "courtyard"):
+        for seed in range(rigs_per_scene):
+            t0 = time.perf_counter()
+            rigs.append(synthetic_rig(kind, seed))
+            print(f"  {kind} seed {seed}: rig in {time.perf_counter() - t0:.1f} s", flush=True)
+    state["synthetic"] = []
+    for n in (20, 50, 100, 200):
+        runs = [pnp_trials(rig, n=n, outliers=0.3, trials=trials) for rig in rigs]
+        merged = {
+            "pairs": n,
+            "outliers": 0.3,
+            "trials": sum(r["trials"] for r in runs),
+            **{
+                key: [x for r in runs for x in r[key]]
+                for key in ("rotation_deg", "translation_m", "inliers", "time_s")
+            },
+        }
+        state["synthetic"].append(merged)
+        print(f"  {n} pairs: {_stats(merged)}", flush=True)
+    datasets["synthetic courtyard"] = {
+        **rigs[-1],
+        "intrinsics": rigs[-1]["native_intrinsics"],
+        "visible": None,
+    }
 
 
-def _json_safe(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, np.generic):
-        return _json_safe(x.item())
-    return x
+def real_section(
+    state: dict[str, Any], datasets: dict[str, dict[str, Any]], *, trials: int
+) -> None:
+    """PnP on the KITTI and PJLab rigs with 100 pairs, with and without outliers."""
+    print("real sets", flush=True)
+    state["real"] = []
+    for name in ("kitti", "pjlab"):
+        datasets[name] = real_set(name)
+        for outliers in (0.0, 0.3):
+            run = pnp_trials(datasets[name], n=100, outliers=outliers, trials=trials)
+            run["set"] = name
+            state["real"].append(run)
+            print(f"  {name} outliers {outliers:.0%}: {_stats(run)}", flush=True)
+
+
+def auto_section(
+    state: dict[str, Any], datasets: dict[str, dict[str, Any]], *, trials: int
+) -> None:
+    """The automatic mode from perturbed starts on each rig."""
+    print("automatic mode", flush=True)
+    state["auto"] = {}
+    for name in ("kitti", "pjlab", "synthetic courtyard"):
+        if name not in datasets:
+            if name == "synthetic courtyard":
+                rig = synthetic_rig("courtyard", 0)
+                datasets[name] = {**rig, "intrinsics": rig["native_intrinsics"]}
+            else:
+                datasets[name] = real_set(name)
+        print(f"  {name}", flush=True)
+        state["auto"][name] = auto_trials(datasets[name], trials=trials)
+    state["auto_summary"] = {k: summarise_auto(v) for k, v in state["auto"].items()}
 
 
 def main(argv: list[str] | None = None) -> int:
-    import cv2
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer rigs and trials (smoke test)")
     ap.add_argument(
@@ -524,73 +566,27 @@ def main(argv: list[str] | None = None) -> int:
         )
         if on
     )
-    folder = args.results / f"calibration-{datetime.now():%Y%m%d-%H%M%S}"
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = results_folder(args.results, "calibration")
+    machine = machine_info()
     state: dict[str, Any] = {
         "benchmark": "calibration",
         "command": command,
         "date": f"{datetime.now():%Y-%m-%d}",
-        "machine_line": f"{os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"OpenCV {cv2.__version__}",
+        "machine_line": f"{machine['cores']} cores, Python {machine['python']}, "
+        f"OpenCV {machine['opencv']}",
+        "machine": machine,
         "config": CalibrationConfig().to_dict(),
         "synthetic_trials": syn_trials,
     }
     datasets: dict[str, dict[str, Any]] = {}
 
     if not args.no_synthetic:
-        print("synthetic rigs", flush=True)
-        rigs = []
-        for kind in ("room", "courtyard"):
-            for seed in range(rigs_per_scene):
-                t0 = time.perf_counter()
-                rigs.append(synthetic_rig(kind, seed))
-                print(f"  {kind} seed {seed}: rig in {time.perf_counter() - t0:.1f} s", flush=True)
-        state["synthetic"] = []
-        for n in (20, 50, 100, 200):
-            runs = [pnp_trials(rig, n=n, outliers=0.3, trials=syn_trials) for rig in rigs]
-            merged = {
-                "pairs": n,
-                "outliers": 0.3,
-                "trials": sum(r["trials"] for r in runs),
-                **{
-                    key: [x for r in runs for x in r[key]]
-                    for key in ("rotation_deg", "translation_m", "inliers", "time_s")
-                },
-            }
-            state["synthetic"].append(merged)
-            print(f"  {n} pairs: {_stats(merged)}", flush=True)
-        datasets["synthetic courtyard"] = {
-            **rigs[-1],
-            "intrinsics": rigs[-1]["native_intrinsics"],
-            "visible": None,
-        }
-
+        synthetic_section(state, datasets, rigs_per_scene=rigs_per_scene, trials=syn_trials)
     if not args.no_real:
-        print("real sets", flush=True)
-        state["real"] = []
-        for name in ("kitti", "pjlab"):
-            datasets[name] = real_set(name)
-            for outliers in (0.0, 0.3):
-                run = pnp_trials(datasets[name], n=100, outliers=outliers, trials=real_trials)
-                run["set"] = name
-                state["real"].append(run)
-                print(f"  {name} outliers {outliers:.0%}: {_stats(run)}", flush=True)
-
+        real_section(state, datasets, trials=real_trials)
     if not args.no_auto:
-        print("automatic mode", flush=True)
-        state["auto"] = {}
-        for name in ("kitti", "pjlab", "synthetic courtyard"):
-            if name not in datasets:
-                if name == "synthetic courtyard":
-                    rig = synthetic_rig("courtyard", 0)
-                    datasets[name] = {**rig, "intrinsics": rig["native_intrinsics"]}
-                else:
-                    datasets[name] = real_set(name)
-            print(f"  {name}", flush=True)
-            state["auto"][name] = auto_trials(datasets[name], trials=auto_n)
-        state["auto_summary"] = {k: summarise_auto(v) for k, v in state["auto"].items()}
-
-    (folder / "results.json").write_text(json.dumps(_json_safe(state), indent=1) + "\n")
+        auto_section(state, datasets, trials=auto_n)
+    write_json(folder / "results.json", state)
     return finish(state, datasets, folder, write_docs=args.write_docs)
 
 
@@ -599,17 +595,12 @@ def finish(
 ) -> int:
     """Print the tables, write results.md and the figures (into docs/ with ``write_docs``)."""
     text = markdown(state)
-    print()
-    print(text)
-    (folder / "results.md").write_text(text + "\n")
+    publish(text + "\n", folder, doc=DOC if write_docs else None, markers=(BEGIN, END))
     fig_folder = FIGURES if write_docs else folder
     if state.get("auto"):
         plot_auto(state, fig_folder / "calibration-auto.png")
     for p in overlay_figures(state, datasets, fig_folder):
         print(f"wrote {p}")
-    if write_docs:
-        update_docs(text)
-        print(f"updated {DOC}")
     print(f"results in {folder}")
     return 0
 

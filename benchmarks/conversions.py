@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import platform
 import statistics
 import sys
 import time
@@ -44,11 +42,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from flexreg.bench.harness import machine_info, replace_section  # noqa: E402
 from flexreg.core.camera import SphericalCamera  # noqa: E402
 from flexreg.core.range_image import from_depth  # noqa: E402
 from flexreg.stages import feature_images as I  # noqa: E402
 
 SHARED = REPO.parent / "shared" / "data" / "conversions"
+DOC = REPO / "docs" / "benchmarks.md"
 THETA = (math.radians(50.0), math.radians(130.0))  # the laser scan's exact polar range
 
 FLEXION_N = {
@@ -219,7 +219,7 @@ def scratch_mb(name: str, shape: tuple[int, ...]) -> float:
 RSS_CHILD = """
 import sys, numpy as np
 sys.path.insert(0, sys.argv[2])
-from flexreg import images as I
+from flexreg.stages import feature_images as I
 
 def status(key):
     for line in open("/proc/self/status"):
@@ -301,10 +301,11 @@ def markdown(results: list[Result], command: str) -> str:
     conversions = list(dict.fromkeys(r.conversion for r in results))
     by = {(r.image, r.conversion): r for r in results}
     sizes = {r.image: r for r in results}
-    cpu = platform.processor() or platform.machine()
+    machine = machine_info()
     lines = [
         f"Command: `{command}` (numba {numba.__version__}, {numba.get_num_threads()} threads, "
-        f"{os.cpu_count()} cores, {cpu}; best of 3-5 calls after a warm-up). Other jobs may "
+        f"{machine['cores']} cores, {machine['cpu']}; best of 3-5 calls after a warm-up). "
+        "Other jobs may "
         "share the machine; the best call is the figure least disturbed by them.",
         "",
         "Images: **real** = the authors' terrestrial laser scan `conversions/laserscan-depth.png` "
@@ -357,16 +358,6 @@ def markdown(results: list[Result], command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def update_docs(text: str, path: Path = REPO / "docs" / "benchmarks.md") -> None:
-    """Replace the body of the "## Depth conversions" section, leaving the rest untouched."""
-    doc = path.read_text()
-    head = "## Depth conversions\n"
-    start = doc.index(head) + len(head)
-    nxt = doc.find("\n## ", start)
-    end = len(doc) if nxt < 0 else nxt + 1
-    path.write_text(doc[:start] + "\n" + text + "\n" + doc[end:])
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--reps", type=int, default=5, help="timed calls per conversion")
@@ -385,8 +376,8 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(results, command)
     print("\n" + text)
     if args.update_docs:
-        update_docs(text)
-        print("updated docs/benchmarks.md")
+        replace_section(DOC, text, heading="## Depth conversions")
+        print(f"updated {DOC.relative_to(REPO)}")
     return 0
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from flexreg import read_scan, write_scan
+from flexreg.bench.harness import machine_info
 from flexreg.core.camera import SphericalCamera
 from flexreg.core.range_image import from_depth, to_scan
 
@@ -65,10 +65,10 @@ def main() -> None:
         if not args.skip_loadtxt:
             t_lt = best_of(lambda: np.loadtxt(path, skiprows=10), 1)
             rows.append(("numpy.loadtxt (values only)", t_lt))
+    m = machine_info()
     print(
         f"PTX station {args.cols} x {args.rows} = {n:,} cells, {size_mb:.0f} MB, "
-        f"{len(scan):,} valid points; {os.cpu_count()} cores, {platform.python_version()}, "
-        f"numpy {np.__version__}"
+        f"{len(scan):,} valid points; {m['cores']} cores, {m['python']}, numpy {m['numpy']}"
     )
     print()
     print("| operation | time (s) | points/s | MB/s |")

@@ -40,13 +40,12 @@ import io
 import itertools
 import json
 import math
-import os
-import platform
 import statistics
 import sys
 import tempfile
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
@@ -57,6 +56,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 from flexreg.errors import FlexregError, RegistrationError  # noqa: E402
 from flexreg.io.sequence import Sequence, read_sequence  # noqa: E402
 from flexreg.odometry.evaluation import ate, rpe  # noqa: E402
@@ -411,10 +411,8 @@ def _ordinal(k: int) -> str:
     return f"{k}{suffix}"
 
 
-def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
-    runs = state["runs"]
-    feats = tuple(state["features"])
-    labels = [lab for lab, _, _ in VARIANTS if lab in state["variants"]]
+def _setup(state: dict[str, Any]) -> list[str]:
+    """Title, data sets and how the images, features, solvers and errors are made."""
     delta = state["rpe"]["delta"]
     L: list[str] = ["# Reproducing the paper's odometry comparison", ""]
     L += [
@@ -482,6 +480,14 @@ def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
         "<ins>underlined</ins>; – = no frame pair could be solved.",
         "",
     ]
+    return L
+
+
+def _tables(state: dict[str, Any], feats: tuple[str, ...], labels: list[str]) -> list[str]:
+    """Per data set and solver: ATE, RPE and bridged-frame tables, numbered."""
+    runs = state["runs"]
+    delta = state["rpe"]["delta"]
+    L: list[str] = []
     num = 1
     for ds in (d for d in state["datasets"] if d in state["sequences"]):
         spec = state["specs"][ds]
@@ -504,6 +510,14 @@ def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
             L += bridged_table(runs, ds, method, feats, labels, info["frames"])
             L.append("")
             num += 1
+    return L
+
+
+def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
+    runs = state["runs"]
+    feats = tuple(state["features"])
+    labels = [lab for lab, _, _ in VARIANTS if lab in state["variants"]]
+    L = _setup(state) + _tables(state, feats, labels)
     L += ["## Findings (computed from the tables)", ""]
     L += findings(state)
     L += [
@@ -524,6 +538,7 @@ def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
         ]
     L += ["## Discussion", "", "<!-- discussion -->", discussion.strip(), "<!-- /discussion -->"]
     seconds = sum(r.get("seconds", 0.0) for r in runs.values())
+    m = state["machine"]
     L += [
         "",
         "## Reproducing",
@@ -533,8 +548,8 @@ def markdown(state: dict[str, Any], figure: str | None, discussion: str) -> str:
         ".venv/bin/python benchmarks/paper_tables.py --quick        # a smoke test",
         "```",
         "",
-        f"Machine: {state['machine']['cpu_count']} cores ({state['machine']['platform']}), "
-        f"Python {state['machine']['python']}, OpenCV {state['machine'].get('opencv', '?')}; "
+        f"Machine: {m.get('cores', m.get('cpu_count'))} cores ({m['platform']}), "
+        f"Python {m['python']}, OpenCV {m.get('opencv', '?')}; "
         f"{len(runs)} runs, {seconds / 60:.0f} min of odometry in total.",
         "",
     ]
@@ -593,17 +608,6 @@ def plot(state: dict[str, Any], path: Path) -> None:
 # ------------------------------------------------------------------------------ main
 
 
-def _machine() -> dict[str, Any]:
-    import cv2
-
-    return {
-        "cpu_count": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "opencv": cv2.__version__,
-    }
-
-
 def _discussion() -> str:
     if DOC.is_file():
         text = DOC.read_text()
@@ -613,105 +617,78 @@ def _discussion() -> str:
     return "(to be written from the tables above)"
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="20/40 frames, ORB + AKAZE, 5 variants")
-    ap.add_argument(
-        "--datasets", nargs="+", default=None, help="subset of 7scenes, synth-room-1, synth-room-2"
+def _resumed(
+    args: argparse.Namespace, ap: argparse.ArgumentParser, specs: dict[str, Any]
+) -> tuple[dict[str, Any], Path]:
+    """A saved run to continue (``--resume``), possibly with more data sets; and its folder."""
+    state = json.loads(args.resume.read_text())
+    folder = args.resume.parent
+    quick = " --quick" in state["command"]
+    for name in args.datasets or []:  # a resumed run may take on more data sets
+        if name not in state["datasets"]:
+            if name not in specs or quick != args.quick:
+                ap.error(f"cannot add data set {name!r} to this run")
+            state["datasets"].append(name)
+            state["specs"][name] = specs[name]
+    state.setdefault("resumed", []).append(
+        ".venv/bin/python benchmarks/paper_tables.py"
+        + (" --quick" if args.quick else "")
+        + (" --datasets " + " ".join(args.datasets) if args.datasets else "")
+        + " --resume <results.json>"
     )
-    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
-    ap.add_argument("--features", nargs="+", default=None, choices=FEATURES)
-    ap.add_argument("--write-docs", action="store_true", help=f"rewrite {DOC.relative_to(REPO)}")
-    ap.add_argument("--results", type=Path, default=RESULTS, help="parent of the result folder")
-    ap.add_argument(
-        "--work-dir",
-        type=Path,
-        default=Path(tempfile.gettempdir()) / "flexreg-paper-tables",
-        help="where the synthetic sequences are written (reused when present)",
+    return state, folder
+
+
+def _new_run(
+    args: argparse.Namespace, ap: argparse.ArgumentParser, specs: dict[str, Any]
+) -> tuple[dict[str, Any], Path]:
+    """The state of a new run (what it will run, on which machine) and its results folder."""
+    names = args.datasets or list(specs)
+    unknown = set(names) - set(specs)
+    if unknown:
+        ap.error(f"unknown data set(s) {sorted(unknown)}; known: {', '.join(specs)}")
+    feats = args.features or (["akaze", "orb"] if args.quick else list(FEATURES))
+    variants = [lab for lab, _, _ in VARIANTS]
+    if args.quick:
+        variants = ["Flexion 3×3", "Flexion 7×7", "BA horizontal", "BA vertical", "Color"]
+    command = ".venv/bin/python benchmarks/paper_tables.py" + "".join(
+        part
+        for part, on in (
+            (" --quick", args.quick),
+            (" --datasets " + " ".join(names), args.datasets is not None),
+            (" --methods " + " ".join(args.methods), args.methods != list(METHODS)),
+            (" --features " + " ".join(feats), args.features is not None),
+        )
+        if on
     )
-    ap.add_argument("--resume", type=Path, metavar="RESULTS_JSON", help="continue a saved run")
-    ap.add_argument("--from-json", type=Path, metavar="RESULTS_JSON", help="render a saved run")
-    ap.add_argument("--threads", type=int, default=1, help="OpenCV / numba threads (default 1)")
-    args = ap.parse_args(argv)
+    folder = results_folder(args.results, "paper-tables")
+    state = {
+        "benchmark": "paper_tables",
+        "command": command,
+        "machine": machine_info(),
+        "datasets": names,
+        "specs": {n: specs[n] for n in names},
+        "methods": list(args.methods),
+        "features": feats,
+        "variants": variants,
+        "rpe": {"delta": RPE_DELTA_QUICK if args.quick else RPE_DELTA, "unit": RPE_UNIT},
+        "config": OdometryConfig().to_dict(),
+        "sequences": {},
+        "runs": {},
+        "started": f"{datetime.now():%Y-%m-%d %H:%M}",
+        "finished": None,
+    }
+    return state, folder
 
-    if args.from_json is not None:
-        state = json.loads(args.from_json.read_text())
-        return finish(state, args.from_json.parent, write_docs=args.write_docs)
 
-    import logging
-
-    import cv2
-    import numba
-
-    # bridged frames are counted in the tables; their warnings would drown the progress lines
-    logging.getLogger("flexreg.odometry.track").setLevel(logging.ERROR)
-    cv2.setNumThreads(args.threads)
-    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-    specs = datasets(args.quick)
-    if args.resume is not None:
-        state = json.loads(args.resume.read_text())
-        folder = args.resume.parent
-        quick = " --quick" in state["command"]
-        for name in args.datasets or []:  # a resumed run may take on more data sets
-            if name not in state["datasets"]:
-                if name not in specs or quick != args.quick:
-                    ap.error(f"cannot add data set {name!r} to this run")
-                state["datasets"].append(name)
-                state["specs"][name] = specs[name]
-        state.setdefault("resumed", []).append(
-            ".venv/bin/python benchmarks/paper_tables.py"
-            + (" --quick" if args.quick else "")
-            + (" --datasets " + " ".join(args.datasets) if args.datasets else "")
-            + " --resume <results.json>"
-        )
-    else:
-        names = args.datasets or list(specs)
-        unknown = set(names) - set(specs)
-        if unknown:
-            ap.error(f"unknown data set(s) {sorted(unknown)}; known: {', '.join(specs)}")
-        feats = args.features or (["akaze", "orb"] if args.quick else list(FEATURES))
-        variants = [lab for lab, _, _ in VARIANTS]
-        if args.quick:
-            variants = ["Flexion 3×3", "Flexion 7×7", "BA horizontal", "BA vertical", "Color"]
-        command = ".venv/bin/python benchmarks/paper_tables.py" + "".join(
-            part
-            for part, on in (
-                (" --quick", args.quick),
-                (" --datasets " + " ".join(names), args.datasets is not None),
-                (" --methods " + " ".join(args.methods), args.methods != list(METHODS)),
-                (" --features " + " ".join(feats), args.features is not None),
-            )
-            if on
-        )
-        folder = args.results / f"paper-tables-{datetime.now():%Y%m%d-%H%M%S}"
-        state = {
-            "benchmark": "paper_tables",
-            "command": command,
-            "machine": _machine(),
-            "datasets": names,
-            "specs": {n: specs[n] for n in names},
-            "methods": list(args.methods),
-            "features": feats,
-            "variants": variants,
-            "rpe": {"delta": RPE_DELTA_QUICK if args.quick else RPE_DELTA, "unit": RPE_UNIT},
-            "config": OdometryConfig().to_dict(),
-            "sequences": {},
-            "runs": {},
-            "started": f"{datetime.now():%Y-%m-%d %H:%M}",
-            "finished": None,
-        }
-    folder.mkdir(parents=True, exist_ok=True)
-
-    def save() -> None:
-        (folder / "results.json").write_text(json.dumps(state, indent=1) + "\n")
-
-    print(f"results: {folder}", flush=True)
-    save()
+def _run_grid(state: dict[str, Any], work_dir: Path, save: Callable[[], None]) -> None:
+    """Every data set x variant x feature x solver not yet in ``state["runs"]``; saves after
+    each variant."""
     kinds = {lab: (kind, n) for lab, kind, n in VARIANTS}
     feats = tuple(state["features"])
     for ds in state["datasets"]:
         print(f"{ds}:", flush=True)
-        seq = prepare(ds, state["specs"][ds], args.work_dir)
+        seq = prepare(ds, state["specs"][ds], work_dir)
         state["sequences"][ds] = describe(seq)
         save()
         for lab in state["variants"]:
@@ -757,6 +734,55 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"  {lab:20s} {f:6s} {m:9s} {msg}", flush=True)
                 save()
             print(f"  ({lab}: {time.perf_counter() - t0:.0f} s)", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="20/40 frames, ORB + AKAZE, 5 variants")
+    ap.add_argument(
+        "--datasets", nargs="+", default=None, help="subset of 7scenes, synth-room-1, synth-room-2"
+    )
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--features", nargs="+", default=None, choices=FEATURES)
+    ap.add_argument("--write-docs", action="store_true", help=f"rewrite {DOC.relative_to(REPO)}")
+    ap.add_argument("--results", type=Path, default=RESULTS, help="parent of the result folder")
+    ap.add_argument(
+        "--work-dir",
+        type=Path,
+        default=Path(tempfile.gettempdir()) / "flexreg-paper-tables",
+        help="where the synthetic sequences are written (reused when present)",
+    )
+    ap.add_argument("--resume", type=Path, metavar="RESULTS_JSON", help="continue a saved run")
+    ap.add_argument("--from-json", type=Path, metavar="RESULTS_JSON", help="render a saved run")
+    ap.add_argument("--threads", type=int, default=1, help="OpenCV / numba threads (default 1)")
+    args = ap.parse_args(argv)
+
+    if args.from_json is not None:
+        state = json.loads(args.from_json.read_text())
+        return finish(state, args.from_json.parent, write_docs=args.write_docs)
+
+    import logging
+
+    import cv2
+    import numba
+
+    # bridged frames are counted in the tables; their warnings would drown the progress lines
+    logging.getLogger("flexreg.odometry.track").setLevel(logging.ERROR)
+    cv2.setNumThreads(args.threads)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    specs = datasets(args.quick)
+    if args.resume is not None:
+        state, folder = _resumed(args, ap, specs)
+    else:
+        state, folder = _new_run(args, ap, specs)
+    folder.mkdir(parents=True, exist_ok=True)
+
+    def save() -> None:
+        write_json(folder / "results.json", state)
+
+    print(f"results: {folder}", flush=True)
+    save()
+    _run_grid(state, args.work_dir, save)
     state["finished"] = f"{datetime.now():%Y-%m-%d %H:%M}"
     save()
     return finish(state, folder, write_docs=args.write_docs)
@@ -768,12 +794,9 @@ def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:
     if write_docs:
         plot(state, FIGURE)
         figure = FIGURE.relative_to(DOC.parent).as_posix()
+        print(f"updated {FIGURE.relative_to(REPO)}")
     text = markdown(state, figure, _discussion())
-    (folder / "results.md").write_text(text)
-    print("\n" + text)
-    if write_docs:
-        DOC.write_text(text)
-        print(f"updated {DOC.relative_to(REPO)} and {FIGURE.relative_to(REPO)}")
+    publish(text, folder, doc=DOC if write_docs else None)
     print(f"raw results: {folder / 'results.json'}")
     return 0
 

@@ -40,13 +40,11 @@ import argparse
 import json
 import math
 import os
-import platform
 import statistics
 import sys
 import time
 import traceback
 from collections.abc import Callable
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +54,8 @@ from numpy.typing import NDArray
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from flexreg.bench.compare import FitEvaluator  # noqa: E402
+from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 from flexreg.core.scan import Scan  # noqa: E402
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m  # noqa: E402
 from flexreg.errors import RegistrationError  # noqa: E402
@@ -131,18 +131,18 @@ def timed_register(
     return rec
 
 
+#: the errors of a pair whose ``register`` raised (infinite: they count in the medians)
+FAILURE_ERRORS = ("rot_coarse_deg", "trans_coarse_m", "rot_deg", "trans_m")
+
+
 def _failure(total_s: float, kind: str, message: str) -> dict[str, Any]:
-    inf = math.inf
     return {
         "ok": False,
         "error": message,
         "error_type": kind,
         "total_s": total_s,
         "timings_s": {},
-        "rot_coarse_deg": inf,
-        "trans_coarse_m": inf,
-        "rot_deg": inf,
-        "trans_m": inf,
+        **dict.fromkeys(FAILURE_ERRORS, math.inf),
     }
 
 
@@ -263,11 +263,10 @@ def _range_image_note(scan: Scan) -> dict[str, Any]:
     return {"width": img.width, "height": img.height, "valid": float(img.valid.mean())}
 
 
-def _nn_fit(tree: Any, source: NDArray[np.float64], T: NDArray[np.float64]) -> tuple[float, float]:
-    """(median nearest-neighbour distance m, share within NN_WITHIN_M) of the mapped source,
-    sampled evenly over its surfaces (so the dense near field does not dominate)."""
-    source = area_sample(source, 20000)
-    d, _ = tree.query(source @ T[:3, :3].T + T[:3, 3])
+def _nn_fit(fit: FitEvaluator, T: NDArray[np.float64]) -> tuple[float, float]:
+    """(median nearest-neighbour distance m, share within NN_WITHIN_M) of the fit's source
+    points mapped by ``T``."""
+    d = fit.distances(T)
     return float(np.median(d)), float(np.mean(d < NN_WITHIN_M))
 
 
@@ -293,8 +292,6 @@ def bunny_gt_from_conf(path: Path) -> dict[str, NDArray[np.float64]]:
 
 def real_pairs(config: RegistrationConfig) -> list[dict[str, Any]]:
     """Register the real pairs; missing data is reported as a skipped pair."""
-    from scipy.spatial import cKDTree
-
     from flexreg.io import read_scan, read_scans
 
     out: list[dict[str, Any]] = []
@@ -344,18 +341,19 @@ def real_pairs(config: RegistrationConfig) -> list[dict[str, Any]]:
         for i, j in KURT_PAIRS:
             T_prior = invert(k[i].T_world_scanner) @ k[j].T_world_scanner
             rec = run(f"3DTK scan00{i} <- scan00{j}", "odometry prior", k[i], k[j], T_prior)
-            tree = cKDTree(k[i].points)
+            # the source sampled evenly over its surfaces (the dense near field must not dominate)
+            tree = FitEvaluator(k[i].points, area_sample(k[j].points, 20000), NN_WITHIN_M)
             rec["prior_distance_m"] = float(np.linalg.norm(T_prior[:3, 3]))
-            rec["nn_prior"] = _nn_fit(tree, k[j].points, T_prior)
+            rec["nn_prior"] = _nn_fit(tree, T_prior)
             if rec["ok"]:
-                rec["nn_result"] = _nn_fit(tree, k[j].points, np.asarray(rec["T_target_source"]))
+                rec["nn_result"] = _nn_fit(tree, np.asarray(rec["T_target_source"]))
             # the same refinement register uses, started from the odometry: the nearest local
             # optimum
             try:
                 thr = rec.get("threshold_m") or KURT_ODOMETRY_ERROR_M
                 T_icp = refine(k[i], k[j], T_prior, threshold_m=thr).T_target_source
                 rec["T_prior_icp"] = T_icp.tolist()
-                rec["nn_prior_icp"] = _nn_fit(tree, k[j].points, T_icp)
+                rec["nn_prior_icp"] = _nn_fit(tree, T_icp)
             except RegistrationError as e:
                 rec["prior_icp_error"] = str(e)
         # loop check, no reference needed: scan000 <- scan001 <- scan002 against the direct result
@@ -492,9 +490,14 @@ def render_synthetic(records: list[dict[str, Any]], resolution: tuple[int, int])
         row("slowest pair (s)", lambda s: _f(s["max_total_s"], ".1f"), ""),
     ]
 
+    return lines + _stage_medians(records) + _pair_rows(records) + _stage_rows(records)
+
+
+def _stage_medians(records: list[dict[str, Any]]) -> list[str]:
+    """Median and slowest time of each stage over the registered pairs."""
     stages = stage_names(records)
     ok = [r for r in records if r["ok"]]
-    lines += [
+    lines = [
         "",
         f"Median time per stage over the {len(ok)} registered pairs (`timings_s`; the plan views "
         "and the preparation of the checks run in background threads beside the feature stages, "
@@ -513,7 +516,12 @@ def render_synthetic(records: list[dict[str, Any]], resolution: tuple[int, int])
             f"| {len(vals)} |"
         )
 
-    lines += [
+    return lines
+
+
+def _pair_rows(records: list[dict[str, Any]]) -> list[str]:
+    """One row per synthetic pair, then the failures' messages."""
+    lines = [
         "",
         "Per pair (errors against the exact `T_target_source`; *prior* = which prior led to the "
         "estimate; inliers / matches of the final guided matching):",
@@ -540,7 +548,13 @@ def render_synthetic(records: list[dict[str, Any]], resolution: tuple[int, int])
             f"- {r['scene']} seed {r['seed']}: `{r['error_type']}: {r['error']}`" for r in failed
         ]
 
-    lines += [
+    return lines
+
+
+def _stage_rows(records: list[dict[str, Any]]) -> list[str]:
+    """Every stage's time, one row per synthetic pair."""
+    stages = stage_names(records)
+    lines = [
         "",
         "Stage timings per pair (s):",
         "",
@@ -876,33 +890,7 @@ def plot_synthetic(records: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def update_docs(text: str, path: Path = DOC) -> None:
-    """Replace the body of the "## Registration" section (append it if missing); the other
-    sections stay untouched."""
-    doc = path.read_text()
-    head = SECTION + "\n"
-    if head in doc:
-        start = doc.index(head) + len(head)
-        nxt = doc.find("\n## ", start)
-        end = len(doc) if nxt < 0 else nxt + 1
-        path.write_text(doc[:start] + "\n" + text + ("\n" if nxt >= 0 else "") + doc[end:])
-    else:
-        path.write_text(doc.rstrip("\n") + "\n\n" + head + "\n" + text)
-
-
 # ------------------------------------------------------------------ main
-
-
-def _json_safe(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None if math.isnan(x) else ("inf" if x > 0 else "-inf")
-    if isinstance(x, np.generic):
-        return _json_safe(x.item())
-    return x
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -913,20 +901,6 @@ def _resolution(text: str) -> tuple[int, int]:
     if w < 16 or h < 8:
         raise argparse.ArgumentTypeError(f"resolution too small: {text!r}")
     return w, h
-
-
-def _machine() -> dict[str, Any]:
-    import cv2
-    import open3d
-
-    return {
-        "cores": os.cpu_count(),
-        "cpu": platform.processor() or platform.machine(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "opencv": cv2.__version__,
-        "open3d": open3d.__version__,
-    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -987,13 +961,12 @@ def main(argv: list[str] | None = None) -> int:
         if on
     )
     config = RegistrationConfig(refine=True, seed=args.seed)
-    folder = args.results / f"registration-{datetime.now():%Y%m%d-%H%M%S}"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+    folder = results_folder(args.results, "registration")
+    write_json(folder / "config.json", config.to_dict(), indent=2)
     state: dict[str, Any] = {
         "benchmark": "registration",
         "command": command,
-        "machine": _machine(),
+        "machine": machine_info(),
         "config": config.to_dict(),
         "criteria": {
             "coarse_success": {"rot_deg": COARSE_ROT_DEG, "trans_m": COARSE_TRANS_M},
@@ -1010,7 +983,7 @@ def main(argv: list[str] | None = None) -> int:
     }
 
     def save() -> None:
-        (folder / "results.json").write_text(json.dumps(_json_safe(state), indent=1) + "\n")
+        write_json(folder / "results.json", state)
 
     print(f"results: {folder}", flush=True)
     save()
@@ -1039,32 +1012,26 @@ def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:
         if write_docs:
             plot_synthetic(state["synthetic"], FIGURE)
             figure = FIGURE.relative_to(DOC.parent).as_posix()
+            print(f"updated {FIGURE.relative_to(REPO)}")
     text = markdown(state, figure)
-    (folder / "results.md").write_text(text)
-    print("\n" + text)
-    if write_docs:
-        update_docs(text)
-        print(
-            f"updated {DOC.relative_to(REPO)}"
-            + (f" and {FIGURE.relative_to(REPO)}" if figure else "")
-        )
+    publish(text, folder, doc=DOC if write_docs else None, heading=SECTION)
     print(f"raw results: {folder / 'results.json'}")
     return 0
 
 
 def load_results(path: Path) -> dict[str, Any]:
-    """A saved ``results.json``, with the infinite errors of failed pairs restored."""
-
-    def restore(x: Any) -> Any:
-        if isinstance(x, dict):
-            return {k: restore(v) for k, v in x.items()}
-        if isinstance(x, list):
-            return [restore(v) for v in x]
-        if x in ("inf", "-inf"):
-            return float(x)
-        return x
-
-    return restore(json.loads(path.read_text()))
+    """A saved ``results.json``, with the infinite errors of failed pairs restored (JSON holds
+    them as null) and the synthetic summary recomputed from them."""
+    state = json.loads(path.read_text())
+    records = list(state.get("synthetic") or []) + list(state.get("real") or [])
+    if state.get("speed"):
+        records += [r for runs in state["speed"]["runs"].values() for r in runs]
+    for r in records:
+        if r.get("ok") is False:
+            r |= {k: math.inf for k in FAILURE_ERRORS if r.get(k) is None}
+    if state.get("synthetic"):
+        state["summary"] = summarise(state["synthetic"])
+    return state
 
 
 if __name__ == "__main__":

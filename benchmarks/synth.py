@@ -10,12 +10,13 @@ median over ``--repeats`` runs.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import time
 
 import numpy as np
+
+from flexreg.bench.harness import machine_info
+from flexreg.synth import TLSConfig, make_scene, place_stations, scan_tls
 
 
 def main() -> None:
@@ -27,8 +28,6 @@ def main() -> None:
     w, h = (int(v) for v in args.resolution.split("x"))
 
     import open3d  # noqa: F401  (import time is not part of any figure)
-
-    from flexreg.synth import TLSConfig, make_scene, place_stations, scan_tls
 
     cfg = TLSConfig(width=w, height=h)
     rows = []
@@ -63,10 +62,8 @@ def main() -> None:
                 )
             )
 
-    print(
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}, grid {w} x {h}\n"
-    )
+    m = machine_info()
+    print(f"{m['cpu']}, {m['cores']} cores, Python {m['python']}, grid {w} x {h}\n")
     print(
         "| scene | seed | triangles | scene s | BVH s | placement s | station s (median) "
         "| station s (max) | points |"

@@ -158,6 +158,12 @@ class FitEvaluator:
         rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else math.nan
         return float(ok.mean()), rmse
 
+    def distances(self, T: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance in metres from each (thinned) source point mapped by ``T`` to its nearest
+        target point, however far."""
+        d, _ = self._tree.query(self.source @ T[:3, :3].T + T[:3, 3])
+        return np.asarray(d, dtype=np.float64)
+
 
 @dataclass(eq=False)
 class MethodRun:

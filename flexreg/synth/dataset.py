@@ -32,7 +32,7 @@ from flexreg._version import __version__
 from flexreg.core.transforms import invert
 from flexreg.errors import ConfigError, InputError
 from flexreg.io import atomic_write, write_scan
-from flexreg.synth.config import RGBDConfig, SynthConfig
+from flexreg.synth.config import RGBDConfig, SynthConfig, TLSConfig
 from flexreg.synth.placement import free_map, place_stations, station_overlap, stream
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import SCENE_KINDS, make_scene, scene_from_mesh
@@ -124,6 +124,18 @@ def build_scene(config: SynthConfig) -> Scene:
     return scene_from_mesh(config.scene, scale=config.mesh_scale, up_axis=config.mesh_up_axis)
 
 
+def _catmull_rom(p0: Any, p1: Any, p2: Any, p3: Any) -> NDArray[np.float64]:
+    """Catmull-Rom spline from ``p1`` to ``p2`` (excluding ``p2``), ~5 cm spacing."""
+    n = max(4, int(np.linalg.norm(p2 - p1) / 0.05))
+    t = np.linspace(0, 1, n, endpoint=False)[:, None]
+    return 0.5 * (
+        2 * p1
+        + (-p0 + p2) * t
+        + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
+        + (-p0 + 3 * p1 - 3 * p2 + p3) * t**3
+    )
+
+
 def smooth_path(
     scene: Scene,
     n_frames: int,
@@ -156,17 +168,6 @@ def smooth_path(
         raise InputError(scene.name or "scene", "no free floor for a sensor path")
     length = max(n_frames, 2) * step_m + 0.5
     h0, h1 = height_range_m
-
-    def piece(p0: Any, p1: Any, p2: Any, p3: Any) -> NDArray[np.float64]:
-        """Catmull-Rom spline from ``p1`` to ``p2`` (excluding ``p2``), ~5 cm spacing."""
-        n = max(4, int(np.linalg.norm(p2 - p1) / 0.05))
-        t = np.linspace(0, 1, n, endpoint=False)[:, None]
-        return 0.5 * (
-            2 * p1
-            + (-p0 + p2) * t
-            + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
-            + (-p0 + 3 * p1 - 3 * p2 + p3) * t**3
-        )
 
     def clear(pts: NDArray[np.float64]) -> bool:
         return bool(fm.lookup(pts[:, :2])[0].all() and scene.distance(pts).min() >= clearance_m)
@@ -209,7 +210,7 @@ def smooth_path(
                 ok = clear(seg)
             else:
                 p0 = W[-3] if len(W) >= 3 else 2 * W[-2] - W[-1]
-                new = piece(p0, W[-2], W[-1], q)
+                new = _catmull_rom(p0, W[-2], W[-1], q)
                 ok = clear(new) and clear(q[None])
             if not ok:
                 stuck += 1
@@ -346,41 +347,17 @@ def synthesize(
     if cfg.lidar_frames:
         lidar_traj = lidar_trajectory(scene, cfg.lidar_frames, rng=stream(cfg.seed, _LIDAR_TRAJ))
 
+    # nothing is written before this point
     out.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
     t0 = time.perf_counter()
     files.append(scene.write(out / "scene.ply"))
     secs["mesh"] = time.perf_counter() - t0
-    stations: list[StationInfo] = []
-    for i, T in enumerate(poses):
-        t0 = time.perf_counter()
-        name = f"station_{i:02d}"
-        scan = scan_tls(scene, T, config=tls, rng=stream(cfg.seed, _STATION + i), name=name)
-        t_sim = time.perf_counter() - t0
-        if not cfg.embed_poses:
-            scan = replace(scan, T_world_scanner=np.eye(4))
-        path = out / f"{name}.{cfg.format}"
-        write_scan(path, scan)
-        files.append(path)
-        stations.append(StationInfo(name, path.name, T, len(scan), t_sim))
-        if progress is not None:
-            progress("stations", i + 1, len(poses))
+    stations = _write_stations(out, scene, poses, cfg, tls, files, progress)
     secs["stations"] = sum(s.seconds for s in stations)
     t0 = time.perf_counter()
-    pairs: list[PairInfo] = []
-    d0, d1 = cfg.distance_range_m
-    for i in range(len(poses)):
-        for j in range(i + 1, len(poses)):
-            d = float(np.linalg.norm(poses[j][:3, 3] - poses[i][:3, 3]))
-            if not d0 <= d <= d1:
-                continue
-            ov = station_overlap(scene, poses[i], poses[j], config=tls)
-            if ov >= cfg.min_overlap:
-                pairs.append(
-                    PairInfo(stations[i].name, stations[j].name, invert(poses[i]) @ poses[j], d, ov)
-                )
+    pairs = _station_pairs(scene, poses, stations, cfg, tls)
     secs["pairs"] = time.perf_counter() - t0
-
     if cfg.rgbd_frames:
         t0 = time.perf_counter()
         files += write_tum_sequence(
@@ -395,23 +372,102 @@ def synthesize(
     lidar_doc: list[dict[str, Any]] = []
     if cfg.lidar_frames:
         t0 = time.perf_counter()
-        lcfg = lidar_config()
-        gen = stream(cfg.seed, _LIDAR)
-        for i, T in enumerate(lidar_traj):
-            name = f"lidar_{i:05d}"
-            scan = scan_tls(scene, T, config=lcfg, rng=gen, name=name)
-            if not cfg.embed_poses:
-                scan = replace(scan, T_world_scanner=np.eye(4))
-            path = out / "lidar" / f"{name}.{cfg.format}"
-            write_scan(path, scan)
-            files.append(path)
-            lidar_doc.append(
-                {"name": name, "file": f"lidar/{path.name}", "T_world_sensor": T.tolist()}
-            )
-            if progress is not None:
-                progress("lidar", i + 1, len(lidar_traj))
+        lidar_doc = _write_lidar(out, scene, lidar_traj, cfg, files, progress)
         secs["lidar"] = time.perf_counter() - t0
+    doc = _ground_truth(cfg, tls, scene, stations, pairs, rgbd_cfg, lidar_doc)
+    _write_json(out / "gt.json", doc)
+    files.append(out / "gt.json")
+    return SynthResult(out, scene, stations, pairs, files, secs)
 
+
+def _write_stations(
+    out: Path,
+    scene: Scene,
+    poses: list[NDArray[np.float64]],
+    cfg: SynthConfig,
+    tls: TLSConfig,
+    files: list[Path],
+    progress: Progress | None,
+) -> list[StationInfo]:
+    """Simulate and write every station (appending to ``files``)."""
+    stations: list[StationInfo] = []
+    for i, T in enumerate(poses):
+        t0 = time.perf_counter()
+        name = f"station_{i:02d}"
+        scan = scan_tls(scene, T, config=tls, rng=stream(cfg.seed, _STATION + i), name=name)
+        t_sim = time.perf_counter() - t0
+        if not cfg.embed_poses:
+            scan = replace(scan, T_world_scanner=np.eye(4))
+        path = out / f"{name}.{cfg.format}"
+        write_scan(path, scan)
+        files.append(path)
+        stations.append(StationInfo(name, path.name, T, len(scan), t_sim))
+        if progress is not None:
+            progress("stations", i + 1, len(poses))
+    return stations
+
+
+def _station_pairs(
+    scene: Scene,
+    poses: list[NDArray[np.float64]],
+    stations: list[StationInfo],
+    cfg: SynthConfig,
+    tls: TLSConfig,
+) -> list[PairInfo]:
+    """Every station pair within the distance range and with at least the minimal overlap,
+    with its ground truth ``T_target_source = inv(T_world_target) @ T_world_source``."""
+    pairs: list[PairInfo] = []
+    d0, d1 = cfg.distance_range_m
+    for i in range(len(poses)):
+        for j in range(i + 1, len(poses)):
+            d = float(np.linalg.norm(poses[j][:3, 3] - poses[i][:3, 3]))
+            if not d0 <= d <= d1:
+                continue
+            ov = station_overlap(scene, poses[i], poses[j], config=tls)
+            if ov >= cfg.min_overlap:
+                pairs.append(
+                    PairInfo(stations[i].name, stations[j].name, invert(poses[i]) @ poses[j], d, ov)
+                )
+    return pairs
+
+
+def _write_lidar(
+    out: Path,
+    scene: Scene,
+    lidar_traj: list[NDArray[np.float64]],
+    cfg: SynthConfig,
+    files: list[Path],
+    progress: Progress | None,
+) -> list[dict[str, Any]]:
+    """Simulate and write the spinning-lidar sweeps (appending to ``files``); their entries of
+    ``gt.json``."""
+    lidar_doc: list[dict[str, Any]] = []
+    lcfg = lidar_config()
+    gen = stream(cfg.seed, _LIDAR)
+    for i, T in enumerate(lidar_traj):
+        name = f"lidar_{i:05d}"
+        scan = scan_tls(scene, T, config=lcfg, rng=gen, name=name)
+        if not cfg.embed_poses:
+            scan = replace(scan, T_world_scanner=np.eye(4))
+        path = out / "lidar" / f"{name}.{cfg.format}"
+        write_scan(path, scan)
+        files.append(path)
+        lidar_doc.append({"name": name, "file": f"lidar/{path.name}", "T_world_sensor": T.tolist()})
+        if progress is not None:
+            progress("lidar", i + 1, len(lidar_traj))
+    return lidar_doc
+
+
+def _ground_truth(
+    cfg: SynthConfig,
+    tls: TLSConfig,
+    scene: Scene,
+    stations: list[StationInfo],
+    pairs: list[PairInfo],
+    rgbd_cfg: RGBDConfig,
+    lidar_doc: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """The content of ``gt.json``."""
     doc: dict[str, Any] = {
         "flexreg_version": __version__,
         "convention": (
@@ -436,6 +492,4 @@ def synthesize(
         }
     if cfg.lidar_frames:
         doc["lidar"] = {"sensor": lidar_config().to_dict(), "frames": lidar_doc}
-    _write_json(out / "gt.json", doc)
-    files.append(out / "gt.json")
-    return SynthResult(out, scene, stations, pairs, files, secs)
+    return doc

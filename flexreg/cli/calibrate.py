@@ -5,12 +5,21 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from flexreg.calibration.config import CalibrationConfig
 from flexreg.cli._common import console, stage, write_all
 from flexreg.cli.app import app
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_out_folder,
+    check_outputs,
+    with_default,
+)
 from flexreg.errors import ConfigError, InputError
 
 if TYPE_CHECKING:
@@ -18,6 +27,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from flexreg.calibration import CalibrationResult
+    from flexreg.core.scan import Scan
     from flexreg.io.intrinsics import CameraIntrinsics
 
 #: header and help of the template written with --export-views
@@ -30,37 +40,32 @@ u,v,row,col
 """
 
 
-def _check_options(
+#: options that set a field of CalibrationConfig (option -> field)
+OPTIONS = {"--seed": "seed", "--threshold-px": "threshold_px"}
+_C = CalibrationConfig
+
+
+def _check_mode(
     *,
-    image: Path,
     camera: Path | None,
     pinhole: tuple[float, float, float, float] | None,
     distortion: str | None,
-    scan: Path,
     pairs: Path | None,
     out: Path | None,
     overlay: Path | None,
     auto: bool,
     init: Path | None,
     export_views: Path | None,
-    seed: int,
-    threshold_px: float,
     kitti_camera: int,
     truth: Path | None,
 ) -> None:
-    """Validate everything that does not need the input files, before anything is read."""
+    """Check that the options make one consistent task, before anything is read."""
     if (camera is None) == (pinhole is None):
         raise ConfigError("give the camera intrinsics with either --camera FILE or --pinhole")
     if distortion is not None and pinhole is None:
         raise ConfigError("--distortion: only with --pinhole (a --camera file holds its own)")
     if pinhole is not None and not all(math.isfinite(x) for x in pinhole):
         raise ConfigError(f"--pinhole: FX FY CX CY must be finite numbers, got {pinhole}")
-    if seed < 0:
-        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
-    if not (math.isfinite(threshold_px) and threshold_px > 0):
-        raise ConfigError(
-            f"--threshold-px: must be a positive number of pixels, got {threshold_px}"
-        )
     if kitti_camera not in (0, 1, 2, 3):
         raise ConfigError(f"--kitti-camera: must be 0, 1, 2 or 3, got {kitti_camera}")
     solving = pairs is not None or auto
@@ -74,22 +79,6 @@ def _check_options(
         for option, value in (("--out", out), ("--overlay", overlay), ("--truth", truth)):
             if value is not None:
                 raise ConfigError(f"{option}: needs a calibration: give --pairs and/or --auto")
-    for option, path, suffix in (("--out", out, ".json"), ("--overlay", overlay, ".png")):
-        if path is not None and path.suffix.lower() != suffix:
-            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
-    if export_views is not None and export_views.exists() and not export_views.is_dir():
-        raise ConfigError(f"--export-views: {export_views}: exists and is not a folder")
-    inputs = [p for p in (image, camera, scan, pairs, init, truth) if p is not None]
-    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
-    for option, path in (("--out", out), ("--overlay", overlay)):
-        if path is None:
-            continue
-        if path.is_dir():
-            raise ConfigError(f"{option}: {path}: is a folder, not a file")
-        key = path.resolve()
-        if key in seen:
-            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
-        seen[key] = option
 
 
 def _parse_distortion(text: str | None) -> list[float]:
@@ -172,77 +161,130 @@ def _png_writer(path: Path, image: NDArray[np.uint8]) -> Any:
     return lambda: atomic_write(path, write_png)
 
 
-@app.command("calibrate")
-def calibrate_command(
-    image: Path = typer.Option(..., "--image", help="Camera image (PNG, JPEG, ...)."),
-    scan: Path = typer.Option(
-        ..., "--scan", help="Lidar scan in any readable format (KITTI .bin, .pcd, .ply, ...)."
-    ),
-    camera: Path | None = typer.Option(
-        None,
+_ImageOption = Annotated[Path, typer.Option("--image", help="Camera image (PNG, JPEG, ...).")]
+_ScanOption = Annotated[
+    Path,
+    typer.Option("--scan", help="Lidar scan in any readable format (KITTI .bin, .pcd, .ply, ...)."),
+]
+_CameraOption = Annotated[
+    Path | None,
+    typer.Option(
         "--camera",
         help="Intrinsics: OpenCV/ROS .yaml, .json (K, distortion, width, height; or the PJLab "
         "intrinsic JSON) or a KITTI calib .txt (P2, rectified, no distortion).",
     ),
-    pinhole: tuple[float, float, float, float] | None = typer.Option(
-        None,
+]
+_PinholeOption = Annotated[
+    tuple[float, float, float, float] | None,
+    typer.Option(
         "--pinhole",
         metavar="FX FY CX CY",
         help="Intrinsics as options instead of --camera (pixels; size from the image).",
     ),
-    distortion: str | None = typer.Option(
-        None,
+]
+_DistortionOption = Annotated[
+    str | None,
+    typer.Option(
         "--distortion",
         metavar="K1,K2,P1,P2[,K3...]",
         help="OpenCV distortion coefficients with --pinhole.",
     ),
-    pairs: Path | None = typer.Option(
-        None,
+]
+_PairsOption = Annotated[
+    Path | None,
+    typer.Option(
         "--pairs",
         help="CSV of correspondences with a header: u,v,X,Y,Z (lidar frame, metres) or "
         "u,v,row,col (pixel of the scan's panorama.png, see --export-views).",
     ),
-    out: Path | None = typer.Option(
-        None,
+]
+_OutOption = Annotated[
+    Path | None,
+    typer.Option(
         "--out",
         help="Output .json: T_camera_lidar (lidar points into the camera frame), its inverse, "
         "quaternions (xyzw and wxyz), reprojection RMSE, inliers, per-pair residuals.",
     ),
-    overlay: Path | None = typer.Option(
-        None, "--overlay", help="Write a .png of the lidar points projected, coloured by range."
+]
+_OverlayOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--overlay", help="Write a .png of the lidar points projected, coloured by range."
     ),
-    auto: bool = typer.Option(
-        False,
+]
+_AutoOption = Annotated[
+    bool,
+    typer.Option(
         "--auto",
         help="Propose correspondences automatically (Flexion view vs. camera edges) around the "
         "initial guess; --pairs, if given, join them.",
     ),
-    init: Path | None = typer.Option(
-        None,
+]
+_InitOption = Annotated[
+    Path | None,
+    typer.Option(
         "--init",
         help="Initial T_camera_lidar: .json (a calibrate output, a 4x4 list, the PJLab "
         "extrinsic JSON), KITTI calib .txt, or 4x4 text.",
     ),
-    export_views: Path | None = typer.Option(
-        None,
+]
+_ExportViewsOption = Annotated[
+    Path | None,
+    typer.Option(
         "--export-views",
         metavar="DIR",
         help="Write picking aids to DIR: camera.png and panorama.png with pixel grids, "
         "flexion-view.png (with --init) and pairs-template.csv.",
     ),
-    seed: int = typer.Option(0, "--seed", help="RANSAC seed; the same seed gives the same result."),
-    threshold_px: float = typer.Option(
-        3.0, "--threshold-px", help="RANSAC inlier threshold on the reprojection error, pixels."
+]
+_SeedOption = Annotated[
+    int | None,
+    typer.Option(
+        "--seed", help=with_default(_C, "seed", "RANSAC seed; the same seed gives the same result.")
     ),
-    kitti_camera: int = typer.Option(
-        2, "--kitti-camera", help="Camera of a KITTI calib file (2: left colour, image_2)."
+]
+_ThresholdPxOption = Annotated[
+    float | None,
+    typer.Option(
+        "--threshold-px",
+        help=with_default(
+            _C, "threshold_px", "RANSAC inlier threshold on the reprojection error, pixels."
+        ),
     ),
-    truth: Path | None = typer.Option(
-        None,
+]
+_KittiCameraOption = Annotated[
+    int,
+    typer.Option("--kitti-camera", help="Camera of a KITTI calib file (2: left colour, image_2)."),
+]
+_TruthOption = Annotated[
+    Path | None,
+    typer.Option(
         "--truth",
         help="Known T_camera_lidar (same formats as --init): report the errors in degrees and "
         "metres and store them in the output JSON.",
     ),
+]
+
+
+@app.command("calibrate")
+def calibrate_command(
+    image: _ImageOption,
+    scan: _ScanOption,
+    camera: _CameraOption = None,
+    pinhole: _PinholeOption = None,
+    distortion: _DistortionOption = None,
+    pairs: _PairsOption = None,
+    out: _OutOption = None,
+    overlay: _OverlayOption = None,
+    auto: _AutoOption = False,
+    init: _InitOption = None,
+    export_views: _ExportViewsOption = None,
+    seed: _SeedOption = None,
+    threshold_px: _ThresholdPxOption = None,
+    kitti_camera: _KittiCameraOption = 2,
+    truth: _TruthOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Camera-lidar extrinsic calibration: write T_camera_lidar (maps lidar points into the
     camera frame).
@@ -250,36 +292,30 @@ def calibrate_command(
     Correspondences come from --pairs and/or --auto; nothing is written unless everything
     succeeds.
     """
-    from flexreg._version import __version__
-    from flexreg.calibration import (
-        CalibrationConfig,
-        calibrate,
-        overlay_image,
-        picking_views,
-        read_correspondences,
-    )
-    from flexreg.io import read_scan, write_transform_json
+    from flexreg.calibration import calibrate, overlay_image, read_correspondences
+    from flexreg.io import read_scan
     from flexreg.io.intrinsics import read_extrinsic
 
-    _check_options(
-        image=image,
+    config = build_config(
+        CalibrationConfig, config_file, sets, OPTIONS, seed=seed, threshold_px=threshold_px
+    )
+    _check_mode(
         camera=camera,
         pinhole=pinhole,
         distortion=distortion,
-        scan=scan,
         pairs=pairs,
         out=out,
         overlay=overlay,
         auto=auto,
         init=init,
         export_views=export_views,
-        seed=seed,
-        threshold_px=threshold_px,
         kitti_camera=kitti_camera,
         truth=truth,
     )
+    inputs = [p for p in (image, camera, scan, pairs, init, truth) if p is not None]
+    check_outputs([("--out", out, ".json"), ("--overlay", overlay, ".png")], inputs=inputs)
+    check_out_folder("--export-views", export_views)
     dist = _parse_distortion(distortion)
-    config = CalibrationConfig(threshold_px=threshold_px, seed=seed)
 
     with stage(f"Reading {image.name}"):
         img = read_image(image)
@@ -304,42 +340,66 @@ def calibrate_command(
     # everything is computed before the first file is written
     writers: list[tuple[Path, Any]] = []
     if export_views is not None:
-        with stage("Drawing picking views"):
-            views = picking_views(img, lidar, intrinsics=intr, T_init=T_init)
-        for name, picture in views.items():
-            path = export_views / f"{name}.png"
-            writers.append((path, _png_writer(path, picture)))
-        template = export_views / "pairs-template.csv"
-        writers.append((template, _text_writer(template, PAIRS_TEMPLATE)))
+        writers += _view_writers(export_views, img, lidar, intr, T_init)
     errors = None
     if result is not None:
         assert out is not None
+        errors = None if T_true is None else _errors(result.T_camera_lidar, T_true)
+        inputs_meta = {
+            "image": str(image),
+            "camera": str(camera) if camera is not None else "--pinhole",
+            "scan": str(scan),
+            "pairs_file": None if pairs is None else str(pairs),
+            "init": None if init is None else str(init),
+        }
         if overlay is not None:
             with stage("Drawing overlay"):
                 picture = overlay_image(
                     img, lidar.points, intr, result.T_camera_lidar, result=result
                 )
             writers.append((overlay, _png_writer(overlay, picture)))
-        meta = result.to_dict()
-        T = meta.pop("T_camera_lidar")
-        errors = None if T_true is None else _errors(result.T_camera_lidar, T_true)
-        meta = {
-            "image": str(image),
-            "camera": str(camera) if camera is not None else "--pinhole",
-            "scan": str(scan),
-            "pairs_file": None if pairs is None else str(pairs),
-            "init": None if init is None else str(init),
-            **meta,
-            "flexreg_version": __version__,
-        }
-        if errors is not None:
-            meta["error_vs_truth"] = {"truth": str(truth), **errors}
-        writers.append((out, lambda: write_transform_json(out, T, key="T_camera_lidar", **meta)))
+        writers.append((out, _result_writer(out, result, inputs_meta, truth, errors)))
     write_all(writers)
     if result is not None:
         _print_summary(result, errors)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
+
+
+def _view_writers(
+    folder: Path, img: NDArray[np.uint8], lidar: Scan, intr: CameraIntrinsics, T_init: Any
+) -> list[tuple[Path, Any]]:
+    """The picking aids of --export-views: PNG views and the pairs template."""
+    from flexreg.calibration import picking_views
+
+    with stage("Drawing picking views"):
+        views = picking_views(img, lidar, intrinsics=intr, T_init=T_init)
+    writers = []
+    for name, picture in views.items():
+        path = folder / f"{name}.png"
+        writers.append((path, _png_writer(path, picture)))
+    template = folder / "pairs-template.csv"
+    writers.append((template, _text_writer(template, PAIRS_TEMPLATE)))
+    return writers
+
+
+def _result_writer(
+    out: Path,
+    result: CalibrationResult,
+    inputs: dict[str, Any],
+    truth: Path | None,
+    errors: dict[str, float] | None,
+) -> Any:
+    """Write the calibration JSON: inputs, result (with its configuration), errors vs truth."""
+    from flexreg._version import __version__
+    from flexreg.io import write_transform_json
+
+    meta = result.to_dict()
+    T = meta.pop("T_camera_lidar")
+    meta = {**inputs, **meta, "flexreg_version": __version__}
+    if errors is not None:
+        meta["error_vs_truth"] = {"truth": str(truth), **errors}
+    return lambda: write_transform_json(out, T, key="T_camera_lidar", **meta)
 
 
 def _text_writer(path: Path, text: str) -> Any:

@@ -3,121 +3,154 @@ KITTI text), as a table, JSON and a figure."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from flexreg.cli._common import console, stage, write_all
 from flexreg.cli.app import app
-from flexreg.errors import ConfigError, InputError
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_outputs,
+    with_default,
+)
+from flexreg.errors import InputError
+from flexreg.odometry.config import EvaluationConfig
 
 if TYPE_CHECKING:
     from flexreg.odometry.evaluation import EvaluationResult
 
-FORMATS = ("auto", "tum", "kitti")
-CONVENTIONS = ("tools", "paper")
+#: options that set a field of EvaluationConfig (option -> field)
+OPTIONS = {
+    "--format": "format",
+    "--delta": "delta",
+    "--delta-unit": "delta_unit",
+    "--rpe-convention": "convention",
+    "--scale": "scale",
+    "--max-dt-s": "max_dt_s",
+    "--offset-s": "offset_s",
+}
+_C = EvaluationConfig
 
 
-def _check_options(
-    *,
-    fmt: str,
-    delta: float,
-    delta_unit: str,
-    convention: str,
-    max_dt_s: float | None,
-    offset_s: float,
-    inputs: tuple[Path, Path],
-    plot: Path | None,
-    json_out: Path | None,
-) -> None:
-    """Validate everything that does not need the input files, before anything is read."""
-    if fmt not in FORMATS:
-        raise ConfigError(f"--format: must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    from flexreg.odometry.evaluation import check_interval
-
-    check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
-    if convention not in CONVENTIONS:
-        raise ConfigError(
-            f"--rpe-convention: must be one of {', '.join(CONVENTIONS)}, got {convention!r}"
-        )
-    if max_dt_s is not None and not (math.isfinite(max_dt_s) and max_dt_s > 0):
-        raise ConfigError(f"--max-dt-s: must be a positive number of seconds, got {max_dt_s}")
-    if not math.isfinite(offset_s):
-        raise ConfigError(f"--offset-s: must be a finite number of seconds, got {offset_s}")
-    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
-    for option, path, suffix in (("--plot", plot, ".png"), ("--json", json_out, ".json")):
-        if path is None:
-            continue
-        if path.suffix.lower() != suffix:
-            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
-        if path.is_dir():
-            raise ConfigError(f"{option}: {path}: is a folder, not a file")
-        key = path.resolve()
-        if key in seen:
-            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
-        seen[key] = option
-
-
-@app.command("evaluate")
-def evaluate_command(
-    gt: Path = typer.Option(
-        ..., "--gt", help="Ground-truth trajectory: TUM (t tx ty tz qx qy qz qw) or KITTI (3x4)."
+_GtOption = Annotated[
+    Path,
+    typer.Option(
+        "--gt", help="Ground-truth trajectory: TUM (t tx ty tz qx qy qz qw) or KITTI (3x4)."
     ),
-    est: Path = typer.Option(..., "--est", help="Estimated trajectory, same format."),
-    fmt: str = typer.Option(
-        "auto",
+]
+_EstOption = Annotated[Path, typer.Option("--est", help="Estimated trajectory, same format.")]
+_FmtOption = Annotated[
+    str | None,
+    typer.Option(
         "--format",
-        help="tum, kitti, or auto (by the number of values per line: 8 or 12). KITTI "
-        "timestamps are frame indices.",
+        help=with_default(
+            _C,
+            "format",
+            "tum, kitti, or auto (by the number of values per line: 8 or 12). KITTI "
+            "timestamps are frame indices.",
+        ),
     ),
-    delta: float = typer.Option(
-        1.0, "--delta", help="RPE interval, in --delta-unit (a whole number of frames)."
+]
+_DeltaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--delta",
+        help=with_default(_C, "delta", "RPE interval, in --delta-unit (a whole number of frames)."),
     ),
-    delta_unit: str = typer.Option(
-        "frames",
+]
+_DeltaUnitOption = Annotated[
+    str | None,
+    typer.Option(
         "--delta-unit",
-        help="RPE interval unit: frames (default, consecutive poses for --delta 1), seconds "
-        "(the TUM tools' unit; use --delta 1 --delta-unit seconds to reproduce evaluate_rpe.py "
-        "--fixed_delta) or metres travelled along the estimate.",
+        help=with_default(
+            _C,
+            "delta_unit",
+            "RPE interval unit: frames (consecutive poses for --delta 1), seconds (the TUM "
+            "tools' unit; use --delta 1 --delta-unit seconds to reproduce evaluate_rpe.py "
+            "--fixed_delta) or metres travelled along the estimate.",
+        ),
     ),
-    convention: str = typer.Option(
-        "tools",
+]
+_ConventionOption = Annotated[
+    str | None,
+    typer.Option(
         "--rpe-convention",
-        help="RPE error composition, with A and B the estimated and true motions over the "
-        "interval: tools (E = A B^-1, as evaluate_rpe.py computes it) or paper (E = B^-1 A, "
-        "eq. 1 of the TUM benchmark paper as printed, as evo computes it).",
+        help=with_default(
+            _C,
+            "convention",
+            "RPE error composition, with A and B the estimated and true motions over the "
+            "interval: tools (E = A B^-1, as evaluate_rpe.py computes it) or paper (E = B^-1 A, "
+            "eq. 1 of the TUM benchmark paper as printed, as evo computes it).",
+        ),
     ),
-    scale: bool = typer.Option(
-        False,
-        "--scale",
-        help="Also estimate a scale in the ATE alignment (monocular estimates); the RPE uses "
-        "the estimate's translations multiplied by it.",
+]
+_ScaleOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--scale/--no-scale",
+        help=with_default(
+            _C,
+            "scale",
+            "Also estimate a scale in the ATE alignment (monocular estimates); the RPE uses "
+            "the estimate's translations multiplied by it.",
+        ),
     ),
-    max_dt_s: float | None = typer.Option(
-        None,
+]
+_MaxDtSOption = Annotated[
+    float | None,
+    typer.Option(
         "--max-dt-s",
         metavar="SECONDS",
         help="Largest time difference of matched poses, seconds. Default: 0.02 s for ATE "
         "(associate.py) and twice the ground truth's median sampling interval for RPE "
         "(evaluate_rpe.py); a value given here applies to both.",
     ),
-    offset_s: float = typer.Option(
-        0.0, "--offset-s", metavar="SECONDS", help="Time offset added to the estimate, seconds."
+]
+_OffsetSOption = Annotated[
+    float | None,
+    typer.Option(
+        "--offset-s",
+        metavar="SECONDS",
+        help=with_default(_C, "offset_s", "Time offset added to the estimate, seconds."),
     ),
-    plot: Path | None = typer.Option(
-        None,
+]
+_PlotOption = Annotated[
+    Path | None,
+    typer.Option(
         "--plot",
         help="Write a .png: top view of the ground truth and the aligned estimate, and the "
         "errors over time.",
     ),
-    json_out: Path | None = typer.Option(
-        None,
+]
+_JsonOutOption = Annotated[
+    Path | None,
+    typer.Option(
         "--json",
         help="Write a .json with ate_rmse_m, rpe_trans_rmse_m, rpe_trans_mean_m, "
-        "rpe_rot_mean_deg and the other statistics.",
+        "rpe_rot_mean_deg, the other statistics and the configuration.",
     ),
+]
+
+
+@app.command("evaluate")
+def evaluate_command(
+    gt: _GtOption,
+    est: _EstOption,
+    fmt: _FmtOption = None,
+    delta: _DeltaOption = None,
+    delta_unit: _DeltaUnitOption = None,
+    convention: _ConventionOption = None,
+    scale: _ScaleOption = None,
+    max_dt_s: _MaxDtSOption = None,
+    offset_s: _OffsetSOption = None,
+    plot: _PlotOption = None,
+    json_out: _JsonOutOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Absolute trajectory error (ATE) and relative pose error (RPE) of EST against GT,
     with the definitions of the TUM RGB-D benchmark tools.
@@ -128,18 +161,21 @@ def evaluate_command(
     from flexreg.io.trajectory import detect_format, read_trajectory
     from flexreg.odometry.evaluation import evaluate
 
-    _check_options(
-        fmt=fmt,
+    config = build_config(
+        EvaluationConfig,
+        config_file,
+        sets,
+        OPTIONS,
+        format=fmt,
         delta=delta,
         delta_unit=delta_unit,
         convention=convention,
+        scale=scale,
         max_dt_s=max_dt_s,
         offset_s=offset_s,
-        inputs=(gt, est),
-        plot=plot,
-        json_out=json_out,
     )
-    formats = [fmt if fmt != "auto" else detect_format(p) for p in (gt, est)]
+    check_outputs([("--plot", plot, ".png"), ("--json", json_out, ".json")], inputs=(gt, est))
+    formats = [config.format if config.format != "auto" else detect_format(p) for p in (gt, est)]
     if formats[0] != formats[1]:
         raise InputError(est, f"is a {formats[1]} trajectory but --gt {gt} is {formats[0]}")
     with stage("Reading trajectories"):
@@ -149,26 +185,19 @@ def evaluate_command(
         result = evaluate(
             traj_gt,
             traj_est,
-            scale=scale,
-            delta=delta,
-            delta_unit=delta_unit,
-            max_dt_s=max_dt_s,
-            offset_s=offset_s,
-            convention=convention,
+            scale=config.scale,
+            delta=config.delta,
+            delta_unit=config.delta_unit,
+            max_dt_s=config.max_dt_s,
+            offset_s=config.offset_s,
+            convention=config.convention,
         )
 
     # everything is computed before the first file is written
     writers: list[tuple[Path, Any]] = []
     if plot is not None:
-        from flexreg.odometry.evaluation import plot_evaluation
-
         with stage("Drawing"):
-            fig = plot_evaluation(
-                result,
-                traj_gt,
-                traj_est,
-                time_unit="frame" if formats[0] == "kitti" else "s",
-            )
+            fig = _figure(result, traj_gt, traj_est, formats[0])
         writers.append((plot, lambda: _save_figure(plot, fig)))
     if json_out is not None:
         doc = {
@@ -176,6 +205,7 @@ def evaluate_command(
             "est": str(est),
             "format": formats[0],
             **result.to_dict(),
+            "config": config.to_dict(),
             "flexreg_version": __version__,
         }
         writers.append((json_out, lambda: _write_json(json_out, doc)))
@@ -183,6 +213,13 @@ def evaluate_command(
     _print_table(result, formats[0])
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
+
+
+def _figure(result: EvaluationResult, traj_gt: Any, traj_est: Any, fmt: str) -> Any:
+    from flexreg.odometry.plots import plot_evaluation
+
+    time_unit = "frame" if fmt == "kitti" else "s"
+    return plot_evaluation(result, traj_gt, traj_est, time_unit=time_unit)
 
 
 def _save_figure(path: Path, fig: Any) -> None:

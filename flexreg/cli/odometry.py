@@ -6,13 +6,21 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from flexreg.cli._common import console, err_console, progress_bar, stage
+from flexreg.cli._common import console, err_console, progress_bar, stage, write_all
 from flexreg.cli.app import app
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_outputs,
+    with_default,
+)
 from flexreg.errors import ConfigError, InputError
+from flexreg.odometry.config import EvaluationConfig, OdometryConfig
 
 if TYPE_CHECKING:
     from flexreg.io.sequence import Sequence
@@ -20,52 +28,32 @@ if TYPE_CHECKING:
     from flexreg.odometry.track import OdometryResult
 
 
-def _check_options(
-    *,
-    image: str,
-    n: int,
-    median: int,
-    features: str,
-    method: str,
-    ratio: float,
-    threshold: float | None,
-    ransac_px: float,
-    min_inliers: int,
-    seed: int,
+#: options that set a field of OdometryConfig (option -> field)
+OPTIONS = {
+    "--image": "image",
+    "--n": "n",
+    "--median": "median",
+    "--features": "features",
+    "--method": "method",
+    "--ratio": "ratio",
+    "--ransac-px": "ransac_threshold_px",
+    "--threshold": "threshold_m",
+    "--min-inliers": "min_inliers",
+    "--seed": "seed",
+}
+#: options that set a field of the summary's EvaluationConfig
+EVALUATION_OPTIONS = {"--delta": "delta", "--delta-unit": "delta_unit"}
+_C = OdometryConfig
+
+
+def _check_reading(
+    sequence: Path,
     max_frames: int | None,
     intrinsics: tuple[float, float, float, float] | None,
     depth_scale: float | None,
     rate_hz: float | None,
-    delta: float,
-    delta_unit: str,
-    sequence: Path,
-    out: Path,
-    json_out: Path | None,
 ) -> None:
-    """Validate everything that does not need the sequence, before anything is read."""
-    from flexreg.odometry.track import IMAGES, METHODS
-    from flexreg.stages.keypoints import METHODS as FEATURES
-
-    if image not in IMAGES:
-        raise ConfigError(f"--image: unknown feature image {image!r}; known: {', '.join(IMAGES)}")
-    if n < 3 or n % 2 == 0:
-        raise ConfigError(f"--n: must be an odd grid size 3, 5, 7, ..., got {n}")
-    if median not in (0, 3, 5):
-        raise ConfigError(f"--median: must be 0 (off), 3 or 5, got {median}")
-    if features not in FEATURES:
-        raise ConfigError(f"--features: unknown method {features!r}; known: {', '.join(FEATURES)}")
-    if method not in METHODS:
-        raise ConfigError(f"--method: must be one of {', '.join(METHODS)}, got {method!r}")
-    if not (math.isfinite(ratio) and 0 < ratio <= 1):
-        raise ConfigError(f"--ratio: must be in (0, 1], got {ratio}")
-    if threshold is not None and not (math.isfinite(threshold) and threshold > 0):
-        raise ConfigError(f"--threshold: must be a positive number of metres, got {threshold}")
-    if not (math.isfinite(ransac_px) and ransac_px > 0):
-        raise ConfigError(f"--ransac-px: must be a positive number of pixels, got {ransac_px}")
-    if min_inliers < 5:
-        raise ConfigError(f"--min-inliers: must be at least 5, got {min_inliers}")
-    if seed < 0:
-        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
+    """The sequence-reading options (not part of the configuration), before anything is read."""
     if max_frames is not None and max_frames < 2:
         raise ConfigError(f"--max-frames: odometry needs at least 2 frames, got {max_frames}")
     if intrinsics is not None:
@@ -79,139 +67,196 @@ def _check_options(
         )
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise ConfigError(f"--rate-hz: must be a positive frame rate, got {rate_hz}")
-    from flexreg.odometry.evaluation import check_interval
-
-    check_interval(delta, delta_unit, names=("--delta", "--delta-unit"))
     if not sequence.exists():
         raise InputError(sequence, "no such folder")
     if not sequence.is_dir():
         raise InputError(
             sequence, "a sequence is a folder (TUM RGB-D, 7-Scenes, depth PNGs, scans)"
         )
-    seen: dict[Path, str] = {}
-    for option, path, suffix in (("--out", out, None), ("--json", json_out, ".json")):
-        if path is None:
-            continue
-        if suffix is not None and path.suffix.lower() != suffix:
-            raise ConfigError(f"{option}: {path}: must be a {suffix} file")
-        if path.is_dir():
-            raise ConfigError(f"{option}: {path}: is a folder, not a file")
-        key = path.resolve()
-        if key in seen:
-            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
-        if sequence.resolve() in key.parents and path.exists():
-            raise ConfigError(f"{option}: {path}: would overwrite a file of the sequence")
-        seen[key] = option
 
 
-@app.command("odometry")
-def odometry_command(
-    sequence: Path = typer.Argument(
-        ...,
+_SequenceArgument = Annotated[
+    Path,
+    typer.Argument(
         metavar="SEQUENCE",
         help="Sequence folder: TUM RGB-D (rgb.txt, depth.txt, groundtruth.txt), 7-Scenes "
         "(frame-XXXXXX.depth.png + pose.txt), depth PNGs + intrinsics, or scan files. The "
         "output folder of 'flexreg synth --rgbd-frames N' works too.",
     ),
-    out: Path = typer.Option(
-        ..., "--out", help="Output trajectory (TUM: t tx ty tz qx qy qz qw, T_world_camera)."
-    ),
-    image: str = typer.Option(
-        "flexion",
+]
+_OutOption = Annotated[
+    Path,
+    typer.Option("--out", help="Output trajectory (TUM: t tx ty tz qx qy qz qw, T_world_camera)."),
+]
+_ImageOption = Annotated[
+    str | None,
+    typer.Option(
         "--image",
-        help="Feature image: flexion, flexion-normalized, flexion-angle, bearing-horizontal, "
-        "bearing-vertical, bearing-diagonal, bearing-antidiagonal, or color (the sequence's "
-        "colour images).",
+        help=with_default(
+            _C,
+            "image",
+            "Feature image: flexion, flexion-normalized, flexion-angle, bearing-horizontal, "
+            "bearing-vertical, bearing-diagonal, bearing-antidiagonal, or color (the "
+            "sequence's colour images).",
+        ),
     ),
-    n: int = typer.Option(5, "--n", help="Odd grid size n of Flexion n x n (and Bearing Angle)."),
-    median: int = typer.Option(3, "--median", help="Median pre-filter window: 0 (off), 3 or 5."),
-    features: str = typer.Option(
-        "orb", "--features", help="Detector/descriptor: akaze, orb, sift, kaze, brisk, surf."
+]
+_NOption = Annotated[
+    int | None,
+    typer.Option(
+        "--n", help=with_default(_C, "n", "Odd grid size n of Flexion n x n (and Bearing Angle).")
     ),
-    method: str = typer.Option(
-        "essential",
+]
+_MedianOption = Annotated[
+    int | None,
+    typer.Option(
+        "--median", help=with_default(_C, "median", "Median pre-filter window: 0 (off), 3 or 5.")
+    ),
+]
+_FeaturesOption = Annotated[
+    str | None,
+    typer.Option(
+        "--features",
+        help=with_default(
+            _C, "features", "Detector/descriptor: akaze, orb, sift, kaze, brisk, surf."
+        ),
+    ),
+]
+_MethodOption = Annotated[
+    str | None,
+    typer.Option(
         "--method",
-        help="essential: the paper's 2D-2D method (essential matrix by RANSAC, recoverPose, "
-        "metric scale from depth); svd: matches lifted to 3D, RANSAC + SVD.",
+        help=with_default(
+            _C,
+            "method",
+            "essential: the paper's 2D-2D method (essential matrix by RANSAC, recoverPose, "
+            "metric scale from depth); svd: matches lifted to 3D, RANSAC + SVD.",
+        ),
     ),
-    ratio: float = typer.Option(0.8, "--ratio", help="Lowe's ratio-test threshold."),
-    ransac_px: float = typer.Option(
-        1.0, "--ransac-px", metavar="PIXELS", help="Essential-matrix RANSAC threshold, pixels."
+]
+_RatioOption = Annotated[
+    float | None,
+    typer.Option("--ratio", help=with_default(_C, "ratio", "Lowe's ratio-test threshold.")),
+]
+_RansacPxOption = Annotated[
+    float | None,
+    typer.Option(
+        "--ransac-px",
+        metavar="PIXELS",
+        help=with_default(_C, "ransac_threshold_px", "Essential-matrix RANSAC threshold, pixels."),
     ),
-    threshold: float | None = typer.Option(
-        None,
+]
+_ThresholdOption = Annotated[
+    float | None,
+    typer.Option(
         "--threshold",
         metavar="METRES",
         help="SVD RANSAC inlier distance, metres (default 1.5 % of the median range, >= 1 cm).",
     ),
-    min_inliers: int = typer.Option(
-        12, "--min-inliers", help="Fewer inliers make a frame pair count as failed."
+]
+_MinInliersOption = Annotated[
+    int | None,
+    typer.Option(
+        "--min-inliers",
+        help=with_default(_C, "min_inliers", "Fewer inliers make a frame pair count as failed."),
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed; the same seed gives the same output."),
-    max_frames: int | None = typer.Option(
-        None, "--max-frames", help="Use only the first frames of the sequence."
+]
+_SeedOption = Annotated[
+    int | None,
+    typer.Option(
+        "--seed", help=with_default(_C, "seed", "Random seed; the same seed gives the same output.")
     ),
-    intrinsics: tuple[float, float, float, float] | None = typer.Option(
-        None,
+]
+_MaxFramesOption = Annotated[
+    int | None, typer.Option("--max-frames", help="Use only the first frames of the sequence.")
+]
+_IntrinsicsOption = Annotated[
+    tuple[float, float, float, float] | None,
+    typer.Option(
         "--intrinsics",
         metavar="FX FY CX CY",
         help="Pinhole intrinsics of the depth images, pixels (default: from the folder).",
     ),
-    depth_scale: float | None = typer.Option(
-        None,
+]
+_DepthScaleOption = Annotated[
+    float | None,
+    typer.Option(
         "--depth-scale",
         metavar="METRES_PER_UNIT",
         help="Depth PNG scale (default: TUM 1/5000, 7-Scenes 1/1000, camera.json's, or 1/1000).",
     ),
-    rate_hz: float | None = typer.Option(
-        None, "--rate-hz", help="Frame rate where the layout has no timestamps (default 30 Hz)."
+]
+_RateHzOption = Annotated[
+    float | None,
+    typer.Option(
+        "--rate-hz", help="Frame rate where the layout has no timestamps (default 30 Hz)."
     ),
-    delta: float = typer.Option(
-        1.0, "--delta", help="RPE interval of the summary, in --delta-unit."
+]
+_DeltaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--delta",
+        help=with_default(
+            EvaluationConfig, "delta", "RPE interval of the summary, in --delta-unit."
+        ),
     ),
-    delta_unit: str = typer.Option(
-        "frames", "--delta-unit", help="RPE interval unit: frames, seconds or metres."
+]
+_DeltaUnitOption = Annotated[
+    str | None,
+    typer.Option(
+        "--delta-unit",
+        help=with_default(
+            EvaluationConfig, "delta_unit", "RPE interval unit: frames, seconds or metres."
+        ),
     ),
-    json_out: Path | None = typer.Option(
-        None,
+]
+_JsonOutOption = Annotated[
+    Path | None,
+    typer.Option(
         "--json",
         help="Also write a .json: per-frame status, every frame pair tried (matches, inliers, "
         "why it failed), bridged frames, timings, configuration and ATE/RPE.",
     ),
+]
+
+
+@app.command("odometry")
+def odometry_command(
+    sequence: _SequenceArgument,
+    out: _OutOption,
+    image: _ImageOption = None,
+    n: _NOption = None,
+    median: _MedianOption = None,
+    features: _FeaturesOption = None,
+    method: _MethodOption = None,
+    ratio: _RatioOption = None,
+    ransac_px: _RansacPxOption = None,
+    threshold: _ThresholdOption = None,
+    min_inliers: _MinInliersOption = None,
+    seed: _SeedOption = None,
+    max_frames: _MaxFramesOption = None,
+    intrinsics: _IntrinsicsOption = None,
+    depth_scale: _DepthScaleOption = None,
+    rate_hz: _RateHzOption = None,
+    delta: _DeltaOption = None,
+    delta_unit: _DeltaUnitOption = None,
+    json_out: _JsonOutOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Frame-to-frame odometry through feature images; write the trajectory (TUM format).
 
     A frame pair that cannot be solved is reported and bridged (matched against the last good
     frame, else constant velocity). Nothing is written unless the run succeeds.
     """
-    from flexreg._version import __version__
-    from flexreg.io import atomic_write
     from flexreg.io.sequence import read_sequence
-    from flexreg.io.trajectory import write_trajectory
-    from flexreg.odometry.track import OdometryConfig, odometry
+    from flexreg.odometry.track import odometry
 
-    _check_options(
-        image=image,
-        n=n,
-        median=median,
-        features=features,
-        method=method,
-        ratio=ratio,
-        threshold=threshold,
-        ransac_px=ransac_px,
-        min_inliers=min_inliers,
-        seed=seed,
-        max_frames=max_frames,
-        intrinsics=intrinsics,
-        depth_scale=depth_scale,
-        rate_hz=rate_hz,
-        delta=delta,
-        delta_unit=delta_unit,
-        sequence=sequence,
-        out=out,
-        json_out=json_out,
-    )
-    config = OdometryConfig(
+    config = build_config(
+        OdometryConfig,
+        config_file,
+        sets,
+        OPTIONS,
         image=image,
         n=n,
         median=median,
@@ -223,6 +268,12 @@ def odometry_command(
         min_inliers=min_inliers,
         seed=seed,
     )
+    summary = build_config(
+        EvaluationConfig, None, (), EVALUATION_OPTIONS, delta=delta, delta_unit=delta_unit
+    )
+    _check_reading(sequence, max_frames, intrinsics, depth_scale, rate_hz)
+    outputs = [("--out", out, None), ("--json", json_out, ".json")]
+    check_outputs(outputs, input_folders=(sequence,))
     with stage(f"Reading {sequence.name}"):
         seq = read_sequence(
             sequence,
@@ -233,17 +284,38 @@ def odometry_command(
         )
     t0 = time.perf_counter()
     with progress_bar() as bar:
-        task = bar.add_task(f"{image} / {features} / {method}", total=len(seq))
+        task = bar.add_task(f"{config.image} / {config.features} / {config.method}", total=len(seq))
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done)
 
         result = odometry(seq, config, progress=progress)
     seconds = time.perf_counter() - t0
-    evaluation, note = _evaluate(seq, result, delta, delta_unit)
+    evaluation, note = _evaluate(seq, result, summary.delta, summary.delta_unit)
+    writers = _writers(seq, result, seconds, evaluation, out, json_out)
+    write_all(writers)
+    _print_summary(seq, result, seconds, evaluation, note)
+    for path, _ in writers:
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
 
-    # everything is computed before the first file is written
-    written = [write_trajectory(out, result.trajectory, "tum")]
+
+def _writers(
+    seq: Sequence,
+    result: OdometryResult,
+    seconds: float,
+    evaluation: EvaluationResult | None,
+    out: Path,
+    json_out: Path | None,
+) -> list[tuple[Path, Any]]:
+    """The trajectory and, with --json, the run's report (written all or none)."""
+    from flexreg._version import __version__
+    from flexreg.core.jsonable import to_jsonable
+    from flexreg.io import atomic_write
+    from flexreg.io.trajectory import write_trajectory
+
+    writers: list[tuple[Path, Any]] = [
+        (out, lambda: write_trajectory(out, result.trajectory, "tum"))
+    ]
     if json_out is not None:
         doc: dict[str, Any] = {
             "sequence": seq.to_dict(),
@@ -252,28 +324,9 @@ def odometry_command(
             "evaluation": None if evaluation is None else evaluation.to_dict(),
             "flexreg_version": __version__,
         }
-        text = json.dumps(doc, indent=2, default=_json_default) + "\n"
-        try:
-            atomic_write(json_out, lambda tmp: tmp.write_text(text))
-        except BaseException:
-            out.unlink(missing_ok=True)  # all outputs or none
-            raise
-        written.append(json_out)
-    _print_summary(seq, result, seconds, evaluation, note)
-    for p in written:
-        console.print(f"wrote {p}", markup=False, soft_wrap=True)
-
-
-def _json_default(o: Any) -> Any:
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
+        text = json.dumps(to_jsonable(doc), indent=2) + "\n"
+        writers.append((json_out, lambda: atomic_write(json_out, lambda tmp: tmp.write_text(text))))
+    return writers
 
 
 def _evaluate(

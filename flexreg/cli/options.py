@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 
@@ -22,22 +22,26 @@ from flexreg.errors import ConfigError
 C = TypeVar("C", bound=Config)
 
 
-#: ``--config FILE`` (declare as ``config_file: Path | None = CONFIG_OPTION``)
-CONFIG_OPTION: Any = typer.Option(
-    None,
-    "--config",
-    metavar="FILE",
-    help="Settings from a TOML file ('flexreg config show NAME' writes one) or a result "
-    "JSON (reruns its 'config'). Options and --set override it.",
-)
-#: repeatable ``--set KEY=VALUE`` (declare as ``sets: list[str] | None = SET_OPTION``)
-SET_OPTION: Any = typer.Option(
-    None,
-    "--set",
-    metavar="KEY=VALUE",
-    help="Set any configuration field (repeatable), e.g. --set ratio=0.8; "
-    "'flexreg config show NAME' lists the fields.",
-)
+#: ``--config FILE`` (declare as ``config_file: ConfigFileOption = None``)
+ConfigFileOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--config",
+        metavar="FILE",
+        help="Settings from a TOML file ('flexreg config show NAME' writes one) or a result "
+        "JSON (reruns its 'config'). Options and --set override it.",
+    ),
+]
+#: repeatable ``--set KEY=VALUE`` (declare as ``sets: SetOption = None``)
+SetOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        metavar="KEY=VALUE",
+        help="Set any configuration field (repeatable), e.g. --set ratio=0.8; "
+        "'flexreg config show NAME' lists the fields.",
+    ),
+]
 
 
 def with_default(cls: type[Config], field: str, text: str) -> str:

@@ -6,15 +6,15 @@ from __future__ import annotations
 from contextlib import AbstractContextManager
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from flexreg.cli._common import console, read_input, stage, write_all
 from flexreg.cli.app import app
 from flexreg.cli.options import (
-    CONFIG_OPTION,
-    SET_OPTION,
+    ConfigFileOption,
+    SetOption,
     build_config,
     check_outputs,
     with_default,
@@ -106,74 +106,97 @@ def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
     return Scan(points=points, colors=colors, name="merged")
 
 
-@app.command("register")
-def register_command(
-    target: Path = typer.Argument(
-        ...,
+_TargetArgument = Annotated[
+    Path,
+    typer.Argument(
         metavar="TARGET",
         help="Target scan: any readable scan file, or a depth PNG with its camera sidecar. "
         "Points are used in the scanner frame; a pose stored in the file is ignored.",
     ),
-    source: Path = typer.Argument(
-        ..., metavar="SOURCE", help="Source scan, mapped onto TARGET by T_target_source."
+]
+_SourceArgument = Annotated[
+    Path,
+    typer.Argument(metavar="SOURCE", help="Source scan, mapped onto TARGET by T_target_source."),
+]
+_OutOption = Annotated[
+    Path,
+    typer.Option(
+        "--out", help="Output .json: T_target_source with inliers, RMSE, timings, config."
     ),
-    out: Path = typer.Option(
-        ..., "--out", help="Output .json: T_target_source with inliers, RMSE, timings, config."
-    ),
-    txt: Path | None = typer.Option(
-        None, "--txt", help="Also write the 4x4 matrix as text (CloudCompare style)."
-    ),
-    image: str | None = typer.Option(
-        None,
+]
+_TxtOption = Annotated[
+    Path | None,
+    typer.Option("--txt", help="Also write the 4x4 matrix as text (CloudCompare style)."),
+]
+_ImageOption = Annotated[
+    str | None,
+    typer.Option(
         "--image",
         help=with_default(
             _C, "image", "Feature image: flexion, bearing-*, range, ... or intensity."
         ),
     ),
-    n: int | None = typer.Option(
-        None, "--n", help=with_default(_C, "n", "Odd grid size n of Flexion n x n.")
-    ),
-    features: str | None = typer.Option(
-        None,
+]
+_NOption = Annotated[
+    int | None, typer.Option("--n", help=with_default(_C, "n", "Odd grid size n of Flexion n x n."))
+]
+_FeaturesOption = Annotated[
+    str | None,
+    typer.Option(
         "--features",
         help=with_default(
             _C, "features", "Detector/descriptor: sift, orb, akaze, kaze, brisk, surf."
         ),
     ),
-    refine: bool | None = typer.Option(
-        None,
+]
+_RefineOption = Annotated[
+    bool | None,
+    typer.Option(
         "--refine/--no-refine",
         help=with_default(_C, "refine", "Refine the RANSAC transform with ICP."),
     ),
-    icp: str | None = typer.Option(
-        None,
+]
+_IcpOption = Annotated[
+    str | None,
+    typer.Option(
         "--icp",
         help=with_default(_C, "icp", "ICP variant: point-to-plane, gicp or point-to-point."),
     ),
-    voxel: float | None = typer.Option(
-        None, "--voxel", metavar="METRES", help="ICP voxel size, metres (default: from spacing)."
+]
+_VoxelOption = Annotated[
+    float | None,
+    typer.Option(
+        "--voxel", metavar="METRES", help="ICP voxel size, metres (default: from spacing)."
     ),
-    threshold: float | None = typer.Option(
-        None,
+]
+_ThresholdOption = Annotated[
+    float | None,
+    typer.Option(
         "--threshold",
         metavar="METRES",
         help="RANSAC inlier distance, metres (default: from the scans' pixel footprint).",
     ),
-    matches: Path | None = typer.Option(
-        None, "--matches", help="Write a .png of both feature images with the inlier matches."
-    ),
-    merged: Path | None = typer.Option(
-        None,
+]
+_MatchesOption = Annotated[
+    Path | None,
+    typer.Option("--matches", help="Write a .png of both feature images with the inlier matches."),
+]
+_MergedOption = Annotated[
+    Path | None,
+    typer.Option(
         "--merged",
         help="Write a .ply of both clouds in the target frame (target orange, source blue).",
     ),
-    seed: int | None = typer.Option(
-        None,
-        "--seed",
-        help=with_default(_C, "seed", "Random seed; the same seed gives the same T."),
+]
+_SeedOption = Annotated[
+    int | None,
+    typer.Option(
+        "--seed", help=with_default(_C, "seed", "Random seed; the same seed gives the same T.")
     ),
-    upright: str | None = typer.Option(
-        None,
+]
+_UprightOption = Annotated[
+    str | None,
+    typer.Option(
         "--upright",
         help=with_default(
             _C,
@@ -182,14 +205,37 @@ def register_command(
             "(required) or off.",
         ),
     ),
-    truth: Path | None = typer.Option(
-        None,
+]
+_TruthOption = Annotated[
+    Path | None,
+    typer.Option(
         "--truth",
         help="Known T_target_source (.json or 4x4 .txt; a 'flexreg synth' gt.json works): "
         "report the errors in degrees and metres and store them in the output JSON.",
     ),
-    config_file: Path | None = CONFIG_OPTION,
-    sets: list[str] | None = SET_OPTION,
+]
+
+
+@app.command("register")
+def register_command(
+    target: _TargetArgument,
+    source: _SourceArgument,
+    out: _OutOption,
+    txt: _TxtOption = None,
+    image: _ImageOption = None,
+    n: _NOption = None,
+    features: _FeaturesOption = None,
+    refine: _RefineOption = None,
+    icp: _IcpOption = None,
+    voxel: _VoxelOption = None,
+    threshold: _ThresholdOption = None,
+    matches: _MatchesOption = None,
+    merged: _MergedOption = None,
+    seed: _SeedOption = None,
+    upright: _UprightOption = None,
+    truth: _TruthOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Register SOURCE onto TARGET through feature images; write T_target_source.
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
 
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform, invert, rotation_about_axis
@@ -65,8 +66,6 @@ def free_map(
     scene: Scene, *, cell_m: float = 0.1, probe_height_m: float = 2.0, tripod_radius_m: float = 0.35
 ) -> FreeMap:
     """Compute (and cache on the scene) the :class:`FreeMap` of its placement region."""
-    from scipy import ndimage
-
     key = f"free_map:{cell_m}:{probe_height_m}:{tripod_radius_m}"
     if key in scene._cache:
         return scene._cache[key]

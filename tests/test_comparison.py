@@ -236,6 +236,35 @@ def test_fork_server_preloads_importable_modules():
     assert "flexreg.bench._preload" in modules and "flexreg.stages.refinement.projective" in modules
 
 
+def test_fork_server_preloads_every_module_a_method_imports(shared_data):
+    """After the listed modules (without the kernel loader, which imports all of flexreg), one
+    run of every default method imports no further flexreg module: a module added to a method
+    and missing from the list would make its first measured call pay its import."""
+    import subprocess
+    import sys
+
+    code = (
+        "import importlib, sys\n"
+        "from flexreg import read_scans\n"
+        "from flexreg.bench.measure import preload_modules\n"
+        f"a, b = read_scans({str(shared_data / 'bunny_range_scans_gt')!r} + "
+        "'/derived_bunny_grids_and_gt.npz')\n"
+        "for m in preload_modules():\n"
+        "    if m != 'flexreg.bench._preload':\n"
+        "        importlib.import_module(m)\n"
+        "before = set(sys.modules)\n"
+        "from flexreg.bench.methods import DEFAULT_METHODS, run_method\n"
+        "for name in DEFAULT_METHODS:\n"
+        "    try:\n"
+        "        run_method(name, a, b)\n"
+        "    except Exception:\n"
+        "        pass\n"
+        "print(sorted(m for m in set(sys.modules) - before if m.startswith('flexreg')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
 def test_startup_loads_cached_serial_kernels_without_compiling():
     """A kernel compiled once (and cached on disk) is loaded when a new process imports
     flexreg.bench._preload, before its first call; parallel kernels are left alone (they would start

@@ -5,8 +5,8 @@ registries the first time any compiled function runs, which costs about 0.25 s i
 process; and it loads each kernel's machine code from its on-disk cache on that kernel's first
 call, tens of milliseconds apiece. Importing this module does both at import time instead, the
 way Open3D and OpenCV load their compiled code when they are imported. The comparison's fork
-server imports it with the other libraries (:data:`flexreg.bench.compare._PRELOAD`), so that a
-method's measured call excludes its libraries' start-up alike.
+server imports it with the other libraries (:func:`flexreg.bench.measure.preload_modules`), so
+that a method's measured call excludes its libraries' start-up alike.
 
 Parallel kernels are left to their first call: loading one starts numba's OpenMP thread pool,
 and a process with running OpenMP threads must not fork.
@@ -17,10 +17,14 @@ from __future__ import annotations
 import importlib
 import logging
 import pkgutil
+from pathlib import Path
 
 from numba.core.registry import CPUDispatcher, cpu_target
 
 log = logging.getLogger(__name__)
+
+#: the folder of the flexreg package, whose modules are searched for kernels
+_PACKAGE = Path(__file__).resolve().parents[1]
 
 cpu_target.target_context.refresh()
 cpu_target.typing_context.refresh()
@@ -33,12 +37,10 @@ def load_cached_kernels() -> int:
     Uses numba's cache index, which is not public API: on any surprise it stops quietly and
     the kernels load on first call as usual.
     """
-    import flexreg
-
     magic = cpu_target.target_context.codegen().magic_tuple()
     loaded = 0
     try:
-        for info in pkgutil.walk_packages(flexreg.__path__, "flexreg."):
+        for info in pkgutil.walk_packages([str(_PACKAGE)], "flexreg."):
             if info.name == __name__:
                 continue
             module = importlib.import_module(info.name)

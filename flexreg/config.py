@@ -119,6 +119,22 @@ def _bounds(cls: type[BaseModel] | None, field: str) -> dict[str, Any]:
     return {}
 
 
+def _choices(cls: type[BaseModel] | None, field: str) -> list[Any]:
+    """The allowed values of a ``Literal`` field (its JSON-schema ``enum``)."""
+    if cls is None:
+        return []
+    try:
+        prop = cls.model_json_schema()["properties"][field]
+    except Exception:  # a message helper never fails its caller
+        return []
+    for schema in (prop, *prop.get("anyOf", ())):
+        if "enum" in schema:
+            return list(schema["enum"])
+        if "const" in schema:
+            return [schema["const"]]
+    return []
+
+
 def _range_text(bounds: dict[str, Any], field: str) -> str:
     """``must be in (0, 1]``, ``must be a positive number of metres``, ``must be at least 8``."""
     lo = ("(", bounds["exclusiveMinimum"]) if "exclusiveMinimum" in bounds else None
@@ -150,6 +166,8 @@ def _message(err: Any, field: str, cls: type[BaseModel] | None) -> str:
     got = err.get("input")
     if kind in _RANGE_ERRORS:
         return _range_text(_bounds(cls, field) or _ctx_bounds(err, got), field)
+    if kind == "literal_error" and _choices(cls, field):
+        return "must be one of " + ", ".join(str(c) for c in _choices(cls, field))
     if kind == "finite_number":
         return f"must be a finite number{_unit(field)}"
     if kind == "extra_forbidden":

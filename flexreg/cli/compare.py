@@ -5,13 +5,21 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from flexreg.cli._common import console, err_console, progress_bar, read_input, stage
 from flexreg.cli.app import app
-from flexreg.errors import ConfigError
+from flexreg.cli.config_cmd import add_config
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_out_folder,
+    with_default,
+)
+from flexreg.config import Config, Positive, Seed
 
 if TYPE_CHECKING:
     from flexreg.bench.compare import Comparison
@@ -22,66 +30,137 @@ if TYPE_CHECKING:
 DEFAULT_METHODS = "flexreg,icp-point,icp-plane,gicp,fpfh-ransac,kiss-icp"
 
 
-def _positive(option: str, value: float | None, unit: str) -> None:
-    if value is not None and not (math.isfinite(value) and value > 0):
-        raise ConfigError(f"{option}: must be a positive number of {unit}, got {value}")
+class CompareConfig(Config):
+    """Settings of ``flexreg compare`` (``flexreg config show compare``).
+
+    Attributes
+    ----------
+    methods : str
+        Comma-separated methods (see :func:`flexreg.bench.methods.parse_methods`).
+    voxel_m : float or None, metres
+        Scale voxel of the baselines (None: from the scan resolution).
+    seed : int
+        Seed of flexreg and RANSAC.
+    success_deg, success_m : float, degrees and metres
+        Success: rotation and translation errors at most these.
+    timeout_s : float, seconds
+        Time limit per method.
+    """
+
+    methods: str = DEFAULT_METHODS
+    voxel_m: Positive | None = None
+    seed: Seed = 0
+    success_deg: Positive = 0.5
+    success_m: Positive = 0.05
+    timeout_s: Positive = 600.0
 
 
-def _check_out_folder(out: Path, inputs: tuple[Path, ...]) -> None:
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out}: exists and is not a folder")
-    for p in inputs:
-        if p.resolve() == out.resolve():
-            raise ConfigError(f"--out: {out}: is also an input")
+add_config("compare", CompareConfig)
+#: options that set a field of CompareConfig (option -> field)
+OPTIONS = {
+    "--methods": "methods",
+    "--voxel": "voxel_m",
+    "--seed": "seed",
+    "--success-deg": "success_deg",
+    "--success-m": "success_m",
+    "--timeout-s": "timeout_s",
+}
+_C = CompareConfig
 
 
-@app.command("compare")
-def compare_command(
-    target: Path = typer.Argument(
-        ..., metavar="TARGET", help="Target scan (any readable scan file), in its scanner frame."
+_TargetArgument = Annotated[
+    Path,
+    typer.Argument(
+        metavar="TARGET", help="Target scan (any readable scan file), in its scanner frame."
     ),
-    source: Path = typer.Argument(
-        ..., metavar="SOURCE", help="Source scan, mapped onto TARGET by T_target_source."
+]
+_SourceArgument = Annotated[
+    Path,
+    typer.Argument(metavar="SOURCE", help="Source scan, mapped onto TARGET by T_target_source."),
+]
+_OutOption = Annotated[
+    Path,
+    typer.Option(
+        "--out", help="Output folder (created): comparison.json, comparison.md and comparison.png."
     ),
-    out: Path = typer.Option(
-        ...,
-        "--out",
-        help="Output folder (created): comparison.json, comparison.md and comparison.png.",
-    ),
-    gt: Path | None = typer.Option(
-        None,
+]
+_GtOption = Annotated[
+    Path | None,
+    typer.Option(
         "--gt",
         help='Known T_target_source: JSON {"T_target_source": [[4x4]]} (a flexreg synth '
         "gt.json works, pair by file stems) or a 4x4 text matrix. Gives errors and success.",
     ),
-    methods: str = typer.Option(
-        DEFAULT_METHODS,
+]
+_MethodsOption = Annotated[
+    str | None,
+    typer.Option(
         "--methods",
-        help="Comma-separated: flexreg, icp-point, icp-plane, gicp, fpfh-ransac, kiss-icp "
-        "(small-gicp when installed).",
+        help=with_default(
+            _C,
+            "methods",
+            "Comma-separated: flexreg, icp-point, icp-plane, gicp, fpfh-ransac, kiss-icp "
+            "(small-gicp when installed).",
+        ),
     ),
-    init: Path | None = typer.Option(
-        None,
+]
+_InitOption = Annotated[
+    Path | None,
+    typer.Option(
         "--init",
         help="Initial T_target_source for the local methods (ICP variants, KISS-ICP); "
         "default identity. flexreg and fpfh-ransac need none.",
     ),
-    voxel: float | None = typer.Option(
-        None,
+]
+_VoxelOption = Annotated[
+    float | None,
+    typer.Option(
         "--voxel",
         metavar="METRES",
         help="Scale voxel of the baselines, metres (default: from the scan resolution).",
     ),
-    seed: int = typer.Option(0, "--seed", help="Seed of flexreg and RANSAC."),
-    success_deg: float = typer.Option(
-        0.5, "--success-deg", help="Success: rotation error at most this, degrees."
+]
+_SeedOption = Annotated[
+    int | None, typer.Option("--seed", help=with_default(_C, "seed", "Seed of flexreg and RANSAC."))
+]
+_SuccessDegOption = Annotated[
+    float | None,
+    typer.Option(
+        "--success-deg",
+        help=with_default(_C, "success_deg", "Success: rotation error at most this, degrees."),
     ),
-    success_m: float = typer.Option(
-        0.05, "--success-m", help="Success: translation error at most this, metres."
+]
+_SuccessMOption = Annotated[
+    float | None,
+    typer.Option(
+        "--success-m",
+        help=with_default(_C, "success_m", "Success: translation error at most this, metres."),
     ),
-    timeout_s: float = typer.Option(
-        600.0, "--timeout-s", help="Time limit per method, seconds (a timeout is a row)."
+]
+_TimeoutSOption = Annotated[
+    float | None,
+    typer.Option(
+        "--timeout-s",
+        help=with_default(_C, "timeout_s", "Time limit per method, seconds (a timeout is a row)."),
     ),
+]
+
+
+@app.command("compare")
+def compare_command(
+    target: _TargetArgument,
+    source: _SourceArgument,
+    out: _OutOption,
+    gt: _GtOption = None,
+    methods: _MethodsOption = None,
+    init: _InitOption = None,
+    voxel: _VoxelOption = None,
+    seed: _SeedOption = None,
+    success_deg: _SuccessDegOption = None,
+    success_m: _SuccessMOption = None,
+    timeout_s: _TimeoutSOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Run flexreg and the ICP baselines on one pair; table, JSON, Markdown and bar chart.
 
@@ -94,15 +173,21 @@ def compare_command(
     from flexreg.io import read_transform
     from flexreg.io.transform_io import read_ground_truth
 
-    chosen = parse_methods(methods)
-    _positive("--voxel", voxel, "metres")
-    _positive("--success-deg", success_deg, "degrees")
-    _positive("--success-m", success_m, "metres")
-    _positive("--timeout-s", timeout_s, "seconds")
-    if seed < 0:
-        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
-    _check_out_folder(out, (target, source))
-    criteria = SuccessCriteria(rotation_deg=success_deg, translation_m=success_m)
+    config = build_config(
+        CompareConfig,
+        config_file,
+        sets,
+        OPTIONS,
+        methods=methods,
+        voxel_m=voxel,
+        seed=seed,
+        success_deg=success_deg,
+        success_m=success_m,
+        timeout_s=timeout_s,
+    )
+    chosen = parse_methods(config.methods)
+    check_out_folder("--out", out, (target, source))
+    criteria = SuccessCriteria(rotation_deg=config.success_deg, translation_m=config.success_m)
     T_gt = None if gt is None else read_ground_truth(gt, target=target.stem, source=source.stem)
     T_init = None if init is None else read_transform(init)
     scans = []
@@ -122,10 +207,10 @@ def compare_command(
             methods=chosen,
             T_gt=T_gt,
             T_init=T_init,
-            voxel_m=voxel,
-            seed=seed,
+            voxel_m=config.voxel_m,
+            seed=config.seed,
             criteria=criteria,
-            timeout_s=timeout_s,
+            timeout_s=config.timeout_s,
             names=(str(target), str(source)),
             progress=progress,
         )
@@ -174,64 +259,93 @@ def _print_comparison(cmp: Comparison) -> None:
         console.print(f"- {line}", markup=False, highlight=False, soft_wrap=True)
 
 
+#: options that set a field of BenchConfig (option -> field)
+BENCH_OPTIONS = {
+    "--suite": "suite",
+    "--quick": "quick",
+    "--methods": "methods",
+    "--seed": "seed",
+    "--data": "data_dir",
+    "--timeout-s": "timeout_s",
+}
+
+
+_BenchSuiteOption = Annotated[
+    str | None, typer.Option("--suite", help="synthetic, real or all. [default: all]")
+]
+_BenchOutOption = Annotated[
+    Path,
+    typer.Option("--out", help="Folder that receives the timestamped result folder (created)."),
+]
+_BenchQuickOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--quick/--full",
+        help="Short run (about 2-3 min): 4 small synthetic pairs, a small sweep, 2 real pairs; "
+        "its defaults apply unless --config is given. [default: full]",
+    ),
+]
+_BenchMethodsOption = Annotated[
+    str | None,
+    typer.Option("--methods", help=f"Comma-separated methods. [default: {DEFAULT_METHODS}]"),
+]
+_BenchSeedOption = Annotated[
+    int | None,
+    typer.Option("--seed", help="Seed of the synthetic pairs and the methods. [default: 0]"),
+]
+_BenchDataOption = Annotated[
+    Path | None,
+    typer.Option("--data", help="Folder of the real data sets. [default: ../shared/data]"),
+]
+_BenchTimeoutSOption = Annotated[
+    float | None,
+    typer.Option(
+        "--timeout-s", help="Time limit per method and pair, seconds (default 300; 120 quick)."
+    ),
+]
+
+
 @app.command("bench")
 def bench_command(
-    suite: str = typer.Option("all", "--suite", help="synthetic, real or all."),
-    out: Path = typer.Option(
-        ..., "--out", help="Folder that receives the timestamped result folder (created)."
-    ),
-    quick: bool = typer.Option(
-        False,
-        "--quick",
-        help="Short run (about 2-3 min): 4 small synthetic pairs, a small sweep, 2 real pairs.",
-    ),
-    methods: str = typer.Option(DEFAULT_METHODS, "--methods", help="Comma-separated methods."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the synthetic pairs and the methods."),
-    data: Path = typer.Option(
-        Path("../shared/data"), "--data", help="Folder of the real data sets."
-    ),
-    timeout_s: float | None = typer.Option(
-        None,
-        "--timeout-s",
-        help="Time limit per method and pair, seconds (default 300; 120 quick).",
-    ),
+    out: _BenchOutOption,
+    suite: _BenchSuiteOption = None,
+    quick: _BenchQuickOption = None,
+    methods: _BenchMethodsOption = None,
+    seed: _BenchSeedOption = None,
+    data: _BenchDataOption = None,
+    timeout_s: _BenchTimeoutSOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Benchmark flexreg against the baselines: synthetic pairs over station distance, yaw,
     tilt, noise and resolution, and the real pairs with a reference.
 
     Writes cases.csv, summary.csv / .md, results.json, config.json and plots into
-    OUT/bench-<time>/ once everything has run.
+    OUT/bench-<time>/ once everything has run; --config OUT/bench-<time>/config.json reruns
+    it.
     """
     from flexreg.bench.methods import parse_methods
     from flexreg.bench.results import write_bench
-    from flexreg.bench.suite import check_real_data, run_bench
-    from flexreg.bench.types import SUITES, BenchConfig
+    from flexreg.bench.suite import check_real_data, planned_cases, run_bench
+    from flexreg.bench.types import BenchConfig
 
-    if suite not in SUITES:
-        raise ConfigError(f"--suite: must be one of {', '.join(SUITES)}, got {suite!r}")
-    chosen = parse_methods(methods)
-    _positive("--timeout-s", timeout_s, "seconds")
-    if seed < 0:
-        raise ConfigError(f"--seed: must be a non-negative integer, got {seed}")
-    _check_out_folder(out, ())
-    overrides: dict[str, Any] = {"methods": chosen, "seed": seed, "data_dir": str(data)}
-    if timeout_s is not None:
-        overrides["timeout_s"] = timeout_s
-    config = BenchConfig.make(suite, quick=quick, **overrides)
+    base = BenchConfig.make(quick=bool(quick))  # --suite is set below, with its name
+    config = build_config(
+        BenchConfig,
+        config_file,
+        sets,
+        BENCH_OPTIONS,
+        base=base,
+        suite=suite,
+        quick=quick,
+        methods=None if methods is None else tuple(parse_methods(methods)),
+        seed=seed,
+        data_dir=None if data is None else str(data),
+        timeout_s=timeout_s,
+    )
+    check_out_folder("--out", out)
     if config.runs_real:
         check_real_data(config.data_dir, config.real_pairs)
-    command = f"flexreg bench --suite {suite}" + (" --quick" if quick else "")
-    command += f" --out {out}"
-    if methods != DEFAULT_METHODS:
-        command += f" --methods {','.join(chosen)}"
-    if seed:
-        command += f" --seed {seed}"
-    if str(data) != "../shared/data":
-        command += f" --data {data}"
-    if timeout_s is not None:
-        command += f" --timeout-s {timeout_s:g}"
-    from flexreg.bench.suite import planned_cases
-
     n_cases = len(planned_cases(config))
     with progress_bar() as bar:
         task = bar.add_task("bench", total=n_cases)
@@ -239,11 +353,31 @@ def bench_command(
         def progress(label: str, k: int, n: int, method: str) -> None:
             bar.update(task, completed=k, description=f"{label}: {method}")
 
+        command = _bench_command_line(config, out, config_file, sets)
         result = run_bench(config, command=command, progress=progress)
         bar.update(task, completed=n_cases, description="done")
     folder = write_bench(result, out)
     _print_bench(result)
     console.print(f"wrote {folder}", markup=False, soft_wrap=True)
+
+
+def _bench_command_line(
+    config: Any, out: Path, config_file: Path | None, sets: list[str] | None
+) -> str:
+    """The command that reruns this benchmark (recorded with its results)."""
+    command = f"flexreg bench --suite {config.suite}" + (" --quick" if config.quick else "")
+    command += f" --out {out}"
+    if config_file is not None:
+        command += f" --config {config_file}"
+    if ",".join(config.methods) != DEFAULT_METHODS:
+        command += f" --methods {','.join(config.methods)}"
+    if config.seed:
+        command += f" --seed {config.seed}"
+    if config.data_dir != "../shared/data":
+        command += f" --data {config.data_dir}"
+    if config.timeout_s != (120.0 if config.quick else 300.0):
+        command += f" --timeout-s {config.timeout_s:g}"
+    return command + "".join(f" --set {item}" for item in sets or ())
 
 
 def _print_bench(result: BenchResult) -> None:

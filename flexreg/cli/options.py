@@ -59,6 +59,8 @@ def build_config(
     config_file: Path | None,
     sets: Sequence[str] | None,
     options: Mapping[str, str],
+    *,
+    base: Config | None = None,
     **values: Any,
 ) -> C:
     """The command's configuration: defaults < ``config_file`` < options and ``--set``.
@@ -72,6 +74,9 @@ def build_config(
         The ``--set KEY=VALUE`` items.
     options : mapping
         Option name -> field it sets (``{"--voxel": "voxel_m"}``), declared once per command.
+    base : Config, optional
+        Used instead of the class defaults when there is no ``config_file`` (a command whose
+        defaults depend on another option, like ``bench --quick``).
     **values
         Field -> the value of its option (None: the option was left out).
 
@@ -93,7 +98,8 @@ def build_config(
             )
     names = {field: option_of[field] for field in given}
     names.update({key: f"--set {key}" for key in overrides})
-    return load_config(cls, config_file, {**given, **overrides}, names=names)
+    start = base.model_dump() if base is not None and config_file is None else {}
+    return load_config(cls, config_file, {**start, **given, **overrides}, names=names)
 
 
 def check_outputs(

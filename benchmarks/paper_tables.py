@@ -59,14 +59,14 @@ sys.path.insert(0, str(REPO))
 from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 from flexreg.errors import FlexregError, RegistrationError  # noqa: E402
 from flexreg.io.sequence import Sequence, read_sequence  # noqa: E402
-from flexreg.odometry.evaluation import ate, rpe  # noqa: E402
-from flexreg.odometry.track import (  # noqa: E402
+from flexreg.odometry import (  # noqa: E402
     FrameFeatures,
     OdometryConfig,
     feature_image,
     frame_features,
     track,
 )
+from flexreg.odometry.evaluation import ate, rpe  # noqa: E402
 from flexreg.stages.keypoints import create_detector  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data"
@@ -155,7 +155,7 @@ def prepare(name: str, spec: dict[str, Any], work: Path) -> Sequence:
 
 def describe(seq: Sequence) -> dict[str, Any]:
     """Length and motion of a sequence's ground truth over its frames."""
-    from flexreg.odometry.evaluation import associate
+    from flexreg.core.trajectory import associate
 
     gt = seq.groundtruth
     assert gt is not None

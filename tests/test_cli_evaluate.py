@@ -14,7 +14,8 @@ from matplotlib.image import imread
 
 from flexreg import __version__
 from flexreg.cli import run
-from flexreg.io.trajectory import Trajectory, read_trajectory, write_trajectory
+from flexreg.core.trajectory import Trajectory
+from flexreg.io.trajectory import read_trajectory, write_trajectory
 
 
 def _files(folder: Path) -> list[str]:

@@ -13,18 +13,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from flexreg.core.trajectory import Trajectory, associate
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError, InputError
-from flexreg.io.trajectory import Trajectory, detect_format, read_trajectory, write_trajectory
-from flexreg.odometry.evaluation import (
-    AssociationError,
-    align_umeyama,
-    associate,
-    ate,
-    evaluate,
-    nearest_partner,
-    rpe,
-)
+from flexreg.io.trajectory import detect_format, read_trajectory, write_trajectory
+from flexreg.odometry.evaluation import AssociationError, ate, evaluate, nearest_partner, rpe
+from flexreg.stages.alignment import umeyama as align_umeyama
 
 # ---------------------------------------------------------------------------------------------
 # helpers

@@ -16,18 +16,18 @@ from flexreg.core.transforms import (
     make_transform,
     rotation_about_axis,
     rotation_error_deg,
+    scale_motion,
     translation_error_m,
 )
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.io.sequence import read_sequence
-from flexreg.odometry.evaluation import ate
-from flexreg.odometry.track import (
+from flexreg.odometry import (
     FrameFeatures,
     OdometryConfig,
+    ate,
     essential_pose,
     feature_image,
     odometry,
-    scale_motion,
     svd_pose,
     track,
 )
@@ -310,7 +310,8 @@ def test_folder_of_lidar_scans(tmp_path):
     """Spinning-lidar sweeps of `flexreg synth --lidar-frames` (0.5 m apart): read as a folder
     of scans with the sensor poses of its gt.json, tracked 3D-3D on panoramic Flexion images;
     the 2D-2D solver needs pinhole images and says so."""
-    from flexreg.synth.dataset import SynthConfig, synthesize
+    from flexreg.synth.config import SynthConfig
+    from flexreg.synth.dataset import synthesize
 
     cfg = SynthConfig(
         scene="courtyard", stations=1, width=64, height=32, lidar_frames=4, format="npz", seed=1

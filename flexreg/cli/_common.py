@@ -18,6 +18,8 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
+from flexreg.io.files import write_all as write_all  # re-exported for the commands
+
 console = Console(highlight=False)
 err_console = Console(stderr=True, highlight=False)
 
@@ -36,25 +38,6 @@ def stage(description: str) -> Iterator[None]:
         progress.add_task(description, total=None)
         yield
     err_console.print(f"[green]✓[/green] {description} ({time.perf_counter() - t0:.2f} s)")
-
-
-def write_all(writers: list[tuple[Path, Any]]) -> None:
-    """Run each ``(path, write)``; if one fails, remove the files already written here, so a
-    command leaves all of its outputs or none."""
-    from flexreg.errors import InputError
-
-    done: list[Path] = []
-    try:
-        for path, write in writers:
-            try:
-                write()
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        raise
 
 
 def progress_bar() -> Progress:

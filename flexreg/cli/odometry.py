@@ -25,7 +25,7 @@ from flexreg.odometry.config import EvaluationConfig, OdometryConfig
 if TYPE_CHECKING:
     from flexreg.io.sequence import Sequence
     from flexreg.odometry.evaluation import EvaluationResult
-    from flexreg.odometry.track import OdometryResult
+    from flexreg.odometry.result import OdometryResult
 
 
 #: options that set a field of OdometryConfig (option -> field)

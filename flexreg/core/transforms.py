@@ -101,3 +101,117 @@ def rotation_about_axis(axis: ArrayLike, angle_rad: float) -> NDArray[np.float64
     k = k / np.linalg.norm(k)
     K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + np.sin(angle_rad) * K + (1.0 - np.cos(angle_rad)) * (K @ K)
+
+
+def nearest_rotation(R: ArrayLike) -> NDArray[np.float64]:
+    """The orthonormal matrix nearest to ``R`` in the Frobenius norm: ``U V^T`` of its SVD.
+
+    Used to re-orthonormalise rotations stored with few digits (KITTI, 7-Scenes poses) or
+    accumulated with rounding. The result is a proper rotation (det +1) when ``det(R) > 0``;
+    for a reflection it stays a reflection, so callers that need a rotation check the sign.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        One matrix or a stack of them.
+
+    Returns
+    -------
+    (..., 3, 3) float64
+
+    Examples
+    --------
+    >>> R = nearest_rotation([[1.0, 1e-4, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    >>> bool(np.allclose(R @ R.T, np.eye(3), atol=1e-15))
+    True
+    """
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    out: NDArray[np.float64] = U @ Vt
+    return out
+
+
+#: quaternion component orders: ``xyzw`` (scalar last: TUM, ROS, scipy) or ``wxyz`` (scalar
+#: first: E57, PCD ``VIEWPOINT``)
+QUAT_ORDERS = ("xyzw", "wxyz")
+
+
+def _check_order(order: str) -> None:
+    if order not in QUAT_ORDERS:
+        raise InputError("order", f"quaternion order must be xyzw or wxyz, got {order!r}")
+
+
+def quat_to_matrix(q: ArrayLike, order: str = "xyzw") -> NDArray[np.float64]:
+    """Rotation matrices of quaternions (normalised here).
+
+    Parameters
+    ----------
+    q : (4,) or (N, 4) array_like
+        Quaternions in ``order``; they need not be exactly unit (files carry 4 to 9 decimals).
+    order : {"xyzw", "wxyz"}
+        Scalar last (TUM trajectories) or scalar first (E57 poses, PCD viewpoints).
+
+    Returns
+    -------
+    (3, 3) or (N, 3, 3) float64
+
+    Examples
+    --------
+    >>> quat_to_matrix([0.0, 1.0, 0.0, 0.0], order="wxyz").round(12).tolist()
+    [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]
+    """
+    # heavy: scipy.spatial costs ~0.3 s at import; every command imports this module
+    from scipy.spatial.transform import Rotation
+
+    _check_order(order)
+    Q = np.asarray(q, dtype=np.float64)
+    xyzw = Q if order == "xyzw" else Q[..., [1, 2, 3, 0]]
+    M = np.asarray(Rotation.from_quat(xyzw.reshape(-1, 4)).as_matrix(), dtype=np.float64)
+    return M.reshape(3, 3) if Q.ndim == 1 else M.reshape(-1, 3, 3)
+
+
+def matrix_to_quat(R: ArrayLike, order: str = "xyzw") -> NDArray[np.float64]:
+    """Unit quaternions of rotation matrices, with a non-negative scalar part.
+
+    Parameters
+    ----------
+    R : (3, 3) or (N, 3, 3) array_like
+        Rotations.
+    order : {"xyzw", "wxyz"}
+        Scalar last or scalar first.
+
+    Returns
+    -------
+    (4,) or (N, 4) float64
+        ``w >= 0`` (of the two quaternions of a rotation, the one with non-negative scalar).
+
+    Examples
+    --------
+    >>> matrix_to_quat(np.eye(3), order="wxyz").tolist()
+    [1.0, 0.0, 0.0, 0.0]
+    """
+    from scipy.spatial.transform import Rotation  # heavy: see quat_to_matrix
+
+    _check_order(order)
+    M = np.asarray(R, dtype=np.float64)
+    q = np.asarray(Rotation.from_matrix(M.reshape(-1, 3, 3)).as_quat(), dtype=np.float64)
+    q = np.where(q[:, 3:] < 0, -q, q)
+    if order == "wxyz":
+        q = q[:, [3, 0, 1, 2]]
+    return q.reshape(4) if M.ndim == 2 else q
+
+
+def scale_motion(T: ArrayLike, factor: float) -> NDArray[np.float64]:
+    """The rigid motion ``T`` continued for ``factor`` times as long at constant velocity:
+    ``exp(factor * log(T))`` on SE(3) (a screw motion; ``factor`` 2 gives ``T @ T``).
+
+    >>> scale_motion(make_transform(np.eye(3), [0.2, 0.0, 0.0]), 0.5)[:3, 3].round(12).tolist()
+    [0.1, 0.0, 0.0]
+    """
+    from scipy.linalg import expm, logm  # heavy: scipy.linalg costs ~0.25 s at import
+
+    M = np.asarray(T, dtype=np.float64)
+    L = np.real(logm(M))
+    out = np.asarray(np.real(expm(float(factor) * L)), dtype=np.float64)
+    out[:3, :3] = nearest_rotation(out[:3, :3])  # exact rotation despite rounding
+    out[3] = [0.0, 0.0, 0.0, 1.0]
+    return out

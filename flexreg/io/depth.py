@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamera
+from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamera, camera_from_dict
+from flexreg.core.range_image import from_depth, to_scan
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
 
@@ -74,8 +75,6 @@ def read_sidecar(path: Path) -> dict[str, Any]:
     dict
         Keyword arguments for :func:`read`: ``camera`` and whichever of the others are given.
     """
-    from flexreg.core.camera import camera_from_dict
-
     side = sidecar_path(path)
     try:
         doc = json.loads(side.read_text())
@@ -113,8 +112,6 @@ def read(
     invalid_values : tuple of int
         Stored values meaning no return (0 always).
     """
-    from flexreg.core.range_image import from_depth, to_scan
-
     if camera is None:
         if not sidecar_path(path).is_file():
             raise InputError(

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.scan import Scan
+from flexreg.core.transforms import matrix_to_quat, quat_to_matrix
 from flexreg.errors import InputError
 
 __all__ = ["read", "write"]
@@ -190,34 +191,13 @@ def _pose(node: Any, path: Path, label: str) -> NDArray[np.float64]:
             raise InputError(
                 path, f"{label}: pose rotation quaternion {q.tolist()} is not a rotation"
             )
-        T[:3, :3] = _quat_wxyz_to_matrix(q / norm)
+        T[:3, :3] = quat_to_matrix(q, order="wxyz")
     if pose.isDefined("translation"):
         tr = pose["translation"]
         T[:3, 3] = [float(tr[k].value()) for k in ("x", "y", "z")]
     if not np.all(np.isfinite(T)):
         raise InputError(path, f"{label}: pose holds NaN or Inf")
     return T
-
-
-def _quat_wxyz_to_matrix(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrix (3, 3) of a unit quaternion given as ``wxyz``."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _matrix_to_quat_wxyz(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Unit quaternion ``wxyz`` (w >= 0) of a (3, 3) rotation matrix, numerically stable."""
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(R).as_quat()  # scipy order is xyzw
-    q = np.array([w, x, y, z])
-    return -q if w < 0 else q
 
 
 def write(path: Path, scans: list[Scan], **options: Any) -> None:
@@ -309,7 +289,7 @@ def _write_one(imf: Any, data3d: Any, libe57: Any, scan: Scan, i: int) -> None:
     node.set("description", libe57.StringNode(imf, "written by flexreg"))
 
     T = scan.T_world_scanner
-    q = _matrix_to_quat_wxyz(T[:3, :3])
+    q = matrix_to_quat(T[:3, :3], order="wxyz")
     pose = libe57.StructureNode(imf)
     rot = libe57.StructureNode(imf)
     for axis, v in zip("wxyz", q, strict=True):

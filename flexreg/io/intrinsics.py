@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flexreg.core.camera import PinholeCamera
-from flexreg.core.transforms import as_transform
+from flexreg.core.transforms import as_transform, nearest_rotation
 from flexreg.errors import InputError
 
 __all__ = [
@@ -494,9 +494,8 @@ def _rigid(T: ArrayLike, p: Path, what: str) -> NDArray[np.float64]:
         raise InputError(p, f"{what} must be a finite 4x4 matrix")
     R = M[:3, :3]
     if np.allclose(R @ R.T, np.eye(3), atol=1e-3) and np.linalg.det(R) > 0:
-        U, _, Vt = np.linalg.svd(R)
         M = M.copy()
-        M[:3, :3] = U @ Vt
+        M[:3, :3] = nearest_rotation(R)
     return as_transform(M, name=f"{p}: {what}")
 
 

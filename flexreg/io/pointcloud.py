@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.scan import Scan
+from flexreg.core.transforms import quat_to_matrix
 from flexreg.errors import InputError
 
 __all__ = ["read", "write"]
@@ -358,14 +359,12 @@ def _read_pcd(path: Path, pcd: _PcdHeader) -> Scan:
 
 def _viewpoint_pose(path: Path, vp: list[float]) -> NDArray[np.float64]:
     """``T_world_scanner`` from a PCD ``VIEWPOINT tx ty tz qw qx qy qz``."""
-    from flexreg.io.e57 import _quat_wxyz_to_matrix
-
     q = np.asarray(vp[3:], dtype=np.float64)
     norm = float(np.linalg.norm(q))
     if not np.all(np.isfinite(vp)) or norm < 1e-9:
         raise InputError(path, f"PCD VIEWPOINT {vp} is not a pose")
     T = np.eye(4)
-    T[:3, :3] = _quat_wxyz_to_matrix(q / norm)
+    T[:3, :3] = quat_to_matrix(q, order="wxyz")
     T[:3, 3] = vp[:3]
     return T
 

@@ -11,11 +11,10 @@ layout              what the folder holds
 ==================  ==========================================================================
 ``tum``             ``depth.txt`` (+ ``rgb.txt``, ``groundtruth.txt``), lines ``timestamp
                     file``; depth PNGs in 1/5000 m; colour associated to depth by timestamp
-                    (:func:`flexreg.odometry.evaluation.associate`: nearest first, less than
-                    ``max_dt_s``
-                    apart, each used once). ``flexreg synth
-                    --rgbd-frames N`` writes this layout to ``<out>/rgbd`` (with a
-                    ``camera.json``); its output folder itself is accepted too.
+                    (:func:`flexreg.core.trajectory.associate`: nearest first, less than
+                    ``max_dt_s`` apart, each used once). ``flexreg synth --rgbd-frames N``
+                    writes this layout to ``<out>/rgbd`` (with a ``camera.json``); its
+                    output folder itself is accepted too.
 ``7scenes``         ``frame-XXXXXX.depth.png`` in millimetres (65535 = no reading),
                     ``frame-XXXXXX.pose.txt`` (4x4 camera-to-world), ``frame-XXXXXX.color.*``
 ``depth-folder``    depth PNGs (+ intrinsics file, optional ``groundtruth.txt``)
@@ -40,26 +39,29 @@ import re
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.camera import Camera, DepthKind, PinholeCamera, camera_from_dict
+from flexreg.core.range_image import RangeImage, from_depth
+from flexreg.core.trajectory import MAX_DT_S, Trajectory, associate
+from flexreg.core.transforms import as_transform, nearest_rotation
 from flexreg.errors import InputError
-
-if TYPE_CHECKING:
-    from flexreg.core.range_image import RangeImage
-    from flexreg.io.trajectory import Trajectory
+from flexreg.io.depth import TUM_DEPTH_SCALE, read_depth_png, read_sidecar
+from flexreg.io.formats import FORMATS
+from flexreg.io.scans import read_scan
+from flexreg.io.trajectory import read_trajectory
+from flexreg.stages.projection import range_image
 
 log = logging.getLogger(__name__)
 
 SequenceKind = Literal["tum", "7scenes", "depth-folder", "scans"]
 KINDS: tuple[str, ...] = ("tum", "7scenes", "depth-folder", "scans")
 
-#: TUM RGB-D: metres per depth unit, and the intrinsics the benchmark recommends for its
-#: (registered) depth images when no calibration is given
-TUM_DEPTH_SCALE = 1.0 / 5000.0
+#: TUM RGB-D: the intrinsics the benchmark recommends for its (registered) depth images when
+#: no calibration is given (metres per depth unit: :data:`flexreg.io.depth.TUM_DEPTH_SCALE`)
 TUM_DEFAULT_INTRINSICS = (525.0, 525.0, 319.5, 239.5)
 #: 7-Scenes: millimetres, 65535 = no reading, intrinsics published with the data set
 SEVEN_SCENES_DEPTH_SCALE = 1.0e-3
@@ -67,8 +69,6 @@ SEVEN_SCENES_INVALID = 65535
 SEVEN_SCENES_INTRINSICS = (585.0, 585.0, 320.0, 240.0)
 #: frame rate assumed where a layout has no timestamps (7-Scenes: Kinect at 30 Hz)
 DEFAULT_RATE_HZ = 30.0
-#: largest timestamp difference of associated colour / depth frames (TUM's associate.py)
-MAX_DT_S = 0.02
 
 _SEVEN = re.compile(r"^frame-(\d+)\.depth\.png$", re.IGNORECASE)
 _COLOR_SUFFIXES = (".color.png", ".color.jpg", ".color.jpeg")
@@ -159,16 +159,9 @@ class Sequence:
         InputError
             The depth file is missing or unreadable, or its size disagrees with the camera.
         """
-        from flexreg.core.range_image import from_depth
-        from flexreg.stages.projection import range_image
-
         frame = self.frames[i]
         if self.kind == "scans":
-            from flexreg.io import read_scan
-
             return range_image(read_scan(frame.depth))
-        from flexreg.io.depth import read_depth_png
-
         assert self.camera is not None
         d = read_depth_png(
             frame.depth, depth_scale=self.depth_scale, invalid_values=self.invalid_values
@@ -316,8 +309,6 @@ def detect_kind(root: Path) -> str:
         return "7scenes"
     if any(n.lower().endswith(".png") for n in names):
         return "depth-folder"
-    from flexreg.io import FORMATS
-
     scan_suffixes = set(FORMATS) - {".png"}
     if any(Path(n).suffix.lower() in scan_suffixes for n in names):
         return "scans"
@@ -407,8 +398,6 @@ def _read_tum(
     rgb_list = root / "rgb.txt"
     if rgb_list.is_file():
         rgb = read_list(rgb_list)
-        from flexreg.odometry.evaluation import associate
-
         i_depth, i_rgb = associate([d[0] for d in depth], [r[0] for r in rgb], max_dt_s=max_dt_s)
         if len(i_depth) == 0:
             raise InputError(
@@ -441,8 +430,6 @@ def _read_tum(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from flexreg.io.trajectory import read_trajectory
-
         gt = read_trajectory(gt_file, "tum")
     return Sequence(
         root=root,
@@ -512,8 +499,6 @@ def _read_7scenes(
     camera, source = _intrinsics(root, numbered[ids[0]], intrinsics, side, SEVEN_SCENES_INTRINSICS)
     gt = None
     if poses:
-        from flexreg.io.trajectory import Trajectory
-
         gt = Trajectory(
             timestamps=np.array([f.timestamp for f in frames], dtype=np.float64),
             poses=np.stack(poses),
@@ -533,8 +518,6 @@ def _read_7scenes(
 
 def _read_pose_txt(path: Path) -> NDArray[np.float64]:
     """A 4x4 camera-to-world matrix as 4 lines of 4 numbers (7-Scenes ``pose.txt``)."""
-    from flexreg.core.transforms import as_transform
-
     rows: list[list[float]] = []
     for no, raw in enumerate(path.read_text(errors="replace").splitlines(), start=1):
         if not raw.strip():
@@ -550,8 +533,7 @@ def _read_pose_txt(path: Path) -> NDArray[np.float64]:
         raise InputError(path, f"expected a 4x4 matrix (4 lines), got {len(rows)} lines")
     # KinectFusion poses are orthonormal to about 1e-6; re-orthonormalise what is close
     M = np.asarray(rows, dtype=np.float64)
-    U, _, Vt = np.linalg.svd(M[:3, :3])
-    R = U @ Vt
+    R = nearest_rotation(M[:3, :3])
     if np.linalg.det(R) < 0 or not np.allclose(M[:3, :3], R, atol=1e-3):
         raise InputError(path, "the 3x3 block is not a rotation")
     M[:3, :3] = R
@@ -584,8 +566,6 @@ def _read_depth_folder(
     if not side and intrinsics is None and not _has_intrinsics_file(root):
         sidecar = files[0].with_name(files[0].stem + ".camera.json")
         if sidecar.is_file():
-            from flexreg.io.depth import read_sidecar
-
             opts = read_sidecar(files[0])
             side = dict(opts)
             side["source"] = sidecar.name
@@ -605,8 +585,6 @@ def _read_depth_folder(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from flexreg.io.trajectory import read_trajectory
-
         gt = read_trajectory(gt_file, "tum")
     return Sequence(
         root=root,
@@ -634,8 +612,6 @@ def _stamp_from_name(stem: str) -> float | None:
 
 
 def _read_scans(root: Path, rate_hz: float, max_frames: int | None) -> Sequence:
-    from flexreg.io import FORMATS
-
     suffixes = set(FORMATS) - {".png"}
     files = sorted(
         (p for p in root.iterdir() if p.is_file() and p.suffix.lower() in suffixes),
@@ -647,8 +623,6 @@ def _read_scans(root: Path, rate_hz: float, max_frames: int | None) -> Sequence:
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        from flexreg.io.trajectory import read_trajectory
-
         gt = read_trajectory(gt_file, "tum")
     else:
         gt = _synth_lidar_truth(root, frames)
@@ -671,9 +645,6 @@ def _synth_lidar_truth(root: Path, frames: tuple[Frame, ...]) -> Trajectory | No
         by_name = {Path(str(f.get("file", ""))).name: f for f in lidar.get("frames", [])}
         if not all(f.depth.name in by_name for f in frames):
             continue
-        from flexreg.core.transforms import as_transform
-        from flexreg.io.trajectory import Trajectory
-
         poses = np.stack(
             [
                 as_transform(by_name[f.depth.name]["T_world_sensor"], name=str(gt_path))
@@ -786,8 +757,6 @@ def _intrinsics(
 
 def _check_groundtruth(seq: Sequence, max_dt_s: float) -> None:
     """The ground truth must associate with at least 3 frames, or it is of no use."""
-    from flexreg.odometry.evaluation import associate
-
     assert seq.groundtruth is not None
     ig, _ = associate(seq.groundtruth, seq.timestamps, max_dt_s=max_dt_s)
     if len(ig) < min(3, len(seq)):

@@ -1,8 +1,8 @@
 """Trajectories on disk: TUM RGB-D and KITTI odometry text formats.
 
-A :class:`Trajectory` is a time-stamped sequence of poses ``T_world_frame`` (4x4 float64,
-mapping points of frame ``i`` into the world frame; the camera-to-world convention both
-formats use).
+A :class:`~flexreg.core.trajectory.Trajectory` is a time-stamped sequence of poses
+``T_world_frame`` (4x4 float64, mapping points of frame ``i`` into the world frame; the
+camera-to-world convention both formats use).
 
 ===========  ==================================================================================
 format       one pose per line
@@ -22,21 +22,22 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
+from flexreg.core.trajectory import Trajectory
+from flexreg.core.transforms import matrix_to_quat, nearest_rotation, quat_to_matrix
 from flexreg.errors import InputError
+from flexreg.io.files import atomic_write
 
 log = logging.getLogger(__name__)
 
 __all__ = [
     "FORMATS",
-    "Trajectory",
     "detect_format",
     "read_trajectory",
     "write_trajectory",
@@ -52,136 +53,6 @@ QUAT_NORM_TOL = 1e-2
 #: a KITTI 3x3 block with max |R R^T - I| above this is not a rotation (7-digit KITTI ground
 #: truth stays within 1e-6)
 ROTATION_TOL = 1e-4
-#: tolerance on orthonormality of the poses a :class:`Trajectory` is built from
-POSE_TOL = 1e-6
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class Trajectory:
-    """Time-stamped rigid poses ``T_world_frame``.
-
-    The arrays are copied to float64 and made read-only. There is at least one pose, and the
-    timestamps increase strictly.
-
-    Parameters
-    ----------
-    timestamps : (N,) float64, seconds
-        Time of each pose (for KITTI files: the frame index).
-    poses : (N, 4, 4) float64
-        ``T_world_frame``: maps points of frame ``i`` into the world frame (metres); each a
-        proper rigid transform (orthonormal rotation block with det +1, to 1e-6).
-    name : str
-        Where the trajectory came from (the file it was read from), used in messages.
-
-    Examples
-    --------
-    >>> poses = np.tile(np.eye(4), (3, 1, 1))
-    >>> poses[:, 0, 3] = [0.0, 1.0, 2.0]
-    >>> traj = Trajectory(np.array([0.0, 0.1, 0.2]), poses, name="walk")
-    >>> len(traj), traj.positions[-1].tolist()
-    (3, [2.0, 0.0, 0.0])
-    """
-
-    timestamps: NDArray[np.float64]
-    poses: NDArray[np.float64]
-    name: str = field(default="")
-
-    def __post_init__(self) -> None:
-        who = self.name or "trajectory"
-        t = np.array(self.timestamps, dtype=np.float64, copy=True)
-        T = np.array(self.poses, dtype=np.float64, copy=True)
-        if t.ndim != 1:
-            raise InputError(who, f"timestamps must be a 1-D array, got shape {t.shape}")
-        if T.shape != (len(t), 4, 4):
-            raise InputError(
-                who,
-                f"poses must have shape ({len(t)}, 4, 4) to match the timestamps, got {T.shape}",
-            )
-        if len(t) == 0:
-            raise InputError(who, "no poses")
-        if not (np.isfinite(t).all() and np.isfinite(T).all()):
-            raise InputError(who, "timestamps or poses hold NaN or Inf")
-        steps = np.diff(t)
-        if (steps <= 0).any():
-            k = int(np.argmax(steps <= 0))
-            raise InputError(
-                who,
-                f"timestamps must increase strictly: pose {k + 1} at t = {float(t[k + 1])!r} s "
-                f"follows t = {float(t[k])!r} s",
-            )
-        bad = ~_is_rigid(T, POSE_TOL)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise InputError(
-                who,
-                f"pose {k} is not a rigid transform (last row 0 0 0 1, orthonormal rotation "
-                "block with det +1)",
-            )
-        t.setflags(write=False)
-        T.setflags(write=False)
-        object.__setattr__(self, "timestamps", t)
-        object.__setattr__(self, "poses", T)
-
-    def __len__(self) -> int:
-        return len(self.timestamps)
-
-    @property
-    def positions(self) -> NDArray[np.float64]:
-        """(N, 3) float64, metres: the frame origins in the world frame."""
-        return self.poses[:, :3, 3]
-
-    @property
-    def duration_s(self) -> float:
-        """Time from the first to the last pose, seconds (0 for fewer than 2 poses)."""
-        return float(self.timestamps[-1] - self.timestamps[0]) if len(self) > 1 else 0.0
-
-    @property
-    def path_length_m(self) -> float:
-        """Length of the polyline through the positions, metres."""
-        return float(np.linalg.norm(np.diff(self.positions, axis=0), axis=1).sum())
-
-    def subset(self, index: ArrayLike) -> Trajectory:
-        """The poses at ``index`` (an increasing integer index array or boolean mask)."""
-        i = np.asarray(index)
-        return Trajectory(self.timestamps[i], self.poses[i], name=self.name)
-
-    def __repr__(self) -> str:
-        label = f"{self.name!r}, " if self.name else ""
-        t0, t1 = self.timestamps[0], self.timestamps[-1]
-        return (
-            f"Trajectory({label}{len(self)} poses, t = {t0:.6f} .. {t1:.6f} s "
-            f"({self.duration_s:.3f} s), path {self.path_length_m:.3f} m)"
-        )
-
-
-def _is_rigid(T: NDArray[np.float64], atol: float) -> NDArray[np.bool_]:
-    """(N,) bool: which of the (N, 4, 4) matrices are proper rigid transforms (to ``atol``)."""
-    R = T[:, :3, :3]
-    ortho = np.abs(R @ R.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2), initial=0.0) <= atol
-    last = np.abs(T[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1, initial=0.0) <= 1e-12
-    return ortho & last & (np.linalg.det(R) > 0)
-
-
-def _quat_xyzw_to_matrix(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(N, 4) quaternions **xyzw** (normalised here) -> (N, 3, 3) rotation matrices."""
-    from scipy.spatial.transform import Rotation
-
-    return np.asarray(Rotation.from_quat(q).as_matrix(), dtype=np.float64).reshape(-1, 3, 3)
-
-
-def _matrix_to_quat_xyzw(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(N, 3, 3) rotations -> (N, 4) unit quaternions **xyzw** with qw >= 0."""
-    from scipy.spatial.transform import Rotation
-
-    q = np.asarray(Rotation.from_matrix(R).as_quat(), dtype=np.float64).reshape(-1, 4)
-    return np.where(q[:, 3:] < 0, -q, q)
-
-
-def _nearest_rotation(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Project (N, 3, 3) nearly orthonormal matrices (det > 0) onto SO(3): ``U V^T`` of the SVD."""
-    U, _, Vt = np.linalg.svd(R)
-    out: NDArray[np.float64] = U @ Vt
-    return out
 
 
 def _parse_lines(path: Path, text: str, fmt: str) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
@@ -262,7 +133,7 @@ def _from_tum(path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp]) 
         )
     keep = order[last]
     poses = np.tile(np.eye(4), (len(keep), 1, 1))
-    poses[:, :3, :3] = _quat_xyzw_to_matrix(q[keep])
+    poses[:, :3, :3] = quat_to_matrix(q[keep], order="xyzw")
     poses[:, :3, 3] = rows[keep, 1:4]
     return Trajectory(t[keep], poses, name=str(path))
 
@@ -281,7 +152,7 @@ def _from_kitti(path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp]
             f"{dev[k]:.3g}, det = {det[k]:.6g})",
         )
     poses = np.tile(np.eye(4), (len(M), 1, 1))
-    poses[:, :3, :3] = _nearest_rotation(R)
+    poses[:, :3, :3] = nearest_rotation(R)
     poses[:, :3, 3] = M[:, :, 3]
     return Trajectory(np.arange(len(M), dtype=np.float64), poses, name=str(path))
 
@@ -390,13 +261,11 @@ def write_trajectory(
     pathlib.Path
         ``path``.
     """
-    from flexreg.io import atomic_write
-
     p = Path(path)
     if fmt not in FORMATS:
         raise InputError(p, f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}")
     if fmt == "tum":
-        q = _matrix_to_quat_xyzw(traj.poses[:, :3, :3])
+        q = matrix_to_quat(traj.poses[:, :3, :3], order="xyzw")
         lines = ["# timestamp tx ty tz qx qy qz qw"]
         for t, xyz, quat in zip(traj.timestamps, traj.positions, q, strict=True):
             lines.append(" ".join(_fmt(v) for v in (t, *xyz, *quat)))

@@ -10,15 +10,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from flexreg.core.jsonable import to_jsonable
 from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import InputError
+from flexreg.io.files import atomic_write
 
 
 def write_transform_txt(path: str | PathLike[str], T: ArrayLike) -> Path:
     """Write a 4x4 matrix as four whitespace-separated rows (what CloudCompare's
     "Edit > Apply transformation" and ``-APPLY_TRANS`` read). Full float64 precision."""
-    from flexreg.io import atomic_write
-
     M = as_transform(T)
     p = Path(path)
     text = "\n".join(" ".join(f"{x:.17g}" for x in row) for row in M) + "\n"
@@ -29,25 +29,14 @@ def write_transform_txt(path: str | PathLike[str], T: ArrayLike) -> Path:
 def write_transform_json(
     path: str | PathLike[str], T: ArrayLike, *, key: str = "T_target_source", **metadata: Any
 ) -> Path:
-    """Write ``{key: [[4x4]], **metadata}`` as JSON (metadata must be JSON-serialisable)."""
-    from flexreg.io import atomic_write
-
+    """Write ``{key: [[4x4]], **metadata}`` as JSON (numpy values and paths in the metadata are
+    converted by :func:`~flexreg.core.jsonable.to_jsonable`)."""
     M = as_transform(T)
     doc = {key: M.tolist(), **metadata}
-    text = json.dumps(doc, indent=2, default=_json_default) + "\n"
+    text = json.dumps(to_jsonable(doc), indent=2) + "\n"
     p = Path(path)
     atomic_write(p, lambda tmp: tmp.write_text(text))
     return p
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
 
 
 def read_transform(
@@ -78,6 +67,7 @@ def read_transform(
     if len(rows) != 4 or any(len(r) != 4 for r in rows):
         raise InputError(p, "expected 4 rows of 4 numbers")
     return as_transform(rows, name=str(p))
+
 
 def read_ground_truth(
     path: str | PathLike[str],

@@ -4,21 +4,22 @@ The definitions are those of the TUM RGB-D benchmark (Sturm et al., *A Benchmark
 Evaluation of RGB-D SLAM Systems*, IROS 2012, eqs. 1-5) and of its published tools
 ``associate.py``, ``evaluate_ate.py`` and ``evaluate_rpe.py``:
 
-- :func:`associate` pairs estimate and ground-truth poses by timestamp: all pairs closer than
-  ``max_dt_s`` are candidates, taken greedily by smallest time difference, each pose used once.
-- :func:`align_umeyama` finds the least-squares rigid (or similarity) transform between the
-  associated positions (Horn 1987; Umeyama 1991, eqs. 38-42).
+- :func:`~flexreg.core.trajectory.associate` pairs estimate and ground-truth poses by
+  timestamp: all pairs closer than ``max_dt_s`` are candidates, taken greedily by smallest time
+  difference, each pose used once.
+- :func:`~flexreg.stages.alignment.umeyama` finds the least-squares rigid (or similarity)
+  transform between the associated positions (Horn 1987; Umeyama 1991, eqs. 38-42).
 - :func:`ate` is the RMSE (and mean/median/std/min/max) of the position differences after that
   alignment, ``F_i = Q_i^-1 S P_i`` (benchmark eqs. 4-5).
 - :func:`rpe` compares motions over a fixed interval ``delta``: with ``A = P_i^-1 P_{i+delta}``
   and ``B = Q_i^-1 Q_{i+delta}``, the error is ``E = A B^-1`` as ``evaluate_rpe.py`` composes
   it (default) or ``E = B^-1 A``, benchmark eq. 1 as printed; reported in metres (its
   translation) and degrees (its rotation angle).
-- :func:`evaluate` runs both, as ``flexreg evaluate`` does; :func:`plot_evaluation` draws the
-  top view and the errors over time.
+- :func:`evaluate` runs both, as ``flexreg evaluate`` does;
+  :func:`flexreg.odometry.plots.plot_evaluation` draws the top view and the errors over time.
 
 ``Q`` is the ground truth and ``P`` the estimate, both ``T_world_frame`` poses
-(:class:`~flexreg.io.trajectory.Trajectory`). Distances are metres, angles in results degrees.
+(:class:`~flexreg.core.trajectory.Trajectory`). Distances are metres, angles in results degrees.
 """
 
 from __future__ import annotations
@@ -26,17 +27,15 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
+from flexreg.core.trajectory import MAX_DT_S, Trajectory, associate, check_window
 from flexreg.core.transforms import rotation_error_deg
-from flexreg.errors import ConfigError, DegenerateGeometryError, InputError
-from flexreg.io.trajectory import Trajectory
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
+from flexreg.errors import ConfigError, InputError
+from flexreg.stages.alignment import umeyama
 
 log = logging.getLogger(__name__)
 
@@ -48,14 +47,11 @@ __all__ = [
     "AteResult",
     "EvaluationResult",
     "RpeResult",
-    "align_umeyama",
-    "associate",
     "ate",
     "check_interval",
     "evaluate",
     "interval_label",
     "nearest_partner",
-    "plot_evaluation",
     "rpe",
 ]
 
@@ -63,12 +59,8 @@ __all__ = [
 DELTA_UNITS = ("frames", "seconds", "metres")
 #: fewest associated poses an evaluation accepts
 MIN_ASSOCIATED = 3
-#: default ATE association window, seconds (TUM ``associate.py``)
-ATE_MAX_DT_S = 0.02
 #: RPE error compositions (see :func:`rpe`)
 RPE_CONVENTIONS = ("tools", "paper")
-#: most candidate pairs :func:`associate` examines (about 32 bytes each)
-MAX_CANDIDATES = 20_000_000
 
 
 class AssociationError(InputError):
@@ -85,177 +77,6 @@ def _stats(x: NDArray[np.float64]) -> dict[str, float]:
         "min": float(np.min(x)),
         "max": float(np.max(x)),
     }
-
-
-def _times(x: Trajectory | ArrayLike, name: str) -> NDArray[np.float64]:
-    t = np.asarray(x.timestamps if isinstance(x, Trajectory) else x, dtype=np.float64)
-    if t.ndim != 1 or not np.isfinite(t).all():
-        raise InputError(name, "timestamps must be a 1-D array of finite seconds")
-    return t
-
-
-def _check_window(max_dt_s: float, offset_s: float) -> None:
-    if not (math.isfinite(max_dt_s) and max_dt_s > 0):
-        raise ConfigError(f"max_dt_s: must be a positive number of seconds, got {max_dt_s}")
-    if not math.isfinite(offset_s):
-        raise ConfigError(f"offset_s: must be a finite number of seconds, got {offset_s}")
-
-
-def associate(
-    gt: Trajectory | ArrayLike,
-    est: Trajectory | ArrayLike,
-    *,
-    max_dt_s: float = 0.02,
-    offset_s: float = 0.0,
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Pair ground-truth and estimate poses by timestamp (TUM ``associate.py`` semantics).
-
-    Every pair with ``|t_gt - (t_est + offset_s)| < max_dt_s`` is a candidate; candidates are
-    taken in order of increasing time difference (ties: earlier ground truth, then earlier
-    estimate), skipping any whose poses are already used, so each pose is used at most once.
-
-    Parameters
-    ----------
-    gt, est : Trajectory or (N,) array_like of float, seconds
-        The two trajectories (or their timestamps).
-    max_dt_s : float, seconds
-        Largest time difference of a pair (exclusive), default 0.02 s as in the TUM tools.
-    offset_s : float, seconds
-        Added to the estimate's timestamps before comparing (sensor delay).
-
-    Returns
-    -------
-    index_gt, index_est : (M,) intp
-        The associated poses, ordered by ground-truth time.
-
-    Raises
-    ------
-    ConfigError
-        ``max_dt_s`` not positive, ``offset_s`` not finite, or a window so wide that it holds
-        more than 20 million candidate pairs.
-
-    Examples
-    --------
-    >>> ig, ie = associate([0.0, 0.01, 0.02, 0.03], [0.012, 0.014, 0.5], max_dt_s=0.005)
-    >>> ig.tolist(), ie.tolist()
-    ([1], [0])
-    """
-    _check_window(max_dt_s, offset_s)
-    tg = _times(gt, "gt")
-    te = _times(est, "est") + offset_s
-    og = np.argsort(tg, kind="stable")
-    tgs = tg[og]
-    lo = np.searchsorted(tgs, te - max_dt_s, side="left")
-    hi = np.searchsorted(tgs, te + max_dt_s, side="right")
-    counts = hi - lo
-    total = int(counts.sum())
-    if total > MAX_CANDIDATES:
-        raise ConfigError(
-            f"max_dt_s: a window of {max_dt_s} s gives {total:,} candidate pairs; use a smaller one"
-        )
-    ie = np.repeat(np.arange(len(te)), counts)
-    start = np.repeat(np.cumsum(counts) - counts, counts)
-    ig = og[lo[ie] + (np.arange(total) - start)]
-    diff = np.abs(tg[ig] - te[ie])
-    ok = diff < max_dt_s
-    ig, ie, diff = ig[ok], ie[ok], diff[ok]
-    # TUM sorts (diff, t_gt, t_est) tuples; with time-ordered indices this is the same order
-    rank_g = np.empty(len(tg), dtype=np.intp)
-    rank_g[og] = np.arange(len(tg))
-    rank_e = np.empty(len(te), dtype=np.intp)
-    rank_e[np.argsort(te, kind="stable")] = np.arange(len(te))
-    order = np.lexsort((rank_e[ie], rank_g[ig], diff))
-    used_g = np.zeros(len(tg), dtype=bool)
-    used_e = np.zeros(len(te), dtype=bool)
-    out_g: list[int] = []
-    out_e: list[int] = []
-    room = min(len(tg), len(te))
-    for g, e in zip(ig[order].tolist(), ie[order].tolist(), strict=True):
-        if used_g[g] or used_e[e]:
-            continue
-        used_g[g] = used_e[e] = True
-        out_g.append(g)
-        out_e.append(e)
-        if len(out_g) == room:
-            break
-    ag = np.asarray(out_g, dtype=np.intp)
-    ae = np.asarray(out_e, dtype=np.intp)
-    by_gt = np.argsort(rank_g[ag], kind="stable")
-    return ag[by_gt], ae[by_gt]
-
-
-def align_umeyama(
-    target: ArrayLike, source: ArrayLike, *, with_scale: bool = False
-) -> tuple[NDArray[np.float64], float]:
-    """Least-squares alignment of corresponding positions: ``target ~= s R source + t``.
-
-    The closed form of Horn (1987) / Umeyama (1991): the SVD ``U D V^T`` of the
-    cross-covariance of the centred points (Umeyama eq. 38) gives ``R = U S V^T`` with
-    ``S = diag(1, 1, det(U) det(V))`` (eqs. 39-40), ``s = tr(D S) / sigma_source^2`` (eq. 42,
-    or 1 without scale) and ``t = mu_target - s R mu_source`` (eq. 41).
-
-    Unlike :func:`flexreg.stages.alignment.kabsch`, which refuses collinear correspondences because
-    a
-    registration must determine the rotation, a trajectory that runs along a straight line is
-    accepted here: the residual, which is what ATE needs, is the same for every rotation about
-    that line (one of them is returned).
-
-    Parameters
-    ----------
-    target, source : (N, 3) array_like of float, metres
-        Corresponding positions (``N >= 3``), e.g. ground truth and estimate.
-    with_scale : bool
-        Also estimate the scale ``s`` (a similarity, for monocular estimates).
-
-    Returns
-    -------
-    T_target_source : (4, 4) float64
-        The rigid part ``[R | t]``.
-    scale : float
-        ``s`` (1.0 unless ``with_scale``). The aligned source is ``apply(T, s * source)``.
-
-    Raises
-    ------
-    InputError
-        Arrays of different or wrong shapes, or non-finite values.
-    DegenerateGeometryError
-        Fewer than 3 points, or (with scale) a source whose points all coincide.
-
-    Examples
-    --------
-    >>> src = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 3]])
-    >>> T, s = align_umeyama(2.0 * src + [1.0, 2.0, 3.0], src, with_scale=True)
-    >>> round(s, 12), np.round(T[:3, 3], 12).tolist()
-    (2.0, [1.0, 2.0, 3.0])
-    """
-    Q = np.asarray(target, dtype=np.float64)
-    P = np.asarray(source, dtype=np.float64)
-    if Q.shape != P.shape or Q.ndim != 2 or Q.shape[1] != 3:
-        raise InputError("positions", f"need two (N, 3) arrays, got {Q.shape} and {P.shape}")
-    if not (np.isfinite(Q).all() and np.isfinite(P).all()):
-        raise InputError("positions", "NaN or Inf in the positions")
-    if len(P) < 3:
-        raise DegenerateGeometryError(f"alignment needs at least 3 positions, got {len(P)}")
-    mq, mp = Q.mean(axis=0), P.mean(axis=0)
-    Qc, Pc = Q - mq, P - mp
-    H = Qc.T @ Pc / len(P)  # eq. 38: target x source cross-covariance
-    U, D, Vt = np.linalg.svd(H)
-    S = np.ones(3)
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:  # eq. 39: no reflection
-        S[2] = -1.0
-    R = (U * S) @ Vt  # eq. 40
-    s = 1.0
-    if with_scale:
-        var_p = float(np.einsum("ij,ij->", Pc, Pc) / len(P))  # eq. 36
-        if var_p <= 1e-24:
-            raise DegenerateGeometryError("scale undetermined: the source positions coincide")
-        s = float(D @ S / var_p)  # eq. 42
-    if np.count_nonzero(D > 1e-12 * max(D[0], 1e-300)) < 2:
-        log.debug("alignment of %d positions is degenerate (collinear or coincident)", len(P))
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = mq - s * R @ mp  # eq. 41
-    return T, s
 
 
 def _association_error(
@@ -358,14 +179,14 @@ def ate(
     est: Trajectory,
     *,
     scale: bool = False,
-    max_dt_s: float = ATE_MAX_DT_S,
+    max_dt_s: float = MAX_DT_S,
     offset_s: float = 0.0,
 ) -> AteResult:
     """Absolute trajectory error (TUM benchmark eqs. 4-5, ``evaluate_ate.py``).
 
     Associates the poses by timestamp (:func:`associate`), aligns the estimate's positions to
-    the ground truth's (:func:`align_umeyama`, rigid unless ``scale``) and measures the
-    remaining position differences ``|trans(Q_k^-1 S P_k)| = |q_k - (s R p_k + t)|``.
+    the ground truth's (:func:`~flexreg.stages.alignment.umeyama`, rigid unless ``scale``) and
+    measures the remaining position differences ``|trans(Q_k^-1 S P_k)| = |q_k - (s R p_k + t)|``.
 
     Parameters
     ----------
@@ -402,7 +223,7 @@ def ate(
         raise _association_error(gt, est, len(ig), max_dt_s, offset_s)
     Q = gt.positions[ig]
     P = est.positions[ie]
-    T, s = align_umeyama(Q, P, with_scale=scale)
+    T, s = umeyama(Q, P, with_scale=scale)
     aligned = s * P @ T[:3, :3].T + T[:3, 3]
     e = np.linalg.norm(Q - aligned, axis=1)
     st = _stats(e)
@@ -499,7 +320,7 @@ def nearest_partner(
         if len(tg) < 2:
             raise AssociationError(gt.name or "gt", "needs at least 2 poses")
         max_dt_s = 2.0 * float(np.median(np.diff(tg)))
-    _check_window(max_dt_s, offset_s)
+    check_window(max_dt_s, offset_s)
     te = est.timestamps + offset_s
     if len(tg) == 1:
         j = np.zeros(len(te), dtype=np.intp)
@@ -828,7 +649,7 @@ def evaluate(
         gt,
         est,
         scale=scale,
-        max_dt_s=ATE_MAX_DT_S if max_dt_s is None else max_dt_s,
+        max_dt_s=MAX_DT_S if max_dt_s is None else max_dt_s,
         offset_s=offset_s,
     )
     r = rpe(
@@ -851,95 +672,3 @@ def interval_label(delta: float, unit: str) -> str:
     ('1 frame', '2.5 metres')
     """
     return f"{delta:g} {unit[:-1] if delta == 1 and unit.endswith('s') else unit}"
-
-
-def _top_axes(points: NDArray[np.float64]) -> tuple[int, int]:
-    """The two coordinate axes along which ``points`` extend most (the plan view; KITTI's
-    camera frame has y down, so this picks x and z there)."""
-    extent = np.ptp(points, axis=0)
-    a, b = sorted(np.argsort(extent)[::-1][:2].tolist())
-    return int(a), int(b)
-
-
-def plot_evaluation(
-    result: EvaluationResult,
-    gt: Trajectory,
-    est: Trajectory,
-    *,
-    time_unit: str = "s",
-) -> Figure:
-    """Figure: top view of the ground truth and the aligned estimate, and errors over time.
-
-    Left: both trajectories projected on the two world axes along which the ground truth
-    extends most, the estimate mapped by the ATE alignment (``scale``, ``T_gt_est``). Right,
-    top: ATE per associated pose; bottom: RPE translation (and rotation, right axis) per pair,
-    both against time since the first ground-truth pose.
-
-    Parameters
-    ----------
-    result : EvaluationResult
-        From :func:`evaluate` on ``gt`` and ``est``.
-    gt, est : Trajectory
-        The trajectories evaluated.
-    time_unit : str
-        Label of the time axis (``"s"``, or ``"frame"`` for KITTI files).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        Drawn with the Agg canvas; save it with ``fig.savefig(path)``.
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    a, r = result.ate, result.rpe
-    names = "xyz"
-    fig = Figure(figsize=(12.0, 6.0), layout="constrained")
-    FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, 2, width_ratios=(1.1, 1.0))
-    top = fig.add_subplot(grid[:, 0])
-    ax0, ax1 = _top_axes(gt.positions)
-    est_aligned = a.scale * est.positions @ a.T_gt_est[:3, :3].T + a.T_gt_est[:3, 3]
-    top.plot(
-        gt.positions[:, ax0],
-        gt.positions[:, ax1],
-        color="0.15",
-        lw=2.4,
-        alpha=0.45,
-        label="ground truth",
-    )
-    top.plot(
-        est_aligned[:, ax0],
-        est_aligned[:, ax1],
-        color="#0072B2",
-        lw=1.0,
-        label="estimate (aligned" + (f", scale {a.scale:.4g})" if a.with_scale else ")"),
-    )
-    top.plot(*gt.positions[0, [ax0, ax1]], "o", color="0.2", ms=5, label="start")
-    top.set_xlabel(f"{names[ax0]} [m]")
-    top.set_ylabel(f"{names[ax1]} [m]")
-    top.set_aspect("equal", adjustable="datalim")
-    top.set_title(f"Top view ({names[ax0]}-{names[ax1]}), ATE rmse {a.rmse_m:.4g} m")
-    top.legend(loc="best", fontsize="small")
-    top.grid(True, lw=0.3)
-
-    t0 = gt.timestamps[0]
-    e1 = fig.add_subplot(grid[0, 1])
-    e1.plot(a.timestamps - t0, a.errors_m, color="#D55E00", lw=0.9)
-    e1.axhline(a.rmse_m, color="0.4", ls="--", lw=0.8, label=f"rmse {a.rmse_m:.4g} m")
-    e1.set_ylabel("ATE [m]")
-    e1.set_title("Absolute trajectory error")
-    e1.legend(loc="upper right", fontsize="small")
-    e1.grid(True, lw=0.3)
-
-    e2 = fig.add_subplot(grid[1, 1], sharex=e1)
-    e2.plot(r.timestamps - t0, r.errors_trans_m, color="#009E73", lw=0.9, label="translation")
-    e2.set_ylabel("RPE translation [m]", color="#009E73")
-    e2.set_xlabel(f"time since start [{time_unit}]")
-    unit = "frames" if time_unit == "frame" and r.delta_unit == "seconds" else r.delta_unit
-    e2.set_title(f"Relative pose error over {interval_label(r.delta, unit)}")
-    e2.grid(True, lw=0.3)
-    e3 = e2.twinx()
-    e3.plot(r.timestamps - t0, r.errors_rot_deg, color="#CC79A7", lw=0.7, alpha=0.8)
-    e3.set_ylabel("RPE rotation [deg]", color="#CC79A7")
-    return fig

@@ -1,6 +1,7 @@
 """Closed-form rigid alignment of 3D correspondences and robust estimation around it.
 
-- :func:`kabsch` — weighted least-squares rigid (or similarity) transform, Umeyama's SVD solution.
+- :func:`umeyama` — weighted least-squares rigid (or similarity) transform, Umeyama's SVD
+  solution; :func:`kabsch` is the same after refusing collinear points.
 - :func:`consistent_subset` — prune outliers with the pairwise-distance consistency of rigid
   motions (a rigid transform preserves every distance), by growing cliques of the
   compatibility graph from its best-connected vertices.
@@ -50,6 +51,112 @@ def spread_ratio(points: NDArray[np.float64], weights: NDArray[np.float64] | Non
     return float(s[1] / s[0]) if s[0] > 0 else 0.0
 
 
+def _weights(weights: ArrayLike | None, n: int) -> NDArray[np.float64]:
+    """One finite non-negative weight per correspondence (all 1 when None), at least 3 > 0."""
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    if len(w) != n or (w < 0).any() or not np.isfinite(w).all():
+        raise InputError("weights", "need one finite non-negative weight per correspondence")
+    if np.count_nonzero(w) < 3:
+        raise DegenerateGeometryError(
+            f"rigid alignment needs at least 3 weighted correspondences, got {np.count_nonzero(w)}"
+        )
+    return w
+
+
+def _umeyama(
+    Q: NDArray[np.float64],
+    P: NDArray[np.float64],
+    w: NDArray[np.float64],
+    *,
+    with_scale: bool,
+    unit_weights: bool,
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """Umeyama's closed form on checked arrays: ``(T_target_source [R | t], s, singular values)``.
+
+    ``unit_weights`` says that ``w`` is all ones; the source variance is then summed without
+    the weights (the same value; its rounding is what the TUM evaluation tools give).
+    """
+    ws = w.sum()
+    mp = (w[:, None] * P).sum(0) / ws
+    mq = (w[:, None] * Q).sum(0) / ws
+    Pc, Qc = P - mp, Q - mq
+    H = (w[:, None] * Qc).T @ Pc / ws  # eq. 38: target x source cross-covariance
+    U, D, Vt = np.linalg.svd(H)
+    S = np.ones(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:  # eq. 39: a rotation, never a reflection
+        S[2] = -1.0
+    R = (U * S) @ Vt  # eq. 40
+    s = 1.0
+    if with_scale:
+        if unit_weights:
+            var_p = float(np.einsum("ij,ij->", Pc, Pc) / len(P))  # eq. 36
+        else:
+            var_p = float((w * np.einsum("ij,ij->i", Pc, Pc)).sum() / ws)
+        if var_p <= 1e-24:
+            raise DegenerateGeometryError("scale undetermined: the source points coincide")
+        s = float(D @ S / var_p)  # eq. 42
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = mq - s * R @ mp  # eq. 41
+    return T, s, D
+
+
+def umeyama(
+    target: ArrayLike,
+    source: ArrayLike,
+    weights: ArrayLike | None = None,
+    *,
+    with_scale: bool = False,
+) -> tuple[NDArray[np.float64], float]:
+    """Least-squares alignment of corresponding points: ``target ~= s R source + t``.
+
+    The closed form of Horn (1987) / Umeyama (1991): the SVD ``U D V^T`` of the (weighted)
+    cross-covariance of the centred points (Umeyama eq. 38) gives ``R = U S V^T`` with
+    ``S = diag(1, 1, det(U) det(V))`` (eqs. 39-40), ``s = tr(D S) / sigma_source^2`` (eq. 42,
+    or 1 without scale) and ``t = mu_target - s R mu_source`` (eq. 41).
+
+    Collinear points are accepted: the residual is the same for every rotation about their
+    line (one of them is returned). :func:`kabsch` refuses them, because a registration must
+    determine the rotation.
+
+    Parameters
+    ----------
+    target, source : (N, 3) array_like of float, metres
+        Corresponding points (``N >= 3``).
+    weights : (N,) array_like of float, optional
+        Non-negative weights (default all 1), at least 3 of them positive.
+    with_scale : bool
+        Also estimate the scale ``s`` (a similarity).
+
+    Returns
+    -------
+    T_target_source : (4, 4) float64
+        The rigid part ``[R | t]``.
+    scale : float
+        ``s`` (1.0 unless ``with_scale``). The aligned source is ``apply(T, s * source)``.
+
+    Raises
+    ------
+    InputError
+        Arrays of different or wrong shapes, non-finite values, or bad weights.
+    DegenerateGeometryError
+        Fewer than 3 (weighted) points, or (with scale) a source whose points all coincide.
+
+    Examples
+    --------
+    >>> src = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 3]])
+    >>> T, s = umeyama(2.0 * src + [1.0, 2.0, 3.0], src, with_scale=True)
+    >>> round(s, 12), np.round(T[:3, 3], 12).tolist()
+    (2.0, [1.0, 2.0, 3.0])
+    """
+    Q, P = _pairs(target, source)
+    w = _weights(weights, len(P))
+    T, s, D = _umeyama(Q, P, w, with_scale=with_scale, unit_weights=weights is None)
+    if np.count_nonzero(D > 1e-12 * max(D[0], 1e-300)) < 2:
+        log.debug("alignment of %d points is degenerate (collinear or coincident)", len(P))
+    return T, s
+
+
 def kabsch(
     target: ArrayLike,
     source: ArrayLike,
@@ -59,8 +166,8 @@ def kabsch(
 ) -> NDArray[np.float64]:
     """Weighted least-squares transform mapping ``source`` onto ``target`` (Kabsch / Umeyama).
 
-    Minimises ``sum_i w_i || target_i - (s R source_i + t) ||^2`` in closed form via the SVD
-    of the weighted cross-covariance, with the reflection fix ``diag(1, 1, det(U V^T))``.
+    Minimises ``sum_i w_i || target_i - (s R source_i + t) ||^2`` in closed form
+    (:func:`umeyama`), after refusing collinear or coincident points.
 
     Parameters
     ----------
@@ -74,7 +181,7 @@ def kabsch(
     Returns
     -------
     (4, 4) float64
-        ``T_target_source``.
+        ``T_target_source`` (with ``s R`` as its 3x3 block when ``with_scale``).
 
     Raises
     ------
@@ -90,32 +197,13 @@ def kabsch(
     [1.0, 2.0, 3.0]
     """
     Q, P = _pairs(target, source)
-    w = np.ones(len(P)) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
-    if len(w) != len(P) or (w < 0).any() or not np.isfinite(w).all():
-        raise InputError("weights", "need one finite non-negative weight per correspondence")
-    if np.count_nonzero(w) < 3:
-        raise DegenerateGeometryError(
-            f"rigid alignment needs at least 3 weighted correspondences, got {np.count_nonzero(w)}"
-        )
-    ws = w.sum()
-    mp = (w[:, None] * P).sum(0) / ws
-    mq = (w[:, None] * Q).sum(0) / ws
-    Pc, Qc = P - mp, Q - mq
+    w = _weights(weights, len(P))
     if spread_ratio(P, w) < COLLINEAR_RATIO or spread_ratio(Q, w) < COLLINEAR_RATIO:
         raise DegenerateGeometryError(
             f"the {len(P)} correspondences are collinear or coincident: rotation undetermined"
         )
-    H = (w[:, None] * Qc).T @ Pc / ws  # cross-covariance, target x source
-    U, S, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
-    R = U @ D @ Vt
-    s = 1.0
-    if with_scale:
-        var_p = (w * np.einsum("ij,ij->i", Pc, Pc)).sum() / ws
-        s = float(np.trace(np.diag(S) @ D) / var_p)
-    T = np.eye(4)
-    T[:3, :3] = s * R
-    T[:3, 3] = mq - s * R @ mp
+    T, s, _ = _umeyama(Q, P, w, with_scale=with_scale, unit_weights=False)
+    T[:3, :3] *= s
     return T
 
 

@@ -1,0 +1,97 @@
+"""Scan files by suffix: ``read_scan`` / ``read_scans`` / ``write_scan`` (see :mod:`flexreg.io`).
+
+Each format lives in its own module (``ptx``, ``e57``, ``pointcloud``, ...), imported when a
+file of that format is first read or written.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+from flexreg.core.scan import Scan
+from flexreg.errors import InputError
+from flexreg.io.files import atomic_write
+from flexreg.io.formats import detect_format
+
+__all__ = ["read_scan", "read_scans", "write_scan"]
+
+_WRITERS = {".ply": "pointcloud", ".npz": "npz", ".ptx": "ptx", ".e57": "e57"}
+
+
+def _module(name: str) -> Any:
+    return importlib.import_module(f"flexreg.io.{name}")
+
+
+def _check_file(p: Path) -> None:
+    if not p.exists():
+        raise InputError(p, "no such file")
+    if p.is_dir():
+        raise InputError(p, "is a folder, not a scan file")
+    if p.stat().st_size == 0:
+        raise InputError(p, "file is empty")
+
+
+def read_scans(
+    path: str | PathLike[str], *, format: str | None = None, **options: Any
+) -> list[Scan]:
+    """Read every scan (cloud, station) in a file.
+
+    Parameters
+    ----------
+    path : path-like
+    format : str, optional
+        Override the suffix: ``ptx``, ``e57``, ``ply``, ``pcd``, ``las``, ``laz``, ``kitti``,
+        ``3dtk``, ``npy``, ``npz``, ``depth``.
+    **options
+        Reader options (``camera``, ``depth_scale``, ``depth_kind`` for depth images; ``pose``
+        for 3DTK).
+
+    Raises
+    ------
+    InputError
+        Unknown suffix, missing/empty file, or any inconsistency in its content.
+    """
+    p = Path(path)
+    mod, _ = detect_format(p, format)
+    _check_file(p)
+    scans: list[Scan] = _module(mod).read(p, **options)
+    if not scans:
+        raise InputError(p, "file holds no scan")
+    if all(len(s) == 0 for s in scans):
+        raise InputError(p, "file holds no valid point (every cell is a no-return)")
+    return scans
+
+
+def read_scan(
+    path: str | PathLike[str], *, format: str | None = None, index: int = 0, **options: Any
+) -> Scan:
+    """Read one scan of a file (the first unless ``index`` says otherwise).
+
+    See :func:`read_scans` for formats and options.
+    """
+    scans = read_scans(path, format=format, **options)
+    if not -len(scans) <= index < len(scans):
+        raise InputError(path, f"scan index {index} out of range: the file holds {len(scans)}")
+    return scans[index]
+
+
+def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:
+    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``, ``.e57``.
+
+    The file is written to a temporary name first and renamed at the end, so a failure never
+    leaves a partial file behind.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in _WRITERS:
+        raise InputError(
+            p, f"cannot write {suffix or '(none)'!r}; writable: {', '.join(sorted(_WRITERS))}"
+        )
+    scans = scan if isinstance(scan, list) else [scan]
+    writer: Callable[..., None] = _module(_WRITERS[suffix]).write
+    atomic_write(p, lambda tmp: writer(tmp, scans, **options))
+    return p

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.calibration.panorama import normalized_fill
@@ -343,6 +342,8 @@ def propose_correspondences(
         Pixels in the (distorted) camera image, points in the lidar frame.
     view : FlexionView
     """
+    from scipy.spatial import cKDTree  # heavy: ~0.1 s at import; the CLI imports this package
+
     T = as_transform(T_init, name="initial guess")
     if view is None:
         view = render_flexion_view(scan, intrinsics, T, scale=config.auto_scale, n=config.flexion_n)

@@ -10,8 +10,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from flexreg.core.camera import SphericalCamera
 from flexreg.core.correspondences import Correspondences2D3D
@@ -43,6 +41,8 @@ def panorama_camera(points: ArrayLike) -> SphericalCamera:
     (whose isotropic pitch this is for a scanner with square sampling). When that function
     recognises evenly spaced rings (one row per ring), its camera is used as it is.
     """
+    from scipy.spatial import cKDTree  # heavy: ~0.1 s at import; the CLI imports this package
+
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     base = auto_spherical_camera(P)
     if not math.isclose(base.dphi, base.dtheta, rel_tol=1e-6):
@@ -67,6 +67,8 @@ def panorama_camera(points: ArrayLike) -> SphericalCamera:
 def _nearest_fill(image: RangeImage, max_px: float) -> RangeImage:
     """Give every no-return pixel within ``max_px`` of a return that nearest return (the real
     point, its index and intensity)."""
+    from scipy import ndimage  # heavy: ~0.1 s at import; the CLI imports this package
+
     v = image.valid
     if v.all() or not v.any():
         return image

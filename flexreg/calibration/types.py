@@ -8,11 +8,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.core.correspondences import Correspondences2D3D
-from flexreg.core.transforms import as_transform, invert
+from flexreg.core.transforms import as_transform, invert, matrix_to_quat
 from flexreg.errors import InputError
 from flexreg.io.intrinsics import CameraIntrinsics
 from flexreg.stages.camera_pose import MIN_CORRESPONDENCES, to_rvec_tvec
@@ -128,13 +127,12 @@ class CalibrationResult:
     @property
     def quaternion_xyzw(self) -> NDArray[np.float64]:
         """(4,) float64 rotation of ``T_camera_lidar`` as a unit quaternion, scalar last."""
-        q = np.asarray(Rotation.from_matrix(self.T_camera_lidar[:3, :3]).as_quat())
-        return q if q[3] >= 0 else -q
+        return matrix_to_quat(self.T_camera_lidar[:3, :3], order="xyzw")
 
     @property
     def quaternion_wxyz(self) -> NDArray[np.float64]:
         """(4,) float64 the same quaternion, scalar first."""
-        return np.roll(self.quaternion_xyzw, 1)
+        return matrix_to_quat(self.T_camera_lidar[:3, :3], order="wxyz")
 
     @property
     def inliers(self) -> int:

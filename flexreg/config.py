@@ -427,17 +427,29 @@ def _toml_value(v: Any) -> str:
 
 
 def to_toml(config: Config, *, header: str | None = None) -> str:
-    """The configuration as TOML, one ``key = value`` per field in declaration order;
-    fields that are None are written as comments (``# key = none``).
+    """The configuration as TOML, one ``key = value`` per field in declaration order; fields
+    that are None are written as comments (``# key = none``), nested configurations as
+    ``[name]`` tables after the plain fields.
 
     :func:`load_config` reads it back to an equal configuration (floats round-trip exactly).
     """
     lines = [f"# {h}" for h in (header.splitlines() if header else [])]
+    tables: list[str] = []
     for name, value in config.model_dump(mode="json").items():
+        if isinstance(value, dict):
+            tables += ["", f"[{name}]", *_toml_lines(value, name)]
+        else:
+            lines += _toml_lines({name: value}, "")
+    return "\n".join(lines + tables) + "\n"
+
+
+def _toml_lines(values: Mapping[str, Any], table: str) -> list[str]:
+    lines = []
+    for name, value in values.items():
         if value is None:
             lines.append(f"# {name} = none")
         elif isinstance(value, dict):
-            raise ConfigError(f"{name}: nested sections are not written by to_toml")
+            raise ConfigError(f"{table}.{name}: tables within tables are not written by to_toml")
         else:
             lines.append(f"{name} = {_toml_value(value)}")
-    return "\n".join(lines) + "\n"
+    return lines

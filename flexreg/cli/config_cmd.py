@@ -7,22 +7,27 @@ it reads back to exactly the defaults.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 
 import typer
 
+from flexreg.bench.types import BenchConfig
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.cli.app import app
 from flexreg.config import Config, to_toml
 from flexreg.errors import ConfigError
 from flexreg.odometry.config import EvaluationConfig, OdometryConfig
 from flexreg.registration.config import RegistrationConfig
+from flexreg.synth.config import SynthConfig
 
-#: command -> the configuration its --config and --set fill in
-CONFIGS: dict[str, type[Config]] = {
+#: command -> its default configuration (the one --config and --set start from)
+CONFIGS: dict[str, Callable[[], Config]] = {
     "register": RegistrationConfig,
     "calibrate": CalibrationConfig,
     "odometry": OdometryConfig,
     "evaluate": EvaluationConfig,
+    "synth": SynthConfig,
+    "bench": BenchConfig.make,
 }
 
 config_app = typer.Typer(
@@ -33,10 +38,10 @@ config_app = typer.Typer(
 app.add_typer(config_app, name="config")
 
 
-def add_config(command: str, cls: type[Config]) -> None:
-    """Make ``cls`` known to ``flexreg config show COMMAND`` (for commands whose configuration
-    lives beside the command)."""
-    CONFIGS[command] = cls
+def add_config(command: str, defaults: Callable[[], Config]) -> None:
+    """Make a command's configuration known to ``flexreg config show COMMAND`` (for commands
+    whose configuration lives beside the command); ``defaults()`` gives its defaults."""
+    CONFIGS[command] = defaults
 
 
 @config_app.command("show")
@@ -55,18 +60,19 @@ def show_command(
     Save it, edit it, and pass it back with --config FILE; --set KEY=VALUE changes single
     fields on the command line.
     """
-    cls = CONFIGS.get(name)
-    if cls is None:
+    defaults = CONFIGS.get(name)
+    if defaults is None:
         raise ConfigError(f"NAME: unknown command {name!r}; known: {', '.join(CONFIGS)}")
+    config = defaults()
     if as_json + as_toml + schema > 1:
         raise ConfigError("--toml, --json, --schema: give at most one")
     if schema:
-        print(json.dumps(cls.model_json_schema(), indent=2))
+        print(json.dumps(type(config).model_json_schema(), indent=2))
     elif as_json:
-        print(json.dumps(cls().to_dict(), indent=2))
+        print(json.dumps(config.to_dict(), indent=2))
     else:
         header = (
-            f"flexreg {name}: default configuration ({cls.__name__}).\n"
+            f"flexreg {name}: default configuration ({type(config).__name__}).\n"
             f"Use with: flexreg {name} ... --config FILE [--set KEY=VALUE ...]"
         )
-        print(to_toml(cls(), header=header), end="")
+        print(to_toml(config, header=header), end="")

@@ -58,7 +58,7 @@ def build_config(
     cls: type[C],
     config_file: Path | None,
     sets: Sequence[str] | None,
-    options: Mapping[str, str],
+    options: Mapping[str, str | tuple[str, ...]],
     *,
     base: Config | None = None,
     **values: Any,
@@ -73,7 +73,8 @@ def build_config(
     sets : sequence of str or None
         The ``--set KEY=VALUE`` items.
     options : mapping
-        Option name -> field it sets (``{"--voxel": "voxel_m"}``), declared once per command.
+        Option name -> field it sets (``{"--voxel": "voxel_m"}``), or fields
+        (``{"--resolution": ("width", "height")}``), declared once per command.
     base : Config, optional
         Used instead of the class defaults when there is no ``config_file`` (a command whose
         defaults depend on another option, like ``bench --quick``).
@@ -85,7 +86,11 @@ def build_config(
     ConfigError
         One line naming the option, ``--set KEY`` or ``FILE: KEY`` at fault and the rule.
     """
-    option_of = {field: option for option, field in options.items()}
+    option_of = {
+        field: option
+        for option, fields in options.items()
+        for field in ((fields,) if isinstance(fields, str) else fields)
+    }
     unknown = set(values) - set(option_of)
     if unknown:  # a programming error in a command, not a user error
         raise TypeError(f"values without an option: {', '.join(sorted(unknown))}")

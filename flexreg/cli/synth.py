@@ -5,20 +5,21 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from flexreg.cli._common import console, err_console, progress_bar
 from flexreg.cli.app import app
+from flexreg.cli.options import ConfigFileOption, SetOption, build_config, with_default
+from flexreg.errors import ConfigError
+from flexreg.synth.config import SynthConfig
 
 if TYPE_CHECKING:
     from flexreg.synth.dataset import SynthResult
 
 
 def _parse_pair(text: str, sep: str, what: str, option: str) -> tuple[float, float]:
-    from flexreg.errors import ConfigError
-
     parts = text.lower().replace(" ", "").split(sep)
     try:
         a, b = (float(p) for p in parts)
@@ -27,83 +28,217 @@ def _parse_pair(text: str, sep: str, what: str, option: str) -> tuple[float, flo
     return a, b
 
 
+#: options that set fields of SynthConfig (option -> field or fields)
+OPTIONS: dict[str, str | tuple[str, ...]] = {
+    "--scene": "scene",
+    "--stations": "stations",
+    "--resolution": ("width", "height"),
+    "--noise-mm": "noise_m",
+    "--seed": "seed",
+    "--format": "format",
+    "--rgbd-frames": "rgbd_frames",
+    "--lidar-frames": "lidar_frames",
+    "--min-overlap": "min_overlap",
+    "--distance-m": "distance_range_m",
+    "--max-tilt-deg": "max_tilt_rad",
+    "--mixed-pixels": "mixed_pixels",
+    "--size-m": "size_m",
+    "--mesh-scale": "mesh_scale",
+    "--mesh-up": "mesh_up_axis",
+    "--embed-poses": "embed_poses",
+}
+_C = SynthConfig
+
+
+def _resolution(text: str | None) -> tuple[int | None, int | None]:
+    if text is None:
+        return None, None
+    w, h = _parse_pair(text, "x", "WIDTHxHEIGHT such as 2048x1024", "--resolution")
+    if w != int(w) or h != int(h):
+        raise ConfigError(f"--resolution: width and height must be integers, got {text!r}")
+    return int(w), int(h)
+
+
+def _option_values(
+    resolution: str | None,
+    noise_mm: float | None,
+    fmt: str | None,
+    distance_m: str | None,
+    max_tilt_deg: float | None,
+    size_m: str | None,
+    mesh_up: str | None,
+) -> dict[str, Any]:
+    """The options given in other units or spellings than their fields, as field values."""
+    width, height = _resolution(resolution)
+    if max_tilt_deg is not None and not math.isfinite(max_tilt_deg):
+        raise ConfigError(f"--max-tilt-deg must be a number, got {max_tilt_deg}")
+    distance = None
+    if distance_m is not None:
+        distance = _parse_pair(distance_m, ",", "MIN,MAX metres such as 2,10", "--distance-m")
+    return {
+        "width": width,
+        "height": height,
+        "noise_m": None if noise_mm is None else noise_mm / 1000.0,
+        "format": None if fmt is None else fmt.lower().lstrip("."),
+        "distance_range_m": distance,
+        "max_tilt_rad": None if max_tilt_deg is None else math.radians(max_tilt_deg),
+        "size_m": None
+        if size_m is None
+        else _parse_pair(size_m, "x", "XxY metres such as 12x9", "--size-m"),
+        "mesh_up_axis": None if mesh_up is None else mesh_up.lower(),
+    }
+
+
+_OutOption = Annotated[Path, typer.Option("--out", help="Output folder.")]
+_SceneOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scene",
+        help="Scene kind: room, courtyard or hall; or a mesh file to scan. [default: room]",
+    ),
+]
+_StationsOption = Annotated[
+    int | None, typer.Option("--stations", help="Number of TLS stations. [default: 2]")
+]
+_ResolutionOption = Annotated[
+    str | None,
+    typer.Option(
+        "--resolution", help="Station grid WIDTHxHEIGHT (azimuth x polar). [default: 2048x1024]"
+    ),
+]
+_NoiseMmOption = Annotated[
+    float | None,
+    typer.Option("--noise-mm", help="Range noise sigma (constant part), mm. [default: 3]"),
+]
+_SeedOption = Annotated[
+    int | None,
+    typer.Option(
+        "--seed", help=with_default(_C, "seed", "Random seed; the same seed gives identical files.")
+    ),
+]
+_FmtOption = Annotated[
+    str | None,
+    typer.Option(
+        "--format", help=with_default(_C, "format", "Station file format: ptx, e57 or npz.")
+    ),
+]
+_RgbdFramesOption = Annotated[
+    int | None,
+    typer.Option(
+        "--rgbd-frames",
+        help=with_default(_C, "rgbd_frames", "Frames of a TUM-style RGB-D sequence."),
+    ),
+]
+_LidarFramesOption = Annotated[
+    int | None,
+    typer.Option(
+        "--lidar-frames",
+        help=with_default(_C, "lidar_frames", "Sweeps of a spinning lidar (64 x 1024)."),
+    ),
+]
+_MinOverlapOption = Annotated[
+    float | None,
+    typer.Option(
+        "--min-overlap",
+        help=with_default(
+            _C,
+            "min_overlap",
+            "Minimal mutual overlap (0..1) of a station with its neighbour.",
+        ),
+    ),
+]
+_DistanceMOption = Annotated[
+    str | None,
+    typer.Option(
+        "--distance-m",
+        help="MIN,MAX distance between neighbouring stations, metres. [default: 2,10]",
+    ),
+]
+_MaxTiltDegOption = Annotated[
+    float | None, typer.Option("--max-tilt-deg", help="Maximal station tilt, degrees. [default: 3]")
+]
+_MixedPixelsOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--mixed-pixels/--no-mixed-pixels",
+        help=with_default(_C, "mixed_pixels", "Simulate mixed pixels at depth edges."),
+    ),
+]
+_SizeMOption = Annotated[
+    str | None,
+    typer.Option(
+        "--size-m", help="Floor size XxY of a procedural scene, metres (default: random)."
+    ),
+]
+_MeshScaleOption = Annotated[
+    float | None,
+    typer.Option(
+        "--mesh-scale", help=with_default(_C, "mesh_scale", "Scale of a mesh scene to metres.")
+    ),
+]
+_MeshUpOption = Annotated[
+    str | None,
+    typer.Option(
+        "--mesh-up", help=with_default(_C, "mesh_up_axis", "Up axis of a mesh scene: x, y or z.")
+    ),
+]
+_EmbedPosesOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--embed-poses/--no-embed-poses",
+        help=with_default(
+            _C, "embed_poses", "Write true poses into station files (default: identity)."
+        ),
+    ),
+]
+
+
 @app.command("synth")
 def synth(
-    scene: str = typer.Option(
-        "room", "--scene", help="Scene kind: room, courtyard or hall; or a mesh file to scan."
-    ),
-    stations: int = typer.Option(2, "--stations", help="Number of TLS stations."),
-    resolution: str = typer.Option(
-        "2048x1024", "--resolution", help="Station grid WIDTHxHEIGHT (azimuth x polar)."
-    ),
-    noise_mm: float = typer.Option(
-        3.0, "--noise-mm", help="Range noise sigma (constant part), mm."
-    ),
-    seed: int = typer.Option(0, "--seed", help="Random seed; the same seed gives identical files."),
-    out: Path = typer.Option(..., "--out", help="Output folder."),
-    fmt: str = typer.Option("ptx", "--format", help="Station file format: ptx, e57 or npz."),
-    rgbd_frames: int = typer.Option(
-        0, "--rgbd-frames", help="Frames of a TUM-style RGB-D sequence."
-    ),
-    lidar_frames: int = typer.Option(
-        0, "--lidar-frames", help="Sweeps of a spinning lidar (64 x 1024)."
-    ),
-    min_overlap: float = typer.Option(
-        0.5, "--min-overlap", help="Minimal mutual overlap (0..1) of a station with its neighbour."
-    ),
-    distance_m: str = typer.Option(
-        "2,10", "--distance-m", help="MIN,MAX distance between neighbouring stations, metres."
-    ),
-    max_tilt_deg: float = typer.Option(
-        3.0, "--max-tilt-deg", help="Maximal station tilt, degrees."
-    ),
-    mixed_pixels: bool = typer.Option(
-        True, "--mixed-pixels/--no-mixed-pixels", help="Simulate mixed pixels at depth edges."
-    ),
-    size_m: str | None = typer.Option(
-        None, "--size-m", help="Floor size XxY of a procedural scene, metres (default: random)."
-    ),
-    mesh_scale: float = typer.Option(1.0, "--mesh-scale", help="Scale of a mesh scene to metres."),
-    mesh_up: str = typer.Option("z", "--mesh-up", help="Up axis of a mesh scene: x, y or z."),
-    embed_poses: bool = typer.Option(
-        False, "--embed-poses", help="Write true poses into station files (default: identity)."
-    ),
+    out: _OutOption,
+    scene: _SceneOption = None,
+    stations: _StationsOption = None,
+    resolution: _ResolutionOption = None,
+    noise_mm: _NoiseMmOption = None,
+    seed: _SeedOption = None,
+    fmt: _FmtOption = None,
+    rgbd_frames: _RgbdFramesOption = None,
+    lidar_frames: _LidarFramesOption = None,
+    min_overlap: _MinOverlapOption = None,
+    distance_m: _DistanceMOption = None,
+    max_tilt_deg: _MaxTiltDegOption = None,
+    mixed_pixels: _MixedPixelsOption = None,
+    size_m: _SizeMOption = None,
+    mesh_scale: _MeshScaleOption = None,
+    mesh_up: _MeshUpOption = None,
+    embed_poses: _EmbedPosesOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
     """Simulate TLS stations (and optionally RGB-D / lidar) of a procedural scene.
 
     Writes scene.ply, one file per station, and gt.json with every station pose
-    T_world_scanner and the pairwise T_target_source = inv(T_world_target) @ T_world_source.
+    T_world_scanner and the pairwise T_target_source = inv(T_world_target) @ T_world_source;
+    gt.json's configuration reruns it with --config.
     """
-    from flexreg.errors import ConfigError
-    from flexreg.synth.dataset import SynthConfig, synthesize
+    from flexreg.synth.dataset import synthesize
 
-    w, h = _parse_pair(resolution, "x", "WIDTHxHEIGHT such as 2048x1024", "--resolution")
-    if w != int(w) or h != int(h):
-        raise ConfigError(f"--resolution: width and height must be integers, got {resolution!r}")
-    d0, d1 = _parse_pair(distance_m, ",", "MIN,MAX metres such as 2,10", "--distance-m")
-    size = (
-        None if size_m is None else _parse_pair(size_m, "x", "XxY metres such as 12x9", "--size-m")
-    )
-    if not math.isfinite(max_tilt_deg):
-        raise ConfigError(f"--max-tilt-deg must be a number, got {max_tilt_deg}")
-    cfg = SynthConfig(
+    converted = _option_values(resolution, noise_mm, fmt, distance_m, max_tilt_deg, size_m, mesh_up)
+    cfg = build_config(
+        SynthConfig,
+        config_file,
+        sets,
+        OPTIONS,
         scene=scene,
         stations=stations,
-        width=int(w),
-        height=int(h),
-        noise_m=noise_mm / 1000.0,
         seed=seed,
-        format=fmt.lower().lstrip("."),
         rgbd_frames=rgbd_frames,
         lidar_frames=lidar_frames,
         min_overlap=min_overlap,
-        distance_range_m=(d0, d1),
-        max_tilt_rad=math.radians(max_tilt_deg),
         mixed_pixels=mixed_pixels,
         mesh_scale=mesh_scale,
-        mesh_up_axis=mesh_up.lower(),
-        size_m=size,
         embed_poses=embed_poses,
+        **converted,
     )
     t0 = time.perf_counter()
     with progress_bar() as bar:

@@ -21,7 +21,7 @@ from flexreg.registration.config import RegistrationConfig
 from flexreg.synth.config import SynthConfig
 
 #: command -> its default configuration (the one --config and --set start from)
-CONFIGS: dict[str, Callable[[], Config]] = {
+CONFIGS: dict[str, Callable[..., Config]] = {
     "register": RegistrationConfig,
     "calibrate": CalibrationConfig,
     "odometry": OdometryConfig,

@@ -59,7 +59,9 @@ from flexreg.bench.harness import machine_info, publish, results_folder, write_j
 from flexreg.core.scan import Scan  # noqa: E402
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m  # noqa: E402
 from flexreg.errors import RegistrationError  # noqa: E402
-from flexreg.registration.pipeline import RegistrationConfig, area_sample, refine, register  # noqa: E402
+from flexreg.registration import RegistrationConfig, register  # noqa: E402
+from flexreg.stages.refinement import refine  # noqa: E402
+from flexreg.stages.sampling import area_sample  # noqa: E402
 
 DATA = REPO.parent / "shared" / "data"
 DOC = REPO / "docs" / "benchmarks.md"

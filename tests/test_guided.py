@@ -23,16 +23,11 @@ from flexreg.core.transforms import (
     translation_error_m,
 )
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.registration.pipeline import (
-    RegistrationConfig,
-    area_cell,
-    area_sample,
-    overlap_score,
-    range_slack,
-    register,
-)
+from flexreg.registration import RegistrationConfig, register
 from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import descriptor_distances, match_guided
+from flexreg.stages.sampling import area_cell, area_sample
+from flexreg.stages.verification import overlap_score, range_slack
 from flexreg.synth import station_pair
 
 

@@ -18,7 +18,7 @@ from flexreg.core.transforms import (
     translation_error_m,
 )
 from flexreg.errors import RegistrationError
-from flexreg.registration.pipeline import RegistrationConfig, register
+from flexreg.registration import RegistrationConfig, register
 from flexreg.stages.projection import project
 
 

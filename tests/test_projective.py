@@ -15,9 +15,10 @@ from flexreg.core.transforms import (
     translation_error_m,
 )
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.registration.pipeline import area_sample
+from flexreg.stages.normals import grid_normals
 from flexreg.stages.projection import range_image
-from flexreg.stages.refinement.projective import grid_normals, point_information, projective_icp
+from flexreg.stages.refinement.projective import point_information, projective_icp
+from flexreg.stages.sampling import area_sample
 from flexreg.synth import station_pair
 
 
@@ -107,7 +108,7 @@ def test_projective_icp_needs_a_camera_and_a_positive_distance(room_pair):
 
 
 def test_pipeline_refine_is_symmetric_projective_by_default(room_pair):
-    from flexreg.registration.pipeline import refine
+    from flexreg.stages.refinement import refine
 
     gt = room_pair.T_target_source
     T0 = make_transform(rotation_about_axis([0.1, 0.3, 1.0], np.radians(0.4)), [-0.02, 0.01, 0.0])

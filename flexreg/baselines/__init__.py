@@ -1,9 +1,9 @@
 """Registration baselines with flexreg's result type: Open3D ICP, Open3D FPFH + RANSAC, KISS-ICP.
 
 Every baseline is a function ``f(target, source, *, T_init=None, voxel_m=None, seed=0)`` that
-returns a :class:`flexreg.registration.pipeline.RegistrationResult` (``T_target_source`` maps
-source points
-into the target frame), so it can stand in for :func:`flexreg.registration.pipeline.register`:
+returns a :class:`flexreg.core.results.PairResult` (``T_target_source`` maps source points into
+the target frame), the type :func:`flexreg.registration.register` returns too, so a baseline can
+stand in for it:
 
 ==============  =====================================================================  =========
 name            what                                                                   start
@@ -31,15 +31,13 @@ from __future__ import annotations
 import importlib
 import importlib.util
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from flexreg.baselines._common import DEFAULT_MAX_POINTS, BaselineConfig, default_voxel
+from flexreg.core.results import PairResult
 from flexreg.errors import ConfigError
 
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationResult
-
-Baseline = Callable[..., "RegistrationResult"]
+Baseline = Callable[..., PairResult]
 
 #: registry: name -> "module:function" (resolved on first use, so nothing heavy is imported)
 BASELINES: dict[str, str] = {
@@ -85,7 +83,7 @@ def get_baseline(name: str) -> Baseline:
     return fn
 
 
-def run_baseline(name: str, target: Any, source: Any, **options: Any) -> RegistrationResult:
+def run_baseline(name: str, target: Any, source: Any, **options: Any) -> PairResult:
     """``get_baseline(name)(target, source, **options)``."""
     return get_baseline(name)(target, source, **options)
 

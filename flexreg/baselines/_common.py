@@ -1,4 +1,4 @@
-"""Pieces shared by the baselines: point extraction, the scale parameter, Open3D clouds, results."""
+"""Pieces shared by the baselines: the scale parameter, the start, Open3D threads, results."""
 
 from __future__ import annotations
 
@@ -6,16 +6,15 @@ import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from flexreg.core.results import PairResult
 from flexreg.core.transforms import as_transform
-from flexreg.errors import ConfigError, InputError, RegistrationError
-
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationConfig, RegistrationResult
+from flexreg.errors import ConfigError, RegistrationError
+from flexreg.stages.sampling import median_spacing, thin, to_open3d
 
 #: default point budget of the scale parameter: the voxel is enlarged until the voxel-downsampled
 #: target keeps at most this many points (FPFH + RANSAC cost grows quickly with the count)
@@ -27,8 +26,8 @@ SPACINGS_PER_VOXEL = 2.0
 
 @dataclass(frozen=True)
 class BaselineConfig:
-    """How a baseline was run; stored in its
-    :class:`~flexreg.registration.pipeline.RegistrationResult`.
+    """How a baseline was run; stored in its :class:`~flexreg.core.results.PairResult`
+    (``seed`` and ``to_dict()`` are what the result uses).
 
     Attributes
     ----------
@@ -64,47 +63,11 @@ class BaselineConfig:
         }
 
 
-def as_points(x: Any, *, name: str) -> NDArray[np.float64]:
-    """(N, 3) float64 points of a :class:`~flexreg.core.scan.Scan`, a
-    :class:`~flexreg.stages.projection.RangeImage` (valid pixels) or an array, in metres.
-
-    Raises
-    ------
-    InputError
-        Not (N, 3), non-finite values, or fewer than 3 points.
-    """
-    from flexreg.core.range_image import RangeImage
-    from flexreg.core.scan import Scan
-
-    if isinstance(x, Scan):
-        P = x.points
-    elif isinstance(x, RangeImage):
-        P = x.xyz[x.valid]
-    else:
-        P = np.asarray(x, dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise InputError(name, f"points must have shape (N, 3), got {P.shape}")
-    if not np.isfinite(P).all():
-        raise InputError(name, "points hold NaN or Inf")
-    if len(P) < 3:
-        raise InputError(name, f"need at least 3 points, got {len(P)}")
-    return np.ascontiguousarray(P, dtype=np.float64)
-
-
 def initial_transform(T_init: ArrayLike | None) -> tuple[NDArray[np.float64], str]:
     """``(T, start)``: the validated initial guess, or the identity."""
     if T_init is None:
         return np.eye(4), "identity"
     return as_transform(T_init, name="T_init"), "initial guess"
-
-
-def cloud(points: NDArray[np.float64]) -> Any:
-    """An Open3D point cloud of (N, 3) float64 points."""
-    import open3d as o3d
-
-    pc = o3d.geometry.PointCloud()
-    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
-    return pc
 
 
 def default_voxel(
@@ -113,7 +76,7 @@ def default_voxel(
     """The scale parameter from the scan resolution: ``(voxel_m, how)``.
 
     ``SPACINGS_PER_VOXEL`` (2) times the target's median nearest-neighbour spacing
-    (:func:`flexreg.stages.refinement.icp.median_spacing`), enlarged until the voxel-downsampled
+    (:func:`flexreg.stages.sampling.median_spacing`), enlarged until the voxel-downsampled
     target keeps at
     most ``max_points`` points. Deterministic (fixed subsample seeds).
 
@@ -129,8 +92,6 @@ def default_voxel(
     how : str
         Which rule set the value (for the record).
     """
-    from flexreg.stages.refinement.icp import median_spacing
-
     if max_points < 100:
         raise ConfigError(f"max_points must be at least 100, got {max_points}")
     spacing = median_spacing(target, tree_points=200_000)
@@ -139,7 +100,7 @@ def default_voxel(
     voxel = SPACINGS_PER_VOXEL * spacing
     how = f"{SPACINGS_PER_VOXEL:g} x median spacing {spacing:.4g} m"
     pts = thin(target, 2_000_000)
-    base = cloud(pts)
+    base = to_open3d(pts)
     n = len(base.voxel_down_sample(voxel).points)
     for _ in range(12):  # the count falls roughly with the square of the voxel (surfaces)
         if n <= max_points:
@@ -159,15 +120,6 @@ def resolve_voxel(
     if not (math.isfinite(voxel_m) and voxel_m > 0):
         raise ConfigError(f"voxel must be a positive number of metres, got {voxel_m}")
     return float(voxel_m), "given"
-
-
-def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
-    """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
-    the sizes the baselines use hold many points of a large scan, so the voxel grid of the
-    thinned cloud hardly differs and downsampling gets much cheaper."""
-    if len(points) <= max_points:
-        return points
-    return points[:: math.ceil(len(points) / max_points)]
 
 
 @contextmanager
@@ -201,16 +153,13 @@ def make_result(
     config: BaselineConfig,
     correspondences: NDArray[np.float64] | None = None,
     prior: str,
-) -> RegistrationResult:
-    """A :class:`~flexreg.registration.pipeline.RegistrationResult` for a baseline.
+) -> PairResult:
+    """A :class:`~flexreg.core.results.PairResult` for a baseline.
 
-    ``config`` is a :class:`BaselineConfig` (it provides ``seed`` and ``to_dict()``, all the
-    result uses); ``keypoints`` are empty (no image features).
+    ``keypoints`` are empty (no image features).
     """
-    from flexreg.registration.pipeline import RegistrationResult
-
     corr = np.zeros((0, 2, 3)) if correspondences is None else correspondences
-    return RegistrationResult(
+    return PairResult(
         T_target_source=np.asarray(T, dtype=np.float64),
         T_coarse=np.asarray(T_coarse, dtype=np.float64),
         matches=int(matches),
@@ -221,7 +170,7 @@ def make_result(
         information=np.asarray(information, dtype=np.float64),
         timings_s=timings_s,
         threshold_m=float(threshold_m),
-        config=cast("RegistrationConfig", config),
+        config=config,
         correspondences=corr,
         inlier_mask=np.ones(len(corr), dtype=bool),
         keypoints=(np.zeros((0, 2)), np.zeros((0, 2))),

@@ -27,26 +27,23 @@ benchmark runs it with all cores, as Open3D does by default (see
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
-    as_points,
-    cloud,
     correspondence_pairs,
     make_result,
     open3d_threads,
     resolve_voxel,
-    thin,
 )
 from flexreg.baselines.open3d_icp import ICP_LEVELS, THIN_POINTS, run_levels
+from flexreg.core.results import PairResult
+from flexreg.core.scan import as_points
 from flexreg.errors import RegistrationError
-
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationResult
+from flexreg.stages.sampling import thin, to_open3d
 
 #: the 1:2:5 rule: normal and FPFH radii in voxels, with their neighbour caps
 NORMAL_RADIUS_VOXELS, NORMAL_MAX_NN = 2.0, 30
@@ -68,7 +65,7 @@ def fpfh_ransac(
     refine: bool = True,
     ransac_threads: int | None = 1,
     T_init: Any = None,
-) -> RegistrationResult:
+) -> PairResult:
     """FPFH + RANSAC global registration (no initial guess), then point-to-plane ICP.
 
     Parameters
@@ -92,7 +89,7 @@ def fpfh_ransac(
 
     Returns
     -------
-    RegistrationResult
+    PairResult
         ``T_coarse`` = the RANSAC transform; ``matches`` = downsampled source points, each with
         its nearest FPFH neighbour in the target (before the mutual filter); ``inliers`` =
         RANSAC inliers within ``1.5 v``. With refinement, ``inlier_rmse_m``, ``fitness`` and
@@ -111,7 +108,7 @@ def fpfh_ransac(
     pt = as_points(target, name="target")
     ps = as_points(source, name="source")
     v, how = resolve_voxel(voxel_m, pt, max_points)
-    tgt_full, src_full = cloud(thin(pt, THIN_POINTS)), cloud(thin(ps, THIN_POINTS))
+    tgt_full, src_full = to_open3d(thin(pt, THIN_POINTS)), to_open3d(thin(ps, THIN_POINTS))
     tgt, src = tgt_full.voxel_down_sample(v), src_full.voxel_down_sample(v)
     t1 = time.perf_counter()
     timings["downsampling"] = t1 - t0
@@ -128,23 +125,7 @@ def fpfh_ransac(
     t2 = time.perf_counter()
     timings["features"] = t2 - t1
     dist = RANSAC_DISTANCE_VOXELS * v
-    o3d.utility.random.seed(int(seed))
-    with open3d_threads(ransac_threads):
-        coarse = reg.registration_ransac_based_on_feature_matching(
-            src,
-            tgt,
-            feats[1],
-            feats[0],
-            True,
-            dist,
-            reg.TransformationEstimationPointToPoint(False),
-            3,
-            [
-                reg.CorrespondenceCheckerBasedOnEdgeLength(EDGE_LENGTH_SIMILARITY),
-                reg.CorrespondenceCheckerBasedOnDistance(dist),
-            ],
-            reg.RANSACConvergenceCriteria(RANSAC_MAX_ITERATIONS, RANSAC_CONFIDENCE),
-        )
+    coarse = _ransac(src, tgt, feats, dist, int(seed), ransac_threads)
     timings["ransac"] = time.perf_counter() - t2
     n_inl = len(coarse.correspondence_set)
     if n_inl < 3:
@@ -163,12 +144,64 @@ def fpfh_ransac(
     t3 = time.perf_counter()
     info = np.asarray(reg.get_information_matrix_from_point_clouds(sl, tl, final_dist, T))
     timings["information"] = time.perf_counter() - t3
-    config = BaselineConfig(
+    config = _settings(v, how, int(seed), dist, ransac_threads, refine)
+    n_src = len(sl.points)
+    return make_result(
+        T=T,
+        T_coarse=T_coarse,
+        matches=len(src.points),
+        inliers=n_inl,
+        inlier_rmse_m=float(res.inlier_rmse),
+        fitness=float(res.fitness),
+        fitness_denominator=(
+            f"{n_src} source points ({v:.3g} m voxels) with a target point within "
+            f"{final_dist:.3g} m"
+        ),
+        information=info,
+        timings_s=timings,
+        threshold_m=final_dist,
+        config=config,
+        correspondences=correspondence_pairs(tl, sl, res.correspondence_set),
+        prior="fpfh-ransac",
+    )
+
+
+def _ransac(
+    src: Any, tgt: Any, feats: list[Any], dist: float, seed: int, ransac_threads: int | None
+) -> Any:
+    """Open3D's RANSAC on mutual FPFH matches (the tutorial's checkers and criteria)."""
+    import open3d as o3d  # heavy: loaded only when the baseline runs
+
+    reg: Any = o3d.pipelines.registration
+    o3d.utility.random.seed(seed)
+    with open3d_threads(ransac_threads):
+        return reg.registration_ransac_based_on_feature_matching(
+            src,
+            tgt,
+            feats[1],
+            feats[0],
+            True,
+            dist,
+            reg.TransformationEstimationPointToPoint(False),
+            3,
+            [
+                reg.CorrespondenceCheckerBasedOnEdgeLength(EDGE_LENGTH_SIMILARITY),
+                reg.CorrespondenceCheckerBasedOnDistance(dist),
+            ],
+            reg.RANSACConvergenceCriteria(RANSAC_MAX_ITERATIONS, RANSAC_CONFIDENCE),
+        )
+
+
+def _settings(
+    v: float, how: str, seed: int, dist: float, ransac_threads: int | None, refine: bool
+) -> BaselineConfig:
+    """The record of how the baseline ran: every size from the voxel ``v``."""
+    return BaselineConfig(
         method="fpfh-ransac",
         voxel_m=v,
         voxel_source=how,
         start="global",
-        seed=int(seed),
+        seed=seed,
         parameters={
             "normal_radius_m": NORMAL_RADIUS_VOXELS * v,
             "normal_max_nn": NORMAL_MAX_NN,
@@ -195,23 +228,4 @@ def fpfh_ransac(
             ),
             "thin_above_points": THIN_POINTS,
         },
-    )
-    n_src = len(sl.points)
-    return make_result(
-        T=T,
-        T_coarse=T_coarse,
-        matches=len(src.points),
-        inliers=n_inl,
-        inlier_rmse_m=float(res.inlier_rmse),
-        fitness=float(res.fitness),
-        fitness_denominator=(
-            f"{n_src} source points ({v:.3g} m voxels) with a target point within "
-            f"{final_dist:.3g} m"
-        ),
-        information=info,
-        timings_s=timings,
-        threshold_m=final_dist,
-        config=config,
-        correspondences=correspondence_pairs(tl, sl, res.correspondence_set),
-        prior="fpfh-ransac",
     )

@@ -27,23 +27,21 @@ Timestamps are all zero (unused without deskewing).
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from flexreg.baselines._common import (
     BaselineConfig,
-    as_points,
-    cloud,
     initial_transform,
     make_result,
 )
+from flexreg.core.results import PairResult
+from flexreg.core.scan import as_points
 from flexreg.core.transforms import apply, invert
 from flexreg.errors import ConfigError, RegistrationError
-
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationResult
+from flexreg.stages.sampling import to_open3d
 
 #: max_range = this x the largest point range of the pair ("covering the scan")
 RANGE_MARGIN = 1.01
@@ -58,7 +56,7 @@ def kiss_icp(
     T_init: ArrayLike | None = None,
     voxel_m: float | None = None,
     seed: int = 0,
-) -> RegistrationResult:
+) -> PairResult:
     """Register ``source`` onto ``target`` with KISS-ICP (see the module notes for how).
 
     Parameters
@@ -74,7 +72,7 @@ def kiss_icp(
 
     Returns
     -------
-    RegistrationResult
+    PairResult
         ``T_coarse`` is the start; ``matches`` = the source points KISS-ICP registered (its
         ``1.5 x voxel`` subsample), ``inliers`` / ``fitness`` / ``inlier_rmse_m`` = those with
         a map point within ``3 sigma`` (the distance KISS-ICP used), evaluated by Open3D.
@@ -130,7 +128,7 @@ def kiss_icp(
     reg: Any = o3d.pipelines.registration
     dist = 3.0 * sigma
     # `used` is in the frame of the points fed (the source moved by T0), so evaluate with T_kiss
-    src, tgt = cloud(used), cloud(map_points)
+    src, tgt = to_open3d(used), to_open3d(map_points)
     ev = reg.evaluate_registration(src, tgt, dist, T_kiss)
     info = np.asarray(reg.get_information_matrix_from_point_clouds(src, tgt, dist, T_kiss))
     corr = np.asarray(ev.correspondence_set, dtype=np.int64).reshape(-1, 2)

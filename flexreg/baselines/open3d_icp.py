@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,19 +42,16 @@ from numpy.typing import ArrayLike, NDArray
 from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
-    as_points,
-    cloud,
     correspondence_pairs,
     initial_transform,
     make_result,
     open3d_threads,
     resolve_voxel,
-    thin,
 )
+from flexreg.core.results import PairResult
+from flexreg.core.scan import as_points
 from flexreg.errors import ConfigError, RegistrationError
-
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationResult
+from flexreg.stages.sampling import median_spacing, thin, to_open3d
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +81,7 @@ def icp(
     max_points: int = DEFAULT_MAX_POINTS,
     seed: int = 0,
     name: str | None = None,
-) -> RegistrationResult:
+) -> PairResult:
     """Coarse-to-fine Open3D ICP from the identity or from ``T_init``.
 
     Parameters
@@ -106,7 +103,7 @@ def icp(
 
     Returns
     -------
-    RegistrationResult
+    PairResult
         ``T_coarse`` is the start; ``matches`` = downsampled source points searched at the
         finest level, ``inliers`` = those with a target point within its distance (``2 v``);
         ``fitness`` = inliers / matches; ``correspondences`` = those pairs.
@@ -128,8 +125,8 @@ def icp(
     ps = as_points(source, name="source")
     T0, start = initial_transform(T_init)
     v, how = resolve_voxel(voxel_m, pt, max_points)
-    tgt = cloud(thin(pt, THIN_POINTS))
-    src = cloud(thin(ps, THIN_POINTS))
+    tgt = to_open3d(thin(pt, THIN_POINTS))
+    src = to_open3d(thin(ps, THIN_POINTS))
     timings["downsampling"] = time.perf_counter() - t0
     T, res, levels, (tl, sl) = run_levels(tgt, src, T0, v, variant, timings)
     reg: Any = o3d.pipelines.registration
@@ -263,22 +260,20 @@ def run_levels(
 
 def level_floor(cloud_: Any) -> float:
     """Median nearest-neighbour spacing of an Open3D cloud (metres; 0 for < 2 points)."""
-    from flexreg.stages.refinement.icp import median_spacing
-
     pts = np.asarray(cloud_.points)
     return median_spacing(pts, sample=2000) if len(pts) >= 2 else 0.0
 
 
-def icp_point_to_point(target: Any, source: Any, **options: Any) -> RegistrationResult:
+def icp_point_to_point(target: Any, source: Any, **options: Any) -> PairResult:
     """``icp(..., variant="point-to-point")`` (registry name ``icp-point``)."""
     return icp(target, source, variant="point-to-point", name="icp-point", **options)
 
 
-def icp_point_to_plane(target: Any, source: Any, **options: Any) -> RegistrationResult:
+def icp_point_to_plane(target: Any, source: Any, **options: Any) -> PairResult:
     """``icp(..., variant="point-to-plane")`` (registry name ``icp-plane``)."""
     return icp(target, source, variant="point-to-plane", name="icp-plane", **options)
 
 
-def generalized_icp(target: Any, source: Any, **options: Any) -> RegistrationResult:
+def generalized_icp(target: Any, source: Any, **options: Any) -> PairResult:
     """``icp(..., variant="gicp")`` (registry name ``gicp``)."""
     return icp(target, source, variant="gicp", name="gicp", **options)

@@ -13,7 +13,7 @@ thread, so that the result is identical from run to run.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -21,16 +21,14 @@ from numpy.typing import ArrayLike
 from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
     BaselineConfig,
-    as_points,
     initial_transform,
     make_result,
     resolve_voxel,
 )
+from flexreg.core.results import PairResult
+from flexreg.core.scan import as_points
 from flexreg.core.transforms import apply
 from flexreg.errors import RegistrationError
-
-if TYPE_CHECKING:
-    from flexreg.registration.pipeline import RegistrationResult
 
 #: downsampling resolution in scale voxels, and the correspondence distance in downsampling
 #: resolutions (small_gicp's default 1.0 m / 0.25 m)
@@ -48,7 +46,7 @@ def small_gicp_align(
     voxel_m: float | None = None,
     max_points: int = DEFAULT_MAX_POINTS,
     seed: int = 0,
-) -> RegistrationResult:
+) -> PairResult:
     """GICP with small_gicp from the identity or ``T_init`` (see the module notes).
 
     Parameters
@@ -65,7 +63,7 @@ def small_gicp_align(
 
     Returns
     -------
-    RegistrationResult
+    PairResult
         ``matches`` = downsampled source points, ``inliers`` = small_gicp's ``num_inliers``
         (within ``2 v``), ``fitness`` = their share, ``inlier_rmse_m`` over them,
         ``information`` = small_gicp's Hessian ``H`` (rotation first, like Open3D's).

@@ -43,7 +43,6 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from flexreg.baselines import default_voxel
-from flexreg.baselines._common import as_points
 from flexreg.bench.measure import (
     Measured,
     isolation_note,
@@ -54,6 +53,7 @@ from flexreg.bench.measure import (
     save_pair,
 )
 from flexreg.bench.methods import DEFAULT_METHODS, GLOBAL_METHODS, parse_methods, run_method
+from flexreg.core.scan import as_points
 from flexreg.core.transforms import as_transform, rotation_error_deg, translation_error_m
 from flexreg.errors import ConfigError, InputError, RegistrationError
 from flexreg.registration.config import RegistrationConfig

@@ -170,3 +170,33 @@ class Scan:
         """Points mapped into the world frame with ``T_world_scanner``, (N, 3) float64."""
         T = self.T_world_scanner
         return self.points @ T[:3, :3].T + T[:3, 3]
+
+
+def as_points(x: Any, *, name: str = "points") -> NDArray[np.float64]:
+    """(N, 3) float64 points of a :class:`Scan`, a
+    :class:`~flexreg.core.range_image.RangeImage` (its valid pixels) or an array, in metres.
+
+    Parameters
+    ----------
+    x : Scan, RangeImage or (N, 3) array_like
+    name : str
+        What to call ``x`` in error messages.
+
+    Raises
+    ------
+    InputError
+        Not (N, 3), non-finite values, or fewer than 3 points.
+    """
+    if isinstance(x, Scan):
+        P = x.points
+    elif hasattr(x, "xyz") and hasattr(x, "valid"):  # a RangeImage (which imports this module)
+        P = x.xyz[x.valid]
+    else:
+        P = np.asarray(x, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(name, f"points must have shape (N, 3), got {P.shape}")
+    if not np.isfinite(P).all():
+        raise InputError(name, "points hold NaN or Inf")
+    if len(P) < 3:
+        raise InputError(name, f"need at least 3 points, got {len(P)}")
+    return np.ascontiguousarray(P, dtype=np.float64)

@@ -1,0 +1,15 @@
+"""Pairwise registration of scans: :func:`register` (one pair), :class:`Registration`
+(``prepare`` each scan once, ``align`` many pairs), :class:`RegistrationConfig`,
+:class:`RegistrationResult`."""
+
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.pipeline import PreparedScan, Registration, register
+from flexreg.registration.result import RegistrationResult
+
+__all__ = [
+    "PreparedScan",
+    "Registration",
+    "RegistrationConfig",
+    "RegistrationResult",
+    "register",
+]

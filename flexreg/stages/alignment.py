@@ -7,6 +7,8 @@
   compatibility graph from its best-connected vertices.
 - :func:`ransac_rigid` — 3-point RANSAC with batched (vectorised) hypotheses, MSAC scoring,
   adaptive stopping by confidence and a final least-squares fit on all inliers.
+- :func:`guided_fit` — guided matching around a prior and least squares with a shrinking
+  inlier radius (the prior-driven alternative to RANSAC).
 
 All transforms are ``T_target_source``: ``target ~= R @ source + t``.
 """
@@ -22,6 +24,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flexreg.errors import DegenerateGeometryError, InputError
+from flexreg.stages.keypoints import Features
+from flexreg.stages.matching import match_guided
 
 log = logging.getLogger(__name__)
 
@@ -445,3 +449,107 @@ def consistent_subset(
         if len(clique) > len(best):
             best = clique
     return np.sort(cand[np.asarray(best, dtype=np.int64)])
+
+
+@dataclass(eq=False)
+class GuidedFit:
+    """Outcome of :func:`guided_fit`.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+    pairs : (Q, 2) int64
+        ``(target keypoint, source keypoint)`` of the final guided matches.
+    inliers : (Q,) bool
+        Pairs within ``threshold_m`` under ``T_target_source``.
+    """
+
+    T_target_source: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+    inliers: NDArray[np.bool_]
+
+
+def _shrinking_fit(
+    T: NDArray[np.float64],
+    pt: NDArray[np.float64],
+    ps: NDArray[np.float64],
+    r0: float,
+    threshold_m: float,
+    radius_per_m: float,
+) -> tuple[NDArray[np.float64] | None, NDArray[np.bool_]]:
+    """Least squares (:func:`kabsch`) on the pairs within a radius that halves from ``r0``
+    down to ``threshold_m`` (the range-proportional part shrinking alike), then two more fits
+    at ``threshold_m``; None when the inliers get too few or collinear."""
+    thr = threshold_m
+    rng_s = np.linalg.norm(ps, axis=1)
+    radii = [r0]
+    while radii[-1] > thr:
+        radii.append(max(radii[-1] / 2, thr))
+    for radius in [*radii, thr, thr]:
+        extra = radius_per_m * rng_s * (radius / r0) if radius > thr else 0.0
+        inl = squared_residuals(T, pt, ps) < (radius + extra) ** 2
+        if inl.sum() < 3 or spread_ratio(ps[inl]) < COLLINEAR_RATIO:
+            return None, inl
+        T = kabsch(pt[inl], ps[inl])
+    return T, squared_residuals(T, pt, ps) < thr * thr
+
+
+def guided_fit(
+    target_features: Features,
+    source_features: Features,
+    target_points: NDArray[np.float64],
+    source_points: NDArray[np.float64],
+    T_prior: NDArray[np.float64],
+    *,
+    threshold_m: float,
+    radius_m: float = 0.25,
+    radius_per_m: float = 0.02,
+) -> GuidedFit | None:
+    """Guided matching around a prior, then least squares with a shrinking inlier radius.
+
+    The prior is trusted to within the guided search radius (``radius_m`` plus
+    ``radius_per_m`` per metre of range, at least ``2 threshold_m``); starting from it,
+    correspondences within the current radius are fitted (Kabsch) and the radius halves down to
+    ``threshold_m``, so the estimate cannot jump to an unrelated model the way RANSAC on the
+    same matches can. A second, tight guided round around the result collects the final
+    matches (:func:`flexreg.stages.matching.match_guided`).
+
+    Parameters
+    ----------
+    target_features, source_features : Features
+        Keypoints and descriptors of both images.
+    target_points, source_points : (K, 3) float64, metres
+        The keypoints lifted to 3D (NaN where they could not be).
+    T_prior : (4, 4) float64
+        The prior ``T_target_source``.
+    threshold_m : float, metres
+        Inlier distance.
+    radius_m, radius_per_m : float
+        Search radius around the prior's prediction: metres plus metres per metre of range.
+
+    Returns
+    -------
+    GuidedFit or None
+        None when too few (or collinear) matches support a fit.
+    """
+    ft, fs, xt, xs, thr = (
+        target_features,
+        source_features,
+        target_points,
+        source_points,
+        threshold_m,
+    )
+    r0 = max(radius_m, 2 * thr)
+    pairs = match_guided(ft, fs, xt, xs, T_prior, radius_m=r0, radius_per_m=radius_per_m)
+    if len(pairs) < 3:
+        return None
+    T, _ = _shrinking_fit(T_prior, xt[pairs[:, 0]], xs[pairs[:, 1]], r0, thr, radius_per_m)
+    if T is None:
+        return None
+    pairs = match_guided(ft, fs, xt, xs, T, radius_m=2 * thr, radius_per_m=0.002)
+    if len(pairs) < 3:
+        return None
+    T, inl = _shrinking_fit(T, xt[pairs[:, 0]], xs[pairs[:, 1]], 2 * thr, thr, radius_per_m)
+    if T is None:
+        return None
+    return GuidedFit(T, pairs, inl)

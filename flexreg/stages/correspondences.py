@@ -1,4 +1,5 @@
-"""Lift 2D keypoints to 3D points on the range image they were detected in."""
+"""Lift 2D keypoints to 3D points on the range image they were detected in; the metric pixel
+footprint and the inlier threshold it gives."""
 
 from __future__ import annotations
 
@@ -71,3 +72,53 @@ def lift(
     ok[a] = good
     pts[a[good]] = p[good]
     return pts, ok
+
+
+def pixel_footprint(image: RangeImage) -> NDArray[np.float32]:
+    """(H, W) metric size of each pixel: the smaller of its horizontal and vertical
+    neighbour distances (NaN where unknown). Used to derive thresholds from resolution."""
+    rows, cols = np.indices(image.shape).reshape(2, -1)
+    return _footprint_at(image, rows, cols).reshape(image.shape)
+
+
+def _footprint_at(
+    image: RangeImage, rows: NDArray[np.int64], cols: NDArray[np.int64]
+) -> NDArray[np.float32]:
+    """:func:`pixel_footprint` at the given pixels only ((N,) float32)."""
+    xyz = image.xyz
+    p = xyz[rows, cols]
+    right = cols + 1
+    if image.wraps:
+        right = np.where(right == image.width, 0, right)
+    nan = np.full(3, np.nan)
+    ph = np.where(
+        (right < image.width)[:, None], xyz[rows, np.minimum(right, image.width - 1)], nan
+    )
+    below = rows + 1
+    pv = np.where(
+        (below < image.height)[:, None], xyz[np.minimum(below, image.height - 1), cols], nan
+    )
+    with np.errstate(invalid="ignore"):
+        dh = np.linalg.norm(ph - p, axis=1).astype(np.float32)
+        return np.fmin(dh, np.linalg.norm(pv - p, axis=1).astype(np.float32))
+
+
+def derive_threshold(
+    target: RangeImage,
+    source: RangeImage,
+    xy_target: NDArray[np.float64],
+    xy_source: NDArray[np.float64],
+    *,
+    threshold_px: float = 3.0,
+) -> float:
+    """Inlier distance from the scans' resolution: ``threshold_px`` times the median metric
+    footprint of the pixels under the keypoints (at least 5 mm), metres."""
+    f = []
+    for img, xy in ((target, xy_target), (source, xy_source)):
+        if len(xy) == 0:
+            continue
+        c = np.clip(np.rint(xy).astype(np.int64), 0, [img.width - 1, img.height - 1])
+        f.append(_footprint_at(img, c[:, 1], c[:, 0]))
+    fa = np.concatenate(f) if f else np.zeros(0)
+    thr = float(threshold_px * np.nanmedian(fa)) if np.isfinite(fa).any() else 0.05
+    return max(thr, 0.005)

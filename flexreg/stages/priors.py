@@ -14,9 +14,11 @@ that makes panoramic feature matching fail across wide baselines. This module
   cross-correlation over yaw (:func:`match_top_views`); the height offset comes from the 1D
   correlation of the heights of horizontal surfaces (floor, tables, ceiling).
 
-The result, :func:`upright_hypotheses`, is a short list of ``T_target_source`` candidates,
-best first; the registration pipeline uses them to guide feature matching and verifies them
-against the data (:mod:`flexreg.registration.pipeline`).
+The result, :func:`upright_priors`, is a short list of ``T_target_source`` candidates, best
+first; the registration pipeline uses them to guide feature matching and verifies them
+against the data (:mod:`flexreg.registration.candidates`). Its per-scan half
+(:func:`plan_view`) is computed once per scan, the pair half (:func:`plan_overlays`) once per
+pair.
 """
 
 from __future__ import annotations
@@ -31,48 +33,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.range_image import RangeImage
+from flexreg.core.transforms import invert, rotation_about_axis
 from flexreg.errors import DegenerateGeometryError
+from flexreg.stages.normals import surface_normals
 
 log = logging.getLogger(__name__)
-
-
-def surface_normals(
-    image: RangeImage, *, k: int = 2, stride: int = 1, compact: bool = True
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Unit normals of an organised scan from central differences at pixel offset ``k``.
-
-    Parameters
-    ----------
-    image : RangeImage
-    k : int
-        Pixel offset of the neighbours (larger is smoother on noisy surfaces).
-    stride : int
-        Use every ``stride``-th row and column (speed on very large images).
-    compact : bool
-        Keep only the usable pixels (default). Otherwise every (strided) pixel in row-major
-        order, with area 0 (and zero normal) where unusable: no copies of the image, and every
-        function here accepts that form.
-
-    Returns
-    -------
-    points : (M, 3) float64, metres
-        The pixels' points (only pixels whose four neighbours are valid and continuous).
-    normals : (M, 3) float64
-        Unit normals, oriented towards the scanner.
-    area : (M,) float64, square metres
-        Surface area each pixel covers (product of its neighbour spacings), so that sums over
-        pixels measure surface independently of the distance to the scanner.
-    """
-    xyz = np.ascontiguousarray(image.xyz[::stride, ::stride], dtype=np.float64)
-    H, W = xyz.shape[:2]
-    if H <= 2 * k or W <= 2 * k:
-        z = np.zeros((0, 3))
-        return z, z, np.zeros(0)
-    nrm, area = _normals_area(xyz, int(k), image.wraps)
-    if not compact:
-        return xyz.reshape(-1, 3), nrm.reshape(-1, 3), area.reshape(-1)
-    ok = area > 0
-    return xyz[ok], nrm[ok], area[ok]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -669,16 +634,145 @@ def height_offset(target: TopView, source: TopView, *, max_offset_m: float = 5.0
     return float(shift[i])
 
 
+# ------------------------------------------------------------------------- priors of a pair
+
+#: the plan views are drawn from at most about this many pixels per scan (every k-th row and
+#: column of larger images); 300 k at 1024 x 512 already lost the far structure that places a
+#: distant station
+PLAN_PIXELS = 1_000_000
+
+
+@dataclass(eq=False)
+class PlanView:
+    """What the plan overlays need of one scan (:func:`plan_view`).
+
+    Attributes
+    ----------
+    levelling : Levelling
+        The scan's vertical.
+    coarse, fine : TopView
+        Plan images at the plan cell (40 m around the scanner) and a quarter of it (20 m).
+    """
+
+    levelling: Levelling
+    coarse: TopView
+    fine: TopView
+
+
+def plan_view(
+    image: RangeImage,
+    *,
+    max_tilt_rad: float = math.radians(10.0),
+    plan_cell_m: float = 0.25,
+    max_pixels: int = PLAN_PIXELS,
+) -> PlanView:
+    """The levelling and the two plan images of one scan: the per-scan half of
+    :func:`upright_priors`.
+
+    Parameters
+    ----------
+    image : RangeImage
+        An organised scan (every k-th row and column of it when it has more than
+        ``max_pixels`` pixels).
+    max_tilt_rad : float, radians
+        Largest tilt of a scan still treated as levelled.
+    plan_cell_m : float, metres
+        Cell of the coarse plan image (the fine one has a quarter of it).
+    max_pixels : int
+        Pixel budget of the normals.
+
+    Raises
+    ------
+    DegenerateGeometryError
+        The scan is not levelled or shows too little horizontal or vertical surface.
+    """
+    stride = max(1, math.ceil(math.sqrt(image.height * image.width / max_pixels)))
+    pts, nrm, area = surface_normals(image, k=2, stride=stride, compact=False)
+    lev = estimate_up(nrm, area, max_tilt_rad=max_tilt_rad)
+    coarse, fine = top_views(pts, nrm, area, lev, [(plan_cell_m, 40.0), (plan_cell_m / 4, 20.0)])
+    return PlanView(lev, coarse, fine)
+
+
+def plan_overlays(
+    target: PlanView, source: PlanView, *, hypotheses: int = 3
+) -> list[NDArray[np.float64]]:
+    """``T_target_source`` candidates of two levelled scans from their plan views, best first:
+    the pair half of :func:`upright_priors`.
+
+    The coarse plans are overlaid by FFT correlation over yaw (2 degree steps, 6 coarse yaw
+    candidates, ``hypotheses`` overlays kept), the fine plans refine each over +-1 degree, and
+    the height offset comes from the horizontal surfaces.
+    """
+    lt, ls = target.levelling, source.levelling
+    plans = match_top_views(
+        target.coarse,
+        source.coarse,
+        yaw_step_rad=math.radians(2.0),
+        top_k=hypotheses,
+        coarse_candidates=6,
+    )
+    plans = refine_plan_matches(target.fine, source.fine, plans, yaw_range_rad=math.radians(1.0))
+    dz = height_offset(target.coarse, source.coarse)
+    out = []
+    for m in plans:
+        M = np.eye(4)
+        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
+        M[:3, 3] = (m.t_xy[0], m.t_xy[1], dz)
+        Lt, Ls = np.eye(4), np.eye(4)
+        Lt[:3, :3], Ls[:3, :3] = lt.R_level, ls.R_level
+        out.append(invert(Lt) @ M @ Ls)
+    log.info(
+        "plan overlays: %s (tilts %.2f / %.2f deg, dz %.3f m)",
+        ", ".join(f"{math.degrees(m.yaw_rad):.1f} deg score {m.score:.0f}" for m in plans),
+        math.degrees(lt.tilt_rad),
+        math.degrees(ls.tilt_rad),
+        dz,
+    )
+    return out
+
+
+def upright_priors(
+    target: RangeImage,
+    source: RangeImage,
+    *,
+    max_tilt_rad: float = math.radians(10.0),
+    plan_cell_m: float = 0.25,
+    plan_hypotheses: int = 3,
+) -> list[NDArray[np.float64]]:
+    """``T_target_source`` candidates of two levelled scans from their plan views, best first.
+
+    Each scan's vertical is estimated from its surfaces, the plans of the levelled scans are
+    overlaid by FFT correlation over yaw and the height offset is read from their horizontal
+    surfaces. Accurate to about a plan cell and a degree: a prior for guided matching, not a
+    result. :func:`plan_view` (per scan) then :func:`plan_overlays` (per pair).
+
+    Raises
+    ------
+    DegenerateGeometryError
+        A scan is not levelled (tilt above ``max_tilt_rad``) or shows too little horizontal or
+        vertical surface.
+    """
+    views = [
+        plan_view(img, max_tilt_rad=max_tilt_rad, plan_cell_m=plan_cell_m)
+        for img in (target, source)
+    ]
+    return plan_overlays(views[0], views[1], hypotheses=plan_hypotheses)
+
+
 __all__ = [
+    "PLAN_PIXELS",
     "Levelling",
     "PlanMatch",
+    "PlanView",
     "TopView",
     "estimate_up",
     "height_offset",
     "match_top_views",
+    "plan_overlays",
+    "plan_view",
     "refine_plan_match",
     "refine_plan_matches",
-    "surface_normals",
     "top_view",
     "top_views",
+    "upright_priors",
 ]

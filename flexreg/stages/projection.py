@@ -17,6 +17,7 @@ from flexreg.core.camera import Camera, SphericalCamera
 from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
     RangeImage,
+    downsample_image,
     from_grid,
     from_index,
 )
@@ -291,6 +292,39 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
         camera=image.camera,
         intensity=image.intensity,
     )
+
+
+#: range images larger than this are subsampled (every k-th row and column) for the image stages
+MAX_IMAGE_PIXELS = 2_500_000
+
+
+def working_image(x: Scan | RangeImage, *, max_pixels: int = MAX_IMAGE_PIXELS) -> RangeImage:
+    """The range image the image stages work on: at most ``max_pixels`` (every k-th row and
+    column of larger grids). A gridded scan keeps its native grid (:func:`range_image`)."""
+
+    def factor(h: int, w: int) -> int:
+        return max(1, math.ceil(math.sqrt(h * w / max(1, max_pixels))))
+
+    if isinstance(x, Scan) and x.has_grid and x.grid_shape is not None:
+        return from_grid(x, stride=factor(*x.grid_shape))
+    img = x if isinstance(x, RangeImage) else range_image(x)
+    return downsample_image(img, factor(img.height, img.width))
+
+
+def with_camera(image: RangeImage) -> RangeImage:
+    """The image itself when it has a camera model; otherwise its points re-projected through
+    an equirectangular camera fitted to them (:func:`auto_spherical_camera`), so that checks
+    can look pixels up."""
+    if image.camera is not None:
+        return image
+    pts = image.xyz[image.valid]
+    return project(Scan(points=pts), auto_spherical_camera(pts))
+
+
+def camera_image(x: Scan | RangeImage, *, max_pixels: int = MAX_IMAGE_PIXELS) -> RangeImage:
+    """The range image a scan is checked against and refined on: :func:`working_image`, holes
+    filled (:func:`fill_holes`), with a camera model (:func:`with_camera`)."""
+    return with_camera(fill_holes(working_image(x, max_pixels=max_pixels)))
 
 
 @numba.njit(cache=True, nogil=True)

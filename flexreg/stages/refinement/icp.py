@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from flexreg.errors import ConfigError, RegistrationError
+from flexreg.stages.refinement.result import IcpResult
+from flexreg.stages.sampling import median_spacing, thin_random, to_open3d
 
 log = logging.getLogger(__name__)
 
@@ -20,87 +22,6 @@ _PRE_THIN = 1_000_000
 
 #: smallest ICP correspondence distance, in voxels
 _FLOOR = 0.5
-
-
-def _thin(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """At most about ``_PRE_THIN`` of the points, a fixed-seed uniform random subset (voxels
-    of the sizes ICP uses hold many points, so the voxel grid hardly changes)."""
-    if len(points) <= _PRE_THIN:
-        return points
-    keep = np.random.default_rng(0).random(len(points)) < _PRE_THIN / len(points)
-    return points[keep]
-
-
-@dataclass(frozen=True)
-class IcpResult:
-    """Outcome of :func:`refine_icp`.
-
-    Attributes
-    ----------
-    T_target_source : (4, 4) float64
-    fitness : float
-        Fraction of the *downsampled source* points with a target point within
-        ``max_distance_m`` (Open3D's definition; denominator stated by the name).
-    inlier_rmse_m : float
-    information : (6, 6) float64
-        Open3D's information matrix of the correspondences (rotation first, then translation).
-    voxel_m : float
-        Downsampling voxel used, metres.
-    max_distance_m : float
-        Correspondence distance of the final ICP level (``fitness`` and ``inlier_rmse_m``
-        refer to it), metres.
-    source_points : int
-        Downsampled source points (the denominator of ``fitness``).
-    association : {"nearest", "projective"}
-        How source points found their target partners: nearest neighbour (Open3D ICP;
-        ``voxel_m`` is the downsampling voxel) or the pixel hit by their ray in the target's
-        range image (:func:`flexreg.stages.refinement.projective.projective_icp`, symmetric:
-        ``source_points``
-        counts the sampled points of both scans, ``voxel_m`` is the cell of the source's even
-        sampling).
-    """
-
-    T_target_source: NDArray[np.float64]
-    fitness: float
-    inlier_rmse_m: float
-    information: NDArray[np.float64]
-    voxel_m: float
-    max_distance_m: float
-    source_points: int = 0
-    association: str = "nearest"
-
-
-def median_spacing(
-    points: NDArray[np.float64],
-    *,
-    sample: int = 5000,
-    seed: int = 0,
-    tree_points: int | None = None,
-) -> float:
-    """Median nearest-neighbour distance of a point cloud (metres), from a fixed subsample.
-
-    With ``tree_points``, the neighbours are searched among at most that many points (a
-    fixed random subset), which overestimates the spacing of larger clouds but is fast.
-    """
-    from scipy.spatial import cKDTree
-
-    P = np.asarray(points, dtype=np.float64)
-    if len(P) < 2:
-        raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
-    if tree_points is not None and len(P) > tree_points:
-        P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
-    tree = cKDTree(P)
-    idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
-    d, _ = tree.query(P[idx], k=2)
-    return float(np.median(d[:, 1]))
-
-
-def _cloud(points: NDArray[np.float64]) -> Any:
-    import open3d as o3d
-
-    pc = o3d.geometry.PointCloud()
-    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
-    return pc
 
 
 def refine_icp(
@@ -151,18 +72,19 @@ def refine_icp(
     RegistrationError
         ICP found no correspondences at all (no overlap at the initial pose).
     """
-    import open3d as o3d
+    import open3d as o3d  # heavy: loaded only when an Open3D refinement runs
 
     reg = o3d.pipelines.registration
     # very large scans: a random thinning first (voxels of the sizes used here hold many
     # points, so the voxel grid hardly changes, and the downsampling gets much cheaper)
-    target, source = _thin(np.asarray(target)), _thin(np.asarray(source))
+    target = thin_random(np.asarray(target), _PRE_THIN)
+    source = thin_random(np.asarray(source), _PRE_THIN)
     auto_voxel = voxel_m is None
     if voxel_m is None:
         voxel_m = 2.0 * median_spacing(target, tree_points=200_000)
     elif not voxel_m > 0:
         raise ConfigError(f"voxel must be positive, got {voxel_m}")
-    tgt = _cloud(target).voxel_down_sample(voxel_m)
+    tgt = to_open3d(target).voxel_down_sample(voxel_m)
     for _ in range(6 if auto_voxel else 0):  # point count falls with the square of the voxel
         if len(tgt.points) <= max_target_points:
             break
@@ -172,7 +94,7 @@ def refine_icp(
         max_distance_m = max(5.0 * voxel_m, initial_error_m)
     if not max_distance_m > 0:
         raise ConfigError(f"ICP distance must be positive, got {max_distance_m}")
-    src = _cloud(source).voxel_down_sample(voxel_m)
+    src = to_open3d(source).voxel_down_sample(voxel_m)
     if len(src.points) > max_source_points:
         src = src.uniform_down_sample(int(np.ceil(len(src.points) / max_source_points)))
     search = o3d.geometry.KDTreeSearchParamHybrid(radius=3 * voxel_m, max_nn=20)
@@ -225,8 +147,6 @@ def refine_icp(
 def _sample_gap(tgt: Any, src: Any, T: NDArray[np.float64], within: float) -> float:
     """Median distance from the source points (placed by ``T``) to their nearest target point,
     among those closer than ``within``, metres."""
-    from scipy.spatial import cKDTree
-
     q = np.asarray(src.points) @ T[:3, :3].T + T[:3, 3]
     d, _ = cKDTree(np.asarray(tgt.points)).query(q, distance_upper_bound=within)
     d = d[np.isfinite(d)]

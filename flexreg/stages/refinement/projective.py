@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -28,10 +27,11 @@ from numba import prange
 from numpy.typing import NDArray
 
 from flexreg.core.camera import PinholeCamera, SphericalCamera
-from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import ConfigError, RegistrationError
+from flexreg.stages.normals import grid_normals
+from flexreg.stages.refinement.result import IcpResult
 
 log = logging.getLogger(__name__)
 
@@ -67,40 +67,6 @@ def angular_step(image: RangeImage) -> float:
 
 
 # ---------------------------------------------------------------------------- numba kernels
-
-
-@numba.njit(cache=True, nogil=True)
-def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
-    """Each unit normal averaged with its 3x3 neighbours' of the same surface (within about
-    25 degrees), renormalised; NaN stays NaN."""
-    H, W = raw.shape[0], raw.shape[1]
-    out = np.full((H, W, 3), np.nan, dtype=np.float32)
-    for i in range(H):
-        for j in range(W):
-            if not math.isfinite(raw[i, j, 0]):
-                continue
-            sx = sy = sz = 0.0
-            for di in range(-1, 2):
-                ii = i + di
-                if ii < 0 or ii >= H:
-                    continue
-                for dj in range(-1, 2):
-                    jj = wrap_col(j + dj, W, wrap)
-                    if jj >= 0 and math.isfinite(raw[ii, jj, 0]):
-                        c = (
-                            raw[ii, jj, 0] * raw[i, j, 0]
-                            + raw[ii, jj, 1] * raw[i, j, 1]
-                            + raw[ii, jj, 2] * raw[i, j, 2]
-                        )
-                        if c > 0.9:  # same surface (within about 25 degrees)
-                            sx += raw[ii, jj, 0]
-                            sy += raw[ii, jj, 1]
-                            sz += raw[ii, jj, 2]
-            s = math.sqrt(sx * sx + sy * sy + sz * sz)
-            out[i, j, 0] = sx / s
-            out[i, j, 1] = sy / s
-            out[i, j, 2] = sz / s
-    return out
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
@@ -203,62 +169,6 @@ def _associate(
 # ---------------------------------------------------------------------------- Python API
 
 
-def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
-    """Unit surface normals of every pixel of an organised scan, from its grid.
-
-    The cross product of the central differences at pixel offset ``k`` along the rows and the
-    columns, averaged with the neighbouring pixels' normals of the same surface (3x3). Pixels
-    whose neighbours are missing or lie across a depth jump get NaN.
-
-    Parameters
-    ----------
-    image : RangeImage
-    k : int
-        Pixel offset of the differences (larger is smoother on noisy surfaces, but blurs
-        edges; 1 was the most accurate for refinement on synthetic and real scans).
-
-    Returns
-    -------
-    (H, W, 3) float32
-        Unit normals, oriented towards the scanner; NaN where unknown.
-    """
-    from flexreg.stages.priors import _normals_area
-
-    xyz = np.where(image.valid[..., None], image.xyz, np.nan)
-    H, W = xyz.shape[:2]
-    if H <= 2 * k or W <= 2 * k:
-        return np.full((H, W, 3), np.nan, dtype=np.float32)
-    nrm, area = _normals_area(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps)
-    return _smooth_normals(np.where(area[..., None] > 0, nrm, np.nan), image.wraps)
-
-
-@dataclass(frozen=True)
-class ProjectiveIcpResult:
-    """Outcome of :func:`projective_icp`.
-
-    Attributes
-    ----------
-    T_target_source : (4, 4) float64
-    fitness : float
-        Share of the source points paired at the final correspondence distance.
-    inlier_rmse_m : float
-        RMS point-to-plane residual of those pairs, metres.
-    information : (6, 6) float64
-        Information matrix of the paired points (Open3D's convention: rotation first).
-    max_distance_m : float
-        Final correspondence distance, metres.
-    iterations : int
-        Iterations over all distance levels.
-    """
-
-    T_target_source: NDArray[np.float64]
-    fitness: float
-    inlier_rmse_m: float
-    information: NDArray[np.float64]
-    max_distance_m: float
-    iterations: int
-
-
 def _exp_se3(delta: NDArray[np.float64]) -> NDArray[np.float64]:
     """4x4 transform of a small twist ``(omega, tau)`` (rotation vector about the origin, then
     translation)."""
@@ -337,7 +247,7 @@ def projective_icp(
     max_iterations: int = 30,
     levels: int = 3,
     tolerance: float = 1e-6,
-) -> ProjectiveIcpResult:
+) -> IcpResult:
     """Refine ``T_target_source`` by point-to-plane ICP with projective data association.
 
     Each source point, mapped by the current transform, is paired with the target pixel its
@@ -380,8 +290,9 @@ def projective_icp(
 
     Returns
     -------
-    ProjectiveIcpResult
-        ``fitness`` and ``inlier_rmse_m`` over the pairs of both directions.
+    IcpResult
+        ``fitness`` and ``inlier_rmse_m`` over the pairs of both directions (``source_points``
+        counts the points of both, ``association="projective"``, ``voxel_m`` NaN).
 
     Raises
     ------
@@ -456,20 +367,21 @@ def projective_icp(
         rmse,
         total,
     )
-    return ProjectiveIcpResult(
+    return IcpResult(
         T_target_source=T,
         fitness=n / n_points,
         inlier_rmse_m=rmse,
         information=point_information(q[paired]),
+        voxel_m=float("nan"),
         max_distance_m=dist,
+        source_points=n_points,
+        association="projective",
         iterations=total,
     )
 
 
 __all__ = [
-    "ProjectiveIcpResult",
     "angular_step",
-    "grid_normals",
     "point_information",
     "projective_icp",
 ]

@@ -1,0 +1,103 @@
+"""The result of registering one pair of scans, shared by flexreg and every baseline."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+class Settings(Protocol):
+    """What a result needs of the configuration that produced it."""
+
+    @property
+    def seed(self) -> int: ...
+
+    def to_dict(self) -> dict[str, Any]: ...
+
+
+@dataclass(eq=False)
+class PairResult:
+    """``T_target_source`` of one pair and the evidence for it.
+
+    Returned by :func:`flexreg.registration.register` (as its subclass
+    :class:`~flexreg.registration.result.RegistrationResult`) and by every baseline
+    (:mod:`flexreg.baselines`), so that the comparison and the coming survey treat them alike.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+        Final transform (refined when the method refines).
+    T_coarse : (4, 4) float64
+        The coarse transform before refinement.
+    matches : int
+        Putative matches (flexreg: 2D matches lifted to 3D).
+    inliers : int
+        Inliers among them.
+    inlier_rmse_m : float
+        RMSE of the final stage's inliers (ICP when refined, else the coarse stage), metres.
+    fitness : float
+        Final-stage overlap; ``fitness_denominator`` says what it divides by.
+    fitness_denominator : str
+        What ``fitness`` divides by.
+    information : (6, 6) float64
+        Information matrix (rotation, translation) for pose graphs (Open3D's convention).
+    timings_s : dict
+        Seconds per stage. Stages that run in background threads overlap, so the stages may
+        add up to more than ``wall_s``.
+    threshold_m : float
+        Inlier threshold used, metres.
+    config : RegistrationConfig, BaselineConfig or another settings object
+        How the pair was registered (``seed`` and ``to_dict()`` are used).
+    correspondences : (Q, 2, 3) float64
+        ``[target point, source point]`` pairs (the coarse stage's input).
+    inlier_mask : (Q,) bool
+    keypoints : tuple of (K, 2) arrays
+        Target and source keypoint positions of the matches (for drawing; empty for
+        methods without image features).
+    prior : str
+        Which prior or method led to the estimate.
+    wall_s : float
+        Seconds the whole call took.
+    """
+
+    T_target_source: NDArray[np.float64]
+    T_coarse: NDArray[np.float64]
+    matches: int
+    inliers: int
+    inlier_rmse_m: float
+    fitness: float
+    fitness_denominator: str
+    information: NDArray[np.float64]
+    timings_s: dict[str, float]
+    threshold_m: float
+    config: Settings
+    correspondences: NDArray[np.float64] = field(repr=False)
+    inlier_mask: NDArray[np.bool_] = field(repr=False)
+    keypoints: tuple[NDArray[np.float64], NDArray[np.float64]] = field(repr=False)
+    prior: str = "descriptors"
+    wall_s: float = float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no per-match arrays)."""
+        return {
+            "T_target_source": self.T_target_source.tolist(),
+            "T_coarse": self.T_coarse.tolist(),
+            "matches": self.matches,
+            "inliers": self.inliers,
+            "inlier_rmse_m": self.inlier_rmse_m,
+            "fitness": self.fitness,
+            "fitness_denominator": self.fitness_denominator,
+            "information": self.information.tolist(),
+            "threshold_m": self.threshold_m,
+            "timings_s": self.timings_s,
+            "wall_s": self.wall_s,
+            "prior": self.prior,
+            "seed": self.config.seed,
+            "config": self.config.to_dict(),
+        }
+
+
+__all__ = ["PairResult", "Settings"]

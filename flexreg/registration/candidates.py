@@ -1,0 +1,264 @@
+"""Choosing the coarse transform: every prior and its keypoint refinement compete on the dense
+free-space check.
+
+Priors come from global descriptor matching and from plan-view overlays. Each is refined by
+guided matching (:func:`flexreg.stages.alignment.guided_fit`); the candidates are judged, after
+a quick local ICP (:func:`polisher`), by the share of the source's even sample that the target's
+view confirms minus three times the share it contradicts
+(:func:`flexreg.stages.verification.classify_points`): first the best prior family at a coarse
+tolerance (a wrong model puts the source in the target's free space), then its most precise
+member at a fine tolerance.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.range_image import RangeImage
+from flexreg.core.transforms import rotation_error_deg, translation_error_m
+from flexreg.errors import RegistrationError
+from flexreg.registration.config import RegistrationConfig
+from flexreg.stages.alignment import guided_fit, squared_residuals
+from flexreg.stages.keypoints import Features
+from flexreg.stages.matching import match_guided
+from flexreg.stages.refinement.projective import projective_icp
+from flexreg.stages.verification import classify_points
+
+log = logging.getLogger(__name__)
+
+#: a candidate: (origin, T_target_source); origin is "plan" or "descriptors", with
+#: "+keypoints" when refined by guided matching
+Candidate = tuple[str, NDArray[np.float64]]
+
+
+@dataclass(eq=False)
+class Check:
+    """The dense check of candidates: the target's view and the source's even sample.
+
+    Attributes
+    ----------
+    view : RangeImage
+        The target's range image with a camera model.
+    measured, slack : (H, W) float32
+        Its :func:`~flexreg.stages.verification.measured_image` and
+        :func:`~flexreg.stages.verification.range_slack`.
+    sample : (N, 3) float64
+        The source's points spread evenly over its surfaces.
+    """
+
+    view: RangeImage
+    measured: NDArray[np.float32]
+    slack: NDArray[np.float32]
+    sample: NDArray[np.float64]
+
+    def classify(
+        self, T: NDArray[np.float64], tol: float, rel: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
+        """The sample in the target frame, and which points are consistent / conflicting."""
+        return classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
+
+    def judge(self, T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
+        """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
+        _, ok_, bad_ = self.classify(T, tol, rel)
+        ok, bad = float(ok_.mean()), float(bad_.mean())
+        return ok - 3 * bad, ok, bad
+
+
+@dataclass(eq=False)
+class Keypoints3D:
+    """Keypoints and descriptors of one scan and their lifted 3D points.
+
+    Attributes
+    ----------
+    features : Features
+    points : (K, 3) float64, metres
+        NaN where a keypoint could not be lifted.
+    lifted : (K,) bool
+    """
+
+    features: Features
+    points: NDArray[np.float64]
+    lifted: NDArray[np.bool_]
+
+
+@dataclass(eq=False)
+class Coarse:
+    """The chosen coarse transform and its final guided matches.
+
+    Attributes
+    ----------
+    origin : str
+    T_target_source : (4, 4) float64
+    pairs : (Q, 2) int64
+        Final guided matches (target, source keypoint).
+    target_points, source_points : (Q, 3) float64
+        Their lifted points.
+    residuals2 : (Q,) float64
+        Squared residuals under ``T_target_source``, square metres.
+    inliers : (Q,) bool
+        Within the inlier threshold.
+    """
+
+    origin: str
+    T_target_source: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+    target_points: NDArray[np.float64]
+    source_points: NDArray[np.float64]
+    residuals2: NDArray[np.float64]
+    inliers: NDArray[np.bool_]
+
+
+def polisher(
+    target: RangeImage, normals: NDArray[np.float32], sample: NDArray[np.float64], thr: float
+) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    """A quick local ICP of a small even sample of the source (``sample``, about 5000 points)
+    against the target's range image (projective,
+    :func:`flexreg.stages.refinement.projective.projective_icp`), for judging candidates.
+
+    ``target`` must have a camera model; ``normals`` are its
+    :func:`~flexreg.stages.normals.grid_normals`."""
+
+    def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
+        try:
+            r = projective_icp(
+                target,
+                sample,
+                T,
+                max_distance_m=3 * thr,
+                normals=normals,
+                max_iterations=15,
+                tolerance=1e-4,
+            )
+        except RegistrationError:
+            return T
+        return r.T_target_source
+
+    return polish
+
+
+def _guided(
+    kt: Keypoints3D,
+    ks: Keypoints3D,
+    T0: NDArray[np.float64],
+    thr: float,
+    config: RegistrationConfig,
+) -> tuple[NDArray[np.float64], int] | None:
+    """:func:`~flexreg.stages.alignment.guided_fit` around ``T0``: its transform and inliers."""
+    fit = guided_fit(
+        kt.features,
+        ks.features,
+        kt.points,
+        ks.points,
+        T0,
+        threshold_m=thr,
+        radius_m=config.guided_radius_m,
+        radius_per_m=config.guided_radius_per_m,
+    )
+    return None if fit is None else (fit.T_target_source, int(fit.inliers.sum()))
+
+
+def families(
+    priors: list[Candidate],
+    kt: Keypoints3D,
+    ks: Keypoints3D,
+    thr: float,
+    config: RegistrationConfig,
+) -> list[list[Candidate]]:
+    """Each prior with its keypoint-refined version (plan priors stay candidates themselves;
+    a descriptor prior only through its refinement)."""
+    out = []
+    for origin, T0 in priors:
+        fam = [(origin, T0)] if origin == "plan" else []
+        est = _guided(kt, ks, T0, thr, config)
+        if est is not None and est[1] >= max(3, config.min_inliers):
+            fam.append((f"{origin}+keypoints", est[0]))
+        if fam:
+            out.append(fam)
+    return out
+
+
+def _best_family(
+    fams: list[list[Candidate]],
+    check: Check,
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    thr: float,
+) -> tuple[int, tuple[float, float], NDArray[np.float64] | None]:
+    """Index of the winning family (-1 when none), its (consistent, conflicting) fractions and
+    its polished transform (None without polishing)."""
+    judged = []  # (score, moved, family, consistent, conflicting, polished T)
+    for i, fam in enumerate(fams):
+        for origin, T in fam:
+            # judged after a quick local ICP: a right but rough candidate improves, a wrong one
+            # stays wrong
+            Tj = polish(T) if polish is not None else T
+            score, ok, bad = check.judge(Tj, 2.5 * thr, 0.01)
+            moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
+            log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
+            judged.append((score, moved, i, ok, bad, Tj))
+    if not judged:
+        return -1, (0.0, 0.0), None
+    top = max(j[0] for j in judged)
+    # candidates that end in the same place score alike: take the one that was already there
+    # (moved least under the quick ICP)
+    _, _, best, ok, bad, Tj = min((j for j in judged if j[0] >= top - 0.01), key=lambda j: j[1])
+    return best, (ok, bad), Tj if polish is not None else None
+
+
+def choose(
+    priors: list[Candidate],
+    kt: Keypoints3D,
+    ks: Keypoints3D,
+    check: Check,
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    thr: float,
+    config: RegistrationConfig,
+    counts: str,
+    notes: list[str],
+) -> Coarse:
+    """The coarse transform: the best prior family at a coarse tolerance, then its most
+    precise member (with the keypoint estimate around the polished winner) at ``thr / 2``.
+
+    ``counts`` (keypoints and descriptor matches) and ``notes`` (why a route gave no prior)
+    end the error messages.
+
+    Raises
+    ------
+    RegistrationError
+        No candidate, or the best explains less than ``config.min_overlap`` of the source's
+        sample or contradicts more than half of what it explains.
+    """
+    fams = families(priors, kt, ks, thr, config)
+    best, (ok, bad), polished = _best_family(fams, check, polish, thr)
+    if best < 0:
+        raise RegistrationError(
+            f"no transform found: {counts}, {len(priors)} priors"
+            + (f"; {'; '.join(notes)}" if notes else "")
+        )
+    if ok < config.min_overlap or bad > 0.5 * ok:
+        raise RegistrationError(
+            f"no overlap: the best transform explains {100 * ok:.1f}% of the source's sampled "
+            f"points and contradicts {100 * bad:.1f}% (need {100 * config.min_overlap:.0f}%); "
+            f"{counts}"
+        )
+    finalists = list(fams[best])
+    if polished is not None:
+        # the keypoint estimate around the polished winner: a candidate that was far off but
+        # converged under the quick ICP still gets a feature-based coarse transform
+        est = _guided(kt, ks, polished, thr, config)
+        if est is not None and est[1] >= 3:
+            finalists.append((f"{finalists[0][0].split('+')[0]}+keypoints", est[0]))
+    origin, T = max(finalists, key=lambda c: check.judge(c[1], thr / 2, 0.002)[0])
+    fin = match_guided(
+        kt.features, ks.features, kt.points, ks.points, T, radius_m=2 * thr, radius_per_m=0.002
+    )
+    pt, ps = kt.points[fin[:, 0]], ks.points[fin[:, 1]]
+    d2 = squared_residuals(T, pt, ps)
+    return Coarse(origin, T, fin, pt, ps, d2, d2 < thr * thr)
+
+
+__all__ = ["Candidate", "Check", "Coarse", "Keypoints3D", "choose", "families", "polisher"]

@@ -1,0 +1,167 @@
+"""Surface normals of organised scans, from the pixel grid.
+
+Each pixel's normal is the cross product of the central differences to its neighbours at a
+pixel offset ``k`` (:func:`normals_area`, compiled, which also gives the surface area the pixel
+covers). :func:`surface_normals` returns them per pixel for levelling and plan views
+(:mod:`flexreg.stages.priors`); :func:`grid_normals` smooths them over each pixel's 3x3
+neighbours of the same surface for the projective refinement
+(:mod:`flexreg.stages.refinement.projective`) and the candidate checks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.grid import wrap_col
+from flexreg.core.range_image import RangeImage
+
+
+def surface_normals(
+    image: RangeImage, *, k: int = 2, stride: int = 1, compact: bool = True
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Unit normals of an organised scan from central differences at pixel offset ``k``.
+
+    Parameters
+    ----------
+    image : RangeImage
+    k : int
+        Pixel offset of the neighbours (larger is smoother on noisy surfaces).
+    stride : int
+        Use every ``stride``-th row and column (speed on very large images).
+    compact : bool
+        Keep only the usable pixels (default). Otherwise every (strided) pixel in row-major
+        order, with area 0 (and zero normal) where unusable: no copies of the image, and every
+        function here accepts that form.
+
+    Returns
+    -------
+    points : (M, 3) float64, metres
+        The pixels' points (only pixels whose four neighbours are valid and continuous).
+    normals : (M, 3) float64
+        Unit normals, oriented towards the scanner.
+    area : (M,) float64, square metres
+        Surface area each pixel covers (product of its neighbour spacings), so that sums over
+        pixels measure surface independently of the distance to the scanner.
+    """
+    xyz = np.ascontiguousarray(image.xyz[::stride, ::stride], dtype=np.float64)
+    H, W = xyz.shape[:2]
+    if H <= 2 * k or W <= 2 * k:
+        z = np.zeros((0, 3))
+        return z, z, np.zeros(0)
+    nrm, area = normals_area(xyz, int(k), image.wraps)
+    if not compact:
+        return xyz.reshape(-1, 3), nrm.reshape(-1, 3), area.reshape(-1)
+    ok = area > 0
+    return xyz[ok], nrm[ok], area[ok]
+
+
+@numba.njit(cache=True, nogil=True)
+def normals_area(xyz, k, wrap):  # pragma: no cover - compiled
+    """Per pixel: unit normal (towards the scanner) from the cross product of the central
+    differences at offset ``k`` and the area the pixel covers; area 0 where a neighbour is
+    missing or lies across a depth jump (a span of 0.2 x the range or more)."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    nrm = np.zeros((H, W, 3))
+    area = np.zeros((H, W))
+    for i in range(k, H - k):
+        for j in range(W):
+            jl, jr = j - k, j + k
+            if wrap:
+                jl %= W
+                jr %= W
+            elif jl < 0 or jr >= W:
+                continue
+            x0, y0, z0 = xyz[i, j, 0], xyz[i, j, 1], xyz[i, j, 2]
+            hx = xyz[i, jr, 0] - xyz[i, jl, 0]
+            hy = xyz[i, jr, 1] - xyz[i, jl, 1]
+            hz = xyz[i, jr, 2] - xyz[i, jl, 2]
+            vx = xyz[i + k, j, 0] - xyz[i - k, j, 0]
+            vy = xyz[i + k, j, 1] - xyz[i - k, j, 1]
+            vz = xyz[i + k, j, 2] - xyz[i - k, j, 2]
+            nx = hy * vz - hz * vy
+            ny = hz * vx - hx * vz
+            nz = hx * vy - hy * vx
+            r = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
+            lh = math.sqrt(hx * hx + hy * hy + hz * hz)
+            lv = math.sqrt(vx * vx + vy * vy + vz * vz)
+            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+            # continuity: both neighbour spans short compared with the range (no depth jump);
+            # every comparison is False for NaN
+            if not (lh < 0.2 * r and lv < 0.2 * r and nn > 0.0 and math.isfinite(nn)):
+                continue
+            if nx * x0 + ny * y0 + nz * z0 > 0.0:
+                nn = -nn
+            nrm[i, j, 0] = nx / nn
+            nrm[i, j, 1] = ny / nn
+            nrm[i, j, 2] = nz / nn
+            # neighbours 2k strided pixels apart: the product covers one stride x stride cell
+            area[i, j] = lh * lv / (4.0 * k * k)
+    return nrm, area
+
+
+def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
+    """Unit surface normals of every pixel of an organised scan, from its grid.
+
+    The cross product of the central differences at pixel offset ``k`` along the rows and the
+    columns, averaged with the neighbouring pixels' normals of the same surface (3x3). Pixels
+    whose neighbours are missing or lie across a depth jump get NaN.
+
+    Parameters
+    ----------
+    image : RangeImage
+    k : int
+        Pixel offset of the differences (larger is smoother on noisy surfaces, but blurs
+        edges; 1 was the most accurate for refinement on synthetic and real scans).
+
+    Returns
+    -------
+    (H, W, 3) float32
+        Unit normals, oriented towards the scanner; NaN where unknown.
+    """
+    xyz = np.where(image.valid[..., None], image.xyz, np.nan)
+    H, W = xyz.shape[:2]
+    if H <= 2 * k or W <= 2 * k:
+        return np.full((H, W, 3), np.nan, dtype=np.float32)
+    nrm, area = normals_area(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps)
+    return _smooth_normals(np.where(area[..., None] > 0, nrm, np.nan), image.wraps)
+
+
+@numba.njit(cache=True, nogil=True)
+def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
+    """Each unit normal averaged with its 3x3 neighbours' of the same surface (within about
+    25 degrees), renormalised; NaN stays NaN."""
+    H, W = raw.shape[0], raw.shape[1]
+    out = np.full((H, W, 3), np.nan, dtype=np.float32)
+    for i in range(H):
+        for j in range(W):
+            if not math.isfinite(raw[i, j, 0]):
+                continue
+            sx = sy = sz = 0.0
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= H:
+                    continue
+                for dj in range(-1, 2):
+                    jj = wrap_col(j + dj, W, wrap)
+                    if jj >= 0 and math.isfinite(raw[ii, jj, 0]):
+                        c = (
+                            raw[ii, jj, 0] * raw[i, j, 0]
+                            + raw[ii, jj, 1] * raw[i, j, 1]
+                            + raw[ii, jj, 2] * raw[i, j, 2]
+                        )
+                        if c > 0.9:  # same surface (within about 25 degrees)
+                            sx += raw[ii, jj, 0]
+                            sy += raw[ii, jj, 1]
+                            sz += raw[ii, jj, 2]
+            s = math.sqrt(sx * sx + sy * sy + sz * sz)
+            out[i, j, 0] = sx / s
+            out[i, j, 1] = sy / s
+            out[i, j, 2] = sz / s
+    return out
+
+
+__all__ = ["grid_normals", "normals_area", "surface_normals"]

@@ -1,0 +1,200 @@
+"""Point sampling: even samples by surface area, thinning, point spacing, Open3D clouds.
+
+A scanner samples the surfaces near it far more densely than distant ones. The area sample
+(:func:`area_sample`, one point per occupied cell of a voxel grid sized by :func:`area_cell`)
+weights every part of a scene by its surface area instead; the dense checks
+(:mod:`flexreg.stages.verification`) and the refinements (:mod:`flexreg.stages.refinement`)
+work on it. :func:`thin` and :func:`thin_random` cut very large clouds down before voxel
+downsampling, :func:`median_spacing` gives the scan resolution every default size derives
+from, :func:`to_open3d` builds the Open3D cloud.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from flexreg.errors import RegistrationError
+
+
+def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64]:
+    """About ``samples`` points spread evenly over the surfaces of a cloud.
+
+    One point (the first in input order) per occupied cell of the voxel grid of
+    :func:`area_cell`; deterministic.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Metres.
+    samples : int
+        Wanted number of points (the result has about 0.7 to 1.4 times that, or all N points
+        when N is smaller).
+
+    Returns
+    -------
+    (M, 3) float64
+        A subset of ``points`` in input order.
+    """
+    return area_sample_cell(points, samples)[1]
+
+
+def area_sample_cell(
+    points: NDArray[np.float64], samples: int
+) -> tuple[float, NDArray[np.float64]]:
+    """:func:`area_cell` and :func:`area_sample` at once."""
+    p = np.asarray(points, dtype=np.float64)
+    cell, first = _area_cells(p, samples)
+    return cell, p if len(p) <= samples else p[first]
+
+
+def area_cell(points: NDArray[np.float64], samples: int) -> float:
+    """Voxel size at which about ``samples`` voxels of a cloud's surfaces are occupied, metres.
+
+    Downsampling with it weights every part of a scene by its surface area rather than by its
+    number of points (a scanner samples the surfaces near it far more densely).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Metres.
+    samples : int
+        Wanted number of occupied voxels.
+    """
+    return _area_cells(np.asarray(points, dtype=np.float64), samples)[0]
+
+
+def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
+    """Cell size and the index of the first point in each occupied cell, ascending (of a
+    thinned copy of ``p`` when it is large: indices then refer to ``p`` itself)."""
+    step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
+    q = np.ascontiguousarray(p[::step])
+    if len(q) == 0:
+        return 1e-9, np.zeros(0, dtype=np.int64)
+    lo, hi = _bounds(q)
+    span = float(np.max(hi - lo))
+    cell = max(span, 1e-9) / math.sqrt(samples)  # surfaces: cells grow with 1 / cell^2
+    first = np.arange(len(q))
+    table = np.empty(1 << max(4, int(2 * len(q) - 1).bit_length()), dtype=np.int64)
+    for _ in range(8):
+        first = _first_in_cells(q, lo, cell, table)
+        ratio = len(first) / samples
+        if 0.7 < ratio < 1.4:
+            break
+        cell *= math.sqrt(ratio)
+    return cell, first * step
+
+
+@numba.njit(cache=True, nogil=True)
+def _bounds(q):  # pragma: no cover - compiled
+    """Per-axis minimum and maximum of (N, 3) points (N >= 1)."""
+    lo = q[0].copy()
+    hi = q[0].copy()
+    for i in range(1, q.shape[0]):
+        for c in range(3):
+            x = q[i, c]
+            if x < lo[c]:
+                lo[c] = x
+            elif x > hi[c]:
+                hi[c] = x
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
+    """Indices (ascending) of the first point of each occupied cell of side ``cell`` anchored
+    at ``lo``: an open-addressing hash set of the integer cell coordinates; ``table`` is
+    scratch space of a power-of-two size at least twice the number of points."""
+    mask = table.shape[0] - 1
+    table[:] = -1
+    out = np.empty(q.shape[0], dtype=np.int64)
+    n = 0
+    for i in range(q.shape[0]):
+        kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
+        ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
+        kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
+        h = (kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)
+        slot = h & mask
+        while True:
+            j = table[slot]
+            if j < 0:
+                table[slot] = i
+                out[n] = i
+                n += 1
+                break
+            if (
+                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
+                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
+                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
+            ):
+                break
+            slot = (slot + 1) & mask
+    return out[:n]
+
+
+def median_spacing(
+    points: NDArray[np.float64],
+    *,
+    sample: int = 5000,
+    seed: int = 0,
+    tree_points: int | None = None,
+) -> float:
+    """Median nearest-neighbour distance of a point cloud (metres), from a fixed subsample.
+
+    With ``tree_points``, the neighbours are searched among at most that many points (a
+    fixed random subset), which overestimates the spacing of larger clouds but is fast.
+    """
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) < 2:
+        raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
+    if tree_points is not None and len(P) > tree_points:
+        P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
+    tree = cKDTree(P)
+    idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
+    d, _ = tree.query(P[idx], k=2)
+    return float(np.median(d[:, 1]))
+
+
+def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
+    """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
+    the sizes the baselines use hold many points of a large scan, so the voxel grid of the
+    thinned cloud hardly differs and downsampling gets much cheaper."""
+    if len(points) <= max_points:
+        return points
+    return points[:: math.ceil(len(points) / max_points)]
+
+
+def thin_random(
+    points: NDArray[np.float64], max_points: int = 1_000_000, *, seed: int = 0
+) -> NDArray[np.float64]:
+    """At most about ``max_points`` of the points, a fixed-seed uniform random subset (voxels
+    of the sizes ICP uses hold many points, so the voxel grid hardly changes)."""
+    if len(points) <= max_points:
+        return points
+    keep = np.random.default_rng(seed).random(len(points)) < max_points / len(points)
+    return points[keep]
+
+
+def to_open3d(points: NDArray[np.float64]) -> Any:
+    """An Open3D point cloud of (N, 3) float64 points."""
+    import open3d as o3d  # heavy: only the Open3D paths need it
+
+    pc = o3d.geometry.PointCloud()
+    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    return pc
+
+
+__all__ = [
+    "area_cell",
+    "area_sample",
+    "area_sample_cell",
+    "median_spacing",
+    "thin",
+    "thin_random",
+    "to_open3d",
+]

@@ -29,7 +29,6 @@ from flexreg.stages.alignment import ransac_rigid
 from flexreg.stages.correspondences import lift
 from flexreg.stages.keypoints import Features, detect_and_describe
 from flexreg.stages.matching import match
-from flexreg.stages.projection import fill_holes
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +52,8 @@ def feature_image(
     *,
     color: NDArray[np.uint8] | None = None,
 ) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
-    """The 8-bit image keypoints are detected on, and its valid mask.
+    """The 8-bit image keypoints are detected on, and its valid mask: the depth conversion of
+    :func:`flexreg.stages.feature_images.feature_image`, or the frame's grey colour image.
 
     Parameters
     ----------
@@ -81,15 +81,14 @@ def feature_image(
                 "color", f"expected an (H, W) uint8 grey image, got {g.shape} {g.dtype}"
             )
         return g, np.ones(g.shape, dtype=bool)
-    img = fill_holes(image) if config.fill_holes else image
-    f = images.convert(img, config.image, n=config.n, median=config.median)
-    q, valid = images.quantize(
-        f,
-        bits=8,
-        value_range=images.value_range(config.image),
+    return images.feature_image(
+        image,
+        kind=config.image,
+        n=config.n,
+        median=config.median,
         stretch=config.stretch,  # type: ignore[arg-type]
+        fill_holes=config.fill_holes,
     )
-    return np.asarray(q, dtype=np.uint8), np.asarray(valid, dtype=bool)
 
 
 @dataclass(eq=False)

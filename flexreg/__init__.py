@@ -1,12 +1,21 @@
 """flexreg: register 3D scans through 2D Flexion images.
 
-Public API (see the user guide in ``docs/``)::
+The public API in one place (the README's "Python API" section runs as a test)::
 
-    from flexreg import read_scan, range_image, SphericalCamera
-    scan = read_scan("station1.ptx")
-    img = range_image(scan)          # native grid, or z-buffer projection
+    import flexreg
+    target, source = flexreg.read_scan("station1.ptx"), flexreg.read_scan("station2.ptx")
+    result = flexreg.register(target, source)       # RegistrationConfig() defaults
+    result.T_target_source                          # (4, 4) float64: source -> target frame
+
+    config = flexreg.load_config(flexreg.RegistrationConfig, "run.toml", {"n": 7})
+    img = flexreg.range_image(target)               # native grid, or z-buffer projection
+
+This module only hands names on (docs/architecture.md shows the layers they come from); no
+module inside flexreg imports it. The applications (``register``, ``calibrate``, ``odometry``,
+...) load on first use, so ``import flexreg`` stays light for the command line.
 """
 
+import importlib
 import logging
 import os
 
@@ -32,7 +41,41 @@ from flexreg.stages.projection import range_image
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
+#: Loaded on first use: name -> the module (package face) that defines it.
+_LAZY = {
+    "load_config": "flexreg.config",
+    "register": "flexreg.registration",
+    "RegistrationConfig": "flexreg.registration",
+    "RegistrationResult": "flexreg.registration",
+    "calibrate": "flexreg.calibration",
+    "CalibrationConfig": "flexreg.calibration",
+    "CalibrationResult": "flexreg.calibration",
+    "CalibrationError": "flexreg.errors",
+    "odometry": "flexreg.odometry",
+    "OdometryConfig": "flexreg.odometry",
+    "OdometryResult": "flexreg.odometry",
+    "read_trajectory": "flexreg.io.trajectory",
+    "write_trajectory": "flexreg.io.trajectory",
+    "rotation_error_deg": "flexreg.core.transforms",
+    "translation_error_m": "flexreg.core.transforms",
+}
+
+
+def __getattr__(name: str):  # PEP 562: the applications load on first use
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'flexreg' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
 __all__ = [
+    *sorted(_LAZY),
     "ConfigError",
     "DegenerateGeometryError",
     "FlexregError",

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from flexreg import InputError, Scan, write_scan
+from flexreg import InputError, Scan, range_image, write_scan
 from flexreg.io.sequence import (
     SEVEN_SCENES_INTRINSICS,
     TUM_DEFAULT_INTRINSICS,
@@ -234,7 +234,7 @@ def test_folder_of_scans(tmp_path):
     assert seq.kind == "scans" and seq.camera is None
     assert [f.depth.name for f in seq.frames] == ["scan8.npz", "scan9.npz", "scan10.npz"]
     np.testing.assert_allclose(seq.timestamps, [0.0, 0.1, 0.2])
-    img = seq.range_image(1)  # z-buffered through an automatic spherical camera
+    img = range_image(seq.frame(1))  # z-buffered through an automatic spherical camera
     assert img.n_valid > 100 and np.isfinite(img.xyz[img.valid]).all()
 
 

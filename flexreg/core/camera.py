@@ -322,3 +322,34 @@ def camera_from_dict(d: dict[str, object]) -> Camera:
     if model == "spherical":
         return SphericalCamera(**kw)  # type: ignore[arg-type]
     raise InputError("camera", f"unknown camera model {model!r}")
+
+
+def azimuth_polar_extent(points: NDArray[np.float64]) -> tuple[float, float, float, float, bool]:
+    """Angular extent of points seen from the origin.
+
+    Returns
+    -------
+    phi_min, phi_max, theta_min, theta_max : float, radians
+        ``phi_max`` may exceed pi when the covered azimuth interval crosses the -pi/pi cut.
+    full_turn : bool
+        True when no azimuth gap wider than 5 degrees exists.
+    """
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) == 0:
+        raise InputError("points", "no points")
+    r = np.linalg.norm(P, axis=1)
+    P = P[r > 0]
+    r = r[r > 0]
+    phi = np.sort(np.arctan2(P[:, 1], P[:, 0]))
+    theta = np.arccos(np.clip(P[:, 2] / r, -1.0, 1.0))
+    gaps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
+    k = int(np.argmax(gaps))
+    full = bool(gaps[k] < np.radians(5.0))
+    if full:
+        phi_min, phi_max = -np.pi, np.pi
+    else:  # the covered interval starts after the widest gap
+        phi_min = float(phi[(k + 1) % len(phi)])
+        phi_max = float(phi[k])
+        if phi_max < phi_min:
+            phi_max += 2 * np.pi
+    return float(phi_min), float(phi_max), float(theta.min()), float(theta.max()), full

@@ -9,13 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.camera import PinholeCamera, SphericalCamera, azimuth_polar_extent
 from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid, rotation_error_deg
 from flexreg.errors import InputError
 from flexreg.io import atomic_write, detect_format
-from flexreg.stages.projection import azimuth_polar_extent
 
 PNG_SCALES_M = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1)
 

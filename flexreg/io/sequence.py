@@ -45,7 +45,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.camera import Camera, DepthKind, PinholeCamera, camera_from_dict
-from flexreg.core.range_image import RangeImage, from_depth
+from flexreg.core.range_image import RangeImage, from_depth, from_grid
+from flexreg.core.scan import Scan
 from flexreg.core.trajectory import MAX_DT_S, Trajectory, associate
 from flexreg.core.transforms import as_transform, nearest_rotation
 from flexreg.errors import InputError
@@ -53,7 +54,6 @@ from flexreg.io.depth import TUM_DEPTH_SCALE, read_depth_png, read_sidecar
 from flexreg.io.formats import FORMATS
 from flexreg.io.scans import read_scan
 from flexreg.io.trajectory import read_trajectory
-from flexreg.stages.projection import range_image
 
 log = logging.getLogger(__name__)
 
@@ -151,17 +151,34 @@ class Sequence:
         """True when every frame has a colour image."""
         return bool(self.frames) and all(f.color is not None for f in self.frames)
 
+    def frame(self, i: int) -> RangeImage | Scan:
+        """Frame ``i`` as it is stored: the organised points of a depth image
+        (:meth:`range_image`) or, for a folder of scans, the :class:`Scan` itself (readers do
+        not project; :func:`flexreg.stages.projection.range_image` does)."""
+        if self.kind == "scans":
+            return read_scan(self.frames[i].depth)
+        return self.range_image(i)
+
     def range_image(self, i: int) -> RangeImage:
-        """The organised 3D points of frame ``i`` (camera frame, metres).
+        """The organised 3D points of depth frame ``i`` (camera frame, metres), or of a scan
+        frame with a native grid.
 
         Raises
         ------
         InputError
-            The depth file is missing or unreadable, or its size disagrees with the camera.
+            The depth file is missing or unreadable, or its size disagrees with the camera; a
+            scan frame without a grid (project it, or use :meth:`frame`).
         """
         frame = self.frames[i]
         if self.kind == "scans":
-            return range_image(read_scan(frame.depth))
+            scan = read_scan(frame.depth)
+            if not scan.has_grid:
+                raise InputError(
+                    frame.depth,
+                    "an unstructured scan has no range image of its own: project it "
+                    "(flexreg.stages.projection.range_image(sequence.frame(i)))",
+                )
+            return from_grid(scan)
         assert self.camera is not None
         d = read_depth_png(
             frame.depth, depth_scale=self.depth_scale, invalid_values=self.invalid_values

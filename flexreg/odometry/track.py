@@ -38,6 +38,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.range_image import RangeImage
 from flexreg.core.trajectory import Trajectory
 from flexreg.core.transforms import as_transform, invert, scale_motion
 from flexreg.errors import ConfigError, RegistrationError
@@ -46,6 +47,7 @@ from flexreg.odometry.config import OdometryConfig
 from flexreg.odometry.frontend import FrameFeatures, frame_features, solve_pair
 from flexreg.odometry.result import FrameFailure, OdometryResult, PairAttempt
 from flexreg.stages.keypoints import create_detector
+from flexreg.stages.projection import range_image
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +108,8 @@ def odometry(
 
     def load(i: int) -> FrameFeatures:
         t0 = time.perf_counter()
-        img = sequence.range_image(i)
+        data = sequence.frame(i)  # a depth frame's points, or a scan to project
+        img = data if isinstance(data, RangeImage) else range_image(data)
         color = sequence.color_image(i) if config.image == "color" else None
         timings["load"] += time.perf_counter() - t0
         return frame_features(img, config, color=color, index=i, detector=detector, timings=timings)

@@ -13,7 +13,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.camera import Camera, SphericalCamera
+from flexreg.core.camera import Camera, SphericalCamera, azimuth_polar_extent
 from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
     RangeImage,
@@ -71,37 +71,6 @@ def project(scan: Scan, camera: Camera) -> RangeImage:
     lin = np.where(ok, iv * W + iu, -1).astype(np.int64)
     index = _zbuffer(lin, d, H * W).reshape(H, W)
     return from_index(scan, index, camera)
-
-
-def azimuth_polar_extent(points: NDArray[np.float64]) -> tuple[float, float, float, float, bool]:
-    """Angular extent of points seen from the origin.
-
-    Returns
-    -------
-    phi_min, phi_max, theta_min, theta_max : float, radians
-        ``phi_max`` may exceed pi when the covered azimuth interval crosses the -pi/pi cut.
-    full_turn : bool
-        True when no azimuth gap wider than 5 degrees exists.
-    """
-    P = np.asarray(points, dtype=np.float64)
-    if len(P) == 0:
-        raise InputError("points", "no points")
-    r = np.linalg.norm(P, axis=1)
-    P = P[r > 0]
-    r = r[r > 0]
-    phi = np.sort(np.arctan2(P[:, 1], P[:, 0]))
-    theta = np.arccos(np.clip(P[:, 2] / r, -1.0, 1.0))
-    gaps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
-    k = int(np.argmax(gaps))
-    full = bool(gaps[k] < np.radians(5.0))
-    if full:
-        phi_min, phi_max = -np.pi, np.pi
-    else:  # the covered interval starts after the widest gap
-        phi_min = float(phi[(k + 1) % len(phi)])
-        phi_max = float(phi[k])
-        if phi_max < phi_min:
-            phi_max += 2 * np.pi
-    return float(phi_min), float(phi_max), float(theta.min()), float(theta.max()), full
 
 
 def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None:

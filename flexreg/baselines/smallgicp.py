@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from flexreg.baselines._common import (
     DEFAULT_MAX_POINTS,
@@ -110,8 +111,6 @@ def small_gicp_align(
             f"small_gicp found no correspondence within {dist:.3g} m of its start: no overlap"
         )
     # residuals of the source points that have a target point within the distance
-    from scipy.spatial import cKDTree
-
     ts = np.asarray(tgt.points())[:, :3]
     ss = np.asarray(src.points())[:, :3]
     d, idx = cKDTree(ts).query(apply(T, ss), distance_upper_bound=dist)

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from flexreg.stages.keypoints import Features
 
@@ -122,8 +123,6 @@ def match_guided(
         ``[target index, source index]`` per match, sorted by source index; each target
         keypoint used at most once (the pair with the best descriptor distance keeps it).
     """
-    from scipy.spatial import cKDTree
-
     okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
     oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
     if len(okt) == 0 or len(oks) == 0:

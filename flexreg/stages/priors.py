@@ -31,6 +31,7 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import NDArray
+from scipy import fft, ndimage
 
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert, rotation_about_axis
@@ -421,8 +422,6 @@ def _rotated_rasters(xy, values, yaws, tx, ty, cell, off, size, bound):  # pragm
 def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[Any]:
     """``corr[d] = sum_x T[x] S[x + d]`` (circular) of each raster in ``S`` (..., H, W), given
     ``FT = conj(rfft2(T))``: source raster position ``x + d`` lies on target position ``x``."""
-    from scipy import fft
-
     return np.asarray(fft.irfft2(fft.rfft2(S, axes=(-2, -1)) * FT, s=shape, axes=(-2, -1)))
 
 
@@ -432,8 +431,6 @@ def _yaw_peaks(
     """For each yaw, the best correlation of the rotated source plan with the target plan over
     all offsets (FFT), rasterised at ``cell_m``: ``(score, t_x, t_y)`` per yaw, the offset
     refined to sub-cell by parabolas."""
-    from scipy import fft
-
     c = cell_m
     tcells = np.floor(target.xy / c + 0.5).astype(np.int64)
     rt = int(np.abs(tcells).max()) + 1
@@ -558,8 +555,6 @@ def refine_plan_matches(
 ) -> list[PlanMatch]:
     """:func:`refine_plan_match` of several overlays of the same plans (the target's
     transform is computed once)."""
-    from scipy import fft, ndimage
-
     c = target.cell_m
     if source.cell_m != c:
         raise ValueError("plans must share their cell size")
@@ -615,8 +610,6 @@ def _wrap_angle(a: float) -> float:
 def height_offset(target: TopView, source: TopView, *, max_offset_m: float = 5.0) -> float:
     """Height of the source scanner above the target's (levelled frames), metres: the shift
     that best overlays the two histograms of horizontal-surface heights."""
-    from scipy import fft
-
     a = np.log1p(target.heights / max(target.heights.max(), 1e-12) * 100)
     b = np.log1p(source.heights / max(source.heights.max(), 1e-12) * 100)
     # full cross-correlation (lags -(len(b) - 1) .. len(a) - 1) as a convolution with the

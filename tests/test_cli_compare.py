@@ -65,6 +65,13 @@ def test_compare_prints_a_table_and_writes_three_files(files, tmp_path):
     assert rows["fpfh-ransac"]["details"]["start"] == "fpfh-ransac"
     assert doc["target"] == str(target) and doc["points"][0] == 40256
     assert "| icp-plane | ok |" in (out / "comparison.md").read_text()
+    # the settings it ran with, so that --config comparison.json repeats the run
+    assert doc["config"]["methods"] == "icp-plane,fpfh-ransac"
+    assert doc["config"]["success_deg"] == 1.0 and doc["config"]["success_m"] == 0.005
+    from flexreg.bench.config import CompareConfig
+    from flexreg.config import load_config
+
+    assert load_config(CompareConfig, out / "comparison.json").success_m == 0.005
 
 
 @pytest.mark.parametrize(

@@ -13,6 +13,7 @@ from typing import Any
 from numpy.typing import ArrayLike
 
 from flexreg.baselines import BASELINES, GLOBAL, available_baselines, get_baseline
+from flexreg.bench.config import DEFAULT_METHODS as COMPARE_DEFAULT_METHODS
 from flexreg.errors import ConfigError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import RegistrationResult, register
@@ -22,15 +23,8 @@ __all__ = ["DEFAULT_METHODS", "GLOBAL_METHODS", "METHODS", "parse_methods", "run
 #: every method name :func:`~flexreg.bench.compare.compare` knows (``small-gicp`` only runs when
 #: installed)
 METHODS: tuple[str, ...] = ("flexreg", *BASELINES)
-#: the methods compared unless told otherwise
-DEFAULT_METHODS: tuple[str, ...] = (
-    "flexreg",
-    "icp-point",
-    "icp-plane",
-    "gicp",
-    "fpfh-ransac",
-    "kiss-icp",
-)
+#: the methods compared unless told otherwise (the default of CompareConfig.methods)
+DEFAULT_METHODS: tuple[str, ...] = tuple(COMPARE_DEFAULT_METHODS.split(","))
 #: methods with a global (coarse) stage before their refinement
 GLOBAL_METHODS: frozenset[str] = frozenset({"flexreg", *GLOBAL})
 

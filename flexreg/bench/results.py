@@ -19,16 +19,20 @@ from flexreg.bench.plots import plot_comparison, plot_success_vs, plot_vs_resolu
 from flexreg.bench.summary import CSV_FIELDS, SUMMARY_FIELDS, summarise, summary_markdown, to_csv
 from flexreg.bench.tables import to_markdown
 from flexreg.bench.types import BenchConfig, BenchResult
+from flexreg.config import Config
 from flexreg.errors import InputError
 from flexreg.io import atomic_write
 
 __all__ = ["FIGURES", "load_bench", "write_bench", "write_comparison", "write_files"]
 
 
-def write_comparison(cmp: Comparison, out_dir: str | PathLike[str]) -> list[Path]:
+def write_comparison(
+    cmp: Comparison, out_dir: str | PathLike[str], *, config: Config | None = None
+) -> list[Path]:
     """Write ``comparison.json``, ``comparison.md`` and ``comparison.png`` into ``out_dir``
     (created). Each file is written under a temporary name and renamed; if one fails, those
-    already written here are removed again.
+    already written here are removed again. ``config`` (the run's settings) is stored under
+    the JSON's ``"config"`` key, so ``flexreg compare --config comparison.json`` repeats it.
 
     Raises
     ------
@@ -38,7 +42,10 @@ def write_comparison(cmp: Comparison, out_dir: str | PathLike[str]) -> list[Path
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(out, "exists and is not a folder")
-    doc = json_text(cmp.to_dict(), indent=2)
+    doc = json_text(
+        {**cmp.to_dict(), **({"config": config.to_dict()} if config is not None else {})},
+        indent=2,
+    )
     md = f"# {Path(cmp.target).name} ← {Path(cmp.source).name}\n\n" + to_markdown(
         cmp, figure="comparison.png"
     )

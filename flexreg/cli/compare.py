@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from flexreg.bench.config import DEFAULT_METHODS, CompareConfig
 from flexreg.cli._common import console, err_console, progress_bar, read_input, stage
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
@@ -19,41 +20,10 @@ from flexreg.cli.options import (
     check_out_folder,
     with_default,
 )
-from flexreg.config import Config, Positive, Seed
 
 if TYPE_CHECKING:
     from flexreg.bench.compare import Comparison
     from flexreg.bench.types import BenchResult
-
-#: the default of --methods (flexreg.bench.compare.DEFAULT_METHODS, spelled out so that --help
-#: needs no import)
-DEFAULT_METHODS = "flexreg,icp-point,icp-plane,gicp,fpfh-ransac,kiss-icp"
-
-
-class CompareConfig(Config):
-    """Settings of ``flexreg compare`` (``flexreg config show compare``).
-
-    Attributes
-    ----------
-    methods : str
-        Comma-separated methods (see :func:`flexreg.bench.methods.parse_methods`).
-    voxel_m : float or None, metres
-        Scale voxel of the baselines (None: from the scan resolution).
-    seed : int
-        Seed of flexreg and RANSAC.
-    success_deg, success_m : float, degrees and metres
-        Success: rotation and translation errors at most these.
-    timeout_s : float, seconds
-        Time limit per method.
-    """
-
-    methods: str = DEFAULT_METHODS
-    voxel_m: Positive | None = None
-    seed: Seed = 0
-    success_deg: Positive = 0.5
-    success_m: Positive = 0.05
-    timeout_s: Positive = 600.0
-
 
 add_config("compare", CompareConfig)
 #: options that set a field of CompareConfig (option -> field)
@@ -214,7 +184,7 @@ def compare_command(
             names=(str(target), str(source)),
             progress=progress,
         )
-    written = write_comparison(cmp, out)
+    written = write_comparison(cmp, out, config=config)
     _print_comparison(cmp)
     for p in written:
         console.print(f"wrote {p}", markup=False, soft_wrap=True)

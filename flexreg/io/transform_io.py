@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flexreg.core.jsonable import to_jsonable
-from flexreg.core.transforms import as_transform, invert
+from flexreg.core.transforms import as_transform, invert, nearest_rotation
 from flexreg.errors import InputError
 from flexreg.io.files import atomic_write
 
@@ -139,8 +139,7 @@ def _rigid(T: Any, path: Path, reorthonormalize: float = 0.0) -> NDArray[np.floa
     try:
         M = np.array(T, dtype=float)
         if reorthonormalize > 0 and M.shape == (4, 4) and np.isfinite(M).all():
-            U, _, Vt = np.linalg.svd(M[:3, :3])
-            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+            R = nearest_rotation(M[:3, :3])  # a reflection stays one: as_transform refuses it
             if np.abs(R - M[:3, :3]).max() < reorthonormalize:
                 M[:3, :3] = R
         return as_transform(M, name=str(path), rigid=True)

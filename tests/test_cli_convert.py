@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -354,3 +355,101 @@ def test_convert_uses_camera_sidecar(tmp_path):
     valid = np.isfinite(expect)
     np.testing.assert_array_equal(got[~valid], 0)
     assert np.abs(got[valid].astype(np.int64) - np.rint(expect[valid] * 65535)).max() <= 1
+
+
+# ------------------------------------------------------------------ the configuration
+
+
+def test_config_show_convert_round_trip(tmp_path, capsys):
+    from flexreg.cli.convert import ConvertConfig
+    from flexreg.config import load_config
+
+    assert run(["config", "show", "convert"]) == 0
+    path = tmp_path / "c.toml"
+    path.write_text(capsys.readouterr().out)
+    config = load_config(ConvertConfig, path)
+    assert config == ConvertConfig(kind="flexion")
+    assert (config.n, config.median, config.bits, config.stretch) == (3, 0, 8, "none")
+
+
+def test_kinds_are_the_stage_kinds():
+    """The configuration accepts exactly the kinds ``convert`` knows, and nothing else."""
+    from flexreg.cli.convert import ConvertConfig
+    from flexreg.errors import ConfigError
+
+    for kind in I.KINDS:
+        assert ConvertConfig(kind=kind).kind == kind
+    schema = ConvertConfig.model_json_schema()["properties"]["kind"]
+    assert schema["enum"] == list(I.KINDS)
+    with pytest.raises(ConfigError, match="unknown kind 'intensity'"):
+        ConvertConfig(kind="intensity")
+
+
+def test_config_file_gives_the_same_image_as_the_options(conv, tmp_path):
+    settings = {"kind": "bearing-vertical", "n": 5, "median": 3, "bits": 16, "stretch": "clahe"}
+    by_options = tmp_path / "options.png"
+    argv = ["convert", str(conv / "laserscan-depth.png"), *LASER_ARGS, "--keep-float"]
+    options = [a for k, v in settings.items() for a in (f"--{k}", str(v))]
+    assert run([*argv, *options, "--out", str(by_options)]) == 0
+    toml = tmp_path / "c.toml"
+    toml.write_text("".join(f"{k} = {v!r}\n".replace("'", '"') for k, v in settings.items()))
+    by_file = tmp_path / "file.png"
+    assert run([*argv, "--config", str(toml), "--out", str(by_file)]) == 0
+    a, b = _read(by_options), _read(by_file)
+    assert a.dtype == np.uint16
+    np.testing.assert_array_equal(a, b)
+    # the .npz stores the effective configuration; --set overrides the file
+    with np.load(by_file.with_suffix(".npz")) as z:
+        assert json.loads(str(z["config"])) == settings
+    by_set = tmp_path / "set.png"
+    assert run([*argv, "--config", str(toml), "--set", "bits=8", "--out", str(by_set)]) == 0
+    assert _read(by_set).dtype == np.uint8
+
+
+def test_set_reaches_every_field_and_stretch_none(conv, tmp_path):
+    src = str(conv / "laserscan-depth.png")
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    assert run(["convert", src, *LASER_ARGS, "--kind", "flexion", "--out", str(a)]) == 0
+    sets = ["--set", "kind=flexion", "--set", "stretch=none", "--set", "n=3"]
+    assert run(["convert", src, *LASER_ARGS, *sets, "--out", str(b)]) == 0
+    np.testing.assert_array_equal(_read(a), _read(b))
+
+
+@pytest.mark.parametrize(
+    ("toml", "extra", "message"),
+    [
+        ('kind = "flexion"\nn = 4\n', [], "error: {toml}: n: must be an odd grid size"),
+        ('kind = "flexion"\nbits = 12\n', [], "error: {toml}: bits: must be one of 8, 16"),
+        ('kind = "sobel"\n', [], "error: {toml}: kind: unknown kind 'sobel'; known: flexion"),
+        ('kind = "flexion"\nnn = 5\n', [], "error: {toml}: nn: unknown setting; known: kind, n"),
+        ('kind = "flexion"\nn = \n', [], "error: {toml}: not valid TOML"),
+        ("", ["--set", "median=4"], "error: --set median: must be one of 0, 3, 5 (got 4)"),
+        ("", ["--set", "stretch=hist"], "error: --set stretch: must be one of none, percentile"),
+        ("", ["--set", "nn=5"], "error: --set nn: unknown setting"),
+        ("", ["--set", "bits"], "error: --set 'bits': expected KEY=VALUE"),
+        ("", ["--set", "n=5", "--n", "5"], "error: --n: also given as --set n=...; give it one"),
+        (None, [], "error: --kind: required"),
+    ],
+)
+def test_bad_config_is_one_line_and_writes_nothing(conv, tmp_path, capsys, toml, extra, message):
+    path = tmp_path / "c.toml"
+    if toml is not None:
+        path.write_text(toml)
+    args = ["--config", str(path)] if toml else (["--kind", "flexion"] if toml == "" else [])
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    argv = ["convert", str(conv / "laserscan-depth.png"), *LASER_ARGS, *args, *extra]
+    assert run([*argv, "--out", str(out_dir / "o.png")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(message.format(toml=path)), err
+    assert not any(out_dir.iterdir())
+
+
+def test_out_may_not_overwrite_the_input(conv, tmp_path, capsys):
+    src = tmp_path / "d.png"
+    shutil.copy(conv / "laserscan-depth.png", src)
+    before = src.read_bytes()
+    assert run(["convert", str(src), *LASER_ARGS, "--kind", "range", "--out", str(src)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: --out: {src}: is also an input"]
+    assert src.read_bytes() == before

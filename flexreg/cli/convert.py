@@ -1,52 +1,97 @@
-"""`flexreg convert`: a scan or depth image -> Flexion / Bearing Angle / range PNG."""
+"""`flexreg convert`: a scan or depth image -> Flexion / Bearing Angle / range PNG.
+
+:class:`ConvertConfig` (the conversion settings) lives here, beside its only user: conversion
+has no application package of its own (the command calls the stage functions
+:func:`~flexreg.stages.feature_images.convert` and ``quantize`` directly), and everything this
+module imports at start-up (``flexreg.stages.feature_images`` for :data:`KINDS`, the
+registration's median windows) is imported by the command line anyway, so ``flexreg --help``
+does not get slower.
+"""
 
 from __future__ import annotations
 
+import typing
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from flexreg.cli._common import console, err_console, progress_bar, read_input
 from flexreg.cli.app import app
-from flexreg.errors import FlexregError, InputError
+from flexreg.cli.config_cmd import add_config
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_out_folder,
+    check_outputs,
+    with_default,
+)
+from flexreg.config import Config, OddSize, one_of, parse_sets
+from flexreg.errors import ConfigError, FlexregError, InputError
+from flexreg.registration.config import MEDIANS
+from flexreg.stages.feature_images import KINDS, Stretch
 
 if TYPE_CHECKING:
     from flexreg.core.range_image import RangeImage
 
-_KIND_HELP = (
-    "flexion, flexion-normalized, flexion-angle, bearing-horizontal, bearing-vertical, "
-    "bearing-diagonal, bearing-antidiagonal, range, curvature-gaussian, curvature-mean, "
-    "curvature-max."
-)
+#: contrast stretches of ``quantize``, and "none"
+STRETCHES: tuple[str, ...] = ("none", *typing.get_args(Stretch))
+#: output bit depths of ``quantize``
+BITS: tuple[int, ...] = (8, 16)
 
 
-def _check_options(
-    kind: str,
-    n: int,
-    median: int,
-    bits: int,
-    stretch: str,
+class ConvertConfig(Config):
+    """Settings of ``flexreg convert`` (``flexreg config show convert``); the input's camera
+    model (``--pinhole``, ``--equirect``, ``--depth-kind``, ``--depth-scale``) belongs to the
+    input file, not here.
+
+    Attributes
+    ----------
+    kind : str
+        Conversion, one of :data:`flexreg.stages.feature_images.KINDS`; required (no default).
+    n : int
+        Odd grid size n of Flexion n x n (neighbours at (n - 1) / 2).
+    median : {0, 3, 5}
+        Median pre-filter window (0: off).
+    bits : {8, 16}
+        Output bit depth.
+    stretch : {"none", "percentile", "clahe"}
+        Contrast stretch of the quantised image (for feature detection).
+    """
+
+    kind: Annotated[str, one_of(KINDS, "kind")]
+    n: OddSize = 3
+    median: Annotated[int, one_of(MEDIANS)] = 0
+    bits: Annotated[int, one_of(BITS)] = 8
+    stretch: Annotated[str, one_of(STRETCHES)] = "none"
+
+
+def _shown_config() -> ConvertConfig:
+    """What ``flexreg config show convert`` prints: the defaults, with ``kind`` (which has no
+    default) set to flexion so the file is ready to use."""
+    return ConvertConfig(kind="flexion")
+
+
+add_config("convert", _shown_config)
+#: options that set a field of ConvertConfig (option -> field)
+OPTIONS = {
+    "--kind": "kind",
+    "--n": "n",
+    "--median": "median",
+    "--bits": "bits",
+    "--stretch": "stretch",
+}
+_C = ConvertConfig
+
+
+def _check_camera(
     pinhole: tuple[float, float, float, float] | None,
     equirect: tuple[float, float] | None,
     depth_kind: str | None,
     depth_scale: float | None,
-    out: Path,
-    folder: bool,
 ) -> None:
-    """Validate everything that does not need the input file, before anything is read."""
-    from flexreg.stages.feature_images import KINDS
-
-    if kind not in KINDS:
-        raise InputError("--kind", f"unknown kind {kind!r}; known: {', '.join(KINDS)}")
-    if n < 3 or n % 2 == 0:
-        raise InputError("--n", f"must be an odd grid size 3, 5, 7, ... 13, got {n}")
-    if median not in (0, 3, 5):
-        raise InputError("--median", f"must be 0 (off), 3 or 5, got {median}")
-    if bits not in (8, 16):
-        raise InputError("--bits", f"must be 8 or 16, got {bits}")
-    if stretch not in ("none", "percentile", "clahe"):
-        raise InputError("--stretch", f"must be none, percentile or clahe, got {stretch!r}")
+    """The camera-model options of the input, checked before anything is read."""
     if pinhole is not None and equirect is not None:
         raise InputError("--pinhole/--equirect", "give one camera model, not both")
     if depth_kind not in (None, "z", "range"):
@@ -57,11 +102,16 @@ def _check_options(
         raise InputError(
             "--depth-scale", f"must be a positive number of metres per unit, got {depth_scale}"
         )
+
+
+def _check_out(out: Path, input: Path, folder: bool) -> None:
+    """``--out`` is a folder when INPUT is one, else a .png file that is not the input."""
     if folder:
-        if out.exists() and not out.is_dir():
-            raise InputError(out, "exists and is not a folder (INPUT is a folder)")
-    elif out.suffix.lower() != ".png":
-        raise InputError(out, "output must be a .png file")
+        check_out_folder("--out", out, (input,))
+        return
+    if out.suffix.lower() != ".png":
+        raise ConfigError(f"--out: {out}: output must be a .png file")
+    check_outputs([("--out", out, None)], inputs=(input,))
 
 
 def load_range_image(
@@ -85,16 +135,14 @@ def load_range_image(
 def _convert_one(
     src: Path,
     dst: Path,
+    config: ConvertConfig,
     *,
-    kind: str,
-    n: int,
-    median: int,
-    bits: int,
-    stretch: str,
     keep_float: bool,
     camera_options: dict[str, object],
 ) -> tuple[int, int, float]:
     """Convert one input file; write ``dst`` (and ``dst.npz``) only once all is computed."""
+    import json
+
     import cv2
     import numpy as np
 
@@ -104,12 +152,13 @@ def _convert_one(
     if not src.is_file():
         raise InputError(src, "no such file")
     rimg = load_range_image(src, **camera_options)  # type: ignore[arg-type]
-    image = convert(rimg, kind, n=n, median=median)
+    kind = config.kind
+    image = convert(rimg, kind, n=config.n, median=config.median)
     q, valid = quantize(
         image,
-        bits,
+        config.bits,
         value_range=value_range(kind, image),
-        stretch=None if stretch == "none" else stretch,  # type: ignore[arg-type]
+        stretch=None if config.stretch == "none" else config.stretch,  # type: ignore[arg-type]
     )
 
     def write_png(tmp: Path) -> None:
@@ -123,9 +172,10 @@ def _convert_one(
                 image=image,
                 valid=valid,
                 kind=np.array(kind),
-                n=np.int64(n),
-                median=np.int64(median),
+                n=np.int64(config.n),
+                median=np.int64(config.median),
                 wraps=np.bool_(rimg.wraps),
+                config=np.array(json.dumps(config.to_dict())),
             )
 
     try:
@@ -148,54 +198,126 @@ def _inputs(folder: Path) -> list[Path]:
     )
 
 
-@app.command("convert")
-def convert_command(
-    input: Path = typer.Argument(
-        ..., metavar="INPUT", help="Scan file, 16-bit depth/range PNG, or a folder of them."
+_InputArgument = Annotated[
+    Path,
+    typer.Argument(metavar="INPUT", help="Scan file, 16-bit depth/range PNG, or a folder of them."),
+]
+_KindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--kind",
+        help=f"Conversion (required here, in --config or as --set kind=...): {', '.join(KINDS)}.",
     ),
-    kind: str = typer.Option(..., "--kind", help=f"Conversion: {_KIND_HELP}"),
-    out: Path = typer.Option(..., "--out", help="Output .png (a folder when INPUT is a folder)."),
-    n: int = typer.Option(
-        3, "--n", help="Odd grid size n of Flexion n x n (neighbours at (n-1)/2)."
+]
+_OutOption = Annotated[
+    Path, typer.Option("--out", help="Output .png (a folder when INPUT is a folder).")
+]
+_NOption = Annotated[
+    int | None,
+    typer.Option(
+        "--n",
+        help=with_default(_C, "n", "Odd grid size n of Flexion n x n (neighbours at (n-1)/2)."),
     ),
-    median: int = typer.Option(0, "--median", help="Median pre-filter window: 0 (off), 3 or 5."),
-    bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
-    pinhole: tuple[float, float, float, float] | None = typer.Option(
-        None, "--pinhole", metavar="FX FY CX CY", help="Pinhole intrinsics of a depth PNG (pixels)."
+]
+_MedianOption = Annotated[
+    int | None,
+    typer.Option(
+        "--median", help=with_default(_C, "median", "Median pre-filter window: 0 (off), 3 or 5.")
     ),
-    equirect: tuple[float, float] | None = typer.Option(
-        None,
+]
+_BitsOption = Annotated[
+    int | None, typer.Option("--bits", help=with_default(_C, "bits", "Output bit depth: 8 or 16."))
+]
+_PinholeOption = Annotated[
+    tuple[float, float, float, float] | None,
+    typer.Option(
+        "--pinhole", metavar="FX FY CX CY", help="Pinhole intrinsics of a depth PNG (pixels)."
+    ),
+]
+_EquirectOption = Annotated[
+    tuple[float, float] | None,
+    typer.Option(
         "--equirect",
         metavar="THETA_MIN THETA_MAX",
         help="Polar range of a full-turn equirectangular range PNG (radians).",
     ),
-    depth_kind: str | None = typer.Option(
-        None, "--depth-kind", help="z or range (default: z for --pinhole, range for --equirect)."
+]
+_DepthKindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--depth-kind", help="z or range (default: z for --pinhole, range for --equirect)."
     ),
-    depth_scale: float | None = typer.Option(
-        None, "--depth-scale", help="Metres per PNG unit (default 1, or the camera sidecar's)."
+]
+_DepthScaleOption = Annotated[
+    float | None,
+    typer.Option("--depth-scale", help="Metres per PNG unit (default 1, or the camera sidecar's)."),
+]
+_StretchOption = Annotated[
+    str | None,
+    typer.Option(
+        "--stretch",
+        help=with_default(
+            _C, "stretch", "Contrast stretch for feature detection: none, percentile, clahe."
+        ),
     ),
-    stretch: str = typer.Option(
-        "none", "--stretch", help="Contrast stretch for feature detection: none, percentile, clahe."
+]
+_KeepFloatOption = Annotated[
+    bool,
+    typer.Option(
+        "--keep-float",
+        help="Also write the float32 image as .npz (with the configuration used, as JSON).",
     ),
-    keep_float: bool = typer.Option(
-        False, "--keep-float", help="Also write the float32 image as .npz."
-    ),
+]
+
+
+@app.command("convert")
+def convert_command(
+    input: _InputArgument,
+    out: _OutOption,
+    kind: _KindOption = None,
+    n: _NOption = None,
+    median: _MedianOption = None,
+    bits: _BitsOption = None,
+    pinhole: _PinholeOption = None,
+    equirect: _EquirectOption = None,
+    depth_kind: _DepthKindOption = None,
+    depth_scale: _DepthScaleOption = None,
+    stretch: _StretchOption = None,
+    keep_float: _KeepFloatOption = False,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
 ) -> None:
-    """Convert a scan or depth image into a Flexion, Bearing Angle or range image."""
-    folder = input.is_dir()
-    _check_options(
-        kind, n, median, bits, stretch, pinhole, equirect, depth_kind, depth_scale, out, folder
+    """Convert a scan or depth image into a Flexion, Bearing Angle or range image.
+
+    Nothing is written for an input that fails; a folder's other files are still converted.
+    """
+    if kind is None and config_file is None and "kind" not in parse_sets(sets or ()):
+        raise ConfigError("--kind: required (or kind in --config FILE, or --set kind=...)")
+    config = build_config(
+        ConvertConfig,
+        config_file,
+        sets,
+        OPTIONS,
+        kind=kind,
+        n=n,
+        median=median,
+        bits=bits,
+        stretch=stretch,
     )
-    options = dict(kind=kind, n=n, median=median, bits=bits, stretch=stretch, keep_float=keep_float)
+    _check_camera(pinhole, equirect, depth_kind, depth_scale)
+    folder = input.is_dir()
+    _check_out(out, input, folder)
     camera_options: dict[str, object] = dict(
         pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
     )
+    options = dict(keep_float=keep_float, camera_options=camera_options)
     if not folder:
         if not input.exists():
             raise InputError(input, "no such file or folder")
-        W, H, frac = _convert_one(input, out, camera_options=camera_options, **options)  # type: ignore[arg-type]
-        console.print(f"wrote {out} ({kind}, {W}x{H}, {100 * frac:.1f}% valid)", markup=False)
+        W, H, frac = _convert_one(input, out, config, **options)  # type: ignore[arg-type]
+        console.print(
+            f"wrote {out} ({config.kind}, {W}x{H}, {100 * frac:.1f}% valid)", markup=False
+        )
         return
 
     files = _inputs(input)
@@ -203,11 +325,11 @@ def convert_command(
         raise InputError(input, "folder holds no scan or depth image")
     failed = 0
     with progress_bar() as progress:
-        task = progress.add_task(f"convert {kind}", total=len(files))
+        task = progress.add_task(f"convert {config.kind}", total=len(files))
         for src in files:
             dst = out / f"{src.stem}.png"
             try:
-                _convert_one(src, dst, camera_options=camera_options, **options)  # type: ignore[arg-type]
+                _convert_one(src, dst, config, **options)  # type: ignore[arg-type]
             except FlexregError as e:
                 failed += 1
                 own = isinstance(e, InputError) and e.source == str(src)

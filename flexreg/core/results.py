@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,6 +16,95 @@ class Settings(Protocol):
     def seed(self) -> int: ...
 
     def to_dict(self) -> dict[str, Any]: ...
+
+
+@dataclass(frozen=True)
+class Reason:
+    """Why a result is not trusted, for machines (``code``) and for people (``message``).
+
+    Attributes
+    ----------
+    code : str
+        Stable identifier, e.g. ``"low_overlap"``, ``"weak_axis"``, ``"ambiguous"``,
+        ``"few_inliers"``, ``"clustered_inliers"``, ``"free_space"``, ``"high_residual"``.
+    message : str
+        One sentence a surveyor understands ("two poses 3.4 m apart along x fit almost equally
+        well: repeating structure").
+    """
+
+    code: str
+    message: str
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A transform that competed with the winner.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+    score_ratio : float
+        Its score divided by the winner's (1 = explains the data as well).
+    rotation_deg, translation_m : float
+        How far it is from the winner.
+    origin : str
+        Which prior produced it.
+    """
+
+    T_target_source: NDArray[np.float64]
+    score_ratio: float
+    rotation_deg: float
+    translation_m: float
+    origin: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "T_target_source": np.asarray(self.T_target_source).tolist(),
+            "score_ratio": self.score_ratio,
+            "rotation_deg": self.rotation_deg,
+            "translation_m": self.translation_m,
+            "origin": self.origin,
+        }
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Whether a registration can be trusted, why, and the evidence behind it.
+
+    Attributes
+    ----------
+    status : {"confident", "uncertain"}
+        ``"uncertain"`` whenever any reason is given.
+    reasons : tuple of Reason
+    evidence : dict
+        JSON-ready measurements the decision used (overlaps, inlier spread, per-axis
+        strength, runner-up, free-space violations, residuals), with units in the keys.
+    runner_up : tuple of Hypothesis
+        Clearly different transforms that explain the data almost as well, best first.
+    """
+
+    status: Literal["confident", "uncertain"]
+    reasons: tuple[Reason, ...] = ()
+    evidence: dict[str, Any] = field(default_factory=dict)
+    runner_up: tuple[Hypothesis, ...] = ()
+
+    @property
+    def confident(self) -> bool:
+        return self.status == "confident"
+
+    def summary(self) -> str:
+        """One line: the status and the reasons in words."""
+        if self.confident:
+            return "confident"
+        return "uncertain: " + "; ".join(r.message for r in self.reasons)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "reasons": [{"code": r.code, "message": r.message} for r in self.reasons],
+            "evidence": self.evidence,
+            "runner_up": [h.to_dict() for h in self.runner_up],
+        }
 
 
 @dataclass(eq=False)
@@ -61,6 +150,9 @@ class PairResult:
         Which prior or method led to the estimate.
     wall_s : float
         Seconds the whole call took.
+    verdict : Verdict or None
+        Whether the result can be trusted (None for methods that give no verdict, such as
+        the ICP baselines: reported as "n/a").
     """
 
     T_target_source: NDArray[np.float64]
@@ -79,6 +171,7 @@ class PairResult:
     keypoints: tuple[NDArray[np.float64], NDArray[np.float64]] = field(repr=False)
     prior: str = "descriptors"
     wall_s: float = float("nan")
+    verdict: Verdict | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no per-match arrays)."""
@@ -97,7 +190,8 @@ class PairResult:
             "prior": self.prior,
             "seed": self.config.seed,
             "config": self.config.to_dict(),
+            "verdict": None if self.verdict is None else self.verdict.to_dict(),
         }
 
 
-__all__ = ["PairResult", "Settings"]
+__all__ = ["Hypothesis", "PairResult", "Reason", "Settings", "Verdict"]

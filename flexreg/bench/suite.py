@@ -51,7 +51,7 @@ from flexreg.errors import ConfigError, DegenerateGeometryError, FlexregError, I
 from flexreg.io import read_scan, read_scans
 from flexreg.io.transform_io import read_ground_truth
 from flexreg.synth import make_scene, place_stations, scan_tls, station_overlap, stream
-from flexreg.synth.sensors import TLSConfig
+from flexreg.synth.config import TLSConfig
 
 __all__ = [
     "check_real_data",

@@ -5,6 +5,7 @@ exit 1 and write nothing."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 from pathlib import Path
@@ -12,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO, one_error_line
+from conftest import REPO, one_error_line, run_cli
 
 import flexreg.registration.pipeline
 from flexreg import Scan, __version__, read_scan, write_scan
@@ -20,6 +21,7 @@ from flexreg.cli import run
 from flexreg.cli.register import SOURCE_RGB, TARGET_RGB
 from flexreg.core.camera import SphericalCamera
 from flexreg.core.range_image import to_scan
+from flexreg.core.results import Hypothesis, Reason, Verdict
 from flexreg.core.transforms import (
     apply,
     invert,
@@ -182,6 +184,109 @@ def test_summary_and_stage_progress(registered):
     assert "Reading target.npz" in err and "Reading source.ptx" in err
     for name in registered["result"].timings_s:  # a spinner and a done line per stage
         assert f"{name[:1].upper()}{name[1:]} (" in err, name
+
+
+def test_a_normal_pair_is_confident_exit_0(registered):
+    """The fixture's run exited 0 (asserted there); its verdict, once the pipeline gives one,
+    is confident and stored in T.json."""
+    doc = json.loads((registered["out"] / "T.json").read_text())
+    assert "verdict" in doc
+    verdict = registered["result"].verdict
+    if verdict is None:  # no verdict from the pipeline: nothing said, exit 0
+        assert doc["verdict"] is None and "verdict:" not in registered["stdout"]
+    else:
+        assert verdict.confident and doc["verdict"]["status"] == "confident"
+        assert "verdict: confident" in registered["stdout"]
+        assert "uncertain" not in registered["stderr"]
+
+
+# ------------------------------------------------------------------------ exit codes 0 / 3
+
+#: the result a repeating structure might give: a runner-up 3.4 m along x that fits as well
+_RUNNER = make_transform(np.eye(3), [3.4, 0.02, 0.0])
+_UNCERTAIN = Verdict(
+    "uncertain",
+    reasons=(
+        Reason(
+            "ambiguous",
+            "two poses 3.40 m apart along x fit almost equally well: repeating structure",
+        ),
+        Reason("weak_axis", "translation along x is weakly constrained (corridor)"),
+    ),
+    evidence={"overlap_target": 0.41, "overlap_source": 0.38, "inliers": 57},
+    runner_up=(Hypothesis(_RUNNER, 0.97, 0.4, 3.4, "plan view 2"),),
+)
+
+
+def _with_verdict(registered, verdict):
+    """The fixture's result with another verdict (translation zero, so the runner-up's offset
+    is its own translation)."""
+    T = np.eye(4)
+    return dataclasses.replace(registered["result"], verdict=verdict, T_target_source=T)
+
+
+def _register_with(registered, pair, tmp_path, monkeypatch, verdict, *extra):
+    result = _with_verdict(registered, verdict)
+    monkeypatch.setattr(flexreg.registration.pipeline, "register", lambda *a, **k: result)
+    target, source, _ = pair
+    out = tmp_path / "out"
+    argv = ["register", target, source, "--out", out / "T.json", "--txt", out / "T.txt", *extra]
+    rc, stdout, stderr = run_cli(argv)
+    return rc, stdout, stderr, out
+
+
+def test_uncertain_result_is_written_with_its_verdict_exit_3(
+    registered, pair, tmp_path, monkeypatch
+):
+    rc, stdout, stderr, out = _register_with(registered, pair, tmp_path, monkeypatch, _UNCERTAIN)
+    assert rc == 3, stderr
+    assert _files(out) == ["T.json", "T.txt"]
+    doc = json.loads((out / "T.json").read_text())
+    v = doc["verdict"]
+    assert v["status"] == "uncertain"
+    assert [r["code"] for r in v["reasons"]] == ["ambiguous", "weak_axis"]
+    assert "repeating structure" in v["reasons"][0]["message"]
+    assert v["evidence"]["overlap_target"] == 0.41
+    (runner,) = v["runner_up"]
+    np.testing.assert_array_equal(runner["T_target_source"], _RUNNER)
+    assert runner["score_ratio"] == 0.97 and runner["translation_m"] == 3.4
+    # the summary in words: status, every reason, how far the runner-up is and how good
+    assert "verdict: UNCERTAIN" in stdout
+    assert "two poses 3.40 m apart along x fit almost equally well" in stdout
+    assert "[weak_axis]" in stdout
+    assert "runner-up 1: 0.4° and 3.40 m away (mostly along x)" in stdout
+    assert "97 % as well" in stdout and "plan view 2" in stdout
+    assert f"wrote {out / 'T.json'}" in stdout
+    # the last line says what happened and what to do
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith("uncertain (exit status 3): ") and str(out / "T.json") in last
+    assert "runner-up transforms" in last and "--merged" in last
+    assert "error:" not in stderr
+
+
+def test_confident_result_exit_0(registered, pair, tmp_path, monkeypatch):
+    verdict = Verdict("confident", evidence={"overlap_target": 0.8})
+    rc, stdout, stderr, out = _register_with(registered, pair, tmp_path, monkeypatch, verdict)
+    assert rc == 0, stderr
+    assert _files(out) == ["T.json", "T.txt"]
+    assert json.loads((out / "T.json").read_text())["verdict"]["status"] == "confident"
+    assert "verdict: confident" in stdout and "uncertain" not in stdout + stderr
+
+
+def test_no_verdict_yet_is_exit_0(registered, pair, tmp_path, monkeypatch):
+    rc, stdout, stderr, out = _register_with(registered, pair, tmp_path, monkeypatch, None)
+    assert rc == 0, stderr
+    assert json.loads((out / "T.json").read_text())["verdict"] is None
+    assert "verdict:" not in stdout
+
+
+def test_exit_codes_in_help():
+    for argv in (["register", "--help"], ["--help"]):
+        rc, stdout, _ = run_cli(argv)
+        assert rc == 0
+        text = " ".join(stdout.split())
+        assert "0 " in text and "3 written, but uncertain" in text, argv
+        assert "1 failed: one error line, nothing written" in text, argv
 
 
 # ------------------------------------------------------------------------ failures

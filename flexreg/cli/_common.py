@@ -6,7 +6,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import (
@@ -19,6 +19,9 @@ from rich.progress import (
 )
 
 from flexreg.io.files import write_all as write_all  # re-exported for the commands
+
+if TYPE_CHECKING:
+    from flexreg.core.results import Verdict
 
 console = Console(highlight=False)
 err_console = Console(stderr=True, highlight=False)
@@ -89,3 +92,90 @@ def read_input(
         )
     scans = read_scans(path, **opts)
     return scans if all_scans else scans[:1]
+
+
+#: exit status of a command that wrote its result but does not trust it (see ``flexreg --help``)
+EXIT_UNCERTAIN = 3
+
+#: what to do about each reason code, in words (codes not listed get the general advice)
+ADVICE = {
+    "ambiguous": "check which of the listed poses is right (a known rough position decides)",
+    "low_overlap": "check that the scans see the same place; a station between them helps",
+    "weak_axis": "the geometry holds the pose weakly along one axis: check the link along it",
+    "few_inliers": "too little agrees: inspect the pair before using it",
+    "clustered_inliers": "the agreeing points lie in one small area: inspect the pair",
+    "free_space": "parts of one scan lie where the other scanner saw through: inspect the pair",
+    "high_residual": "the surfaces do not meet closely: inspect the pair",
+    "coplanar_points": "add pairs whose lidar points lie off that plane",
+    "collinear_points": "add pairs whose lidar points lie off that line",
+    "clustered_pixels": "add pairs spread over the whole camera image",
+}
+
+
+def _along(delta: Any) -> str:
+    """``" (mostly along x)"`` when one axis carries most of a translation."""
+    import numpy as np
+
+    d = np.abs(np.asarray(delta, dtype=np.float64))
+    n = float(np.linalg.norm(d))
+    if n <= 0 or not np.isfinite(n):
+        return ""
+    k = int(np.argmax(d))
+    return f" (mostly along {'xyz'[k]})" if d[k] >= 0.9 * n else ""
+
+
+def verdict_lines(verdict: Verdict | None, T: Any = None) -> list[str]:
+    """The verdict in words: status, one line per reason, one per runner-up pose.
+
+    ``T`` (the winning transform) lets a runner-up's offset name its main axis.
+    """
+    import numpy as np
+
+    if verdict is None:
+        return []
+    if verdict.confident:
+        return ["verdict: confident"]
+    lines = ["verdict: UNCERTAIN -- written, but do not use it unchecked"]
+    lines += [f"  - {r.message} [{r.code}]" for r in verdict.reasons]
+    for i, h in enumerate(verdict.runner_up, 1):
+        where = ""
+        if T is not None:
+            where = _along(np.asarray(h.T_target_source)[:3, 3] - np.asarray(T)[:3, 3])
+        origin = f", from {h.origin}" if h.origin else ""
+        lines.append(
+            f"  runner-up {i}: {h.rotation_deg:.1f}° and {h.translation_m:.2f} m away{where}, "
+            f"explains the data {100 * h.score_ratio:.0f} % as well as the answer (score ratio "
+            f"{h.score_ratio:.2f}){origin}"
+        )
+    return lines
+
+
+def what_to_do(verdict: Verdict, output: Path, *, extra: str = "") -> str:
+    """The last line of an uncertain run: what was written and what to do next."""
+    seen = dict.fromkeys(ADVICE[r.code] for r in verdict.reasons if r.code in ADVICE)
+    steps = "; ".join(seen) or "inspect the result before using it"
+    if verdict.runner_up:
+        steps += f"; the runner-up transforms are in {output} under verdict.runner_up"
+    return (
+        f"uncertain (exit status {EXIT_UNCERTAIN}): {output} was written with the reasons; "
+        f"{steps}{extra}."
+    )
+
+
+def print_verdict(verdict: Verdict | None, T: Any = None) -> None:
+    """Print :func:`verdict_lines` on the console (nothing without a verdict)."""
+    for line in verdict_lines(verdict, T):
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
+def exit_for(verdict: Verdict | None, output: Path, *, extra: str = "") -> None:
+    """Leave with :data:`EXIT_UNCERTAIN` after the advice line when the verdict is uncertain;
+    return (exit 0) when it is confident or there is none."""
+    import typer
+
+    if verdict is None or verdict.confident:
+        return
+    err_console.print(
+        what_to_do(verdict, output, extra=extra), markup=False, highlight=False, soft_wrap=True
+    )
+    raise typer.Exit(EXIT_UNCERTAIN)

@@ -18,7 +18,13 @@ from flexreg.errors import FlexregError
 
 app = typer.Typer(
     name="flexreg",
-    help="Register 3D scans through 2D Flexion images.",
+    help="Register 3D scans through 2D Flexion images.\n\n"
+    "\b\nExit status of the commands:\n"
+    "  0  done (register, calibrate: the result is confident)\n"
+    "  3  written, but uncertain (register, calibrate): the reasons are on screen and in\n"
+    '     the output JSON under "verdict"\n'
+    "  1  failed: one error line, nothing written\n"
+    "  2  wrong usage (unknown option, missing argument)",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -68,7 +74,8 @@ def _click_classes(name: str) -> tuple[type[BaseException], ...]:
 
 
 def run(argv: list[str] | None = None) -> int:
-    """Run the CLI and return its exit status (0 ok, 1 known error, 2 usage error)."""
+    """Run the CLI and return its exit status: 0 done (and confident), 1 known error (nothing
+    written), 2 usage error, 3 written but uncertain (``register``, ``calibrate``)."""
     try:
         rv = app(args=argv, standalone_mode=False)
     except FlexregError as e:

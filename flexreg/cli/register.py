@@ -10,7 +10,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from flexreg.cli._common import console, read_input, stage, write_all
+from flexreg.cli._common import (
+    console,
+    exit_for,
+    print_verdict,
+    read_input,
+    stage,
+    write_all,
+)
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -239,7 +246,12 @@ def register_command(
 ) -> None:
     """Register SOURCE onto TARGET through feature images; write T_target_source.
 
-    Nothing is written unless registration succeeds.
+    \b
+    Exit status:
+      0  written, and the result is confident
+      3  written, but uncertain: the reasons and any runner-up transforms are on screen
+         and in the output JSON under "verdict"; check the pair before using it
+      1  failed: one error line, nothing written
     """
     from flexreg.registration.pipeline import register
 
@@ -278,8 +290,11 @@ def register_command(
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
     _print_summary(result, config, errors)
+    print_verdict(result.verdict, result.T_target_source)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
+    look = f"{merged} shows" if merged is not None else "--merged merged.ply would show"
+    exit_for(result.verdict, out, extra=f"; {look} both clouds as registered")
 
 
 def _writers(

@@ -65,6 +65,12 @@ def test_compare_prints_a_table_and_writes_three_files(files, tmp_path):
     assert rows["fpfh-ransac"]["details"]["start"] == "fpfh-ransac"
     assert doc["target"] == str(target) and doc["points"][0] == 40256
     assert "| icp-plane | ok |" in (out / "comparison.md").read_text()
+    # the baselines give no verdict: "n/a" in the table, the Markdown and the JSON
+    assert "verdict" in stdout and "n/a" in stdout
+    assert rows["icp-plane"]["verdict"] == rows["fpfh-ransac"]["verdict"] == "n/a"
+    assert rows["icp-plane"]["details"]["verdict"] is None
+    md = (out / "comparison.md").read_text()
+    assert "| success | verdict |" in md and "| yes | n/a |" in md
     # the settings it ran with, so that --config comparison.json repeats the run
     assert doc["config"]["methods"] == "icp-plane,fpfh-ransac"
     assert doc["config"]["success_deg"] == 1.0 and doc["config"]["success_m"] == 0.005
@@ -247,3 +253,81 @@ def test_bench_writes_nothing_when_writing_fails(shared_data, tmp_path, monkeypa
     )
     assert rc == 1 and "No space left on device" in one_error_line(err)
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------ the verdict column
+
+
+def _measured_with(verdict):
+    """A measured call whose result carries ``verdict`` (flexreg's) or none (a baseline's)."""
+    from flexreg.bench.measure import Measured
+    from flexreg.core.results import PairResult
+    from flexreg.registration.config import RegistrationConfig
+
+    result = PairResult(
+        T_target_source=np.eye(4),
+        T_coarse=np.eye(4),
+        matches=120,
+        inliers=40,
+        inlier_rmse_m=0.01,
+        fitness=0.5,
+        fitness_denominator="source points",
+        information=np.eye(6),
+        timings_s={"total": 1.0},
+        threshold_m=0.05,
+        config=RegistrationConfig(),
+        correspondences=np.zeros((0, 2, 3)),
+        inlier_mask=np.zeros(0, dtype=bool),
+        keypoints=(np.zeros((0, 2)), np.zeros((0, 2))),
+        verdict=verdict,
+    )
+    return Measured("ok", result, None, 1.0, 10.0)
+
+
+def test_verdict_column_per_method():
+    """flexreg's rows show its verdict (reasons in the JSON details), a baseline's "n/a", a
+    failed method's none; the console, Markdown and JSON take the same cells."""
+    from flexreg.bench.compare import Comparison, SuccessCriteria, make_row
+    from flexreg.bench.tables import COLUMNS, table_rows, to_markdown
+    from flexreg.core.results import Reason, Verdict
+
+    uncertain = Verdict("uncertain", (Reason("low_overlap", "the scans overlap by 8 %"),))
+    criteria = SuccessCriteria()
+    T_gt = np.eye(4)
+    runs = [
+        make_row("flexreg", _measured_with(uncertain), T_gt=T_gt, criteria=criteria, fit=None),
+        make_row("icp-plane", _measured_with(None), T_gt=T_gt, criteria=criteria, fit=None),
+    ]
+    from flexreg.bench.measure import Measured
+
+    failed = Measured("failed", None, "too few inliers", 1.0, None)
+    runs.append(make_row("gicp", failed, T_gt=T_gt, criteria=criteria, fit=None))
+    assert [r.verdict for r in runs] == ["uncertain", "n/a", None]
+    assert runs[0].details["verdict"]["reasons"][0]["code"] == "low_overlap"
+    assert runs[0].to_dict()["verdict"] == "uncertain"
+    confident = make_row(
+        "flexreg", _measured_with(Verdict("confident")), T_gt=T_gt, criteria=criteria, fit=None
+    )
+    assert confident.verdict == "confident"
+
+    cmp = Comparison(
+        target="a",
+        source="b",
+        runs=runs,
+        criteria=criteria,
+        T_gt=T_gt,
+        T_init=None,
+        scale_m=0.05,
+        scale_source="given",
+        fit_denominator="source points",
+        peak_memory="ru_maxrss",
+        isolation="one process",
+        points=(10, 10),
+        seed=0,
+    )
+    assert [row["verdict"] for row in table_rows(cmp)] == ["uncertain", "n/a", "–"]
+    assert "verdict" in COLUMNS
+    md = to_markdown(cmp).splitlines()
+    assert len(md[1].split("|")) == len(md[0].split("|")) == len(COLUMNS) + 2
+    assert "| yes | uncertain |" in md[2] and "| yes | n/a |" in md[3]
+    assert any("Verdict:" in line and "n/a" in line for line in md)

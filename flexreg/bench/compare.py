@@ -185,6 +185,10 @@ class MethodRun:
         None without ground truth (and ``coarse_success`` for local methods).
     fitness, inlier_rmse_m : float or None
         The common fit (:class:`FitEvaluator`).
+    verdict : str or None
+        The method's own verdict on its result: ``"confident"`` or ``"uncertain"`` (flexreg),
+        ``"n/a"`` for methods that give none (the baselines); None without a result. The
+        reasons and evidence are in ``details["verdict"]``.
     details : dict
         The method's own figures: matches, inliers, its fitness and denominator, threshold,
         timings per stage, configuration.
@@ -205,6 +209,7 @@ class MethodRun:
     coarse_success: bool | None = None
     fitness: float | None = None
     inlier_rmse_m: float | None = None
+    verdict: str | None = None
     details: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -231,6 +236,7 @@ class MethodRun:
             "coarse_success": self.coarse_success,
             "fitness": self.fitness,
             "inlier_rmse_m": self.inlier_rmse_m,
+            "verdict": self.verdict,
             "details": self.details,
         }
 
@@ -275,6 +281,8 @@ def make_row(
             )
     if fit is not None:
         row.fitness, row.inlier_rmse_m = fit(row.T_target_source)
+    verdict = getattr(r, "verdict", None)
+    row.verdict = "n/a" if verdict is None else verdict.status
     cfg = r.config.to_dict() if hasattr(r.config, "to_dict") else {}
     row.details = {
         "matches": r.matches,
@@ -286,6 +294,7 @@ def make_row(
         "start": r.prior,
         "timings_s": dict(r.timings_s),
         "config": cfg,
+        "verdict": None if verdict is None else verdict.to_dict(),
     }
     return row
 

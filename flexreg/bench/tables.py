@@ -15,6 +15,7 @@ COLUMNS: tuple[str, ...] = (
     "rotation error (°)",
     "translation error (m)",
     "success",
+    "verdict",
     "coarse error (° / m)",
     "inlier RMSE (m)",
     "fitness",
@@ -51,6 +52,7 @@ def table_rows(cmp: Comparison) -> list[dict[str, str]]:
                 "rotation error (°)": _num(r.rotation_error_deg, ".4f"),
                 "translation error (m)": _num(r.translation_error_m, ".4f"),
                 "success": _yes(r.success),
+                "verdict": r.verdict or "–",
                 "coarse error (° / m)": coarse,
                 "inlier RMSE (m)": _num(r.inlier_rmse_m, ".4f"),
                 "fitness": _num(r.fitness, ".3f"),
@@ -71,6 +73,8 @@ def notes(cmp: Comparison) -> list[str]:
         + " of the ground truth; coarse error = the transform before refinement (global "
         "methods: flexreg, fpfh-ransac)."
         + ("" if cmp.T_gt is not None else " No ground truth given: no errors, no success."),
+        "Verdict: the method's own judgement of its result, before any ground truth is seen "
+        "(flexreg: confident or uncertain; n/a: the method gives none, as the baselines).",
         f"Fitness: share of {cmp.fit_denominator}; inlier RMSE over those points.",
         f"Scale voxel {cmp.scale_m:.4g} m ({cmp.scale_source}); local methods start from "
         + ("the given initial guess." if cmp.T_init is not None else "the identity."),
@@ -86,7 +90,7 @@ def to_markdown(cmp: Comparison, *, figure: str | None = None) -> str:
     rows = table_rows(cmp)
     lines = [
         "| " + " | ".join(COLUMNS) + " |",
-        "|---|---|" + "---:|" * 3 + "---|" + "---:|" * 4,
+        "|---|---|" + "---:|" * 2 + "---|" * 2 + "---:|" * 5,
     ]
     for row in rows:
         cells = [row[c].replace("|", "\\|") for c in COLUMNS]

@@ -197,6 +197,7 @@ _SHORT = {
     "rotation error (°)": "rot. err °",
     "translation error (m)": "trans. err m",
     "success": "success",
+    "verdict": "verdict",
     "coarse error (° / m)": "coarse ° / m",
     "inlier RMSE (m)": "RMSE m",
     "fitness": "fitness",
@@ -213,7 +214,7 @@ def _print_comparison(cmp: Comparison) -> None:
 
     t = Table(title=f"{cmp.target} ← {cmp.source}", title_justify="left")
     for c in COLUMNS:
-        left = c in ("method", "status", "success")
+        left = c in ("method", "status", "success", "verdict")
         t.add_column(_SHORT[c], justify="left" if left else "right", no_wrap=c != "status")
     for row, run in zip(table_rows(cmp), cmp.runs, strict=True):
         cells = dict(row)

@@ -572,3 +572,93 @@ def test_unstructured_lidar_panorama_has_lidar_pitch(rig):
     assert ri.shape == (cam.height, cam.width)
     assert (ri.index[ri.valid] >= 0).all()  # every pixel shows a real return
     assert ri.valid.mean() > 0.8
+
+
+# ------------------------------------------------------------------------------ verdict
+
+
+def _hand_made(kind: str, seed: int = 0):
+    """Hand-made pairs on the 640 x 480 camera (f = 500 px) with 1 px noise: camera-frame
+    points of one kind mapped into a lidar frame, and the true T_camera_lidar."""
+    rng = np.random.default_rng(seed)
+    T = make_transform(rotation_about_axis([0.3, 1.0, -0.2], 0.4), [0.2, -0.1, 0.3])
+    n = 7 if kind in ("few", "line") else 30
+    if kind == "plane":  # one tilted wall 6 m away, 3 m x 2 m
+        pc = np.column_stack([rng.uniform(-1.5, 1.5, n), rng.uniform(-1, 1, n), np.full(n, 6.0)])
+        pc = pc @ rotation_about_axis([1, 0.3, 0], 0.3).T
+    elif kind == "line":  # along one 3D line, exactly
+        a, b = np.array([-2.0, 1.0, 5.0]), np.array([2.5, -0.5, 12.0])
+        pc = a + np.linspace(0, 1, n)[:, None] * (b - a)
+    else:
+        lo, hi = ([5, 5], [100, 80]) if kind == "corner" else ([5, 5], [634, 474])
+        uv = rng.uniform(lo, hi, (n, 2))
+        pc = np.column_stack([(uv - [320, 240]) / 500, np.ones(n)]) * rng.uniform(3, 20, (n, 1))
+    uv = pc[:, :2] / pc[:, 2:] * 500 + [320, 240] + rng.normal(0, 1, (n, 2))
+    assert (uv >= 0).all() and (uv[:, 0] < 639).all() and (uv[:, 1] < 479).all()
+    return Correspondences2D3D(uv, apply(invert(T), pc)), T
+
+
+@pytest.mark.parametrize(
+    ("kind", "codes"),
+    [
+        ("plane", {"coplanar_points"}),
+        ("corner", {"clustered_pixels"}),
+        ("few", {"few_inliers"}),
+    ],
+)
+def test_near_degenerate_pairs_are_uncertain(kind, codes):
+    pairs, _ = _hand_made(kind)
+    r = solve_pnp(pairs, _intr())
+    v = r.verdict
+    assert v.status == "uncertain" and not v.confident
+    assert codes <= {reason.code for reason in v.reasons}, v.reasons
+    assert all(reason.message for reason in v.reasons)
+    d = json.loads(json.dumps(r.to_dict()))["verdict"]
+    assert d["status"] == "uncertain" and codes <= {x["code"] for x in d["reasons"]}
+    assert d["evidence"]["inliers"] == r.inliers
+    assert "uncertain" in repr(r)
+
+
+def test_well_spread_pairs_are_confident():
+    pairs, T = _hand_made("spread")
+    r = solve_pnp(pairs, _intr())
+    assert r.verdict.confident, r.verdict.reasons
+    assert rotation_error_deg(r.T_camera_lidar, T) < 0.2
+    e = r.verdict.evidence
+    assert e["image_coverage"] > 0.5 and e["thickness_ratio"] > 0.05
+    assert max(e["rotation_std_deg"].values()) < 0.5
+    assert max(e["translation_std_m"].values()) < 0.05
+
+
+def test_a_plane_far_away_lists_the_mirrored_pose():
+    """A small wall far away: planar PnP's second pose fits almost as well and is listed."""
+    rng = np.random.default_rng(4)
+    T = make_transform(rotation_about_axis([0.3, 1.0, -0.2], 0.4), [0.2, -0.1, 0.3])
+    pc = np.column_stack([rng.uniform(-1, 1, 20), rng.uniform(-0.7, 0.7, 20), np.full(20, 20.0)])
+    pc = pc @ rotation_about_axis([1, 0.3, 0], 0.3).T
+    uv = pc[:, :2] / pc[:, 2:] * 500 + [320, 240] + rng.normal(0, 1, (20, 2))
+    r = solve_pnp(Correspondences2D3D(uv, apply(invert(T), pc)), _intr())
+    assert r.verdict.status == "uncertain"
+    assert "coplanar_points" in {x.code for x in r.verdict.reasons}
+    (mirror,) = r.verdict.runner_up
+    assert mirror.score_ratio > 0.5 and mirror.rotation_deg > 5
+    assert "mirrored" in mirror.origin
+
+
+def test_collinear_points_leave_the_pose_undetermined():
+    pairs, _ = _hand_made("line")
+    with pytest.raises(CalibrationError, match=r"lie on one line.*not determined"):
+        solve_pnp(pairs, _intr())
+
+
+def test_verdict_thresholds_are_validated():
+    with pytest.raises(ConfigError, match="collinear_ratio"):
+        CalibrationConfig(collinear_ratio=0.2)
+    with pytest.raises(ConfigError, match="verdict_min_inliers"):
+        CalibrationConfig(verdict_min_inliers=3)
+    with pytest.raises(ConfigError, match="verdict_min_image_coverage"):
+        CalibrationConfig(verdict_min_image_coverage=1.5)
+    # stricter thresholds turn a confident set uncertain
+    pairs, _ = _hand_made("spread")
+    strict = CalibrationConfig(verdict_min_inliers=40)
+    assert solve_pnp(pairs, _intr(), config=strict).verdict.status == "uncertain"

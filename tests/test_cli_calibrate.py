@@ -308,3 +308,54 @@ def test_missing_scan_is_one_line(kitti, tmp_path):
     rc, _, err = run_cli([*argv, "--pairs", str(pairs)])
     assert rc == 1 and "missing.bin: no such file" in one_error_line(err)
     assert not (tmp_path / "calib.json").exists()
+
+
+# ------------------------------------------------------------------------ exit codes 0 / 3 / 1
+
+
+def test_few_pairs_are_written_but_uncertain_exit_3(kitti, tmp_path):
+    """Eight correct pairs: PnP solves them, but too few to check one another -> exit 3,
+    the calibration written with its verdict; a well spread set (above) exits 0."""
+    pairs = _kitti_pairs(kitti, tmp_path / "pairs.csv", n=8, seed=1)
+    out = tmp_path / "out"
+    rc, stdout, stderr = run_cli([*_base(kitti, out), "--pairs", str(pairs)])
+    assert rc == 3, stderr
+    doc = json.loads((out / "calib.json").read_text())
+    assert doc["verdict"]["status"] == "uncertain"
+    assert "few_inliers" in {r["code"] for r in doc["verdict"]["reasons"]}
+    assert doc["verdict"]["evidence"]["inliers"] == doc["inliers"] == 8
+    T = np.array(doc["T_camera_lidar"])
+    assert rotation_error_deg(T, kitti["T"]) < 1.0
+    assert "verdict: UNCERTAIN" in stdout and "[few_inliers]" in stdout
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith("uncertain (exit status 3): ") and "calib.json" in last
+    assert "--overlay" in last
+
+
+def test_well_spread_pairs_exit_0_confident(kitti, tmp_path):
+    pairs = _kitti_pairs(kitti, tmp_path / "pairs.csv", n=30)
+    rc, stdout, stderr = run_cli([*_base(kitti, tmp_path), "--pairs", str(pairs)])
+    assert rc == 0, stderr
+    assert json.loads((tmp_path / "calib.json").read_text())["verdict"]["status"] == "confident"
+    assert "verdict: confident" in stdout
+
+
+def test_pairs_on_one_line_exit_1_nothing_written(kitti, tmp_path):
+    """Seven pairs on one 3D line cannot determine the pose: one error line, exit 1."""
+    from flexreg.core.transforms import apply, invert
+
+    pc = np.array([-3.0, 1.2, 8.0]) + np.linspace(0, 1, 7)[:, None] * [6.0, 0.3, 10.0]
+    xyz = apply(invert(kitti["T"]), pc)
+    uv, _ = project_points(xyz, kitti["intr"], kitti["T"])
+    pairs = _xyz_csv(tmp_path / "line.csv", uv, xyz)
+    out = tmp_path / "out"
+    rc, _, err = run_cli([*_base(kitti, out), "--pairs", str(pairs)])
+    assert rc == 1
+    assert "lie on one line" in one_error_line(err) and "not determined" in err
+    assert not out.exists()
+
+
+def test_exit_codes_in_help():
+    rc, stdout, _ = run_cli(["calibrate", "--help"])
+    text = " ".join(stdout.split())
+    assert rc == 0 and "3 written, but uncertain" in text and "1 failed" in text

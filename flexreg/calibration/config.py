@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from flexreg.config import Config, OddSize, Positive, Seed, odd
 
@@ -47,6 +47,24 @@ class CalibrationConfig(Config):
         refuses.
     flexion_n : int
         Grid size n of the Flexion n x n images (odd, >= 3).
+    verdict_min_inliers : int
+        Fewer agreeing pairs make the result uncertain (``few_inliers``).
+    verdict_planar_ratio : float
+        Inlier lidar points thinner than this share of their extent (third over first
+        principal spread) lie on one plane: uncertain (``coplanar_points``); up to five times
+        thicker, only when a mirrored pose fits them at least half as well.
+    verdict_line_ratio : float
+        Narrower than this share (second over first principal spread): near one line,
+        uncertain (``collinear_points``).
+    collinear_ratio : float
+        Narrower than this share: on one line, the pose is not determined and calibration
+        fails (at most ``verdict_line_ratio``).
+    verdict_min_image_coverage : float
+        Share of the camera image the inlier pixels' convex hull must cover, in [0, 1]
+        (``clustered_pixels`` below it).
+    verdict_max_rotation_std_deg, verdict_max_translation_std_m : float, degrees and metres
+        Largest standard deviation of the pose about / along any camera axis (from the
+        reprojection's information matrix) for a confident result (``weak_axis`` beyond).
     """
 
     threshold_px: Positive = 3.0
@@ -64,3 +82,19 @@ class CalibrationConfig(Config):
     min_inliers: int = Field(12, ge=1)
     max_spread_deg: Positive = 1.0
     flexion_n: OddSize = 3
+    verdict_min_inliers: int = Field(10, ge=4)
+    verdict_planar_ratio: float = Field(0.01, ge=0, lt=1)
+    verdict_line_ratio: float = Field(0.05, ge=0, lt=1)
+    collinear_ratio: float = Field(0.01, ge=0, lt=1)
+    verdict_min_image_coverage: float = Field(0.05, ge=0, le=1)
+    verdict_max_rotation_std_deg: Positive = 0.5
+    verdict_max_translation_std_m: Positive = 0.05
+
+    @model_validator(mode="after")
+    def _line_ratios(self) -> CalibrationConfig:
+        if self.collinear_ratio > self.verdict_line_ratio:
+            raise ValueError(
+                f"collinear_ratio ({self.collinear_ratio}) must be at most verdict_line_ratio "
+                f"({self.verdict_line_ratio})"
+            )
+        return self

@@ -7,6 +7,7 @@ from numpy.typing import ArrayLike
 
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.calibration.types import CalibrationResult, check_correspondences
+from flexreg.calibration.verdict import calibration_verdict, require_determined
 from flexreg.core.correspondences import Correspondences2D3D
 from flexreg.core.transforms import as_transform
 from flexreg.io.intrinsics import CameraIntrinsics
@@ -44,7 +45,8 @@ def solve_pnp(
     Returns
     -------
     CalibrationResult
-        ``method="pairs"``.
+        ``method="pairs"``, with the verdict on the inliers' geometry
+        (:func:`flexreg.calibration.verdict.calibration_verdict`).
 
     Raises
     ------
@@ -52,9 +54,12 @@ def solve_pnp(
         See :func:`check_correspondences`.
     CalibrationError
         RANSAC finds no pose with at least
-        :data:`flexreg.stages.camera_pose.MIN_CORRESPONDENCES` inliers in front of the camera.
+        :data:`flexreg.stages.camera_pose.MIN_CORRESPONDENCES` inliers in front of the camera;
+        the pairs' (or the inliers') lidar points lie on one line, which leaves the pose
+        undetermined (:func:`flexreg.calibration.verdict.require_determined`).
     """
     check_correspondences(correspondences, intrinsics, T_init=T_init)
+    require_determined(correspondences, config=config)
     pnp = camera_pose.solve_pnp(
         correspondences,
         intrinsics,
@@ -63,6 +68,9 @@ def solve_pnp(
         max_iterations=config.max_iterations,
         seed=config.seed,
         refine=config.refine,
+    )
+    verdict = calibration_verdict(
+        correspondences, pnp.inlier_mask, intrinsics, pnp.T_camera_lidar, config=config
     )
     return CalibrationResult(
         T_camera_lidar=pnp.T_camera_lidar,
@@ -75,4 +83,5 @@ def solve_pnp(
         config=config,
         timings_s=pnp.timings_s,
         T_init=None if T_init is None else as_transform(T_init, name="initial guess"),
+        verdict=verdict,
     )

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.core.correspondences import Correspondences2D3D
+from flexreg.core.results import Verdict
 from flexreg.core.transforms import as_transform, invert, matrix_to_quat
 from flexreg.errors import InputError
 from flexreg.io.intrinsics import CameraIntrinsics
@@ -92,6 +93,10 @@ class CalibrationResult:
         The initial guess, when one was used.
     auto : dict or None
         Automatic mode: per-round matches, inliers, search radius and edge score.
+    verdict : Verdict or None
+        Whether the inliers' geometry can be trusted (:mod:`flexreg.calibration.verdict`):
+        ``"uncertain"`` with reasons for near-degenerate sets (few inliers, coplanar or
+        nearly collinear points, pixels in one small region, weak axes).
     """
 
     T_camera_lidar: NDArray[np.float64]
@@ -105,13 +110,16 @@ class CalibrationResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     T_init: NDArray[np.float64] | None = None
     auto: dict[str, Any] | None = None
+    verdict: Verdict | None = None
 
     def __repr__(self) -> str:
         t = self.translation_m
         return (
             f"CalibrationResult({self.method}, {self.inliers}/{len(self.correspondences)} "
             f"inliers, RMSE {self.reprojection_rmse_px:.2f} px, "
-            f"t = [{t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}] m)"
+            f"t = [{t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}] m"
+            + ("" if self.verdict is None else f", {self.verdict.status}")
+            + ")"
         )
 
     @property
@@ -191,6 +199,7 @@ class CalibrationResult:
             "intrinsics": self.intrinsics.to_dict(),
             "T_init": None if self.T_init is None else self.T_init.tolist(),
             "auto": self.auto,
+            "verdict": None if self.verdict is None else self.verdict.to_dict(),
             "timings_s": self.timings_s,
             "seed": self.config.seed,
             "config": self.config.to_dict(),

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.calibration.config import CalibrationConfig
-from flexreg.cli._common import console, stage, write_all
+from flexreg.cli._common import console, exit_for, print_verdict, stage, write_all
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -291,6 +291,15 @@ def calibrate_command(
 
     Correspondences come from --pairs and/or --auto; nothing is written unless everything
     succeeds.
+
+    \b
+    Exit status:
+      0  written, and the correspondences determine the pose well (confident)
+      3  written, but uncertain: near-degenerate pairs (few inliers, points on one plane or
+         near one line, pixels in one small region, weak axes); the reasons are on screen
+         and in the output JSON under "verdict"
+      1  failed (also: lidar points on one line, which leave the pose undetermined): one
+         error line, nothing written
     """
     from flexreg.calibration import calibrate, overlay_image, read_correspondences
     from flexreg.io import read_scan
@@ -362,8 +371,12 @@ def calibrate_command(
     write_all(writers)
     if result is not None:
         _print_summary(result, errors)
+        print_verdict(result.verdict)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
+    if result is not None and out is not None:
+        look = f"; check {overlay}" if overlay is not None else "; --overlay overlay.png shows it"
+        exit_for(result.verdict, out, extra=look)
 
 
 def _view_writers(

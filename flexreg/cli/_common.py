@@ -133,8 +133,9 @@ def verdict_lines(verdict: Verdict | None, T: Any = None) -> list[str]:
 
     if verdict is None:
         return []
+    notes = [f"  note: {r.message} [{r.code}]" for r in getattr(verdict, "notes", ())]
     if verdict.confident:
-        return ["verdict: confident"]
+        return ["verdict: confident", *notes]
     lines = ["verdict: UNCERTAIN -- written, but do not use it unchecked"]
     lines += [f"  - {r.message} [{r.code}]" for r in verdict.reasons]
     for i, h in enumerate(verdict.runner_up, 1):
@@ -147,7 +148,7 @@ def verdict_lines(verdict: Verdict | None, T: Any = None) -> list[str]:
             f"explains the data {100 * h.score_ratio:.0f} % as well as the answer (score ratio "
             f"{h.score_ratio:.2f}){origin}"
         )
-    return lines
+    return lines + notes
 
 
 def what_to_do(verdict: Verdict, output: Path, *, extra: str = "") -> str:

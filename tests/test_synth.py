@@ -11,6 +11,9 @@ from flexreg.core.camera import SphericalCamera
 from flexreg.core.transforms import apply, invert, make_transform, rotation_about_axis
 from flexreg.errors import ConfigError, DegenerateGeometryError
 from flexreg.synth import (
+    AMBIGUOUS_SCENE_KINDS,
+    CUE_SCENE_KINDS,
+    SCENE_KINDS,
     RGBDConfig,
     Scene,
     TLSConfig,
@@ -29,7 +32,7 @@ from flexreg.synth import (
     station_pair,
     write_tum_sequence,
 )
-from flexreg.synth.mesh import box, cylinder, ellipsoid, tube, wall_boxes
+from flexreg.synth.mesh import arch, box, cylinder, ellipsoid, profile_slabs, tube, wall_boxes
 
 SIGMA = 0.003
 CLEAN = dict(dropout_rate=0.0, mixed_pixel_prob=0.0, tripod_cone_rad=0.0, min_intensity=0.0)
@@ -55,8 +58,12 @@ def _plane_scene(z: float = 0.0, half: float = 200.0) -> Scene:
         cylinder([0, 0, 0], [0.3, 0.2, 2.0], 0.4),
         tube([[0, 0, 0], [1, 0, 0], [1, 1, 0.5]], 0.1),
         ellipsoid([1, 2, 3], [1.0, 2.0, 0.5], subdivisions=2),
+        *arch(1.0, 0.0, 0.4, 2.0, 1.5, 0.3, segments=3),
+        *profile_slabs([[0, -0.3], [0, 2], [1, 3], [2, 2], [2, -0.3]], 0.0, 5.0, 0.3),
     ],
-    ids=["box", "cylinder", "bent tube", "ellipsoid"],
+    ids=["box", "cylinder", "bent tube", "ellipsoid"]
+    + [f"arch voussoir {i}" for i in range(3)]
+    + [f"tunnel slab {i}" for i in range(4)],
 )
 def test_primitives_face_outward(mesh):
     V, F = mesh
@@ -423,3 +430,141 @@ def test_station_pair_ground_truth_aligns_source_on_target_surfaces(kind):
     )
     d_wrong = pair.scene.distance(apply(target.T_world_scanner @ wrong, source.points))
     assert np.median(d_wrong) > 3 * SIGMA
+
+
+# ------------------------------------------------------------------------------ ambiguous scenes
+def _pairs_up(A: np.ndarray, B: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """(len(A),) bool: each point of A has a point of B within ``tol``."""
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(B).query(A, distance_upper_bound=tol)
+    return np.isfinite(d)
+
+
+def _range_grid(scan) -> np.ndarray:
+    """Range of every grid pixel (NaN without a return)."""
+    r = np.full(scan.grid_shape, np.nan)
+    r[scan.grid_index[:, 0], scan.grid_index[:, 1]] = np.linalg.norm(scan.points, axis=1)
+    return r
+
+
+def test_scene_kinds_list_the_ambiguous_scenes():
+    assert SCENE_KINDS[:3] == ("room", "courtyard", "hall")
+    assert set(SCENE_KINDS[3:]) == set(AMBIGUOUS_SCENE_KINDS) | set(CUE_SCENE_KINDS)
+    assert CUE_SCENE_KINDS == tuple(f"{k}-cue" for k in AMBIGUOUS_SCENE_KINDS)
+
+
+@pytest.mark.parametrize("kind", AMBIGUOUS_SCENE_KINDS + CUE_SCENE_KINDS)
+def test_ambiguous_scenes_build_deterministically_and_take_stations(kind):
+    a, b = make_scene(kind, 3), make_scene(kind, 3)
+    for name in ("vertices", "triangles", "reflectance", "colors"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.kind == kind and a.objects == b.objects and a.name == f"{kind}-3"
+    assert not np.array_equal(make_scene(kind, 4).vertices, a.vertices)
+    # the cue variant is the base scene plus one object, drawn after everything else
+    base = make_scene(kind.removesuffix("-cue"), 3)
+    assert len(base.symmetries) > 0 and (len(a.symmetries) == 0) == kind.endswith("-cue")
+    if kind.endswith("-cue"):
+        assert _pairs_up(base.vertices, a.vertices).mean() > 0.9
+        assert {k: a.objects[k] for k in base.objects} == base.objects  # plus the cue's parts
+        assert set(a.objects) > set(base.objects)
+    for S in base.symmetries:
+        np.testing.assert_allclose(S[:3, :3] @ S[:3, :3].T, np.eye(3), atol=1e-12)
+    lo, hi = a.bounds
+    x0, y0, x1, y1 = a.region
+    assert lo[0] < x0 < x1 < hi[0] and lo[1] < y0 < y1 < hi[1]
+    poses = place_stations(a, 2, rng=3)
+    assert 2.0 <= np.linalg.norm(poses[1][:3, 3] - poses[0][:3, 3]) <= 10.0
+    assert station_overlap(a, poses[0], poses[1]) >= 0.5
+    doc = a.to_dict()
+    assert ("symmetries" in doc) == bool(a.symmetries)
+
+
+def test_make_scene_checks_ambiguous_sizes():
+    with pytest.raises(ConfigError, match="symmetric room size"):
+        make_scene("symmetric-room", 0, size_m=(6.0, 9.0))
+    with pytest.raises(ConfigError, match="tunnel size"):
+        make_scene("tunnel-cue", 0, size_m=(30.0, 8.0))
+    with pytest.raises(ConfigError, match="bays width"):
+        make_scene("bays", 0, size_m=(100.0, 5.0))
+
+
+def test_symmetric_room_maps_onto_itself_and_its_cue_does_not():
+    room_ = make_scene("symmetric-room", 1)
+    cue = make_scene("symmetric-room-cue", 1)
+    lo, hi = room_.bounds
+    assert hi[0] - lo[0] == pytest.approx(hi[1] - lo[1])  # square: quarter turns
+    assert len(room_.symmetries) == 3
+    for S in room_.symmetries:
+        V = apply(S, room_.vertices)
+        assert _pairs_up(V, room_.vertices).all()
+        # the cue's bookshelf, turned, stands in open space (the surfaces themselves are compared
+        # by ray casting in test_a_station_moved_by_a_symmetry_measures_the_same_scan)
+        Cc = cue.vertices[cue.triangles].mean(axis=1)
+        assert np.mean(cue.distance(apply(S, Cc)) > 0.01) > 0.05
+        # the cue's vertices (its bookshelf) have no partner after the turn
+        assert not _pairs_up(apply(S, cue.vertices), cue.vertices).all()
+    # a rectangle keeps only the half turn
+    rect = make_scene("symmetric-room", 1, size_m=(9.0, 7.0))
+    (half,) = rect.symmetries
+    np.testing.assert_allclose(half[:2, :2], -np.eye(2))
+    assert _pairs_up(apply(half, rect.vertices), rect.vertices).all()
+
+
+@pytest.mark.parametrize("kind", AMBIGUOUS_SCENE_KINDS)
+def test_a_station_moved_by_a_symmetry_measures_the_same_scan(kind):
+    """The ambiguity itself: a station at ``S @ T`` gets the scan of ``T``, not in the cue
+    variant."""
+    cfg = TLSConfig(width=256, height=128, range_noise_m=0.0, range_noise_per_m=0.0, **CLEAN)
+    scene, cue = make_scene(kind, 2), make_scene(f"{kind}-cue", 2)
+    (T,) = place_stations(cue, 1, rng=2)
+    for S in scene.symmetries:
+        a, b = scan_tls(scene, T, config=cfg, rng=0), scan_tls(scene, S @ T, config=cfg, rng=0)
+        ra, rb = _range_grid(a), _range_grid(b)
+        same = (np.isnan(ra) & np.isnan(rb)) | (np.abs(ra - rb) < 0.01)
+        assert same.mean() > 0.995, (kind, S[:3, 3])
+        ca, cb = scan_tls(cue, T, config=cfg, rng=0), scan_tls(cue, S @ T, config=cfg, rng=0)
+        rca, rcb = _range_grid(ca), _range_grid(cb)
+        differ = ~((np.isnan(rca) & np.isnan(rcb)) | (np.abs(rca - rcb) < 0.05))
+        assert differ.sum() >= 20, (kind, S[:3, 3])
+
+
+def test_tunnel_is_longer_than_the_scanner_reaches():
+    max_range = TLSConfig().max_range_m
+    for kind in ("tunnel", "tunnel-cue"):
+        s = make_scene(kind, 0)
+        lo, hi = s.bounds
+        x0, _, x1, _ = s.region
+        assert hi[0] - lo[0] > 2 * max_range
+        assert x0 - lo[0] > max_range and hi[0] - x1 > max_range  # no station sees an end
+    s = make_scene("tunnel", 0)
+    # the cross-section never changes: every vertex lies on an end plane of the tube
+    inside = (s.vertices[:, 0] > 0.0) & (s.vertices[:, 0] < hi[0] - 0.3)
+    assert not inside.any()
+    assert any(np.allclose(S, make_transform(np.eye(3), [1.0, 0, 0])) for S in s.symmetries)
+    # a station in the middle measures nothing beyond its range
+    (T,) = place_stations(s, 1, rng=0)
+    scan = scan_tls(s, T, config=TLSConfig(width=256, height=128), rng=0)
+    assert np.linalg.norm(scan.points, axis=1).max() < max_range
+
+
+def test_bays_repeat_with_their_period():
+    s = make_scene("bays", 5)
+    shift = s.symmetries[0]
+    period = shift[0, 3]
+    assert 3.2 <= period <= 3.8 and np.allclose(shift[:3, :3], np.eye(3))
+    lo, hi = s.bounds
+    x0, _, x1, _ = s.region
+    assert x0 - lo[0] > TLSConfig().max_range_m and hi[0] - x1 > TLSConfig().max_range_m
+    # away from the ends, the bays shifted by one period lie on the bays
+    V = s.vertices
+    mid = (V[:, 0] > x0 - 40) & (V[:, 0] < x1 + 40)
+    for k in (1, -1, 2):
+        assert _pairs_up(V[mid] + [k * period, 0, 0], V).all()
+    assert s.objects["column"] == 2 * (round((hi[0] - lo[0] - 0.6) / period) - 1)
+    # ... and not by a fraction of it
+    assert _pairs_up(V[mid] + [0.5 * period, 0, 0], V).mean() < 0.5
+    cue = make_scene("bays-cue", 5)
+    Vc = cue.vertices
+    midc = (Vc[:, 0] > x0 - 40) & (Vc[:, 0] < x1 + 40)
+    assert not _pairs_up(Vc[midc] + [period, 0, 0], Vc).all()

@@ -94,7 +94,11 @@ _SceneOption = Annotated[
     str | None,
     typer.Option(
         "--scene",
-        help="Scene kind: room, courtyard or hall; or a mesh file to scan. [default: room]",
+        help=(
+            "Scene kind: room, courtyard, hall; the ambiguous symmetric-room, tunnel, bays, "
+            "or their variants with one asymmetric cue (symmetric-room-cue, tunnel-cue, "
+            "bays-cue); or a mesh file to scan. [default: room]"
+        ),
     ),
 ]
 _StationsOption = Annotated[

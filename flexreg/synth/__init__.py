@@ -3,7 +3,8 @@
 >>> from flexreg.synth import station_pair
 >>> target, source, T_target_source = station_pair("room", seed=3)  # doctest: +SKIP
 
-Scenes (:func:`make_scene`: ``room``, ``courtyard``, ``hall``; :func:`scene_from_mesh`) are
+Scenes (:func:`make_scene`: ``room``, ``courtyard``, ``hall``; the ambiguous
+``symmetric-room``, ``tunnel``, ``bays`` and their ``-cue`` variants; :func:`scene_from_mesh`) are
 triangle meshes with a reflectance and colour per triangle. Sensors ray-cast them:
 :func:`scan_tls` (equirectangular TLS station), :func:`scan_lidar` (spinning lidar),
 :func:`render_rgbd` (pinhole depth + image). :func:`place_stations` finds stations with a
@@ -33,13 +34,18 @@ from flexreg.synth.placement import (
 )
 from flexreg.synth.scene import RayHits, Scene, read_scene
 from flexreg.synth.scenes import (
+    AMBIGUOUS_SCENE_KINDS,
+    CUE_SCENE_KINDS,
     SCENE_KINDS,
     add_mesh_objects,
+    bays,
     courtyard,
     hall,
     make_scene,
     room,
     scene_from_mesh,
+    symmetric_room,
+    tunnel,
 )
 from flexreg.synth.sensors import (
     RGBDFrame,
@@ -52,6 +58,8 @@ from flexreg.synth.sensors import (
 )
 
 __all__ = [
+    "AMBIGUOUS_SCENE_KINDS",
+    "CUE_SCENE_KINDS",
     "SCENE_KINDS",
     "FreeMap",
     "Material",
@@ -65,6 +73,7 @@ __all__ = [
     "SynthResult",
     "TLSConfig",
     "add_mesh_objects",
+    "bays",
     "camera_trajectory",
     "courtyard",
     "free_map",
@@ -84,7 +93,9 @@ __all__ = [
     "station_overlap",
     "station_pair",
     "stream",
+    "symmetric_room",
     "synthesize",
+    "tunnel",
     "visible_fraction",
     "write_tum_sequence",
 ]

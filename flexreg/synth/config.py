@@ -185,7 +185,9 @@ class SynthConfig(Config):
     Attributes
     ----------
     scene : str
-        ``"room"``, ``"courtyard"``, ``"hall"``, or the path of a mesh file to scan.
+        A kind of :data:`~flexreg.synth.scenes.SCENE_KINDS` (``"room"``, ``"courtyard"``,
+        ``"hall"``, ``"symmetric-room"``, ``"tunnel"``, ``"bays"`` and their ``"-cue"``
+        variants), or the path of a mesh file to scan.
     stations : int
         Number of TLS stations (1..200).
     width, height : int

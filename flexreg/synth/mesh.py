@@ -283,6 +283,63 @@ def quad(p0: ArrayLike, p1: ArrayLike, p2: ArrayLike, p3: ArrayLike) -> Mesh:
     return np.array([p0, p1, p2, p3], dtype=np.float64), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
 
 
+def profile_slabs(profile_yz: ArrayLike, x0: float, x1: float, thickness: float) -> list[Mesh]:
+    """Solid lining along x (tunnels): one slab behind each segment of a cross-section.
+
+    Parameters
+    ----------
+    profile_yz : (K, 2) float, metres
+        Cross-section polyline ``(y, z)``, running up the wall at small y, over the top and down
+        the wall at large y, so that the slabs lie outside it and their inner faces (wound
+        outward) look into the space it encloses.
+    x0, x1 : float, metres
+        Extent along x.
+    thickness : float, metres
+
+    Returns
+    -------
+    list of Mesh
+        One closed hexahedron per segment.
+    """
+    P = np.asarray(profile_yz, dtype=np.float64).reshape(-1, 2)
+    out = []
+    for (ya, za), (yb, zb) in pairwise(P):
+        v = np.array([yb - ya, zb - za]) / np.hypot(yb - ya, zb - za)
+        n = np.array([-v[1], v[0]]) * thickness  # x cross (0, v): outward
+        corners = []
+        for (y_a, z_a), (y_b, z_b) in (((ya, za), (yb, zb)), ((ya, za) + n, (yb, zb) + n)):
+            corners += [(x0, y_a, z_a), (x1, y_a, z_a), (x1, y_b, z_b), (x0, y_b, z_b)]
+        out.append(hexahedron(corners))
+    return out
+
+
+def arch(
+    x_center: float,
+    y0: float,
+    y1: float,
+    z_spring: float,
+    radius: float,
+    depth: float,
+    *,
+    segments: int = 10,
+) -> list[Mesh]:
+    """Semicircular arch ring in the x-z plane, as ``segments`` closed voussoirs.
+
+    Inner radius ``radius`` about ``(x_center, z_spring)``, ``depth`` thick radially, spanning
+    ``y0..y1`` (all metres).
+    """
+    a = np.linspace(np.pi, 0.0, segments + 1)
+    out = []
+    for ta, tb in pairwise(a):
+        corners = []
+        for r in (radius, radius + depth):
+            xa, za = x_center + r * np.cos(ta), z_spring + r * np.sin(ta)
+            xb, zb = x_center + r * np.cos(tb), z_spring + r * np.sin(tb)
+            corners += [(xa, y0, za), (xb, y0, zb), (xb, y1, zb), (xa, y1, za)]
+        out.append(hexahedron(corners))
+    return out
+
+
 def wall_boxes(
     length: float,
     height: float,

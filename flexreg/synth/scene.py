@@ -64,7 +64,7 @@ class Scene:
     colors : (T, 3) uint8
         RGB base colour of each triangle.
     kind : str
-        ``"room"``, ``"courtyard"``, ``"hall"`` or ``"mesh"``.
+        A kind of :data:`~flexreg.synth.scenes.SCENE_KINDS` or ``"mesh"``.
     seed : int or None
         Seed the scene was generated with, if it was an int.
     floor_z : float, metres
@@ -74,6 +74,13 @@ class Scene:
     objects : dict of str to int
         Number of objects of each category (for summaries).
     name : str
+    symmetries : tuple of (4, 4) float64
+        World motions ``S`` (``p -> S p``) that map the scene's structure, as seen from its
+        placement ``region`` within a scanner's range, onto itself: a station at
+        ``S @ T_world_scanner`` then measures (nearly) the same scan as one at
+        ``T_world_scanner``. Empty for scenes without such ambiguity (every scene except the
+        ``symmetric-room``, ``tunnel`` and ``bays`` kinds); a tunnel lists samples of its
+        continuous family of shifts along the axis.
     """
 
     vertices: NDArray[np.float64]
@@ -86,6 +93,7 @@ class Scene:
     region: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     objects: dict[str, int] = field(default_factory=dict)
     name: str = ""
+    symmetries: tuple[NDArray[np.float64], ...] = ()
     _raycaster: Any = field(default=None, init=False, repr=False)
     _cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
@@ -110,6 +118,7 @@ class Scene:
         self.colors = np.ascontiguousarray(
             np.broadcast_to(np.asarray(self.colors, dtype=np.uint8), (T, 3))
         )
+        self.symmetries = tuple(np.array(S, dtype=np.float64) for S in self.symmetries)
         if self.region == (0.0, 0.0, 0.0, 0.0):
             lo, hi = self.bounds
             self.region = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
@@ -137,9 +146,9 @@ class Scene:
         return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (no geometry)."""
+        """JSON-ready description (no geometry); ``symmetries`` only when there are any."""
         lo, hi = self.bounds
-        return {
+        d = {
             "kind": self.kind,
             "seed": self.seed,
             "name": self.name,
@@ -150,6 +159,9 @@ class Scene:
             "region_m": list(self.region),
             "objects": dict(sorted(self.objects.items())),
         }
+        if self.symmetries:
+            d["symmetries"] = [S.tolist() for S in self.symmetries]
+        return d
 
     # ------------------------------------------------------------------ ray casting
     def raycaster(self) -> Any:

@@ -10,7 +10,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.synth import objects as ob
-from flexreg.synth.mesh import Material, MeshBuilder, box, cylinder, rot_z, wall_boxes
+from flexreg.synth.mesh import (
+    Material,
+    MeshBuilder,
+    box,
+    cylinder,
+    rot_z,
+    wall_boxes,
+)
 from flexreg.synth.scene import Scene
 
 
@@ -256,11 +263,21 @@ def exterior(
 
 
 def finish(
-    b: MeshBuilder, kind: str, seed: int | None, Lx: float, Ly: float, *, margin_m: float
+    b: MeshBuilder,
+    kind: str,
+    seed: int | None,
+    Lx: float,
+    Ly: float,
+    *,
+    margin_m: float,
+    region: tuple[float, float, float, float] | None = None,
+    symmetries: tuple[NDArray[np.float64], ...] = (),
 ) -> Scene:
     """The built mesh as a :class:`Scene` on floor z = 0, with stations allowed inside the
-    ``Lx`` x ``Ly`` footprint less ``margin_m``."""
+    ``Lx`` x ``Ly`` footprint less ``margin_m`` (or inside ``region`` when given)."""
     V, T, refl, rgb = b.arrays()
+    if region is None:
+        region = (margin_m, margin_m, Lx - margin_m, Ly - margin_m)
     return Scene(
         V,
         T,
@@ -269,7 +286,25 @@ def finish(
         kind=kind,
         seed=seed,
         floor_z=0.0,
-        region=(margin_m, margin_m, Lx - margin_m, Ly - margin_m),
+        region=region,
         objects=b.counts,
         name=f"{kind}-{seed}" if seed is not None else kind,
+        symmetries=symmetries,
     )
+
+
+def turn_z(cx: float, cy: float, quarter_turns: int) -> NDArray[np.float64]:
+    """(4, 4) rotation by ``quarter_turns`` x 90 degrees about the vertical line through
+    ``(cx, cy)``, with exact 0/1 entries."""
+    c, s = ((1, 0), (0, 1), (-1, 0), (0, -1))[quarter_turns % 4]
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = [cx - c * cx + s * cy, cy - s * cx - c * cy]
+    return T
+
+
+def shift_x(dx: float) -> NDArray[np.float64]:
+    """(4, 4) translation by ``dx`` metres along x."""
+    T = np.eye(4)
+    T[0, 3] = dx
+    return T

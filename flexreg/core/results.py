@@ -81,22 +81,31 @@ class Verdict:
         strength, runner-up, free-space violations, residuals), with units in the keys.
     runner_up : tuple of Hypothesis
         Clearly different transforms that explain the data almost as well, best first.
+    notes : tuple of Reason
+        Things worth knowing that do not make the result uncertain (e.g.
+        ``"refinement_rejected"``: the refinement was discarded, the coarse transform kept).
     """
 
     status: Literal["confident", "uncertain"]
     reasons: tuple[Reason, ...] = ()
     evidence: dict[str, Any] = field(default_factory=dict)
     runner_up: tuple[Hypothesis, ...] = ()
+    notes: tuple[Reason, ...] = ()
 
     @property
     def confident(self) -> bool:
         return self.status == "confident"
 
     def summary(self) -> str:
-        """One line: the status and the reasons in words."""
-        if self.confident:
-            return "confident"
-        return "uncertain: " + "; ".join(r.message for r in self.reasons)
+        """One line: the status and the reasons in words (and any notes, in brackets)."""
+        text = (
+            "confident"
+            if self.confident
+            else "uncertain: " + "; ".join(r.message for r in self.reasons)
+        )
+        if self.notes:
+            text += " (note: " + "; ".join(r.message for r in self.notes) + ")"
+        return text
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -104,6 +113,7 @@ class Verdict:
             "reasons": [{"code": r.code, "message": r.message} for r in self.reasons],
             "evidence": self.evidence,
             "runner_up": [h.to_dict() for h in self.runner_up],
+            "notes": [{"code": r.code, "message": r.message} for r in self.notes],
         }
 
 

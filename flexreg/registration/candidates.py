@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +34,28 @@ log = logging.getLogger(__name__)
 #: a candidate: (origin, T_target_source); origin is "plan" or "descriptors", with
 #: "+keypoints" when refined by guided matching
 Candidate = tuple[str, NDArray[np.float64]]
+
+
+@dataclass(frozen=True)
+class Judged:
+    """One candidate as the dense check at the coarse tolerance judged it.
+
+    Attributes
+    ----------
+    origin : str
+    T_target_source : (4, 4) float64
+        The candidate after the quick local ICP (as given without polishing).
+    score : float
+        ``consistent - 3 conflicting`` (see :meth:`Check.judge`).
+    consistent, conflicting : float
+        Fractions of the source's sample.
+    """
+
+    origin: str
+    T_target_source: NDArray[np.float64]
+    score: float
+    consistent: float
+    conflicting: float
 
 
 @dataclass(eq=False)
@@ -102,6 +124,10 @@ class Coarse:
         Squared residuals under ``T_target_source``, square metres.
     inliers : (Q,) bool
         Within the inlier threshold.
+    judged : list of Judged
+        Every candidate as the dense check judged it (the runner-ups come from here).
+    score : float
+        The winner's score in that check.
     """
 
     origin: str
@@ -111,6 +137,8 @@ class Coarse:
     source_points: NDArray[np.float64]
     residuals2: NDArray[np.float64]
     inliers: NDArray[np.bool_]
+    judged: list[Judged] = field(default_factory=list)
+    score: float = float("nan")
 
 
 def polisher(
@@ -187,10 +215,12 @@ def _best_family(
     check: Check,
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     thr: float,
-) -> tuple[int, tuple[float, float], NDArray[np.float64] | None]:
-    """Index of the winning family (-1 when none), its (consistent, conflicting) fractions and
-    its polished transform (None without polishing)."""
+) -> tuple[int, tuple[float, float], NDArray[np.float64] | None, list[Judged], float]:
+    """Index of the winning family (-1 when none), its (consistent, conflicting) fractions,
+    its polished transform (None without polishing), every candidate as judged, and the
+    winner's score."""
     judged = []  # (score, moved, family, consistent, conflicting, polished T)
+    seen = []
     for i, fam in enumerate(fams):
         for origin, T in fam:
             # judged after a quick local ICP: a right but rough candidate improves, a wrong one
@@ -200,13 +230,14 @@ def _best_family(
             moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
             judged.append((score, moved, i, ok, bad, Tj))
+            seen.append(Judged(origin, Tj, score, ok, bad))
     if not judged:
-        return -1, (0.0, 0.0), None
+        return -1, (0.0, 0.0), None, seen, float("nan")
     top = max(j[0] for j in judged)
     # candidates that end in the same place score alike: take the one that was already there
     # (moved least under the quick ICP)
     _, _, best, ok, bad, Tj = min((j for j in judged if j[0] >= top - 0.01), key=lambda j: j[1])
-    return best, (ok, bad), Tj if polish is not None else None
+    return best, (ok, bad), Tj if polish is not None else None, seen, top
 
 
 def choose(
@@ -233,7 +264,7 @@ def choose(
         sample or contradicts more than half of what it explains.
     """
     fams = families(priors, kt, ks, thr, config)
-    best, (ok, bad), polished = _best_family(fams, check, polish, thr)
+    best, (ok, bad), polished, judged, top = _best_family(fams, check, polish, thr)
     if best < 0:
         raise RegistrationError(
             f"no transform found: {counts}, {len(priors)} priors"
@@ -258,7 +289,16 @@ def choose(
     )
     pt, ps = kt.points[fin[:, 0]], ks.points[fin[:, 1]]
     d2 = squared_residuals(T, pt, ps)
-    return Coarse(origin, T, fin, pt, ps, d2, d2 < thr * thr)
+    return Coarse(origin, T, fin, pt, ps, d2, d2 < thr * thr, judged, top)
 
 
-__all__ = ["Candidate", "Check", "Coarse", "Keypoints3D", "choose", "families", "polisher"]
+__all__ = [
+    "Candidate",
+    "Check",
+    "Coarse",
+    "Judged",
+    "Keypoints3D",
+    "choose",
+    "families",
+    "polisher",
+]

@@ -85,6 +85,34 @@ class RegistrationConfig(Config):
         stages; ICP still uses every point.
     polish : bool
         Judge each candidate after a quick local ICP on small subsets of the scans.
+    refine_guard : bool
+        Keep the ICP refinement only when it scores at least as well as the coarse transform
+        in the two-way dense check (:func:`~flexreg.stages.verification.soft_score`), less
+        ``refine_guard_margin``; else keep the coarse transform (see docs/registration.md).
+    refine_guard_margin : float
+        How much lower (fraction of the sampled points) the refinement may score and still be
+        kept: the check resolves the tolerance, not the millimetres ICP adds.
+    verdict_min_overlap : float
+        Share of each scan the other must explain at the fine tolerance, in [0, 1]; less
+        gives the reason ``low_overlap``.
+    verdict_max_conflict : float
+        Largest share of either scan that may lie in the other's free space, in [0, 1]
+        (``free_space``).
+    verdict_min_inliers : int
+        Fewest agreeing feature matches (``few_inliers``; 0: not tested; plan-view poses
+        often rest on a handful of matches and the dense checks).
+    verdict_min_inlier_spread : float
+        Smallest second principal spread of the agreeing matches, as a fraction of the
+        overlap's (``clustered_inliers``).
+    verdict_min_axis_strength : float
+        Smallest per-point strength of each pose parameter, 0-1 (``weak_axis``).
+    verdict_ambiguity_ratio : float
+        A clearly different pose scoring at least this fraction of the winner's score makes
+        the answer ``ambiguous``.
+    verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
+        How far a candidate must be from the answer to count as a different pose.
+    verdict_max_rmse_ratio : float
+        Largest final inlier RMSE, in inlier thresholds (``high_residual``).
     """
 
     image: Annotated[str, one_of(IMAGES, "feature image")] = "flexion"
@@ -115,3 +143,14 @@ class RegistrationConfig(Config):
     min_overlap: float = Field(0.1, ge=0, le=1)
     max_image_pixels: int = Field(2_500_000, ge=1)
     polish: bool = True
+    refine_guard: bool = True
+    refine_guard_margin: float = Field(0.01, ge=0, le=1)
+    verdict_min_overlap: float = Field(0.2, ge=0, le=1)
+    verdict_max_conflict: float = Field(0.2, ge=0, le=1)
+    verdict_min_inliers: int = Field(0, ge=0)
+    verdict_min_inlier_spread: float = Field(0.05, ge=0, le=1)
+    verdict_min_axis_strength: float = Field(0.005, ge=0, le=1)
+    verdict_ambiguity_ratio: float = Field(0.9, gt=0, allow_inf_nan=False)
+    verdict_distinct_deg: Positive = 3.0
+    verdict_distinct_m: Positive = 0.5
+    verdict_max_rmse_ratio: Positive = 1.0

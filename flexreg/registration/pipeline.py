@@ -34,11 +34,20 @@ from scipy import fft
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
+from flexreg.core.results import Verdict
 from flexreg.core.scan import Scan, as_points
 from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationError
-from flexreg.registration.candidates import Candidate, Check, Keypoints3D, choose, polisher
+from flexreg.registration.candidates import (
+    Candidate,
+    Check,
+    Coarse,
+    Keypoints3D,
+    choose,
+    polisher,
+)
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.result import RegistrationResult
+from flexreg.registration.verdict import Scored, TwoWay, decide, gather, runner_ups
 from flexreg.stages import feature_images
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
@@ -92,13 +101,17 @@ class ScanView:
     image : RangeImage
         The working range image with a camera model (re-projected when it had none).
     measured, slack : (H, W) float32 or None
-        As target: :func:`~flexreg.stages.verification.measured_image` and
-        :func:`~flexreg.stages.verification.range_slack` of ``image``.
+        :func:`~flexreg.stages.verification.measured_image` and
+        :func:`~flexreg.stages.verification.range_slack` of ``image`` (the dense checks; the
+        verdict checks in both directions).
     normals : (H, W, 3) float32 or None
         :func:`~flexreg.stages.normals.grid_normals` of ``image`` (as target; as source for
         the projective refinement).
-    sample, polish_sample : (N, 3) float64 or None
-        As source: even samples of the working image for the dense check and the quick ICP.
+    sample : (N, 3) float64 or None
+        Even sample of the working image for the dense checks (as source; as target for the
+        verdict's check in the other direction).
+    polish_sample : (N, 3) float64 or None
+        As source: even sample for the quick ICP.
     refine_sample : (float, (M, 3) float64) or None
         The projective refinement's even sample of the whole scan and its cell, metres.
     """
@@ -240,14 +253,14 @@ def _scan_view(
     """The parts of :class:`ScanView` the scan's roles need."""
     v = ScanView(with_camera(image))
     projective = config.refine and uses_projective(config.icp, config.voxel_m)
-    if target:
-        v.measured = measured_image(v.image)
-        v.slack = range_slack(v.image, v.measured)
+    # both roles: the verdict checks the transform in both directions
+    v.measured = measured_image(v.image)
+    v.slack = range_slack(v.image, v.measured)
     if target or (source and projective):
         v.normals = grid_normals(v.image)
+    pts = image.xyz[image.valid]
+    v.sample = area_sample(pts, CHECK_POINTS)
     if source:
-        pts = image.xyz[image.valid]
-        v.sample = area_sample(pts, CHECK_POINTS)
         v.polish_sample = area_sample(pts, POLISH_POINTS)
     if projective:
         v.refine_sample = area_sample_cell(as_points(scan, name="scan"), PROJECTIVE_ICP_POINTS // 2)
@@ -376,6 +389,73 @@ def _icp_denominator(icp: Any) -> str:
     )
 
 
+def _refine(
+    scans: list[Scan | RangeImage],
+    views: list[ScanView],
+    T: NDArray[np.float64],
+    thr: float,
+    check: Check,
+    config: RegistrationConfig,
+    run: _Run,
+) -> Any:
+    """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`)."""
+    vt, vs = views
+    samples = None
+    if vs.refine_sample is not None and vt.refine_sample is not None:
+        samples = (vs.refine_sample[0], vs.refine_sample[1], vt.refine_sample[1])
+    with run.stage("refinement"):
+        return refine(
+            scans[0],
+            scans[1],
+            T,
+            threshold_m=thr,
+            method=config.icp,
+            voxel_m=config.voxel_m,
+            check=lambda T_: check.judge(T_, thr / 2, 0.002)[0],
+            target_image=vt.image,
+            target_normals=vt.normals,
+            source_image=vs.image,
+            source_normals=vs.normals,
+            samples=samples,
+        )
+
+
+def _verdict(
+    c: Coarse,
+    scored: Scored,
+    two: TwoWay,
+    vt: ScanView,
+    stage: tuple[float, float],
+    thr: float,
+    refinement: dict[str, Any] | None,
+    config: RegistrationConfig,
+) -> Verdict:
+    """The evidence on the final transform and the verdict (:mod:`.verdict`)."""
+    ups = runner_ups(
+        c.judged,
+        scored.T,
+        c.score,
+        distinct_deg=config.verdict_distinct_deg,
+        distinct_m=config.verdict_distinct_m,
+        ratio=config.verdict_ambiguity_ratio,
+    )
+    ev = gather(
+        two,
+        scored,
+        target_normals=vt.normals,
+        inlier_points=c.target_points[c.inliers],
+        matches=len(c.pairs),
+        fit_to_matches="keypoints" in c.origin or "plan" not in c.origin,
+        runner_up=ups,
+        candidates=len(c.judged),
+        inlier_rmse_m=stage[0],
+        fitness=stage[1],
+        threshold_m=thr,
+        refinement=refinement,
+    )
+    return decide(ev, ups, config)
+
+
 def _finish(
     scans: list[Scan | RangeImage],
     kps: list[Keypoints3D],
@@ -385,11 +465,14 @@ def _finish(
     config: RegistrationConfig,
     run: _Run,
 ) -> RegistrationResult:
-    """Candidates, the coarse transform and its checks, the refinement, the result."""
+    """Candidates, the coarse transform and its checks, the refinement (kept when it scores
+    better), the verdict, the result."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.measured is not None and vt.slack is not None and vt.normals is not None
     assert vs.sample is not None and vs.polish_sample is not None
+    assert vs.measured is not None and vs.slack is not None and vt.sample is not None
     check = Check(vt.image, vt.measured, vt.slack, vs.sample)
+    two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
     polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if config.polish else None
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
     with run.stage("estimation"):
@@ -414,28 +497,29 @@ def _finish(
         "+ 0.2% of range of what the target saw"
     )
     info = point_information(q[cons])
-    if config.refine:
-        samples = None
-        if vs.refine_sample is not None and vt.refine_sample is not None:
-            samples = (vs.refine_sample[0], vs.refine_sample[1], vt.refine_sample[1])
-        with run.stage("refinement"):
-            icp = refine(
-                scans[0],
-                scans[1],
-                T,
-                threshold_m=thr,
-                method=config.icp,
-                voxel_m=config.voxel_m,
-                check=lambda T_: check.judge(T_, fine_tol, 0.002)[0],
-                target_image=vt.image,
-                target_normals=vt.normals,
-                source_image=vs.image,
-                source_normals=vs.normals,
-                samples=samples,
-            )
-        T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
-        info = icp.information
-        denom = _icp_denominator(icp)
+    refinement = None
+    icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
+    with run.stage("verdict"):
+        scored = coarse = two.score(T_coarse, fine_tol)
+        if icp is not None:
+            refined = two.score(icp.T_target_source, fine_tol)
+            margin = config.refine_guard_margin
+            kept = not config.refine_guard or refined.value >= coarse.value - margin
+            refinement = {
+                "kept": kept,
+                "score_coarse": round(coarse.value, 6),
+                "score_refined": round(refined.value, 6),
+                "guard": config.refine_guard,
+                "margin": margin,
+                "method": config.icp,
+            }
+            if kept:
+                T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
+                info, denom, scored = icp.information, _icp_denominator(icp), refined
+            else:
+                log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
+        verdict = _verdict(c, scored, two, vt, (rmse, fitness), thr, refinement, config)
+    log.info("verdict: %s", verdict.summary())
     return RegistrationResult(
         T_target_source=T,
         T_coarse=T_coarse,
@@ -453,6 +537,7 @@ def _finish(
         keypoints=(kt.features.xy[c.pairs[:, 0]], ks.features.xy[c.pairs[:, 1]]),
         prior=c.origin,
         wall_s=time.perf_counter() - run.start,
+        verdict=verdict,
     )
 
 

@@ -48,6 +48,9 @@ class RegistrationResult(PairResult):
         (global descriptor matching), ``"+keypoints"`` when refined by guided matching.
     wall_s : float
         Seconds the whole call took.
+    verdict : Verdict
+        Whether the result can be trusted, why, and the evidence
+        (:mod:`flexreg.registration.verdict`); always set by :func:`register`.
     """
 
     config: RegistrationConfig

@@ -132,14 +132,26 @@ def classify_points(
         return np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, bool)
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
-    cam = target.camera
-    if cam is None:
+    if target.camera is None:
         pt = target.xyz[target.valid]
         pt = pt[:: max(1, len(pt) // 200_000)]
-        d, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
-        ok = d < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
+        dist, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
+        ok = dist < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
         return q, ok, np.zeros(len(q), dtype=bool)
-    u, v, d = cam.project(q)
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
+    with np.errstate(invalid="ignore"):
+        consistent = np.abs(d - r) < tol
+        conflict = d < r - tol
+    return q, consistent, conflict
+
+
+def _pixels(
+    target: RangeImage, q: NDArray[np.float64]
+) -> tuple[NDArray[np.bool_], tuple[NDArray[np.int64], NDArray[np.int64]], NDArray[np.float64]]:
+    """Which points fall inside the target's image, their (row, column) pixels and their
+    measured coordinate (range or depth) ``d``."""
+    assert target.camera is not None
+    u, v, d = target.camera.project(q)
     with np.errstate(invalid="ignore"):
         iu = np.floor(u + 0.5)
         iv = np.floor(v + 0.5)
@@ -147,20 +159,223 @@ def classify_points(
             iu = np.where(iu >= target.width, iu - target.width, iu)
         inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
         inside &= (iu >= 0) & (iu < target.width) & (iv >= 0) & (iv < target.height)
+    return inside, (iv[inside].astype(np.int64), iu[inside].astype(np.int64)), d
+
+
+def _ray_ranges(
+    target: RangeImage,
+    q: NDArray[np.float64],
+    tolerance_m: float,
+    tolerance_rel: float,
+    slack: NDArray[np.float32] | None,
+    ref: NDArray[np.float32] | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per point (target frame): its range ``d`` along the target's ray, what the target
+    measured there ``r`` (NaN outside its view or where it saw nothing) and the tolerance."""
+    inside, pix, d = _pixels(target, q)
     if ref is None:
         ref = measured_image(target)
     if slack is None:
         slack = range_slack(target, ref)
     r = np.full(len(q), np.nan)
     extra = np.zeros(len(q))
-    pix = (iv[inside].astype(np.int64), iu[inside].astype(np.int64))
     r[inside] = ref[pix]
     extra[inside] = slack[pix]
     tol = tolerance_m + tolerance_rel * np.abs(d) + extra
+    return d, r, tol
+
+
+def soft_score(
+    target: RangeImage,
+    ps: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    tolerance_m: float,
+    tolerance_rel: float,
+    slack: NDArray[np.float32] | None = None,
+    ref: NDArray[np.float32] | None = None,
+) -> tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
+    """A continuous version of the dense check: how well ``T_target_source`` explains the
+    target's view of the points ``ps``, sensitive to changes far below the tolerance.
+
+    Each point consistent with the target's view (see :func:`classify_points`) counts
+    ``1 - (e / tol)^2`` (a truncated quadratic of its range residual ``e`` along the target's
+    ray: 1 when exact, 0 at the tolerance), each conflicting point ``-3``, every other point 0;
+    the score is their mean. Used to decide whether a refinement improved a transform.
+
+    Parameters
+    ----------
+    target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
+        As :func:`classify_points`.
+
+    Returns
+    -------
+    score : float
+        At most 1 (every point exactly on what the target saw).
+    q, consistent, conflicting
+        As :func:`classify_points`.
+    """
+    if len(ps) == 0 or target.camera is None:
+        q, ok, bad = classify_points(
+            target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
+        )
+        return (float(ok.mean() - 3 * bad.mean()) if len(q) else 0.0), q, ok, bad
+    T = np.asarray(T_target_source, dtype=np.float64)
+    q = ps @ T[:3, :3].T + T[:3, 3]
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
-        consistent = np.abs(d - r) < tol
-        conflict = d < r - tol
-    return q, consistent, conflict
+        ok = np.abs(d - r) < tol
+        bad = d < r - tol
+    w = np.zeros(len(q))
+    w[ok] = 1.0 - ((d[ok] - r[ok]) / tol[ok]) ** 2
+    return float(w.mean() - 3 * bad.mean()), q, ok, bad
 
 
-__all__ = ["classify_points", "measured_image", "overlap_score", "range_slack"]
+def plane_information(
+    target: RangeImage, normals: NDArray[np.float32], q: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """Point-to-plane information of points lying on the target's surfaces, about their
+    centroid: the sum of ``J^T J`` with ``J = [(q - c) x n, n]`` (Open3D's order: rotation
+    ``rx, ry, rz``, then translation ``tx, ty, tz``), ``n`` the target's normal at the pixel
+    each point falls on.
+
+    Unlike a point-to-point information, it knows that a point on a plane fixes nothing along
+    the plane: a corridor gives no translation information along its axis.
+
+    Parameters
+    ----------
+    target : RangeImage
+        The target's view, with a camera model.
+    normals : (H, W, 3) float32
+        Its :func:`flexreg.stages.normals.grid_normals`.
+    q : (N, 3) float64, metres
+        Points in the target frame (e.g. the source points consistent with the target's view).
+
+    Returns
+    -------
+    information : (6, 6) float64
+        Rotations in radians about axes through the centroid, translations in metres.
+    centroid : (3,) float64, metres
+    count : int
+        How many points had a normal (the others are left out).
+    """
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 3)
+    if len(q) == 0 or target.camera is None:
+        return np.zeros((6, 6)), np.zeros(3), 0
+    inside, pix, _ = _pixels(target, q)
+    n = np.full((len(q), 3), np.nan)
+    n[inside] = normals[pix]
+    good = np.isfinite(n).all(axis=1)
+    q, n = q[good], n[good]
+    if len(q) == 0:
+        return np.zeros((6, 6)), np.zeros(3), 0
+    c = q.mean(axis=0)
+    J = np.concatenate([np.cross(q - c, n), n], axis=1)
+    return J.T @ J, c, len(q)
+
+
+#: names of the six pose parameters in Open3D's order
+AXES = ("roll", "pitch", "yaw", "x", "y", "z")
+
+
+def axis_strength(
+    information: NDArray[np.float64], points: int, length_m: float | NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """How firmly each of the six pose parameters is fixed, per point, on a 0-1 scale.
+
+    Each parameter's information once the other five are free to adjust (``1 / (H^-1)_ii``),
+    divided by ``points``; rotations are expressed in metres at their lever arm ``length_m``
+    (a rotation of ``a`` radians moves points at that distance from its axis by
+    ``a * length_m``). A corridor has near-zero translation strength along its axis even when
+    its walls fix everything else. For planar surfaces the translation strengths are at most
+    1 (the share of surface facing that axis), and so are the rotation strengths when each
+    lever arm is the RMS distance of the points from that axis.
+
+    Parameters
+    ----------
+    information : (6, 6) float64
+        Rotation (radians) then translation (metres), Open3D's order.
+    points : int
+        How many points it sums.
+    length_m : float or (3,) float64, metres
+        Lever arm of the rotations, one for all or one per rotation axis.
+
+    Returns
+    -------
+    strength : (6,) float64
+        Per parameter of :data:`AXES` (roll, pitch, yaw, x, y, z).
+    weakest : float
+        The smallest eigenvalue of the normalised information (rotations in metres at the
+        mean lever arm): the strength of the least constrained combination of parameters.
+    direction : (6,) float64
+        That combination (unit eigenvector, rotations scaled as for ``weakest``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> H = np.diag([1.0, 1.0, 1.0, 1.0, 0.5, 0.0])  # nothing along z
+    >>> s, weakest, d = axis_strength(H, 1, 1.0)
+    >>> s.round(3).tolist(), weakest, int(np.abs(d).argmax())
+    ([1.0, 1.0, 1.0, 1.0, 0.5, 0.0], 0.0, 5)
+    """
+    if points <= 0 or not np.all(np.isfinite(information)):
+        return np.zeros(6), 0.0, np.zeros(6)
+    L = np.maximum(np.broadcast_to(np.asarray(length_m, dtype=np.float64), (3,)), 1e-9)
+    scale = np.concatenate([1 / L, np.ones(3)])
+    H = np.asarray(information, dtype=np.float64) * np.outer(scale, scale) / points
+    H = (H + H.T) / 2
+    lam, V = np.linalg.eigh(H)
+    lam = np.clip(lam, 0.0, None)
+    inv_diag = (V**2 / np.maximum(lam, 1e-12)).sum(axis=1)
+    strength = np.where(inv_diag > 0, 1.0 / inv_diag, 0.0)
+    strength = np.where(strength < 1e-12, 0.0, strength)
+    # the weakest combination with one lever arm for all rotations (eigenvectors depend on it)
+    m = float(np.sqrt(np.mean(L**2)))
+    s1 = np.concatenate([np.full(3, 1 / m), np.ones(3)])
+    H1 = np.asarray(information, dtype=np.float64) * np.outer(s1, s1) / points
+    lam1, V1 = np.linalg.eigh((H1 + H1.T) / 2)
+    return strength, max(float(lam1[0]), 0.0), V1[:, 0]
+
+
+def spread(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """How points spread in 3D: standard deviation per axis and along the principal axes.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, metres
+
+    Returns
+    -------
+    std_xyz : (3,) float64, metres
+        Standard deviation along x, y, z (zeros for fewer than two points).
+    std_principal : (3,) float64, metres
+        Standard deviations along the principal axes, largest first: a line has one large
+        value, a plane two, a volume three.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> line = np.stack([np.arange(5.0), np.zeros(5), np.zeros(5)], axis=1)
+    >>> [v.round(3).tolist() for v in spread(line)]
+    [[1.414, 0.0, 0.0], [1.414, 0.0, 0.0]]
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) < 2:
+        return np.zeros(3), np.zeros(3)
+    c = p - p.mean(axis=0)
+    cov = c.T @ c / len(p)
+    ev = np.sqrt(np.clip(np.linalg.eigvalsh(cov)[::-1], 0.0, None))
+    return np.sqrt(np.diag(cov)), ev
+
+
+__all__ = [
+    "AXES",
+    "axis_strength",
+    "classify_points",
+    "measured_image",
+    "overlap_score",
+    "plane_information",
+    "range_slack",
+    "soft_score",
+    "spread",
+]

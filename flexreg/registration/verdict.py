@@ -1,0 +1,452 @@
+"""Whether a registration can be trusted: the evidence (:func:`gather`) and the decision
+(:func:`decide`).
+
+The evidence is measured on the final transform with inputs the registration has already
+prepared: each scan's view (range image, what it measured, range slack, normals) and each
+scan's even sample. It answers, in numbers with units in their keys:
+
+* ``overlap``: how much of each scan the other explains (both directions);
+* ``free_space``: how much of each lies where the other scanner saw through empty space;
+* ``inliers``: how many feature matches agree and how they spread in 3D;
+* ``axis_strength``: how firmly the overlap's surfaces fix each of the six pose parameters
+  (a corridor fixes nothing along its axis);
+* ``runner_up``: the best clearly different candidate pose and its score against the winner;
+* ``residual``: how closely the surfaces meet; ``refinement``: whether ICP was kept.
+
+:func:`decide` turns the evidence into a :class:`~flexreg.core.results.Verdict` with one
+:class:`~flexreg.core.results.Reason` per failed test; its thresholds are the ``verdict_*``
+fields of :class:`~flexreg.registration.config.RegistrationConfig`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.range_image import RangeImage
+from flexreg.core.results import Hypothesis, Reason, Verdict
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+from flexreg.registration.candidates import Check, Judged
+from flexreg.registration.config import RegistrationConfig
+from flexreg.stages.verification import AXES, axis_strength, plane_information, soft_score, spread
+
+#: most runner-up poses listed
+MAX_RUNNER_UPS = 3
+
+#: relative range tolerance of the fine checks (fraction of the range)
+FINE_REL = 0.002
+
+#: free space is judged at this many inlier thresholds plus this fraction of the range (the
+#: tolerance at which the candidates compete)
+FREE_SPACE_TOLERANCE, FREE_SPACE_REL = 2.5, 0.01
+
+
+@dataclass(eq=False)
+class TwoWay:
+    """Checks of a transform in both directions: the source's sample in the target's view
+    (``forward``) and the target's sample in the source's view (``backward``)."""
+
+    forward: Check
+    backward: Check
+
+    def score(self, T: NDArray[np.float64], tol: float) -> Scored:
+        """:func:`~flexreg.stages.verification.soft_score` of both directions at ``tol``
+        (metres, plus 0.2% of the range)."""
+        f = soft_score(*self._args(self.forward, T, tol))
+        b = soft_score(*self._args(self.backward, invert(T), tol))
+        return Scored(T, tol, f, b)
+
+    @staticmethod
+    def _args(c: Check, T: NDArray[np.float64], tol: float) -> tuple[Any, ...]:
+        return c.view, c.sample, T, tol, FINE_REL, c.slack, c.measured
+
+
+@dataclass(eq=False)
+class Scored:
+    """A transform scored in both directions (see :meth:`TwoWay.score`)."""
+
+    T: NDArray[np.float64]
+    tolerance_m: float
+    forward: tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]
+    backward: tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]
+
+    @property
+    def value(self) -> float:
+        """The mean score of both directions."""
+        return 0.5 * (self.forward[0] + self.backward[0])
+
+
+def _frac(mask: NDArray[np.bool_]) -> float:
+    return float(mask.mean()) if len(mask) else 0.0
+
+
+def _r(x: float, nd: int = 4) -> float:
+    return round(float(x), nd)
+
+
+def _vec(v: NDArray[np.float64], nd: int = 4) -> list[float]:
+    return [round(float(x), nd) for x in v]
+
+
+def runner_ups(
+    judged: Sequence[Judged],
+    T: NDArray[np.float64],
+    top: float,
+    *,
+    distinct_deg: float,
+    distinct_m: float,
+    ratio: float,
+) -> list[Hypothesis]:
+    """The best candidates clearly different from ``T`` (more than ``distinct_deg`` or
+    ``distinct_m`` away, and from each other), best first: always the best one, then any
+    others whose score is at least ``ratio`` of the winner's ``top`` (at most
+    :data:`MAX_RUNNER_UPS`)."""
+
+    def far(A: NDArray[np.float64], B: NDArray[np.float64]) -> bool:
+        return rotation_error_deg(A, B) > distinct_deg or translation_error_m(A, B) > distinct_m
+
+    out: list[Hypothesis] = []
+    for j in sorted(judged, key=lambda j: -j.score):
+        if not far(j.T_target_source, T) or any(
+            not far(j.T_target_source, h.T_target_source) for h in out
+        ):
+            continue
+        rel = j.score / top if top > 1e-9 else (1.0 if j.score >= top else 0.0)
+        if out and rel < ratio:
+            break
+        out.append(
+            Hypothesis(
+                np.array(j.T_target_source, dtype=np.float64),
+                _r(rel),
+                _r(rotation_error_deg(j.T_target_source, T), 3),
+                _r(translation_error_m(j.T_target_source, T), 3),
+                j.origin,
+            )
+        )
+        if len(out) >= MAX_RUNNER_UPS:
+            break
+    return out
+
+
+def _strength(
+    target: RangeImage, normals: NDArray[np.float32] | None, q: NDArray[np.float64]
+) -> dict[str, Any]:
+    """Per-axis constraint strength of the overlap's points ``q`` (target frame)."""
+    if normals is None or len(q) < 6:
+        return {a: 0.0 for a in AXES} | {"points": len(q)}
+    info, c, n = plane_information(target, normals, q)
+    d2 = (q - c) ** 2
+    # lever arm of each rotation: RMS distance of the points from that axis
+    lever = np.sqrt(np.mean(d2.sum(axis=1)[:, None] - d2, axis=0))
+    s, weakest, d = axis_strength(info, n, lever)
+    kind = "translation" if np.linalg.norm(d[3:]) >= np.linalg.norm(d[:3]) else "rotation"
+    part = d[3:] if kind == "translation" else d[:3]
+    part = part / (np.linalg.norm(part) or 1.0)
+    if part[int(np.argmax(np.abs(part)))] < 0:
+        part = -part
+    return {a: _r(v) for a, v in zip(AXES, s, strict=True)} | {
+        "points": int(n),
+        "lever_arm_m": _vec(lever, 3),
+        "weakest": {
+            "strength": _r(weakest),
+            "kind": kind,
+            "direction_target": _vec(part, 3),
+        },
+    }
+
+
+def gather(
+    two: TwoWay,
+    final: Scored,
+    *,
+    target_normals: NDArray[np.float32] | None,
+    inlier_points: NDArray[np.float64],
+    matches: int,
+    fit_to_matches: bool,
+    runner_up: Sequence[Hypothesis],
+    candidates: int,
+    inlier_rmse_m: float,
+    fitness: float,
+    threshold_m: float,
+    refinement: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """The evidence of a registration (JSON-ready, units in the keys).
+
+    Parameters
+    ----------
+    two : TwoWay
+        Both scans' views and samples.
+    final : Scored
+        The final transform scored in both directions (:meth:`TwoWay.score`).
+    target_normals : (H, W, 3) float32 or None
+        The target's grid normals (for the per-axis strength).
+    inlier_points : (K, 3) float64, metres
+        The inlier feature matches' target points.
+    matches : int
+        Feature matches tested.
+    fit_to_matches : bool
+        Whether the coarse transform was fitted to the matches (not so for a plan overlay
+        alone: then the matches do not carry the pose and their count is not tested).
+    runner_up : sequence of Hypothesis
+        From :func:`runner_ups`.
+    candidates : int
+        How many candidate poses were judged.
+    inlier_rmse_m, fitness, threshold_m : float
+        The final stage's residual and overlap, and the inlier threshold.
+    refinement : dict or None
+        Whether the refinement was kept and the scores (None: not refined).
+    """
+    _, qf, okf, _ = final.forward
+    _, _, okb, _ = final.backward
+    # free space at the candidates' coarse tolerance: a surface clearly in front of what the
+    # other scanner saw, not range noise
+    free_tol = FREE_SPACE_TOLERANCE * threshold_m
+    badf = two.forward.classify(final.T, free_tol, FREE_SPACE_REL)[2]
+    badb = two.backward.classify(invert(final.T), free_tol, FREE_SPACE_REL)[2]
+    overlap_q = qf[okf]
+    std_xyz, std_pc = spread(inlier_points)
+    _, overlap_pc = spread(overlap_q)
+    ev: dict[str, Any] = {
+        "overlap": {
+            "source_explained": _r(_frac(okf)),
+            "target_explained": _r(_frac(okb)),
+            "tolerance_m": _r(final.tolerance_m),
+            "tolerance_rel": FINE_REL,
+            "samples": [len(okf), len(okb)],
+        },
+        "free_space": {
+            "source_conflicting": _r(_frac(badf)),
+            "target_conflicting": _r(_frac(badb)),
+            "tolerance_m": _r(free_tol),
+            "tolerance_rel": FREE_SPACE_REL,
+        },
+        "inliers": {
+            "count": len(inlier_points),
+            "matches": int(matches),
+            "fit_to_matches": bool(fit_to_matches),
+            "std_xyz_m": _vec(std_xyz, 3),
+            "std_principal_m": _vec(std_pc, 3),
+            "overlap_std_principal_m": _vec(overlap_pc, 3),
+            "spread_ratio": _r(std_pc[1] / overlap_pc[1]) if overlap_pc[1] > 0 else 0.0,
+        },
+        "axis_strength": _strength(two.forward.view, target_normals, overlap_q),
+        "runner_up": None,
+        "candidates": int(candidates),
+        "residual": {
+            "inlier_rmse_m": _r(inlier_rmse_m, 5),
+            "fitness": _r(fitness),
+            "threshold_m": _r(threshold_m, 5),
+            "rmse_over_threshold": _r(inlier_rmse_m / threshold_m) if threshold_m > 0 else None,
+        },
+        "refinement": refinement,
+    }
+    if runner_up:
+        h = runner_up[0]
+        c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
+        D = np.asarray(h.T_target_source) @ invert(final.T)
+        ev["runner_up"] = {
+            "score_ratio": h.score_ratio,
+            "rotation_deg": h.rotation_deg,
+            "translation_m": h.translation_m,
+            "offset_m": _vec(D[:3, :3] @ c + D[:3, 3] - c, 3),
+            "origin": h.origin,
+        }
+    return ev
+
+
+# ---------------------------------------------------------------------------- decision
+
+
+def _along(v: Sequence[float]) -> str:
+    """``"x"`` when one axis carries most of a direction, else the direction's components."""
+    a = np.asarray(v, dtype=np.float64)
+    n = float(np.linalg.norm(a))
+    if n <= 0:
+        return "an unknown direction"
+    k = int(np.argmax(np.abs(a)))
+    if abs(a[k]) >= 0.9 * n:
+        return "xyz"[k]
+    return "({:.2f}, {:.2f}, {:.2f}) of the target frame".format(*(a / n))
+
+
+def _overlap_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    o = ev.get("overlap")
+    if not o:
+        return None
+    s, t = o["source_explained"], o["target_explained"]
+    if min(s, t) >= cfg.verdict_min_overlap:
+        return None
+    return Reason(
+        "low_overlap",
+        f"only {100 * s:.0f}% of the source and {100 * t:.0f}% of the target are explained by "
+        f"the other scan (need {100 * cfg.verdict_min_overlap:.0f}% of each): the scans may "
+        "hardly overlap",
+    )
+
+
+def _free_space_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    f = ev.get("free_space")
+    if not f:
+        return None
+    worst = max(f["source_conflicting"], f["target_conflicting"])
+    if worst <= cfg.verdict_max_conflict:
+        return None
+    return Reason(
+        "free_space",
+        f"{100 * worst:.0f}% of one scan lands where the other scanner saw through empty space "
+        f"(allowed {100 * cfg.verdict_max_conflict:.0f}%): the pose puts surfaces in open space",
+    )
+
+
+def _inlier_reasons(ev: dict[str, Any], cfg: RegistrationConfig) -> list[Reason]:
+    i = ev.get("inliers")
+    if not i or not i.get("fit_to_matches", True):
+        return []
+    if i["count"] < cfg.verdict_min_inliers:
+        return [
+            Reason(
+                "few_inliers",
+                f"only {i['count']} of {i['matches']} feature matches agree with the pose (need "
+                f"{cfg.verdict_min_inliers}): it rests on the surfaces alone",
+            )
+        ]
+    if i["count"] >= 3 and i["spread_ratio"] < cfg.verdict_min_inlier_spread:
+        return [
+            Reason(
+                "clustered_inliers",
+                f"the {i['count']} agreeing feature matches lie in a narrow patch (spread "
+                f"{i['std_principal_m'][1]:.2f} m across, the overlap "
+                f"{i['overlap_std_principal_m'][1]:.2f} m): the pose may tilt about them",
+            )
+        ]
+    return []
+
+
+def _axis_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    a = ev.get("axis_strength")
+    if not a:
+        return None
+    weak = [k for k in AXES if a.get(k, 1.0) < cfg.verdict_min_axis_strength]
+    if not weak:
+        return None
+    limit = f"strength {min(a[k] for k in weak):.3f}, need {cfg.verdict_min_axis_strength:g}"
+    w = a.get("weakest", {})
+    direction = _along(w.get("direction_target", ()))
+    if any(k in ("x", "y", "z") for k in weak) and w.get("kind", "translation") == "translation":
+        return Reason(
+            "weak_axis",
+            f"the scans constrain almost nothing along {direction} ({limit}; a corridor or "
+            "tunnel?): the position along it is a guess",
+        )
+    return Reason(
+        "weak_axis",
+        f"the scans constrain almost no rotation about {direction} ({limit}; a round room or "
+        "a single surface?): the angle about it is a guess",
+    )
+
+
+def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    r = ev.get("runner_up")
+    if not r or r["score_ratio"] < cfg.verdict_ambiguity_ratio:
+        return None
+    if r["rotation_deg"] > 10:
+        what = f"turned {r['rotation_deg']:.0f}° from each other"
+        cause = "symmetric structure"
+    else:
+        what = f"{r['translation_m']:.1f} m apart along {_along(r.get('offset_m', ()))}"
+        cause = "repeating structure"
+    return Reason(
+        "ambiguous",
+        f"two poses {what} fit almost equally well (the other scores {100 * r['score_ratio']:.0f}"
+        f"% of the answer): {cause}",
+    )
+
+
+def _residual_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    r = ev.get("residual")
+    if not r or r.get("rmse_over_threshold") is None:
+        return None
+    if r["rmse_over_threshold"] <= cfg.verdict_max_rmse_ratio:
+        return None
+    return Reason(
+        "high_residual",
+        f"the surfaces still differ by {100 * r['inlier_rmse_m']:.1f} cm RMS (allowed "
+        f"{100 * cfg.verdict_max_rmse_ratio * r['threshold_m']:.1f} cm): they do not meet closely",
+    )
+
+
+def decide(
+    evidence: dict[str, Any],
+    runner_up: Sequence[Hypothesis] = (),
+    config: RegistrationConfig = RegistrationConfig(),
+) -> Verdict:
+    """The verdict on a registration's evidence: ``"uncertain"`` with one reason per failed
+    test, else ``"confident"``.
+
+    Tests (thresholds: ``config.verdict_*``; a test whose evidence is missing passes):
+    ``low_overlap`` (either scan explained less than ``verdict_min_overlap``),
+    ``free_space`` (either conflicting more than ``verdict_max_conflict``),
+    ``few_inliers`` (fewer than ``verdict_min_inliers``) or ``clustered_inliers`` (their
+    second principal spread below ``verdict_min_inlier_spread`` of the overlap's),
+    ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
+    ``ambiguous`` (a clearly different pose scores at least ``verdict_ambiguity_ratio`` of
+    the winner), ``high_residual`` (inlier RMSE above ``verdict_max_rmse_ratio`` inlier
+    thresholds). A rejected refinement is a note, not a reason.
+
+    Parameters
+    ----------
+    evidence : dict
+        As :func:`gather` makes it.
+    runner_up : sequence of Hypothesis
+    config : RegistrationConfig
+
+    Returns
+    -------
+    Verdict
+
+    Examples
+    --------
+    >>> v = decide({"overlap": {"source_explained": 0.05, "target_explained": 0.6}})
+    >>> v.status, [r.code for r in v.reasons]
+    ('uncertain', ['low_overlap'])
+    >>> decide({"overlap": {"source_explained": 0.7, "target_explained": 0.6}}).status
+    'confident'
+    """
+    reasons: list[Reason] = []
+    for test in (_overlap_reason, _free_space_reason, _axis_reason, _ambiguity_reason):
+        r = test(evidence, config)
+        if r is not None:
+            reasons.append(r)
+    reasons += _inlier_reasons(evidence, config)
+    r = _residual_reason(evidence, config)
+    if r is not None:
+        reasons.append(r)
+    notes: list[Reason] = []
+    ref = evidence.get("refinement")
+    if ref and not ref.get("kept", True):
+        notes.append(
+            Reason(
+                "refinement_rejected",
+                f"the ICP refinement was discarded: it scored {ref['score_refined']:.4f} "
+                f"against {ref['score_coarse']:.4f} before it (the coarse transform is kept)",
+            )
+        )
+    status: Literal["confident", "uncertain"] = "uncertain" if reasons else "confident"
+    return Verdict(status, tuple(reasons), evidence, tuple(runner_up), tuple(notes))
+
+
+__all__ = [
+    "FINE_REL",
+    "FREE_SPACE_REL",
+    "FREE_SPACE_TOLERANCE",
+    "MAX_RUNNER_UPS",
+    "Scored",
+    "TwoWay",
+    "decide",
+    "gather",
+    "runner_ups",
+]

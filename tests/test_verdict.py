@@ -1,0 +1,347 @@
+"""The verdict: its evidence on hand-made scenes of a few planes (ray-cast exactly), the
+decision on constructed evidence, and a normal synthetic pair end to end."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from flexreg.core.camera import SphericalCamera
+from flexreg.core.range_image import RangeImage
+from flexreg.core.results import Hypothesis, Verdict
+from flexreg.core.transforms import (
+    invert,
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+from flexreg.errors import ConfigError
+from flexreg.registration import RegistrationConfig, register
+from flexreg.registration.candidates import Check, Judged
+from flexreg.registration.verdict import TwoWay, decide, gather, runner_ups
+from flexreg.stages.normals import grid_normals
+from flexreg.stages.sampling import area_sample
+from flexreg.stages.verification import (
+    axis_strength,
+    measured_image,
+    plane_information,
+    range_slack,
+    spread,
+)
+from flexreg.synth import station_pair
+
+CAM = SphericalCamera(360, 180, -np.pi, np.pi, 0.15, np.pi - 0.15)
+
+
+# ---------------------------------------------------------------------------- hand-made scenes
+
+
+def _cast(lo, hi, blocks, T_world_scanner, max_range=25.0):
+    """Range image of a station inside the box ``lo..hi`` with solid cuboid ``blocks``
+    (each ``(lo, hi)``), ray-cast exactly; rays longer than ``max_range`` see nothing."""
+    v, u = np.mgrid[0 : CAM.height, 0 : CAM.width].astype(np.float64)
+    phi, theta = CAM.phi_min + u * CAM.dphi, CAM.theta_min + v * CAM.dtheta
+    d_s = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1)
+    R, o = T_world_scanner[:3, :3], T_world_scanner[:3, 3]
+    d = d_s @ R.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_exit = np.min(np.where(d > 0, (hi - o) / d, (lo - o) / d), axis=-1)  # leaving the box
+        t = t_exit
+        for blo, bhi in blocks:
+            a, b = (blo - o) / d, (bhi - o) / d
+            near = np.max(np.minimum(a, b), axis=-1)
+            far = np.min(np.maximum(a, b), axis=-1)
+            hit = (near <= far) & (near > 0)
+            t = np.where(hit & (near < t), near, t)
+    valid = np.isfinite(t) & (t < max_range)
+    xyz = np.where(valid[..., None], d_s * np.where(valid, t, 0.0)[..., None], np.nan)
+    return RangeImage(xyz, valid, np.full(valid.shape, -1, np.int64), CAM)
+
+
+def _views(lo, hi, blocks, T_wt, T_ws):
+    """Both stations' images and the two-way check between them (as the pipeline builds it)."""
+    views = [_cast(np.array(lo), np.array(hi), blocks, T) for T in (T_wt, T_ws)]
+    checks = []
+    for view, other in (views, views[::-1]):
+        ref = measured_image(view)
+        sample = area_sample(other.xyz[other.valid], 8000)
+        checks.append(Check(view, ref, range_slack(view, ref), sample))
+    return views, TwoWay(*checks)
+
+
+def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives):
+    """The verdict at the true pose, with the true pose and ``alternatives`` (world-frame
+    motions of the source station) as the judged candidates."""
+    (vt, _), two = _views(lo, hi, blocks, T_wt, T_ws)
+    T = invert(T_wt) @ T_ws
+    thr = 0.02
+    judged = []
+    for M in [np.eye(4), *alternatives]:
+        Tc = invert(T_wt) @ M @ T_ws
+        score, ok, bad = two.forward.judge(Tc, 2.5 * thr, 0.01)
+        judged.append(Judged("hand-made", Tc, score, ok, bad))
+    top = judged[0].score
+    config = RegistrationConfig()
+    ups = runner_ups(
+        judged[1:], T, top, distinct_deg=3.0, distinct_m=0.5, ratio=config.verdict_ambiguity_ratio
+    )
+    scored = two.score(T, thr / 2)
+    ev = gather(
+        two,
+        scored,
+        target_normals=grid_normals(vt),
+        inlier_points=np.zeros((0, 3)),
+        matches=0,
+        fit_to_matches=False,
+        runner_up=ups,
+        candidates=len(judged),
+        inlier_rmse_m=0.003,
+        fitness=0.9,
+        threshold_m=thr,
+        refinement=None,
+    )
+    return decide(ev, ups, config)
+
+
+def _station(x, y, yaw_deg=0.0):
+    return make_transform(rotation_about_axis([0, 0, 1], np.radians(yaw_deg)), [x, y, 0.0])
+
+
+def _turn_about_centre(deg):
+    """World motion: a turn about the vertical through the origin (the room's centre)."""
+    return make_transform(rotation_about_axis([0, 0, 1], np.radians(deg)), [0.0, 0.0, 0.0])
+
+
+BOX = ([-4.0, -3.0, -1.5], [4.0, 3.0, 1.5])
+CUE = [(np.array([2.0, 2.4, -1.5]), np.array([3.2, 3.0, 0.7]))]  # a cupboard in one corner
+
+
+def test_symmetric_box_is_ambiguous():
+    """An empty box looks the same turned by 180°: the turned pose explains it as well."""
+    v = _verdict(*BOX, [], _station(0.6, 0.4), _station(-1.0, 0.5, 30), [_turn_about_centre(180)])
+    assert not v.confident
+    assert "ambiguous" in [r.code for r in v.reasons]
+    h = v.runner_up[0]
+    assert h.score_ratio > 0.95 and abs(h.rotation_deg - 180) < 1
+    assert "180°" in v.summary() and "symmetric" in v.summary()
+
+
+def test_box_with_one_cue_is_confident():
+    """The same box with a cupboard in one corner: the turned pose puts it in open space."""
+    v = _verdict(*BOX, CUE, _station(0.6, 0.4), _station(-1.0, 0.5, 30), [_turn_about_centre(180)])
+    assert v.confident, v.summary()
+    assert v.runner_up and v.runner_up[0].score_ratio < 0.9
+    ev = v.evidence
+    assert ev["overlap"]["source_explained"] > 0.8 and ev["overlap"]["target_explained"] > 0.8
+    assert ev["free_space"]["source_conflicting"] < 0.01
+
+
+def test_corridor_has_a_weak_axis_along_it():
+    """A corridor along x whose ends are out of range: nothing fixes the position along x."""
+    lo, hi = [-100.0, -1.5, -1.5], [100.0, 1.5, 1.5]
+    v = _verdict(lo, hi, [], _station(0, 0), _station(1.5, 0.3), [])
+    a = v.evidence["axis_strength"]
+    assert a["x"] < 0.001 and min(a["y"], a["z"]) > 0.2
+    assert a["weakest"]["kind"] == "translation" and abs(a["weakest"]["direction_target"][0]) > 0.99
+    assert [r.code for r in v.reasons] == ["weak_axis"]
+    assert "along x" in v.reasons[0].message and "corridor" in v.reasons[0].message
+
+
+def test_corridor_with_a_niche_is_confident():
+    """The same corridor with a niche box on one wall fixes the position along it."""
+    lo, hi = [-100.0, -1.5, -1.5], [100.0, 1.5, 1.5]
+    cue = [(np.array([2.0, 0.9, -1.5]), np.array([3.0, 1.5, 1.5]))]  # both see its face at x = 2
+    v = _verdict(lo, hi, cue, _station(0, 0), _station(-1.5, 0.3), [])
+    assert v.evidence["axis_strength"]["x"] > 2 * RegistrationConfig().verdict_min_axis_strength
+    assert v.confident, v.summary()
+
+
+# ---------------------------------------------------------------------------- stage functions
+
+
+def test_plane_information_sees_only_the_normal_direction():
+    """Points on the floor (z = -1.5) constrain z, roll and pitch, nothing else."""
+    view = _cast(np.array(BOX[0]), np.array(BOX[1]), [], _station(0, 0))
+    q = view.xyz[view.valid]
+    floor = q[q[:, 2] < -1.49]
+    H, _, n = plane_information(view, grid_normals(view), floor)
+    assert n > 0.9 * len(floor)
+    s, _, _ = axis_strength(H, n, 1.0)
+    assert s[5] > 0.99  # z
+    assert max(s[2], s[3], s[4]) < 0.003  # yaw, x, y (grid normals blur at the corners)
+
+
+def test_spread_of_points_on_a_plane():
+    rng = np.random.default_rng(0)
+    p = np.column_stack([rng.uniform(-2, 2, 500), rng.uniform(-1, 1, 500), np.zeros(500)])
+    std_xyz, std_pc = spread(p)
+    assert std_xyz[2] == 0 and std_pc[2] < 1e-9
+    assert std_pc[0] == pytest.approx(4 / np.sqrt(12), rel=0.1)
+    assert std_pc[1] == pytest.approx(2 / np.sqrt(12), rel=0.1)
+
+
+def test_runner_ups_skip_poses_near_the_answer_and_each_other():
+    T = np.eye(4)
+    near = make_transform(np.eye(3), [0.1, 0, 0])
+    far1 = make_transform(np.eye(3), [3.4, 0, 0])
+    far2 = make_transform(np.eye(3), [3.45, 0, 0])  # the same pose as far1
+    far3 = make_transform(np.eye(3), [-3.4, 0, 0])
+    judged = [Judged("a", M, s, 0.5, 0.0) for M, s in ((near, 1.0), (far1, 0.9), (far2, 0.89))]
+    judged.append(Judged("b", far3, 0.2, 0.3, 0.1))
+    ups = runner_ups(judged, T, 1.0, distinct_deg=3, distinct_m=0.5, ratio=0.85)
+    assert [h.translation_m for h in ups] == [3.4]  # far3 is listed only when close in score
+    assert ups[0].score_ratio == pytest.approx(0.9)
+    # the best distinct one is always listed, however poor
+    ups = runner_ups(judged[3:], T, 1.0, distinct_deg=3, distinct_m=0.5, ratio=0.85)
+    assert len(ups) == 1 and ups[0].origin == "b" and ups[0].score_ratio == pytest.approx(0.2)
+
+
+# ---------------------------------------------------------------------------- decision
+
+
+GOOD = {
+    "overlap": {"source_explained": 0.7, "target_explained": 0.6},
+    "free_space": {"source_conflicting": 0.02, "target_conflicting": 0.03},
+    "inliers": {
+        "count": 40,
+        "matches": 80,
+        "fit_to_matches": True,
+        "std_principal_m": [5.0, 3.0, 1.0],
+        "overlap_std_principal_m": [6.0, 4.0, 1.0],
+        "spread_ratio": 0.75,
+    },
+    "axis_strength": {"roll": 0.3, "pitch": 0.3, "yaw": 0.2, "x": 0.3, "y": 0.3, "z": 0.4},
+    "runner_up": {
+        "score_ratio": 0.2,
+        "rotation_deg": 90.0,
+        "translation_m": 4.0,
+        "offset_m": [4, 0, 0],
+    },
+    "residual": {"inlier_rmse_m": 0.004, "threshold_m": 0.04, "rmse_over_threshold": 0.1},
+    "refinement": {"kept": True, "score_coarse": 0.5, "score_refined": 0.6},
+}
+
+
+def _with(**changes):
+    ev = json.loads(json.dumps(GOOD))
+    for path, value in changes.items():
+        group, key = path.split("__")
+        ev[group][key] = value
+    return ev
+
+
+def test_good_evidence_is_confident():
+    v = decide(GOOD, (), RegistrationConfig())
+    assert v.confident and v.reasons == () and v.summary() == "confident"
+
+
+@pytest.mark.parametrize(
+    ("changes", "code", "words"),
+    [
+        ({"overlap__target_explained": 0.1}, "low_overlap", "10% of the target"),
+        ({"free_space__source_conflicting": 0.3}, "free_space", "empty space"),
+        ({"inliers__count": 2}, "few_inliers", "only 2 of 80"),
+        ({"inliers__spread_ratio": 0.01}, "clustered_inliers", "narrow patch"),
+        ({"axis_strength__y": 0.001}, "weak_axis", "constrain almost"),
+        ({"runner_up__score_ratio": 0.97}, "ambiguous", "turned 90°"),
+        ({"residual__rmse_over_threshold": 2.0}, "high_residual", "do not meet"),
+    ],
+)
+def test_each_failed_test_gives_its_reason(changes, code, words):
+    cfg = RegistrationConfig(verdict_min_inliers=8)
+    v = decide(_with(**changes), (), cfg)
+    assert v.status == "uncertain" and [r.code for r in v.reasons] == [code]
+    assert words in v.reasons[0].message and words in v.summary()
+
+
+def test_repeating_structure_names_the_offset():
+    ev = _with(runner_up__score_ratio=0.95, runner_up__rotation_deg=0.4)
+    ev["runner_up"]["translation_m"], ev["runner_up"]["offset_m"] = 3.4, [3.39, 0.1, 0.0]
+    (r,) = decide(ev).reasons
+    assert r.message.startswith("two poses 3.4 m apart along x fit almost equally well")
+    assert "repeating structure" in r.message
+
+
+def test_inlier_tests_skip_poses_not_fitted_to_matches():
+    ev = _with(inliers__count=1, inliers__spread_ratio=0.0, inliers__fit_to_matches=False)
+    assert decide(ev, (), RegistrationConfig(verdict_min_inliers=8)).confident
+
+
+def test_thresholds_are_config_fields():
+    ev = _with(overlap__target_explained=0.15)
+    assert not decide(ev).confident
+    assert decide(ev, (), RegistrationConfig(verdict_min_overlap=0.1)).confident
+    with pytest.raises(ConfigError):
+        RegistrationConfig(verdict_min_overlap=1.5)
+
+
+def test_rejected_refinement_is_a_note_not_a_reason():
+    ev = _with(refinement__kept=False, refinement__score_refined=0.4)
+    v = decide(ev)
+    assert v.confident and [n.code for n in v.notes] == ["refinement_rejected"]
+    assert v.summary().startswith("confident (note: the ICP refinement was discarded")
+    assert v.to_dict()["notes"][0]["code"] == "refinement_rejected"
+
+
+def test_missing_evidence_passes():
+    assert decide({}).confident
+
+
+# ---------------------------------------------------------------------------- end to end
+
+
+def test_normal_synthetic_pair_is_confident_with_every_field():
+    pair = station_pair("room", seed=2, resolution=(1024, 512))
+    r = register(pair.target, pair.source, RegistrationConfig())
+    assert rotation_error_deg(r.T_target_source, pair.T_target_source) < 0.1
+    assert translation_error_m(r.T_target_source, pair.T_target_source) < 0.01
+    assert isinstance(r.verdict, Verdict) and r.verdict.confident, r.verdict.summary()
+    d = json.loads(json.dumps(r.to_dict()))["verdict"]
+    ev = d["evidence"]
+    assert d["status"] == "confident" and d["reasons"] == []
+    assert set(ev) >= {
+        "overlap",
+        "free_space",
+        "inliers",
+        "axis_strength",
+        "runner_up",
+        "residual",
+        "refinement",
+    }
+    assert {"source_explained", "target_explained", "tolerance_m"} <= set(ev["overlap"])
+    assert {"std_xyz_m", "std_principal_m", "count"} <= set(ev["inliers"])
+    assert {"roll", "pitch", "yaw", "x", "y", "z", "lever_arm_m"} <= set(ev["axis_strength"])
+    assert {"inlier_rmse_m", "fitness", "threshold_m"} <= set(ev["residual"])
+    assert ev["refinement"]["kept"] is True
+    assert ev["refinement"]["score_refined"] >= ev["refinement"]["score_coarse"] - 0.01
+    assert r.timings_s["verdict"] < 0.1 * r.wall_s
+    for h in d["runner_up"]:
+        assert np.asarray(h["T_target_source"]).shape == (4, 4)
+    assert isinstance(r.verdict.runner_up, tuple)
+    assert all(isinstance(h, Hypothesis) for h in r.verdict.runner_up)
+
+
+def test_refinement_guard_keeps_the_coarse_transform_when_icp_is_worse(monkeypatch):
+    """An ICP that wanders off is discarded: the result is the coarse transform, noted."""
+    import flexreg.registration.pipeline as pipeline
+
+    pair = station_pair("room", seed=2, resolution=(512, 256))
+    real = pipeline.refine
+
+    def wandering(*args, **kwargs):
+        r = real(*args, **kwargs)
+        off = make_transform(rotation_about_axis([0, 0, 1], np.radians(2.0)), [0.1, 0, 0])
+        return replace(r, T_target_source=off @ r.T_target_source)
+
+    monkeypatch.setattr(pipeline, "refine", wandering)
+    r = register(pair.target, pair.source, RegistrationConfig())
+    assert np.array_equal(r.T_target_source, r.T_coarse)
+    ref = r.verdict.evidence["refinement"]
+    assert ref["kept"] is False and ref["score_refined"] < ref["score_coarse"]
+    assert [n.code for n in r.verdict.notes] == ["refinement_rejected"]
+    off = register(pair.target, pair.source, RegistrationConfig(refine_guard=False))
+    assert not np.array_equal(off.T_target_source, off.T_coarse)

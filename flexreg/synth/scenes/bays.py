@@ -79,19 +79,21 @@ def bays(
     stone = ob.CONCRETE.jitter(rng, 0.05)
     wall_mat = ob.PLASTER.jitter(rng, 0.05)
     b = MeshBuilder()
-    b.box([-0.3, -0.3, -0.3], [L + 0.3, W + 0.3, 0.0], ob.SCREED.jitter(rng))
-    b.box([-0.3, -0.3, H], [L + 0.3, W + 0.3, H + 0.3], ob.CEILING)
+    floor_mat = ob.SCREED.jitter(rng)
     for x0, x1 in ((-0.3, 0.0), (L, L + 0.3)):
-        b.box([x0, -0.3, 0.0], [x1, W + 0.3, H], wall_mat)
+        b.box([x0, -0.3, -0.3], [x1, W + 0.3, H + 0.3], wall_mat)
     b.count("end wall", 2)
     win_w, sill = float(rng.uniform(1.2, 1.8)), float(rng.uniform(1.0, 1.2))
     win_top = min(H - 0.5, sill + float(rng.uniform(1.2, 1.8)))
-    windows = [
-        ((i + 0.5) * p - win_w / 2, (i + 0.5) * p + win_w / 2, sill, win_top) for i in range(n)
-    ]
-    for lo, hi in wall_boxes(L, H, 0.3, windows):  # wall at y = 0 (outside: y < 0) ...
-        b.box([lo[0], -hi[1], lo[2]], [hi[0], -lo[1], hi[2]], wall_mat)
-        b.box([lo[0], W + lo[1], lo[2]], [hi[0], W + hi[1], hi[2]], wall_mat)  # ... and y = W
+    window = [(p / 2 - win_w / 2, p / 2 + win_w / 2, sill, win_top)]
+    # bay by bay (long thin triangles make the distance queries of the ray caster imprecise)
+    for i in range(n):
+        x0 = i * p
+        b.box([x0, -0.3, -0.3], [x0 + p, W + 0.3, 0.0], floor_mat)
+        b.box([x0, -0.3, H], [x0 + p, W + 0.3, H + 0.3], ob.CEILING)
+        for lo, hi in wall_boxes(p, H, 0.3, window):  # wall at y = 0 (outside: y < 0) ...
+            b.box([x0 + lo[0], -hi[1], lo[2]], [x0 + hi[0], -lo[1], hi[2]], wall_mat)
+            b.box([x0 + lo[0], W + lo[1], lo[2]], [x0 + hi[0], W + hi[1], hi[2]], wall_mat)
     b.count("side wall", 2)
     b.count("window", 2 * n)
     for y in (c, W - c):
@@ -101,7 +103,8 @@ def bays(
         for i in range(n):
             for voussoir in arch((i + 0.5) * p, y0, y1, hs, r, 0.3):
                 b.add(voussoir, stone)
-        b.box([0.0, y0, top], [L, y1, top + 0.3], stone)
+        for i in range(n):
+            b.box([i * p, y0, top], [(i + 1) * p, y1, top + 0.3], stone)
     b.count("column", 2 * (n - 1))
     b.count("arch", 2 * n)
     for i in range(1, n):
@@ -131,7 +134,7 @@ def _lights_and_markings(
     for i in range(n):
         put(b, panel, (i + 0.5) * p, W / 2, 0.0, H)
     b.count("light", n)
-    L = n * p
     for y in (c + 0.8, W - c - 0.8):
-        b.box([0.0, y - 0.05, 0.0], [L, y + 0.05, 0.003], ob.MARKING)
+        for i in range(n):
+            b.box([i * p, y - 0.05, 0.0], [(i + 1) * p, y + 0.05, 0.003], ob.MARKING)
     b.count("floor marking", 2)

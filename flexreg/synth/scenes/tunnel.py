@@ -10,6 +10,7 @@ stations.
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +27,8 @@ from flexreg.synth.seeding import as_rng
 TUNNEL_LENGTH_M = 400.0
 #: length of the zone around the middle of the tunnel where stations stand, metres
 TUNNEL_ZONE_M = 20.0
+#: longest piece of the lining along the axis, metres
+_PIECE_M = 5.0
 #: shifts along the axis listed as samples of the tunnel's continuous symmetry, metres
 _SAMPLE_SHIFTS_M = (-5.0, -2.0, -1.0, 1.0, 2.0, 5.0)
 
@@ -86,26 +89,32 @@ def tunnel(
         put(b, niche, x_c, (0.0, W)[side], (0.0, math.pi)[side])
     else:
         symmetries = (turn_z(L / 2, W / 2, 2), *(shift_x(d) for d in _SAMPLE_SHIFTS_M))
-    # walls (local y of wall_boxes: into the rock) and the vault over them
-    for side, y_sign, y_face in ((0, -1.0, 0.0), (1, 1.0, W)):
-        for lo, hi in wall_boxes(L, hw + 0.3, 0.3, openings[side]):
-            ys = sorted((y_face + y_sign * lo[1], y_face + y_sign * hi[1]))
-            b.box([lo[0], ys[0], lo[2] - 0.3], [hi[0], ys[1], hi[2] - 0.3], lining)
     t = np.linspace(math.pi, 0.0, 25)
     vault = np.column_stack([W / 2 + W / 2 * np.cos(t), hw + rise * np.sin(t)])
-    for slab in profile_slabs(vault, 0.0, L, 0.3):
-        b.add(slab, lining)
+    # in pieces of at most _PIECE_M along the axis: long thin triangles make the distance
+    # queries of the ray caster imprecise
+    xs = np.linspace(0.0, L, math.ceil(L / _PIECE_M) + 1)
+    for x0, x1 in pairwise(xs):
+        x0, x1 = float(x0), float(x1)
+        # walls (local y of wall_boxes: into the rock) and the vault over them
+        for side, y_sign, y_face in ((0, -1.0, 0.0), (1, 1.0, W)):
+            local = [(a - x0, c - x0, z0, z1) for a, c, z0, z1 in openings[side]]
+            for lo, hi in wall_boxes(x1 - x0, hw + 0.3, 0.3, local):
+                ys = sorted((y_face + y_sign * lo[1], y_face + y_sign * hi[1]))
+                b.box([x0 + lo[0], ys[0], lo[2] - 0.3], [x0 + hi[0], ys[1], hi[2] - 0.3], lining)
+        for slab in profile_slabs(vault, x0, x1, 0.3):
+            b.add(slab, lining)
+        b.box([x0, 0.0, -0.3], [x1, W, 0.0], road)
+        for y0, y1 in ((0.0, walk_w), (W - walk_w, W)):
+            b.box([x0, y0, 0.0], [x1, y1, 0.2], walk)
+        for y0, y1 in ((0.0, 0.35), (W - 0.35, W)):
+            b.box([x0, y0, tray_z - 0.08], [x1, y1, tray_z], ob.METAL)
     b.count("tunnel lining")
+    b.count("walkway", 2)
+    b.count("cable tray", 2)
     for x0, x1 in ((-0.3, 0.0), (L, L + 0.3)):
         b.box([x0, -0.4, -0.3], [x1, W + 0.4, hw + rise + 0.4], lining)
     b.count("end wall", 2)
-    b.box([0.0, 0.0, -0.3], [L, W, 0.0], road)
-    for y0, y1 in ((0.0, walk_w), (W - walk_w, W)):
-        b.box([0.0, y0, 0.0], [L, y1, 0.2], walk)
-    b.count("walkway", 2)
-    for y0, y1 in ((0.0, 0.35), (W - 0.35, W)):
-        b.box([0.0, y0, tray_z - 0.08], [L, y1, tray_z], ob.METAL)
-    b.count("cable tray", 2)
     zone = min(TUNNEL_ZONE_M, L - 2.0)
     region = (L / 2 - zone / 2, 0.3, L / 2 + zone / 2, W - 0.3)
     kind = "tunnel-cue" if cue else "tunnel"

@@ -102,6 +102,7 @@ def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives):
         inlier_rmse_m=0.003,
         fitness=0.9,
         threshold_m=thr,
+        residual_kind="point-to-plane",
         refinement=None,
     )
     return decide(ev, ups, config)

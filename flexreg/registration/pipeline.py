@@ -425,7 +425,7 @@ def _verdict(
     scored: Scored,
     two: TwoWay,
     vt: ScanView,
-    stage: tuple[float, float],
+    stage: tuple[float, float, str],
     thr: float,
     refinement: dict[str, Any] | None,
     config: RegistrationConfig,
@@ -450,6 +450,7 @@ def _verdict(
         candidates=len(c.judged),
         inlier_rmse_m=stage[0],
         fitness=stage[1],
+        residual_kind=stage[2],
         threshold_m=thr,
         refinement=refinement,
     )
@@ -501,6 +502,7 @@ def _finish(
     icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
     with run.stage("verdict"):
         scored = coarse = two.score(T_coarse, fine_tol)
+        kind = "keypoints"
         if icp is not None:
             refined = two.score(icp.T_target_source, fine_tol)
             margin = config.refine_guard_margin
@@ -516,9 +518,11 @@ def _finish(
             if kept:
                 T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
                 info, denom, scored = icp.information, _icp_denominator(icp), refined
+                kind = "point-to-plane" if icp.association == "projective" else "open3d"
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
-        verdict = _verdict(c, scored, two, vt, (rmse, fitness), thr, refinement, config)
+        stage = (rmse, fitness, kind)
+        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config)
     log.info("verdict: %s", verdict.summary())
     return RegistrationResult(
         T_target_source=T,

@@ -172,6 +172,7 @@ def gather(
     inlier_rmse_m: float,
     fitness: float,
     threshold_m: float,
+    residual_kind: str = "point-to-plane",
     refinement: dict[str, Any] | None,
 ) -> dict[str, Any]:
     """The evidence of a registration (JSON-ready, units in the keys).
@@ -197,6 +198,11 @@ def gather(
         How many candidate poses were judged.
     inlier_rmse_m, fitness, threshold_m : float
         The final stage's residual and overlap, and the inlier threshold.
+    residual_kind : {"point-to-plane", "keypoints", "open3d"}
+        What ``inlier_rmse_m`` measures: point-to-plane residuals (projective refinement),
+        keypoint residuals (no refinement kept), or Open3D's distances between voxel samples
+        of the two clouds (GICP, point-to-point: they grow with the voxel, not with the misfit,
+        so the residual test skips them).
     refinement : dict or None
         Whether the refinement was kept and the scores (None: not refined).
     """
@@ -241,6 +247,7 @@ def gather(
             "fitness": _r(fitness),
             "threshold_m": _r(threshold_m, 5),
             "rmse_over_threshold": _r(inlier_rmse_m / threshold_m) if threshold_m > 0 else None,
+            "kind": residual_kind,
         },
         "refinement": refinement,
     }
@@ -368,7 +375,7 @@ def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | N
 
 def _residual_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     r = ev.get("residual")
-    if not r or r.get("rmse_over_threshold") is None:
+    if not r or r.get("rmse_over_threshold") is None or r.get("kind") == "open3d":
         return None
     if r["rmse_over_threshold"] <= cfg.verdict_max_rmse_ratio:
         return None

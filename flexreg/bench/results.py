@@ -155,7 +155,8 @@ def write_bench(result: BenchResult, out_dir: str | PathLike[str]) -> Path:
         (tmp / "summary.md").write_text(
             "# Comparison benchmark\n\n" + summary_markdown(result, figs)
         )
-        (tmp / "results.json").write_text(json_text(result.to_dict(), indent=1))
+        doc = {**result.to_dict(), "summary": summarise(recs)}
+        (tmp / "results.json").write_text(json_text(doc, indent=1))
         (tmp / "config.json").write_text(json_text(result.config.to_dict(), indent=2))
         tmp.rename(final)
     except BaseException as e:

@@ -12,7 +12,6 @@ from pydantic import Field, field_validator
 
 from flexreg.bench.compare import SuccessCriteria
 from flexreg.bench.methods import DEFAULT_METHODS, parse_methods
-from flexreg.bench.summary import summarise
 from flexreg.config import Config
 
 if TYPE_CHECKING:
@@ -248,5 +247,4 @@ class BenchResult:
             "cases": self.cases,
             "records": self.records,
             "memory_note": self.memory_note,
-            "summary": summarise(self.records),
         }

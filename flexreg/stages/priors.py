@@ -41,50 +41,6 @@ from flexreg.stages.normals import surface_normals
 log = logging.getLogger(__name__)
 
 
-@numba.njit(cache=True, nogil=True)
-def _normals_area(xyz, k, wrap):  # pragma: no cover - compiled
-    """Per pixel: unit normal (towards the scanner) from the cross product of the central
-    differences at offset ``k`` and the area the pixel covers; area 0 where a neighbour is
-    missing or lies across a depth jump (a span of 0.2 x the range or more)."""
-    H, W = xyz.shape[0], xyz.shape[1]
-    nrm = np.zeros((H, W, 3))
-    area = np.zeros((H, W))
-    for i in range(k, H - k):
-        for j in range(W):
-            jl, jr = j - k, j + k
-            if wrap:
-                jl %= W
-                jr %= W
-            elif jl < 0 or jr >= W:
-                continue
-            x0, y0, z0 = xyz[i, j, 0], xyz[i, j, 1], xyz[i, j, 2]
-            hx = xyz[i, jr, 0] - xyz[i, jl, 0]
-            hy = xyz[i, jr, 1] - xyz[i, jl, 1]
-            hz = xyz[i, jr, 2] - xyz[i, jl, 2]
-            vx = xyz[i + k, j, 0] - xyz[i - k, j, 0]
-            vy = xyz[i + k, j, 1] - xyz[i - k, j, 1]
-            vz = xyz[i + k, j, 2] - xyz[i - k, j, 2]
-            nx = hy * vz - hz * vy
-            ny = hz * vx - hx * vz
-            nz = hx * vy - hy * vx
-            r = math.sqrt(x0 * x0 + y0 * y0 + z0 * z0)
-            lh = math.sqrt(hx * hx + hy * hy + hz * hz)
-            lv = math.sqrt(vx * vx + vy * vy + vz * vz)
-            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-            # continuity: both neighbour spans short compared with the range (no depth jump);
-            # every comparison is False for NaN
-            if not (lh < 0.2 * r and lv < 0.2 * r and nn > 0.0 and math.isfinite(nn)):
-                continue
-            if nx * x0 + ny * y0 + nz * z0 > 0.0:
-                nn = -nn
-            nrm[i, j, 0] = nx / nn
-            nrm[i, j, 1] = ny / nn
-            nrm[i, j, 2] = nz / nn
-            # neighbours 2k strided pixels apart: the product covers one stride x stride cell
-            area[i, j] = lh * lv / (4.0 * k * k)
-    return nrm, area
-
-
 def _rotation_onto_z(u: NDArray[np.float64]) -> NDArray[np.float64]:
     """Smallest rotation taking the unit vector ``u`` onto +Z (keeps the heading)."""
     z = np.array([0.0, 0.0, 1.0])

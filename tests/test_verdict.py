@@ -118,7 +118,9 @@ def _turn_about_centre(deg):
 
 
 BOX = ([-4.0, -3.0, -1.5], [4.0, 3.0, 1.5])
-CUE = [(np.array([2.0, 2.4, -1.5]), np.array([3.2, 3.0, 0.7]))]  # a cupboard in one corner
+# a room-high block filling one corner (2.5 m x 2.5 m): a smaller cue, such as a cupboard, moves the
+# turned pose's score ratio only to 0.75-0.95, which the default threshold still calls ambiguous
+CUE = [(np.array([1.5, 0.5, -1.5]), np.array([4.0, 3.0, 1.5]))]
 
 
 def test_symmetric_box_is_ambiguous():
@@ -132,10 +134,10 @@ def test_symmetric_box_is_ambiguous():
 
 
 def test_box_with_one_cue_is_confident():
-    """The same box with a cupboard in one corner: the turned pose puts it in open space."""
+    """The same box with a block in one corner: the turned pose puts it in open space."""
     v = _verdict(*BOX, CUE, _station(0.6, 0.4), _station(-1.0, 0.5, 30), [_turn_about_centre(180)])
     assert v.confident, v.summary()
-    assert v.runner_up and v.runner_up[0].score_ratio < 0.9
+    assert v.runner_up and v.runner_up[0].score_ratio < 0.65
     ev = v.evidence
     assert ev["overlap"]["source_explained"] > 0.8 and ev["overlap"]["target_explained"] > 0.8
     assert ev["free_space"]["source_conflicting"] < 0.01

@@ -150,7 +150,7 @@ class RegistrationConfig(Config):
     verdict_min_inliers: int = Field(0, ge=0)
     verdict_min_inlier_spread: float = Field(0.05, ge=0, le=1)
     verdict_min_axis_strength: float = Field(0.005, ge=0, le=1)
-    verdict_ambiguity_ratio: float = Field(0.9, gt=0, allow_inf_nan=False)
+    verdict_ambiguity_ratio: float = Field(0.7, gt=0, allow_inf_nan=False)
     verdict_distinct_deg: Positive = 3.0
     verdict_distinct_m: Positive = 0.5
     verdict_max_rmse_ratio: Positive = 1.0

@@ -74,3 +74,19 @@ def one_error_line(err: str) -> str:
     assert sum(line.startswith("error:") for line in lines) == 1, err
     assert lines[-1].startswith("error: ") and "Traceback" not in err, err
     return lines[-1]
+
+
+def room_walk(n_frames: int) -> list:
+    """``n_frames`` camera poses 2 cm apart in ``make_scene("room", 3)``, walking towards a
+    view with plenty of structure (some 50 AKAZE inliers per frame pair). Fixed poses, not
+    ``synth.camera_trajectory``: that path starts in the scene's free map, which ray casts
+    decide, and a tie between coplanar faces that another CPU breaks the other way moved it
+    to a view too bare to track."""
+    import numpy as np
+
+    from flexreg.synth import look_at
+
+    start = np.array([7.3, 7.3, 1.32])
+    view = np.array([-0.948, 0.12, -0.295])
+    step = np.array([-0.95, 0.12, 0.0]) / np.hypot(0.95, 0.12)
+    return [look_at(start + 0.02 * k * step, start + 3.0 * view) for k in range(n_frames)]

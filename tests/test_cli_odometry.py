@@ -11,7 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import one_error_line, run_cli
+from conftest import one_error_line, room_walk, run_cli
 
 from flexreg.io.trajectory import read_trajectory
 from flexreg.odometry.evaluation import ate
@@ -20,12 +20,11 @@ from flexreg.odometry.evaluation import ate
 @pytest.fixture(scope="module")
 def sequence(tmp_path_factory) -> Path:
     """6 rendered 320 x 240 RGB-D frames walking through a procedural room (TUM layout)."""
-    from flexreg.synth import RGBDConfig, camera_trajectory, make_scene, write_tum_sequence
+    from flexreg.synth import RGBDConfig, make_scene, write_tum_sequence
 
     folder = tmp_path_factory.mktemp("seq")
-    scene = make_scene("room", 3)
     cfg = RGBDConfig(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
-    write_tum_sequence(folder, scene, camera_trajectory(scene, 6, step_m=0.02, rng=3), config=cfg)
+    write_tum_sequence(folder, make_scene("room", 3), room_walk(6), config=cfg)
     return folder
 
 

@@ -26,6 +26,8 @@ from flexreg.errors import ConfigError, RegistrationError
 from flexreg.registration import RegistrationConfig, register
 from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import descriptor_distances, match_guided
+from flexreg.stages.priors import upright_priors
+from flexreg.stages.projection import range_image
 from flexreg.stages.sampling import area_cell, area_sample
 from flexreg.stages.verification import overlap_score, range_slack
 from flexreg.synth import station_pair
@@ -311,9 +313,17 @@ def test_register_plan_prior_recovers_truth(registered, kind):
     gt = pair.T_target_source
     assert rotation_error_deg(r.T_coarse, gt) < 0.5
     assert translation_error_m(r.T_coarse, gt) < 0.05
-    assert "plan" in r.prior and "plan views" in r.timings_s
     np.testing.assert_array_equal(r.T_target_source, r.T_coarse)  # no refinement asked
     assert r.to_dict()["prior"] == r.prior
+    # the plan prior competed, and its best candidate is right to its stated accuracy (about a
+    # plan cell and a degree); whether it or the descriptors' candidate wins when both end in
+    # the same place is a near tie that another CPU's last bits may break either way
+    assert "plan views" in r.timings_s
+    ti, si = range_image(pair.target), range_image(pair.source)
+    plans = upright_priors(ti, si, max_tilt_rad=CONFIG.max_tilt_rad, plan_cell_m=CONFIG.plan_cell_m)
+    best = plans[0]  # best first
+    assert rotation_error_deg(best, gt) < 1.0
+    assert translation_error_m(best, gt) < CONFIG.plan_cell_m
 
 
 def test_register_is_deterministic(registered):

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import room_walk
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.transforms import (
@@ -260,13 +261,11 @@ def test_feature_image_is_the_paper_8bit_mapping():
 @pytest.fixture(scope="module")
 def synth_sequence(tmp_path_factory):
     """A rendered TUM-style RGB-D sequence: 8 frames of 320 x 240 in a procedural room."""
-    from flexreg.synth import RGBDConfig, camera_trajectory, make_scene, write_tum_sequence
+    from flexreg.synth import RGBDConfig, make_scene, write_tum_sequence
 
     folder = tmp_path_factory.mktemp("rgbd")
-    scene = make_scene("room", 3)
     cfg = RGBDConfig(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
-    poses = camera_trajectory(scene, 8, step_m=0.02, rng=3)
-    write_tum_sequence(folder, scene, poses, config=cfg, rng=0)
+    write_tum_sequence(folder, make_scene("room", 3), room_walk(8), config=cfg, rng=0)
     return folder
 
 
@@ -285,7 +284,8 @@ def test_synthetic_sequence_is_tracked_and_deterministic(synth_sequence):
 def test_colour_needs_colour_and_essential_needs_pinhole(synth_sequence, tmp_path):
     seq = read_sequence(synth_sequence)
     res = odometry(seq, OdometryConfig(image="color", features="orb", method="svd"))
-    assert ate(seq.groundtruth, res.trajectory).rmse_m < 0.02
+    # ORB keypoints are whole pixels (1 cm at the 2.5 m seen), chained over 7 steps: ~sqrt(7) cm
+    assert ate(seq.groundtruth, res.trajectory).rmse_m < 0.03
     for f in ("rgb.txt",):
         (tmp_path / "d").mkdir()
         for p in synth_sequence.iterdir():

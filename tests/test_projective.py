@@ -82,9 +82,14 @@ def test_projective_icp_recovers_synthetic_station(room_pair):
     # 3 cm and 0.5 degrees off
     T0 = make_transform(rotation_about_axis([0.3, -0.2, 1.0], np.radians(0.5)), [0.02, -0.02, 0.01])
     r = projective_icp(target, area_sample(source, 20000), T0 @ gt, max_distance_m=0.15)
-    assert rotation_error_deg(r.T_target_source, gt) < 0.02
-    assert translation_error_m(r.T_target_source, gt) < 0.003
-    assert 0.3 < r.fitness <= 1.0 and r.inlier_rmse_m < 0.01  # two scans with 2 mm noise
+    # which pair seed 4 places depends on ray casts (another CPU may get another pair): limits
+    # for any pair, well under the 0.70° pixel pitch and 5x the 2 mm noise (worst of 110
+    # seeded pairs: 0.07°, 8 mm)
+    assert rotation_error_deg(r.T_target_source, gt) < 0.1
+    assert translation_error_m(r.T_target_source, gt) < 0.01
+    # the stations share half their view or more; residuals are the 2 mm noise plus clutter
+    # bending within a pixel (0.4-3 cm over the same pairs)
+    assert 0.2 < r.fitness <= 1.0 and r.inlier_rmse_m < 0.04
     assert r.information.shape == (6, 6) and np.all(np.linalg.eigvalsh(r.information) > 0)
     # deterministic
     r2 = projective_icp(target, area_sample(source, 20000), T0 @ gt, max_distance_m=0.15)
@@ -114,8 +119,9 @@ def test_pipeline_refine_is_symmetric_projective_by_default(room_pair):
     T0 = make_transform(rotation_about_axis([0.1, 0.3, 1.0], np.radians(0.4)), [-0.02, 0.01, 0.0])
     r = refine(room_pair.target, room_pair.source, T0 @ gt, threshold_m=0.05)
     assert r.association == "projective" and r.source_points > 20000  # both scans sampled
-    assert rotation_error_deg(r.T_target_source, gt) < 0.02
-    assert translation_error_m(r.T_target_source, gt) < 0.003
+    # limits for any seeded pair, as above (worst of 110: 0.07°, 5 mm)
+    assert rotation_error_deg(r.T_target_source, gt) < 0.1
+    assert translation_error_m(r.T_target_source, gt) < 0.01
     # GICP keeps Open3D's nearest-neighbour ICP
     g = refine(room_pair.target, room_pair.source, T0 @ gt, threshold_m=0.05, method="gicp")
     assert g.association == "nearest"

@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.flexreg-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test lint bench bench-registration bench-calibration bench-compare clean
+.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-compare clean
 
 install: $(STAMP)
 
@@ -45,6 +45,9 @@ bench-registration: $(STAMP)
 
 bench-calibration: $(STAMP)
 	$(BIN)/python benchmarks/calibration.py
+
+bench-verdict: $(STAMP)
+	$(BIN)/python benchmarks/verdict.py --write-docs
 
 bench-compare: $(STAMP)
 	$(BIN)/flexreg bench --suite all --out bench-results

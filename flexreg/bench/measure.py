@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from flexreg.bench.methods import run_method
+from flexreg.core.results import PairResult
 from flexreg.errors import FlexregError
-from flexreg.registration.pipeline import RegistrationResult
 
 __all__ = [
     "STATUSES",
@@ -63,7 +63,7 @@ class Measured:
         ``failed``: the method raised a :class:`FlexregError` (it reports that it could not
         register); ``error``: it raised another exception; ``crashed``: its process died;
         ``timeout``: no result within the time limit.
-    result : RegistrationResult or None
+    result : PairResult or None
     message : str or None
         The error message (``"Type: message"`` for ``error``).
     time_s : float, seconds
@@ -73,7 +73,7 @@ class Measured:
     """
 
     status: str
-    result: RegistrationResult | None
+    result: PairResult | None
     message: str | None
     time_s: float
     peak_memory_mb: float | None
@@ -113,7 +113,7 @@ def peak_memory_note() -> str:
     )
 
 
-def measure_call(fn: Callable[[], RegistrationResult]) -> Measured:
+def measure_call(fn: Callable[[], PairResult]) -> Measured:
     """Call ``fn()`` in this process: wall time, peak memory increase, and the outcome
     (exceptions become ``failed``/``error`` statuses, never propagate)."""
     hwm = reset_high_water_mark()

@@ -14,9 +14,10 @@ from numpy.typing import ArrayLike
 
 from flexreg.baselines import BASELINES, GLOBAL, available_baselines, get_baseline
 from flexreg.bench.config import DEFAULT_METHODS as COMPARE_DEFAULT_METHODS
+from flexreg.core.results import PairResult
 from flexreg.errors import ConfigError
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.pipeline import RegistrationResult, register
+from flexreg.registration.pipeline import register
 
 __all__ = ["DEFAULT_METHODS", "GLOBAL_METHODS", "METHODS", "parse_methods", "run_method"]
 
@@ -58,7 +59,7 @@ def run_method(
     voxel_m: float | None = None,
     seed: int = 0,
     config: RegistrationConfig | None = None,
-) -> RegistrationResult:
+) -> PairResult:
     """Run one method by name: ``flexreg`` (``register`` with ``config`` or the default
     configuration and ``seed``) or a baseline. ``T_init`` goes to the local methods only
     (flexreg and fpfh-ransac are global); ``voxel_m`` to the baselines only (flexreg derives

@@ -15,7 +15,6 @@ module inside flexreg imports it. The applications (``register``, ``calibrate``,
 ...) load on first use, so ``import flexreg`` stays light for the command line.
 """
 
-import importlib
 import logging
 import os
 
@@ -36,6 +35,7 @@ from flexreg.errors import (
     InputError,
     RegistrationError,
 )
+from flexreg.exports import lazy
 from flexreg.io import read_scan, read_scans, read_transform, write_scan
 from flexreg.stages.projection import range_image
 
@@ -61,17 +61,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):  # PEP 562: the applications load on first use
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'flexreg' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy(globals(), _LAZY)
 
 
 __all__ = [

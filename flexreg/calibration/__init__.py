@@ -23,50 +23,34 @@ verification / picking aids           :func:`overlay_image`, :func:`picking_view
 Conventions: see :mod:`flexreg.calibration.calibrate`.
 """
 
-from flexreg.calibration.auto import (
-    FlexionView,
-    auto_scale,
-    calibrate_auto,
-    edge_score,
-    propose_correspondences,
-    render_flexion_view,
-)
-from flexreg.calibration.calibrate import calibrate
-from flexreg.calibration.config import CalibrationConfig
-from flexreg.calibration.panorama import (
-    panorama_camera,
-    panorama_flexion,
-    read_correspondences,
-    scan_range_image,
-)
-from flexreg.calibration.pnp import solve_pnp
-from flexreg.calibration.types import CalibrationResult, check_correspondences
-from flexreg.calibration.views import overlay_image, picking_views
-from flexreg.core.correspondences import Correspondences2D3D
-from flexreg.errors import CalibrationError
-from flexreg.stages.camera_pose import MIN_CORRESPONDENCES, project_points, reprojection_errors
+# bound now: the submodule of the same name would otherwise shadow it once imported
+from flexreg.calibration.calibrate import calibrate as calibrate
+from flexreg.exports import lazy
 
-__all__ = [
-    "MIN_CORRESPONDENCES",
-    "CalibrationConfig",
-    "CalibrationError",
-    "CalibrationResult",
-    "Correspondences2D3D",
-    "FlexionView",
-    "auto_scale",
-    "calibrate",
-    "calibrate_auto",
-    "check_correspondences",
-    "edge_score",
-    "overlay_image",
-    "panorama_camera",
-    "panorama_flexion",
-    "picking_views",
-    "project_points",
-    "propose_correspondences",
-    "read_correspondences",
-    "render_flexion_view",
-    "reprojection_errors",
-    "scan_range_image",
-    "solve_pnp",
-]
+#: public name -> the module that defines it (loaded on first use: see flexreg.exports)
+_WHERE = {
+    "MIN_CORRESPONDENCES": "flexreg.stages.camera_pose",
+    "CalibrationConfig": "flexreg.calibration.config",
+    "CalibrationError": "flexreg.errors",
+    "CalibrationResult": "flexreg.calibration.types",
+    "Correspondences2D3D": "flexreg.core.correspondences",
+    "FlexionView": "flexreg.calibration.auto",
+    "auto_scale": "flexreg.calibration.auto",
+    "calibrate": "flexreg.calibration.calibrate",
+    "calibrate_auto": "flexreg.calibration.auto",
+    "check_correspondences": "flexreg.calibration.types",
+    "edge_score": "flexreg.calibration.auto",
+    "overlay_image": "flexreg.calibration.views",
+    "panorama_camera": "flexreg.calibration.panorama",
+    "panorama_flexion": "flexreg.calibration.panorama",
+    "picking_views": "flexreg.calibration.views",
+    "project_points": "flexreg.stages.camera_pose",
+    "propose_correspondences": "flexreg.calibration.auto",
+    "read_correspondences": "flexreg.calibration.panorama",
+    "render_flexion_view": "flexreg.calibration.auto",
+    "reprojection_errors": "flexreg.stages.camera_pose",
+    "scan_range_image": "flexreg.calibration.panorama",
+    "solve_pnp": "flexreg.calibration.pnp",
+}
+__getattr__, __dir__ = lazy(globals(), _WHERE)
+__all__ = list(_WHERE)

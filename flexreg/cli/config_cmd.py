@@ -11,7 +11,6 @@ from collections.abc import Callable
 
 import typer
 
-from flexreg.bench.types import BenchConfig
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.cli.app import app
 from flexreg.config import Config, to_toml
@@ -20,6 +19,15 @@ from flexreg.odometry.config import EvaluationConfig, OdometryConfig
 from flexreg.registration.config import RegistrationConfig
 from flexreg.synth.config import SynthConfig
 
+
+def _bench_defaults() -> Config:
+    """The bench's full-suite defaults (its module loads the benchmark machinery: imported
+    only when asked for, so that every other command starts fast)."""
+    from flexreg.bench.types import BenchConfig
+
+    return BenchConfig.make()
+
+
 #: command -> its default configuration (the one --config and --set start from)
 CONFIGS: dict[str, Callable[..., Config]] = {
     "register": RegistrationConfig,
@@ -27,7 +35,7 @@ CONFIGS: dict[str, Callable[..., Config]] = {
     "odometry": OdometryConfig,
     "evaluate": EvaluationConfig,
     "synth": SynthConfig,
-    "bench": BenchConfig.make,
+    "bench": _bench_defaults,
 }
 
 config_app = typer.Typer(

@@ -11,55 +11,38 @@
 - :mod:`~flexreg.odometry.plots`: :func:`plot_evaluation`.
 """
 
-from flexreg.odometry.config import IMAGES, METHODS, OdometryConfig
-from flexreg.odometry.evaluation import (
-    AssociationError,
-    AteResult,
-    EvaluationResult,
-    RpeResult,
-    ate,
-    check_interval,
-    evaluate,
-    interval_label,
-    nearest_partner,
-    rpe,
-)
-from flexreg.odometry.frontend import (
-    FrameFeatures,
-    essential_pose,
-    feature_image,
-    frame_features,
-    solve_pair,
-    svd_pose,
-)
-from flexreg.odometry.plots import plot_evaluation
-from flexreg.odometry.result import FrameFailure, OdometryResult, PairAttempt
-from flexreg.odometry.track import odometry, track
+from flexreg.exports import lazy
 
-__all__ = [
-    "IMAGES",
-    "METHODS",
-    "AssociationError",
-    "AteResult",
-    "EvaluationResult",
-    "FrameFailure",
-    "FrameFeatures",
-    "OdometryConfig",
-    "OdometryResult",
-    "PairAttempt",
-    "RpeResult",
-    "ate",
-    "check_interval",
-    "essential_pose",
-    "evaluate",
-    "feature_image",
-    "frame_features",
-    "interval_label",
-    "nearest_partner",
-    "odometry",
-    "plot_evaluation",
-    "rpe",
-    "solve_pair",
-    "svd_pose",
-    "track",
-]
+# bound now: the submodule of the same name would otherwise shadow it once imported
+from flexreg.odometry.track import track as track
+
+#: public name -> the module that defines it (loaded on first use: see flexreg.exports)
+_WHERE = {
+    "IMAGES": "flexreg.odometry.config",
+    "METHODS": "flexreg.odometry.config",
+    "AssociationError": "flexreg.odometry.evaluation",
+    "AteResult": "flexreg.odometry.evaluation",
+    "EvaluationResult": "flexreg.odometry.evaluation",
+    "FrameFailure": "flexreg.odometry.result",
+    "FrameFeatures": "flexreg.odometry.frontend",
+    "OdometryConfig": "flexreg.odometry.config",
+    "OdometryResult": "flexreg.odometry.result",
+    "PairAttempt": "flexreg.odometry.result",
+    "RpeResult": "flexreg.odometry.evaluation",
+    "ate": "flexreg.odometry.evaluation",
+    "check_interval": "flexreg.odometry.evaluation",
+    "essential_pose": "flexreg.odometry.frontend",
+    "evaluate": "flexreg.odometry.evaluation",
+    "feature_image": "flexreg.odometry.frontend",
+    "frame_features": "flexreg.odometry.frontend",
+    "interval_label": "flexreg.odometry.evaluation",
+    "nearest_partner": "flexreg.odometry.evaluation",
+    "odometry": "flexreg.odometry.track",
+    "plot_evaluation": "flexreg.odometry.plots",
+    "rpe": "flexreg.odometry.evaluation",
+    "solve_pair": "flexreg.odometry.frontend",
+    "svd_pose": "flexreg.odometry.frontend",
+    "track": "flexreg.odometry.track",
+}
+__getattr__, __dir__ = lazy(globals(), _WHERE)
+__all__ = list(_WHERE)

@@ -8,8 +8,12 @@ from pydantic import Field, ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
 
 from flexreg.config import Config, Finite, OddSize, Positive, Seed, one_of
-from flexreg.odometry.evaluation import DELTA_UNITS, RPE_CONVENTIONS
 from flexreg.stages.keypoints import METHODS as FEATURES
+
+#: units of the RPE interval ``delta``
+DELTA_UNITS = ("frames", "seconds", "metres")
+#: RPE error compositions (see :func:`flexreg.odometry.evaluation.rpe`)
+RPE_CONVENTIONS = ("tools", "paper")
 
 #: feature images odometry can run on
 IMAGES: tuple[str, ...] = (

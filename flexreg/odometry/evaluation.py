@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from flexreg.core.trajectory import MAX_DT_S, Trajectory, associate, check_window
 from flexreg.core.transforms import rotation_error_deg
 from flexreg.errors import ConfigError, InputError
+from flexreg.odometry.config import DELTA_UNITS, RPE_CONVENTIONS
 from flexreg.stages.alignment import umeyama
 
 log = logging.getLogger(__name__)
@@ -55,12 +56,8 @@ __all__ = [
     "rpe",
 ]
 
-#: units of the RPE interval ``delta``
-DELTA_UNITS = ("frames", "seconds", "metres")
 #: fewest associated poses an evaluation accepts
 MIN_ASSOCIATED = 3
-#: RPE error compositions (see :func:`rpe`)
-RPE_CONVENTIONS = ("tools", "paper")
 
 
 class AssociationError(InputError):

@@ -2,16 +2,16 @@
 (``prepare`` each scan once, ``align`` many pairs), :class:`RegistrationConfig`,
 :class:`RegistrationResult` and its verdict (:func:`decide`, :mod:`.verdict`)."""
 
-from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.pipeline import PreparedScan, Registration, register
-from flexreg.registration.result import RegistrationResult
-from flexreg.registration.verdict import decide
+from flexreg.exports import lazy
 
-__all__ = [
-    "PreparedScan",
-    "Registration",
-    "RegistrationConfig",
-    "RegistrationResult",
-    "decide",
-    "register",
-]
+#: public name -> the module that defines it (loaded on first use: see flexreg.exports)
+_WHERE = {
+    "PreparedScan": "flexreg.registration.pipeline",
+    "Registration": "flexreg.registration.pipeline",
+    "RegistrationConfig": "flexreg.registration.config",
+    "RegistrationResult": "flexreg.registration.result",
+    "decide": "flexreg.registration.verdict",
+    "register": "flexreg.registration.pipeline",
+}
+__getattr__, __dir__ = lazy(globals(), _WHERE)
+__all__ = list(_WHERE)

@@ -6,7 +6,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.stages.keypoints import Features
 
@@ -130,6 +129,8 @@ def match_guided(
     T = np.asarray(T_target_source, dtype=np.float64)
     q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
     r = radius_m + radius_per_m * np.linalg.norm(q, axis=1)
+    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
     tree = cKDTree(target_xyz[okt])
     cand = tree.query_ball_point(q, r)
     lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))

@@ -17,7 +17,6 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.errors import RegistrationError
 
@@ -154,6 +153,8 @@ def median_spacing(
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
     if tree_points is not None and len(P) > tree_points:
         P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
+    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
     tree = cKDTree(P)
     idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
     d, _ = tree.query(P[idx], k=2)

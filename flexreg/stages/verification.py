@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
@@ -135,6 +134,8 @@ def classify_points(
     if target.camera is None:
         pt = target.xyz[target.valid]
         pt = pt[:: max(1, len(pt) // 200_000)]
+        from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
         dist, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
         ok = dist < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
         return q, ok, np.zeros(len(q), dtype=bool)

@@ -7,7 +7,6 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.stages.refinement.result import IcpResult
@@ -148,6 +147,8 @@ def _sample_gap(tgt: Any, src: Any, T: NDArray[np.float64], within: float) -> fl
     """Median distance from the source points (placed by ``T``) to their nearest target point,
     among those closer than ``within``, metres."""
     q = np.asarray(src.points) @ T[:3, :3].T + T[:3, 3]
+    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
     d, _ = cKDTree(np.asarray(tgt.points)).query(q, distance_upper_bound=within)
     d = d[np.isfinite(d)]
     return float(np.median(d)) if len(d) else 0.0

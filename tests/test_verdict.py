@@ -118,9 +118,11 @@ def _turn_about_centre(deg):
 
 
 BOX = ([-4.0, -3.0, -1.5], [4.0, 3.0, 1.5])
-# a room-high block filling one corner (2.5 m x 2.5 m): a smaller cue, such as a cupboard, moves the
-# turned pose's score ratio only to 0.75-0.95, which the default threshold still calls ambiguous
+# a room-high block filling one corner (2.5 m x 2.5 m)
 CUE = [(np.array([1.5, 0.5, -1.5]), np.array([4.0, 3.0, 1.5]))]
+# a cupboard against one wall (1.2 m wide, 0.5 m deep, 2 m high): it moves the turned pose's score
+# ratio only to about 0.9, so only the duel between the two poses can settle them
+CUPBOARD = [(np.array([1.0, 2.5, -1.5]), np.array([2.2, 3.0, 0.5]))]
 
 
 def test_symmetric_box_is_ambiguous():
@@ -143,6 +145,26 @@ def test_box_with_one_cue_is_confident():
     assert ev["free_space"]["source_conflicting"] < 0.01
 
 
+def test_box_with_a_cupboard_wins_the_duel():
+    """A small cue scores the turned pose almost as well as the answer, but the cupboard's
+    points fit only under the answer and land in open space under the turned pose."""
+    v = _verdict(
+        *BOX, CUPBOARD, _station(0.6, 0.4), _station(-1.0, 0.5, 30), [_turn_about_centre(180)]
+    )
+    u = v.evidence["runner_up"]
+    assert u["score_ratio"] >= RegistrationConfig().verdict_ambiguity_ratio  # a rival on score
+    assert u["refuted_share"] > 3 * u["refuting_share"] + 0.005  # ... dismissed by the duel
+    assert v.confident, v.summary()
+
+
+def test_symmetric_box_duel_is_a_tie():
+    """Without the cupboard neither pose wins the duel: the runner-up stays a rival."""
+    v = _verdict(*BOX, [], _station(0.6, 0.4), _station(-1.0, 0.5, 30), [_turn_about_centre(180)])
+    u = v.evidence["runner_up"]
+    assert u["refuted_share"] < 0.005 and u["refuting_share"] < 0.005
+    assert [r.code for r in v.reasons] == ["ambiguous"]
+
+
 def test_corridor_has_a_weak_axis_along_it():
     """A corridor along x whose ends are out of range: nothing fixes the position along x."""
     lo, hi = [-100.0, -1.5, -1.5], [100.0, 1.5, 1.5]
@@ -159,7 +181,7 @@ def test_corridor_with_a_niche_is_confident():
     lo, hi = [-100.0, -1.5, -1.5], [100.0, 1.5, 1.5]
     cue = [(np.array([2.0, 0.9, -1.5]), np.array([3.0, 1.5, 1.5]))]  # both see its face at x = 2
     v = _verdict(lo, hi, cue, _station(0, 0), _station(-1.5, 0.3), [])
-    assert v.evidence["axis_strength"]["x"] > 2 * RegistrationConfig().verdict_min_axis_strength
+    assert v.evidence["axis_strength"]["x"] > 1.5 * RegistrationConfig().verdict_min_axis_strength
     assert v.confident, v.summary()
 
 
@@ -259,6 +281,34 @@ def test_each_failed_test_gives_its_reason(changes, code, words):
     v = decide(_with(**changes), (), cfg)
     assert v.status == "uncertain" and [r.code for r in v.reasons] == [code]
     assert words in v.reasons[0].message and words in v.summary()
+
+
+@pytest.mark.parametrize(
+    ("won", "lost", "decisive"),
+    [(0.02, 0.001, True), (0.006, 0.0, True), (0.004, 0.0, False), (0.02, 0.01, False)],
+)
+def test_a_rival_is_dismissed_only_by_a_decisive_duel(won, lost, decisive):
+    """Rival at 0.97 of the answer's score: dismissed when the answer wins the duel by at least
+    0.5 % of the samples and 3 times what it loses."""
+    ev = _with(runner_up__score_ratio=0.97, runner_up__refuted_share=won)
+    ev["runner_up"]["refuting_share"] = lost
+    ev["runner_ups"] = [ev["runner_up"]]
+    v = decide(ev)
+    assert v.confident == decisive
+    # a second rival that the duel does not dismiss keeps the answer ambiguous
+    ev["runner_ups"].append(dict(ev["runner_up"], refuted_share=0.0, refuting_share=0.0))
+    assert [r.code for r in decide(ev).reasons] == ["ambiguous"]
+
+
+def test_conflicts_relative_to_the_overlap_are_free_space():
+    """10 % in free space is little against 60 % explained, but not against 20 %."""
+    ev = _with(free_space__source_conflicting=0.1, free_space__source_conflict_ratio=0.1 / 0.6)
+    assert decide(ev).confident
+    ev["free_space"]["source_conflict_ratio"] = 0.1 / 0.2
+    (r,) = decide(ev).reasons
+    assert (
+        r.code == "free_space" and "for every 100 points" in r.message and " 50 land" in r.message
+    )
 
 
 def test_repeating_structure_names_the_offset():

@@ -98,6 +98,10 @@ class RegistrationConfig(Config):
     verdict_max_conflict : float
         Largest share of either scan that may lie in the other's free space, in [0, 1]
         (``free_space``).
+    verdict_max_conflict_ratio : float
+        Largest share of either scan in the other's free space as a fraction of the share the
+        other explains (``free_space``): a pose that contradicts half as much as it explains
+        is not a fit, whatever the absolute shares.
     verdict_min_inliers : int
         Fewest agreeing feature matches (``few_inliers``; 0: not tested; plan-view poses
         often rest on a handful of matches and the dense checks).
@@ -108,7 +112,12 @@ class RegistrationConfig(Config):
         Smallest per-point strength of each pose parameter, 0-1 (``weak_axis``).
     verdict_ambiguity_ratio : float
         A clearly different pose scoring at least this fraction of the winner's score makes
-        the answer ``ambiguous``.
+        the answer ``ambiguous`` unless the answer beats it decisively (below).
+    verdict_decisive_share, verdict_decisive_ratio : float
+        The answer beats a runner-up decisively when the points it explains and the runner-up
+        puts in free space outnumber the reverse by at least ``verdict_decisive_share`` of both
+        scans' samples and by a factor of at least ``verdict_decisive_ratio``: one unique
+        object (a cue) settles what the symmetric rest leaves open.
     verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
         How far a candidate must be from the answer to count as a different pose.
     verdict_max_rmse_ratio : float
@@ -147,10 +156,13 @@ class RegistrationConfig(Config):
     refine_guard_margin: float = Field(0.01, ge=0, le=1)
     verdict_min_overlap: float = Field(0.2, ge=0, le=1)
     verdict_max_conflict: float = Field(0.2, ge=0, le=1)
+    verdict_max_conflict_ratio: Positive = 0.45
     verdict_min_inliers: int = Field(0, ge=0)
     verdict_min_inlier_spread: float = Field(0.05, ge=0, le=1)
-    verdict_min_axis_strength: float = Field(0.005, ge=0, le=1)
-    verdict_ambiguity_ratio: float = Field(0.7, gt=0, allow_inf_nan=False)
+    verdict_min_axis_strength: float = Field(0.01, ge=0, le=1)
+    verdict_ambiguity_ratio: float = Field(0.6, gt=0, allow_inf_nan=False)
+    verdict_decisive_share: float = Field(0.005, ge=0, le=1)
+    verdict_decisive_ratio: Positive = 3.0
     verdict_distinct_deg: Positive = 3.0
     verdict_distinct_m: Positive = 0.5
     verdict_max_rmse_ratio: Positive = 1.0

@@ -213,6 +213,7 @@ def gather(
     free_tol = FREE_SPACE_TOLERANCE * threshold_m
     badf = two.forward.classify(final.T, free_tol, FREE_SPACE_REL)[2]
     badb = two.backward.classify(invert(final.T), free_tol, FREE_SPACE_REL)[2]
+    sf, sb = _frac(okf), _frac(okb)
     overlap_q = qf[okf]
     std_xyz, std_pc = spread(inlier_points)
     _, overlap_pc = spread(overlap_q)
@@ -227,6 +228,9 @@ def gather(
         "free_space": {
             "source_conflicting": _r(_frac(badf)),
             "target_conflicting": _r(_frac(badb)),
+            # contradicted as a fraction of explained, per direction
+            "source_conflict_ratio": _r(_frac(badf) / sf) if sf > 0 else None,
+            "target_conflict_ratio": _r(_frac(badb) / sb) if sb > 0 else None,
             "tolerance_m": _r(free_tol),
             "tolerance_rel": FREE_SPACE_REL,
         },
@@ -251,18 +255,64 @@ def gather(
         },
         "refinement": refinement,
     }
-    if runner_up:
-        h = runner_up[0]
-        c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
+    c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
+    ups = []
+    for h in runner_up:
         D = np.asarray(h.T_target_source) @ invert(final.T)
-        ev["runner_up"] = {
-            "score_ratio": h.score_ratio,
-            "rotation_deg": h.rotation_deg,
-            "translation_m": h.translation_m,
-            "offset_m": _vec(D[:3, :3] @ c + D[:3, 3] - c, 3),
-            "origin": h.origin,
-        }
+        won, lost = duel(two, final.T, h.T_target_source, threshold_m)
+        ups.append(
+            {
+                "score_ratio": h.score_ratio,
+                "rotation_deg": h.rotation_deg,
+                "translation_m": h.translation_m,
+                "offset_m": _vec(D[:3, :3] @ c + D[:3, 3] - c, 3),
+                "origin": h.origin,
+                "refuted_share": _r(won),
+                "refuting_share": _r(lost),
+            }
+        )
+    if ups:
+        ev["runner_up"] = ups[0]
+        ev["runner_ups"] = ups
     return ev
+
+
+def duel(
+    two: TwoWay, A: NDArray[np.float64], B: NDArray[np.float64], threshold_m: float
+) -> tuple[float, float]:
+    """Direct evidence between two poses of the same pair: the share of both scans' samples
+    that ``A`` explains and ``B`` puts in the other scanner's free space, and the reverse.
+
+    A symmetric room or repeating bays give both poses the same surfaces to fit, so overall
+    scores tie; a unique object (a cue) fits under the right pose and lands in open space
+    under the other. Conflicts are judged at the free-space test's tolerance
+    (:data:`FREE_SPACE_TOLERANCE` inlier thresholds plus 1% of the range), consistency at the
+    fine tolerance (half an inlier threshold plus 0.2%).
+
+    Parameters
+    ----------
+    two : TwoWay
+    A, B : (4, 4) float64
+        Two ``T_target_source``.
+    threshold_m : float, metres
+        The registration's inlier threshold.
+
+    Returns
+    -------
+    won, lost : float
+        Shares (of all sampled points of both directions) that favour ``A`` and ``B``.
+    """
+    won = lost = n = 0
+    fine, free = threshold_m / 2, FREE_SPACE_TOLERANCE * threshold_m
+    for check, TA, TB in ((two.forward, A, B), (two.backward, invert(A), invert(B))):
+        okA = check.classify(TA, fine, FINE_REL)[1]
+        okB = check.classify(TB, fine, FINE_REL)[1]
+        badA = check.classify(TA, free, FREE_SPACE_REL)[2]
+        badB = check.classify(TB, free, FREE_SPACE_REL)[2]
+        won += int((okA & badB).sum())
+        lost += int((okB & badA).sum())
+        n += len(okA)
+    return (won / n, lost / n) if n else (0.0, 0.0)
 
 
 # ---------------------------------------------------------------------------- decision
@@ -300,13 +350,23 @@ def _free_space_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | 
     if not f:
         return None
     worst = max(f["source_conflicting"], f["target_conflicting"])
-    if worst <= cfg.verdict_max_conflict:
-        return None
-    return Reason(
-        "free_space",
-        f"{100 * worst:.0f}% of one scan lands where the other scanner saw through empty space "
-        f"(allowed {100 * cfg.verdict_max_conflict:.0f}%): the pose puts surfaces in open space",
-    )
+    ratio = max(f.get("source_conflict_ratio") or 0.0, f.get("target_conflict_ratio") or 0.0)
+    if worst > cfg.verdict_max_conflict:
+        return Reason(
+            "free_space",
+            f"{100 * worst:.0f}% of one scan lands where the other scanner saw through empty "
+            f"space (allowed {100 * cfg.verdict_max_conflict:.0f}%): the pose puts surfaces in "
+            "open space",
+        )
+    if ratio > cfg.verdict_max_conflict_ratio:
+        return Reason(
+            "free_space",
+            f"for every 100 points of one scan the other explains, {100 * ratio:.0f} land where "
+            f"the other scanner saw through empty space (allowed "
+            f"{100 * cfg.verdict_max_conflict_ratio:.0f}): the pose contradicts much of what it "
+            "fits",
+        )
+    return None
 
 
 def _inlier_reasons(ev: dict[str, Any], cfg: RegistrationConfig) -> list[Reason]:
@@ -356,10 +416,22 @@ def _axis_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     )
 
 
+def decisive(won: float, lost: float, cfg: RegistrationConfig) -> bool:
+    """Whether :func:`duel` shares ``won`` against ``lost`` settle two poses (see
+    ``verdict_decisive_share`` and ``verdict_decisive_ratio`` of the config)."""
+    return won - lost >= cfg.verdict_decisive_share and won >= cfg.verdict_decisive_ratio * lost
+
+
 def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    r = ev.get("runner_up")
-    if not r or r["score_ratio"] < cfg.verdict_ambiguity_ratio:
+    rivals = [
+        u
+        for u in ev.get("runner_ups") or ([ev["runner_up"]] if ev.get("runner_up") else [])
+        if u["score_ratio"] >= cfg.verdict_ambiguity_ratio
+        and not ("refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], cfg))
+    ]
+    if not rivals:
         return None
+    r = rivals[0]
     if r["rotation_deg"] > 10:
         what = f"turned {r['rotation_deg']:.0f}° from each other"
         cause = "symmetric structure"
@@ -396,13 +468,15 @@ def decide(
 
     Tests (thresholds: ``config.verdict_*``; a test whose evidence is missing passes):
     ``low_overlap`` (either scan explained less than ``verdict_min_overlap``),
-    ``free_space`` (either conflicting more than ``verdict_max_conflict``),
+    ``free_space`` (either conflicting more than ``verdict_max_conflict``, or more than
+    ``verdict_max_conflict_ratio`` of what the other explains of it),
     ``few_inliers`` (fewer than ``verdict_min_inliers``) or ``clustered_inliers`` (their
     second principal spread below ``verdict_min_inlier_spread`` of the overlap's),
     ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
     ``ambiguous`` (a clearly different pose scores at least ``verdict_ambiguity_ratio`` of
-    the winner), ``high_residual`` (inlier RMSE above ``verdict_max_rmse_ratio`` inlier
-    thresholds). A rejected refinement is a note, not a reason.
+    the winner and the answer does not beat it :func:`decisive`-ly), ``high_residual``
+    (inlier RMSE above ``verdict_max_rmse_ratio`` inlier thresholds). A rejected refinement
+    is a note, not a reason.
 
     Parameters
     ----------
@@ -454,6 +528,8 @@ __all__ = [
     "Scored",
     "TwoWay",
     "decide",
+    "decisive",
+    "duel",
     "gather",
     "runner_ups",
 ]

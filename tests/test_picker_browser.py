@@ -24,6 +24,8 @@ from test_picker import picker_scene, true_clicks, write_scene
 from flexreg.calibration import project_points, scan_range_image
 from flexreg.core.transforms import rotation_error_deg, translation_error_m
 
+pytestmark = pytest.mark.slow
+
 
 def _start_pick(argv: list[str], timeout_s: float = 120.0) -> tuple[subprocess.Popen, str]:
     """Run ``flexreg pick`` in a subprocess; return it and the URL it printed."""
@@ -95,8 +97,9 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
             page.wait_for_selector("#message.info:has-text('saved')")
             assert not page.errors, page.errors
     finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+        proc.terminate()  # the server shuts down gracefully on SIGTERM, as on Ctrl-C
+        rc = proc.wait(timeout=30)
+    assert rc == 0 and "not saved" not in proc.stderr.read()
     result = out.with_name("pairs-calib.json")
     assert out.is_file() and result.is_file()
     np.testing.assert_allclose(json.loads(result.read_text())["T_camera_lidar"], T, atol=1e-9)
@@ -112,7 +115,6 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
 def _screenshot(page, tmp_path: Path, hover: dict) -> None:
     """The page with the solution: the lidar view zoomed on the camera's field of view and the
     predicted partner of a hovered lidar return; docs/figures/picker.png on request."""
-    box = page.locator("#lidar-panel .viewport").bounding_box()
     marks = page.locator("#lidar-panel g.mark").evaluate_all(
         "els => els.map(e => { const r = e.getBoundingClientRect();"
         " return [r.x + r.width / 2, r.y + r.height / 2]; })"
@@ -121,7 +123,6 @@ def _screenshot(page, tmp_path: Path, hover: dict) -> None:
     page.mouse.move(float(cx), float(cy))
     page.mouse.wheel(0, -600)
     page.wait_for_function("window.picker.panels.lidar.s > 1.5")
-    del box
     page.mouse.move(*_client_xy(page, "lidar", hover["x"] + 12, hover["y"] + 2))
     page.wait_for_selector("#camera-panel g.ghost", state="attached")
     path = tmp_path / "picker.png"
@@ -129,6 +130,3 @@ def _screenshot(page, tmp_path: Path, hover: dict) -> None:
         path = REPO / "docs" / "figures" / "picker.png"
     page.screenshot(path=str(path))
     assert path.stat().st_size > 10_000
-
-
-pytestmark = pytest.mark.slow

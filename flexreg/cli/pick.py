@@ -153,7 +153,10 @@ def pick_command(
         import webbrowser
 
         webbrowser.open(server.url)
-    server.run()
+    try:
+        server.run()
+    except KeyboardInterrupt:  # Ctrl-C (or SIGTERM): the normal way to stop the server
+        pass
     if session.pairs and session.saved_revision != session.revision:
         err_console.print(
             f"warning: the last changes were not saved ({len(session.pairs)} pairs; "

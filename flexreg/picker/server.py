@@ -231,6 +231,7 @@ class PickerServer:
         except OSError as e:
             self._socket.close()
             raise InputError("--port", f"cannot listen on 127.0.0.1:{port}: {e.strerror}") from None
+        self._socket.listen(128)  # connections wait in the backlog until uvicorn serves them
         self.port = int(self._socket.getsockname()[1])
         self.url = f"http://127.0.0.1:{self.port}/?token={self.token}"
         config = uvicorn.Config(
@@ -240,11 +241,21 @@ class PickerServer:
         self._thread: threading.Thread | None = None
 
     def run(self) -> None:
-        """Serve until interrupted (Ctrl-C)."""
+        """Serve until interrupted: Ctrl-C or SIGTERM shut the server down gracefully, then
+        raise :class:`KeyboardInterrupt` (uvicorn re-raises the signal after its shutdown)."""
+        import signal
+
+        def interrupted(signum: int, frame: object) -> None:
+            raise KeyboardInterrupt
+
+        main = threading.current_thread() is threading.main_thread()
+        old = signal.signal(signal.SIGTERM, interrupted) if main else None
         try:
             self._server.run(sockets=[self._socket])
         finally:
             self._socket.close()
+            if main:
+                signal.signal(signal.SIGTERM, old)
 
     def start(self, timeout_s: float = 30.0) -> None:
         """Serve in a daemon thread; return once it accepts connections."""

@@ -334,33 +334,50 @@ class PickSession:
             return list(self.suggestions.values())
 
     def _proposals(self, T: NDArray[np.float64]) -> Correspondences2D3D:
-        """Proposals within the pose's uncertainty that a joint solve with the pairs keeps."""
+        """Proposals that agree with the current pose.
+
+        Solved: searched within 4 x ``threshold_px`` (at least 10 px) of each point's projection
+        and kept when within 2 x ``threshold_px`` of it. Initial guess only: searched within
+        its stated uncertainty (``init_rotation_deg``, ``init_translation_m`` at the median
+        depth), solved jointly with any picked pairs, and kept when they are inliers of a joint
+        pose within twice that uncertainty of the guess (the plausibility test of the
+        automatic mode); none otherwise.
+        """
         cfg = self.config
-        solved = self.result is not None
         f = max(self.intrinsics.fx, self.intrinsics.fy)
-        uv, z = project_points(self._overlay_points, self.intrinsics, T)
-        zf = z[(z > 0) & np.isfinite(uv).all(axis=1)]
-        z_med = float(np.median(zf)) if zf.size else 10.0
-        radius = (
-            max(4.0 * cfg.threshold_px, 10.0)
-            if solved
-            else 1.25 * f * (math.radians(cfg.init_rotation_deg) + cfg.init_translation_m / z_med)
-        )
+        empty = Correspondences2D3D(np.zeros((0, 2)), np.zeros((0, 3)))
+        if self.result is not None:
+            radius = max(4.0 * cfg.threshold_px, 10.0)
+        else:
+            uv, z = project_points(self._overlay_points, self.intrinsics, T)
+            zf = z[(z > 0) & np.isfinite(uv).all(axis=1)]
+            z_med = float(np.median(zf)) if zf.size else 10.0
+            radius = (
+                1.25 * f * (math.radians(cfg.init_rotation_deg) + cfg.init_translation_m / z_med)
+            )
         prop, _ = propose_correspondences(
             self.image, self.scan, self.intrinsics, T, radius_px=radius, config=cfg
         )
-        if len(prop) < MIN_CORRESPONDENCES:
-            return prop
+        if self.result is not None or len(prop) < MIN_CORRESPONDENCES:
+            uv, z = project_points(prop.points, self.intrinsics, T)
+            err = np.linalg.norm(uv - prop.pixels, axis=1)
+            return prop.subset((z > 0) & (err <= 2.0 * cfg.threshold_px))
         joint = self.correspondences().concat(prop) if self.pairs else prop
         try:
-            res = solve_pnp(joint, self.intrinsics, config=cfg, threshold_px=cfg.threshold_px)
+            res = solve_pnp(joint, self.intrinsics, config=cfg)
         except (CalibrationError, InputError) as e:
             log.info("suggestions: no joint solution (%s)", e)
-            return Correspondences2D3D(np.zeros((0, 2)), np.zeros((0, 3)))
-        n = len(self.pairs)
-        keep = np.zeros(len(prop), dtype=bool)
-        keep[: len(res.inlier_mask) - n] = res.inlier_mask[n:]
-        return prop.subset(keep)
+            return empty
+        Tj = res.T_camera_lidar
+        if (
+            rotation_error_deg(Tj, T) > 2.0 * cfg.init_rotation_deg
+            or translation_error_m(Tj, T) > 2.0 * cfg.init_translation_m
+        ):
+            log.info("suggestions: the proposals' joint pose is too far from the guess")
+            return empty
+        uv, z = project_points(prop.points, self.intrinsics, Tj)
+        err = np.linalg.norm(uv - prop.pixels, axis=1)
+        return prop.subset((z > 0) & (err <= res.threshold_px))
 
     def accept(self, suggestion_id: Any) -> Pair:
         """Make a suggestion a pair; re-solve."""

@@ -353,3 +353,41 @@ def test_pick_command_checks_options_before_reading(tmp_path):
          "--out", tmp_path / "pairs.csv"]
     )  # fmt: skip
     assert rc == 1 and "either --camera FILE or --pinhole" in err
+
+
+def test_pick_command_loads_pairs_and_prints_the_address(tmp_path, monkeypatch):
+    """The command's wiring, with the server's blocking loop replaced: inputs read, the
+    --pairs file loaded and solved, the tokened 127.0.0.1 address printed, nothing written."""
+    from flexreg.io.correspondences import write_pairs
+    from flexreg.picker.server import PickerServer
+
+    files = write_scene(tmp_path / "scene")
+    s = picker_scene()
+    session = PickSession(
+        s["image"], s["scan"], s["intrinsics"], out=tmp_path / "x.csv", result_out=tmp_path / "y"
+    )
+    clicks = true_clicks(session.views.range_image, 8, seed=4)
+    old = tmp_path / "old.csv"
+    for c in clicks:
+        session.add_pair(c["u"], c["v"], c["mode"], c["x"], c["y"])
+    c = session.correspondences()
+    write_pairs(old, c.pixels, xyz=c.points)
+    seen = {}
+
+    def fake_run(self):  # the real one serves until Ctrl-C
+        seen["session"], seen["url"] = self.session, self.url
+        self._socket.close()
+
+    monkeypatch.setattr(PickerServer, "run", fake_run)
+    out = tmp_path / "new" / "pairs.csv"
+    rc, stdout, err = run_cli(
+        ["pick", "--image", files["image"], "--camera", files["camera"], "--scan", files["scan"],
+         "--pairs", old, "--out", out, "--no-browser"]
+    )  # fmt: skip
+    assert rc == 0, err
+    st = seen["session"].state()
+    assert len(st["pairs"]) == 8 and st["solution"]["source"] == "solution" and st["saved"]
+    assert [p["line"] for p in st["pairs"]] == list(range(2, 10))
+    assert seen["url"].startswith("http://127.0.0.1:") and "?token=" in seen["url"]
+    assert f"open {seen['url']}" in stdout and "not saved" not in err
+    assert not out.parent.exists()

@@ -506,7 +506,7 @@ async function main() {
   });
   document.addEventListener("keydown", (e) => {
     if (e.key === "Escape") { pending = null; renderPending(); drawAll(); }
-    if ((e.key === "Delete" || e.key === "Backspace") && hoverId !== null && e.target === document.body) {
+    if (e.key === "Delete" && hoverId !== null && e.target === document.body) {
       change("DELETE", `/api/pairs/${hoverId}`);
     }
   });

@@ -113,15 +113,9 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
 
 
 def _screenshot(page, tmp_path: Path, hover: dict) -> None:
-    """The page with the solution: the lidar view zoomed on the camera's field of view and the
+    """The page with the solution: the lidar view zoomed to the camera's field of view and the
     predicted partner of a hovered lidar return; docs/figures/picker.png on request."""
-    marks = page.locator("#lidar-panel g.mark").evaluate_all(
-        "els => els.map(e => { const r = e.getBoundingClientRect();"
-        " return [r.x + r.width / 2, r.y + r.height / 2]; })"
-    )
-    cx, cy = np.mean(marks, axis=0)
-    page.mouse.move(float(cx), float(cy))
-    page.mouse.wheel(0, -600)
+    page.click("#fit-camera")  # the lidar view zoomed to what the camera sees
     page.wait_for_function("window.picker.panels.lidar.s > 1.5")
     page.mouse.move(*_client_xy(page, "lidar", hover["x"] + 12, hover["y"] + 2))
     page.wait_for_selector("#camera-panel g.ghost", state="attached")

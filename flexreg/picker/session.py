@@ -148,6 +148,7 @@ class PickSession:
         self._step = max(1, math.ceil(len(scan) / OVERLAY_POINTS))
         self._overlay_points = scan.points[:: self._step]
         self._projected: tuple[int, Any, NDArray[np.float64], NDArray[np.int64]] | None = None
+        self._box: tuple[int, list[float] | None] | None = None
 
     # ------------------------------------------------------------------ pose and solving
 
@@ -487,6 +488,7 @@ class PickSession:
                         for m in self.views.modes
                     },
                     "points": len(self.scan),
+                    "camera_box": self._camera_box(),
                 },
                 "pairs": self._pair_dicts(pairs),
                 "suggestions": self._pair_dicts(sugg),
@@ -499,6 +501,28 @@ class PickSession:
                 "out": str(self.out),
                 "result_out": str(self.result_out),
             }
+
+    def _camera_box(self) -> list[float] | None:
+        """``[x0, y0, x1, y1]`` on the panorama around the returns the current pose puts in
+        the camera image (1st to 99th percentile), for the page to zoom to; None without a
+        pose or such returns."""
+        T = self.pose
+        if T is None:
+            return None
+        if self._box is not None and self._box[0] == self.revision:
+            return self._box[1]
+        W, H = self.image.shape[1], self.image.shape[0]
+        uv, z = project_points(self._overlay_points, self.intrinsics, T)
+        seen = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+        k = np.flatnonzero(seen)
+        xy = self.views.locate(self._overlay_points[k], k * self._step, "panorama")
+        xy = xy[np.isfinite(xy).all(axis=1)]
+        box = None
+        if len(xy) >= 10:
+            lo, hi = np.percentile(xy, [1, 99], axis=0)
+            box = [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
+        self._box = (self.revision, box)
+        return box
 
     def _solution(self) -> dict[str, Any] | None:
         T = self.pose

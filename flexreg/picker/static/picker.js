@@ -12,6 +12,7 @@ let lidarMode = null;      // current lidar view
 let ghosts = { camera: null, lidar: null };  // predicted partner positions while hovering
 let snapMark = null;       // where a lidar click would land
 let busy = 0;
+let autoFitted = false;    // the lidar panorama was zoomed to the camera's view once
 
 // ------------------------------------------------------------------ server calls
 
@@ -88,6 +89,17 @@ class Panel {
     this.fullLoaded = false;
     this.base.src = src;
     if (first) this.fit(); else this.apply();
+  }
+
+  // zoom to [x0, y0, x1, y1] (image pixels), with a margin
+  fitBox(b) {
+    const r = this.vp.getBoundingClientRect();
+    const w = Math.max(b[2] - b[0] + 1, 8) * 1.15, h = Math.max(b[3] - b[1] + 1, 8) * 1.15 * this.aspect;
+    this.s = Math.min(r.width / w, r.height / h);
+    const cx = (b[0] + b[2]) / 2 + 0.5, cy = ((b[1] + b[3]) / 2 + 0.5) * this.aspect;
+    this.tx = r.width / 2 - cx * this.s;
+    this.ty = r.height / 2 - cy * this.s;
+    this.apply();
   }
 
   fit() {
@@ -195,7 +207,7 @@ function mark(panel, x, y, cls, label, id, kind) {
   const [X, Y] = panel.toStage(x, y);
   const g = svgEl("g", { class: `mark ${cls}`, transform: `translate(${X} ${Y})` }, panel.svg);
   if (id !== undefined) { g.dataset.id = id; g.dataset.kind = kind; }
-  svgEl("circle", { r, "vector-effect": "non-scaling-stroke" }, g);
+  svgEl("circle", { r }, g);
   if (label !== "") {
     const t = svgEl("text", { x: r * 1.2, y: -r * 0.9, "font-size": 13 / panel.s }, g);
     t.textContent = label;
@@ -210,6 +222,7 @@ function mark(panel, x, y, cls, label, id, kind) {
 function drawMarks(panel) {
   const svg = panel.svg;
   while (svg.firstChild) svg.removeChild(svg.firstChild);
+  svg.style.setProperty("--k", String(1 / panel.s));
   if (!state) return;
   const sol = state.solution;
   const solved = sol && sol.source === "solution";
@@ -219,7 +232,7 @@ function drawMarks(panel) {
     if (panel.side === "camera" && p.projected_uv && $("#show-overlay").checked) {
       const [X1, Y1] = panel.toStage(p.u, p.v);
       const [X2, Y2] = panel.toStage(p.projected_uv[0], p.projected_uv[1]);
-      svgEl("line", { x1: X1, y1: Y1, x2: X2, y2: Y2, class: "residual", "vector-effect": "non-scaling-stroke" }, svg);
+      svgEl("line", { x1: X1, y1: Y1, x2: X2, y2: Y2, class: "residual" }, svg);
     }
     let cls = solved ? (p.inlier ? "inlier" : "outlier") : "unsolved";
     if (p.id === hoverId) cls += " hover";
@@ -242,9 +255,9 @@ function drawMarks(panel) {
     const [X, Y] = panel.toStage(ghost[0], ghost[1]);
     const g = svgEl("g", { class: "ghost", transform: `translate(${X} ${Y})` }, svg);
     const r = 10 / panel.s;
-    svgEl("circle", { r, "vector-effect": "non-scaling-stroke" }, g);
-    svgEl("line", { x1: -2 * r, y1: 0, x2: 2 * r, y2: 0, "vector-effect": "non-scaling-stroke" }, g);
-    svgEl("line", { x1: 0, y1: -2 * r, x2: 0, y2: 2 * r, "vector-effect": "non-scaling-stroke" }, g);
+    svgEl("circle", { r }, g);
+    svgEl("line", { x1: -2 * r, y1: 0, x2: 2 * r, y2: 0 }, g);
+    svgEl("line", { x1: 0, y1: -2 * r, x2: 0, y2: 2 * r }, g);
   }
   if (panel.side === "lidar" && snapMark) {
     const [X, Y] = panel.toStage(snapMark[0], snapMark[1]);
@@ -462,6 +475,12 @@ function renderImages() {
   const pw = Math.min(W, Math.round(W * Math.min(1, state.preview_px / Math.max(W, H))));
   panels.lidar.setImage(lidarMode, url(`/api/lidar/${lidarMode}.png`),
     url(`/api/lidar/${lidarMode}.png`, { full: 1 }), W, H, state.lidar.aspect[lidarMode], pw);
+  const box = gridOf(lidarMode) === "panorama" ? state.lidar.camera_box : null;
+  $("#fit-camera").hidden = !box;
+  if (!autoFitted) {  // on opening, with a pose: show the part of the scan the camera sees
+    autoFitted = true;
+    if (box) panels.lidar.fitBox(box);
+  }
   const ov = panels.camera.overlay;
   const show = $("#show-overlay").checked && state.solution && state.solution.T_camera_lidar;
   ov.hidden = !show;
@@ -489,6 +508,8 @@ async function main() {
   panels.lidar = new Panel($("#lidar-panel"), "lidar");
   $("#lidar-mode").addEventListener("change", (e) => { lidarMode = e.target.value; snapMark = null; render(); });
   $("#show-overlay").addEventListener("change", render);
+  $("#fit-camera").addEventListener("click", () => { if (state.lidar.camera_box) panels.lidar.fitBox(state.lidar.camera_box); });
+  $("#fit-all").addEventListener("click", () => panels.lidar.fit());
   $("#opacity").addEventListener("input", () => { panels.camera.overlay.style.opacity = $("#opacity").value / 100; });
   $("#save").addEventListener("click", async () => {
     try {

@@ -1,9 +1,9 @@
 """`flexreg pick` end to end in a real headless Chromium: the command serves a synthetic
 camera-lidar scene with a known extrinsic, the test clicks 8 pairs at their true positions (the
 lidar click first; its partner where the snapped return truly projects), watches the live solve
-reach the truth within 0.2 deg / 1 cm, saves, and `flexreg calibrate --pairs` on the saved CSV
-gives the same result. With FLEXREG_WRITE_FIGURES=1 the page's screenshot becomes
-docs/figures/picker.png."""
+reach the truth within 0.2 deg / 1 cm, drags a mark away and back, saves, and `flexreg calibrate
+--pairs` on the saved CSV gives the same result. With FLEXREG_WRITE_FIGURES=1 the page's
+screenshot becomes docs/figures/picker.png."""
 
 from __future__ import annotations
 
@@ -92,6 +92,7 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
             assert page.locator("#pairs tr.outlier").count() == 0
             assert not out.exists()  # nothing written before Save
 
+            _drag_away_and_back(page, T)
             _screenshot(page, tmp_path, c)
             page.click("#save")
             page.wait_for_selector("#message.info:has-text('saved')")
@@ -110,6 +111,25 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
     )  # fmt: skip
     assert rc in (0, 3), err
     np.testing.assert_allclose(json.loads(calib.read_text())["T_camera_lidar"], T, atol=1e-9)
+
+
+def _drag_away_and_back(page, T: np.ndarray) -> None:
+    """Drag pair 1's camera mark 12 px away (it becomes an outlier), then back onto its pixel
+    (the solution returns)."""
+    pair = page.evaluate("window.picker.state().pairs[0]")
+    x, y = _client_xy(page, "camera", pair["u"], pair["v"])
+    for dx, dy in ((12.0, 0.0), (0.0, 0.0)):
+        rev = int(page.evaluate("document.body.dataset.revision"))
+        start = page.evaluate("window.picker.state().pairs[0]")
+        page.mouse.move(*_client_xy(page, "camera", start["u"], start["v"]))
+        page.mouse.down()
+        page.mouse.move(x + dx, y + dy, steps=6)
+        page.mouse.up()
+        page.wait_for_function(f"Number(document.body.dataset.revision) > {rev}")
+        outlier = page.locator("#pairs tbody tr:first-child.outlier").count() == 1
+        assert outlier == (dx != 0.0)
+    back = np.array(json.loads(page.get_attribute("#T", "data-t")))
+    np.testing.assert_allclose(back, T, atol=1e-6)
 
 
 def _screenshot(page, tmp_path: Path, hover: dict) -> None:

@@ -146,6 +146,12 @@ def pick_command(
     if pairs is not None:
         with stage(f"Reading {pairs.name}"):
             session.load_pairs(read_correspondences(pairs, scan=lidar))
+    if pairs is None and out.exists():
+        err_console.print(
+            f"note: {out} exists; Save will replace it (--pairs {out} continues from it)",
+            markup=False,
+            soft_wrap=True,
+        )
     server = PickerServer(session, port=port)
     console.print(f"flexreg pick: open {server.url}", markup=False, soft_wrap=True)
     console.print("(127.0.0.1 only; Ctrl-C stops; Save in the page writes the files)")

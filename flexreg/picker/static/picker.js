@@ -345,11 +345,14 @@ function hoverEnd(side) {
 }
 
 function setHover(id) {
+  // classes only: re-drawing the marks would replace the element under the pointer
   hoverId = id;
   for (const tr of document.querySelectorAll("#pairs tbody tr")) {
     tr.classList.toggle("hover", Number(tr.dataset.id) === id);
   }
-  drawAll();
+  for (const g of document.querySelectorAll("g.mark[data-kind='pair']")) {
+    g.classList.toggle("hover", Number(g.dataset.id) === id);
+  }
 }
 
 // ------------------------------------------------------------------ side panel

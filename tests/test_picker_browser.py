@@ -2,8 +2,9 @@
 camera-lidar scene with a known extrinsic, the test clicks 8 pairs at their true positions (the
 lidar click first; its partner where the snapped return truly projects), watches the live solve
 reach the truth within 0.2 deg / 1 cm, drags a mark away and back, saves, and `flexreg calibrate
---pairs` on the saved CSV gives the same result. With FLEXREG_WRITE_FIGURES=1 the page's
-screenshot becomes docs/figures/picker.png."""
+--pairs` on the saved CSV gives the same result; then asks for suggestions, rejects one, deletes
+a pair, and the stopped command warns that the last changes were not saved. With
+FLEXREG_WRITE_FIGURES=1 the page's screenshot becomes docs/figures/picker.png."""
 
 from __future__ import annotations
 
@@ -96,11 +97,12 @@ def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):
             _screenshot(page, tmp_path, c)
             page.click("#save")
             page.wait_for_selector("#message.info:has-text('saved')")
+            _suggest_reject_delete(page)
             assert not page.errors, page.errors
     finally:
         proc.terminate()  # the server shuts down gracefully on SIGTERM, as on Ctrl-C
         rc = proc.wait(timeout=30)
-    assert rc == 0 and "not saved" not in proc.stderr.read()
+    assert rc == 0 and "the last changes were not saved (7 pairs" in proc.stderr.read()
     result = out.with_name("pairs-calib.json")
     assert out.is_file() and result.is_file()
     np.testing.assert_allclose(json.loads(result.read_text())["T_camera_lidar"], T, atol=1e-9)
@@ -130,6 +132,20 @@ def _drag_away_and_back(page, T: np.ndarray) -> None:
         assert outlier == (dx != 0.0)
     back = np.array(json.loads(page.get_attribute("#T", "data-t")))
     np.testing.assert_allclose(back, T, atol=1e-6)
+
+
+def _suggest_reject_delete(page) -> None:
+    """After Save: suggestions around the solution (one rejected), then pair 8 deleted (the
+    page then says the state is not saved)."""
+    page.click("#suggest")
+    page.wait_for_selector("#message.info:has-text('suggestion(s)')")
+    n = page.locator("#suggestions tbody tr").count()
+    assert n >= 1
+    page.click("#suggestions tbody tr:first-child .reject")
+    page.wait_for_function(f"document.querySelectorAll('#suggestions tbody tr').length === {n - 1}")
+    page.click("#pairs tbody tr:last-child button")
+    page.wait_for_function("document.querySelectorAll('#pairs tbody tr').length === 7")
+    assert "not saved" in page.inner_text("#status")
 
 
 def _screenshot(page, tmp_path: Path, hover: dict) -> None:

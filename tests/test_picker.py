@@ -322,6 +322,8 @@ def test_initial_guess_gives_a_pose_views_and_suggestions(tmp_path):
     c = TestClient(create_app(session, TOKEN), base_url="http://127.0.0.1:1")
     st = c.get("/api/state", headers=_h()).json()
     assert "perspective" in st["lidar"]["modes"] and st["solution"]["source"] == "initial guess"
+    # the panorama's columns turn against the camera's u: shown mirrored, with or without a pose
+    assert st["lidar"]["mirror"] is True and session.views.mirror is True
     x0, y0, x1, y1 = st["lidar"]["camera_box"]  # the camera sees about 60 of 360 degrees
     assert 0 <= x0 < x1 < 1024 and 0 <= y0 < y1 < 64 and 120 < x1 - x0 < 260
     overlay = c.get("/api/overlay.png", headers=_h())

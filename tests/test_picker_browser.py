@@ -45,10 +45,10 @@ def _start_pick(argv: list[str], timeout_s: float = 120.0) -> tuple[subprocess.P
 
 
 def _client_xy(page, panel: str, x: float, y: float) -> tuple[float, float]:
-    """Page coordinates of pixel centre ``(x, y)`` of a panel's image."""
-    box = page.locator(f"#{panel}-panel img.base").bounding_box()
-    W, H = page.evaluate(f"[window.picker.panels.{panel}.W, window.picker.panels.{panel}.H]")
-    return box["x"] + (x + 0.5) / W * box["width"], box["y"] + (y + 0.5) / H * box["height"]
+    """Page coordinates of pixel centre ``(x, y)`` of a panel's image (the page's own mapping:
+    zoom, pan and a mirrored panorama included)."""
+    X, Y = page.evaluate(f"window.picker.panels.{panel}.toClient({x}, {y})")
+    return float(X), float(Y)
 
 
 def test_pick_in_chromium_reaches_the_truth_and_saves(tmp_path):

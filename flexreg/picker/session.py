@@ -148,7 +148,8 @@ class PickSession:
         self._step = max(1, math.ceil(len(scan) / OVERLAY_POINTS))
         self._overlay_points = scan.points[:: self._step]
         self._projected: tuple[int, Any, NDArray[np.float64], NDArray[np.int64]] | None = None
-        self._box: tuple[int, list[float] | None] | None = None
+        #: (revision, camera box on the panorama, mirror or None) under the current pose
+        self._box: tuple[int, list[float] | None, bool | None] | None = None
 
     # ------------------------------------------------------------------ pose and solving
 
@@ -489,6 +490,7 @@ class PickSession:
                     },
                     "points": len(self.scan),
                     "camera_box": self._camera_box(),
+                    "mirror": self._mirror(),
                 },
                 "pairs": self._pair_dicts(pairs),
                 "suggestions": self._pair_dicts(sugg),
@@ -502,26 +504,40 @@ class PickSession:
                 "result_out": str(self.result_out),
             }
 
+    def _mirror(self) -> bool:
+        """Whether the panorama should be shown left-right reversed to match the camera: with
+        a pose, when the columns of the returns the camera sees run against their image ``u``;
+        without one, for an equirectangular panorama (its columns turn counter-clockwise about
+        +Z, the other way than an upright camera's ``u``)."""
+        self._camera_box()
+        assert self._box is not None
+        return self._box[2] if self._box[2] is not None else self.views.mirror
+
     def _camera_box(self) -> list[float] | None:
         """``[x0, y0, x1, y1]`` on the panorama around the returns the current pose puts in
         the camera image (1st to 99th percentile), for the page to zoom to; None without a
         pose or such returns."""
         T = self.pose
         if T is None:
+            self._box = (self.revision, None, None)
             return None
         if self._box is not None and self._box[0] == self.revision:
             return self._box[1]
+        self._box = (self.revision, None, None)
         W, H = self.image.shape[1], self.image.shape[0]
         uv, z = project_points(self._overlay_points, self.intrinsics, T)
         seen = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
         k = np.flatnonzero(seen)
         xy = self.views.locate(self._overlay_points[k], k * self._step, "panorama")
-        xy = xy[np.isfinite(xy).all(axis=1)]
-        box = None
+        ok = np.isfinite(xy).all(axis=1)
+        xy, u = xy[ok], uv[k[ok], 0]
+        box, mirror = None, None
         if len(xy) >= 10:
             lo, hi = np.percentile(xy, [1, 99], axis=0)
             box = [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
-        self._box = (self.revision, box)
+            if np.std(xy[:, 0]) > 0 and np.std(u) > 0:
+                mirror = bool(np.corrcoef(xy[:, 0], u)[0, 1] < 0)
+        self._box = (self.revision, box, mirror)
         return box
 
     def _solution(self) -> dict[str, Any] | None:

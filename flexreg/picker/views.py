@@ -157,6 +157,18 @@ def _nearest_valid(valid: NDArray[np.bool_], x: float, y: float) -> tuple[int, i
     return int(rows[k] + r0), int(cols[k] + c0)
 
 
+def _turns_counter_clockwise(xyz: NDArray[np.floating], valid: NDArray[np.bool_]) -> bool:
+    """Whether a grid's columns turn counter-clockwise about +Z (azimuth ``atan2(y, x)``
+    growing with the column, median over neighbouring returns of about 64 rows). Seen from
+    the scanner with +Z up, such a panorama is mirrored next to a camera image."""
+    rows = slice(None, None, max(1, xyz.shape[0] // 64))
+    P, v = xyz[rows], valid[rows]
+    phi = np.arctan2(P[..., 1], P[..., 0]).astype(np.float64)
+    d = np.mod(phi[:, 1:] - phi[:, :-1] + np.pi, 2 * np.pi) - np.pi
+    d = d[v[:, 1:] & v[:, :-1]]
+    return bool(d.size > 0 and np.median(d) > 0)
+
+
 class LidarViews:
     """The scan's pictures for picking, the grids they share, and snapping on them.
 
@@ -190,6 +202,7 @@ class LidarViews:
             if isinstance(cam, SphericalCamera)
             else 1.0
         )
+        self.mirror = _turns_counter_clockwise(ri.xyz, ri.valid)
         self._pixel_of = np.full(len(scan), -1, dtype=np.int64)  # scan point -> panorama pixel
         flat = np.flatnonzero((ri.valid & (ri.index >= 0)).ravel())
         self._pixel_of[ri.index.ravel()[flat][::-1]] = flat[::-1]  # first pixel wins

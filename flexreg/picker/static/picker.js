@@ -69,7 +69,7 @@ class Panel {
     this.base = el.querySelector("img.base");
     this.overlay = el.querySelector("img.overlay");
     this.svg = el.querySelector("svg.marks");
-    this.W = 1; this.H = 1; this.aspect = 1; this.previewW = 1;
+    this.W = 1; this.H = 1; this.aspect = 1; this.previewW = 1; this.mirror = false;
     this.s = 1; this.tx = 0; this.ty = 0;
     this.key = null; this.fullSrc = null; this.fullLoaded = false;
     this.drag = null;
@@ -91,12 +91,20 @@ class Panel {
     if (first) this.fit(); else this.apply();
   }
 
+  // shown left-right reversed (a panorama whose columns turn the other way than the camera's)
+  setMirror(m) {
+    if (this.mirror === m) return;
+    this.mirror = m;
+    this.base.style.transform = m ? "scaleX(-1)" : "";
+    this.apply();
+  }
+
   // zoom to [x0, y0, x1, y1] (image pixels), with a margin
   fitBox(b) {
     const r = this.vp.getBoundingClientRect();
     const w = Math.max(b[2] - b[0] + 1, 8) * 1.15, h = Math.max(b[3] - b[1] + 1, 8) * 1.15 * this.aspect;
     this.s = Math.min(r.width / w, r.height / h);
-    const cx = (b[0] + b[2]) / 2 + 0.5, cy = ((b[1] + b[3]) / 2 + 0.5) * this.aspect;
+    const [cx, cy] = this.toStage((b[0] + b[2]) / 2, (b[1] + b[3]) / 2);
     this.tx = r.width / 2 - cx * this.s;
     this.ty = r.height / 2 - cy * this.s;
     this.apply();
@@ -128,9 +136,14 @@ class Panel {
     const r = this.vp.getBoundingClientRect();
     const ex = (clientX - r.left - this.tx) / this.s;
     const ey = (clientY - r.top - this.ty) / this.s;
-    return [ex - 0.5, ey / this.aspect - 0.5];
+    return [this.mirror ? this.W - ex - 0.5 : ex - 0.5, ey / this.aspect - 0.5];
   }
-  toStage(x, y) { return [x + 0.5, (y + 0.5) * this.aspect]; }
+  toStage(x, y) { return [this.mirror ? this.W - x - 0.5 : x + 0.5, (y + 0.5) * this.aspect]; }
+  toClient(x, y) {  // page coordinates of image pixel (x, y)
+    const r = this.vp.getBoundingClientRect();
+    const [X, Y] = this.toStage(x, y);
+    return [r.left + this.tx + X * this.s, r.top + this.ty + Y * this.s];
+  }
   inside(x, y) { return x >= -0.5 && x <= this.W - 0.5 && y >= -0.5 && y <= this.H - 0.5; }
 
   wheel(e) {
@@ -480,10 +493,15 @@ function renderImages() {
     url(`/api/lidar/${lidarMode}.png`, { full: 1 }), W, H, state.lidar.aspect[lidarMode], pw);
   const box = gridOf(lidarMode) === "panorama" ? state.lidar.camera_box : null;
   $("#fit-camera").hidden = !box;
-  if (!autoFitted) {  // on opening, with a pose: show the part of the scan the camera sees
+  const grid = gridOf(lidarMode);
+  if (panels.lidar.grid === undefined) $("#mirror").checked = state.lidar.mirror;
+  panels.lidar.setMirror(grid === "panorama" && $("#mirror").checked);
+  if (!autoFitted || panels.lidar.grid !== grid) {
+    // on opening, and back from the perspective view: the part of the scan the camera sees
     autoFitted = true;
     if (box) panels.lidar.fitBox(box);
   }
+  panels.lidar.grid = grid;
   const ov = panels.camera.overlay;
   const show = $("#show-overlay").checked && state.solution && state.solution.T_camera_lidar;
   ov.hidden = !show;
@@ -513,6 +531,7 @@ async function main() {
   $("#show-overlay").addEventListener("change", render);
   $("#fit-camera").addEventListener("click", () => { if (state.lidar.camera_box) panels.lidar.fitBox(state.lidar.camera_box); });
   $("#fit-all").addEventListener("click", () => panels.lidar.fit());
+  $("#mirror").addEventListener("change", render);
   $("#opacity").addEventListener("input", () => { panels.camera.overlay.style.opacity = $("#opacity").value / 100; });
   $("#save").addEventListener("click", async () => {
     try {

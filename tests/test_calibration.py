@@ -30,6 +30,7 @@ from flexreg.calibration import (
     reprojection_errors,
     scan_range_image,
     solve_pnp,
+    usable_correspondences,
 )
 from flexreg.core.transforms import (
     apply,
@@ -356,6 +357,45 @@ def test_checks_count_pixels_and_cheirality():
         check_correspondences(
             Correspondences2D3D(px, pts2, lines, "p.csv"), _intr(), T_init=np.eye(4)
         )
+
+
+def test_slips_are_left_out_and_named():
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(-1, 1, 9), rng.uniform(-1, 1, 9), rng.uniform(4, 6, 9)])
+    px = rng.uniform(0, 400, (9, 2))
+    px[3] = [640.0, 10.0]
+    pts[6, 2] = -3.0
+    c = Correspondences2D3D(px, pts, np.arange(2, 11), "p.csv")
+    kept, dropped = usable_correspondences(c, _intr(), T_camera_lidar=np.eye(4))
+    assert kept.lines.tolist() == [2, 3, 4, 6, 7, 9, 10]
+    assert [(d.where, d.line) for d in dropped] == [("line 5", 5), ("line 8", 8)]
+    assert dropped[0].reason == "pixel (640, 10) outside the 640x480 image"
+    assert dropped[1].reason == "behind the camera of the initial guess (z = -3.00 m)"
+    kept, dropped = usable_correspondences(c, _intr())  # no pose: only the pixel is checked
+    assert len(kept) == 8 and [d.line for d in dropped] == [5]
+    assert usable_correspondences(kept.subset(np.arange(3)), _intr())[1] == ()
+
+
+def test_solver_leaves_slips_out_but_keeps_six_usable():
+    rng = np.random.default_rng(3)
+    T = make_transform(rotation_about_axis([0.2, 1.0, 0.1], 0.1), [0.1, -0.05, 0.2])
+    pts = np.column_stack(
+        [rng.uniform(-2, 2, 12), rng.uniform(-1.5, 1.5, 12), rng.uniform(3, 8, 12)]
+    )
+    uv, _ = project_points(pts, _intr(), T)
+    uv[2] = [700.0, 5.0]  # outside
+    pts[5] = -pts[5]  # behind the camera under the solution
+    c = Correspondences2D3D(uv, pts, np.arange(2, 14), "p.csv")
+    res = solve_pnp(c, _intr())
+    assert rotation_error_deg(res.T_camera_lidar, T) < 1e-6
+    assert [(d.line, d.reason.split(" (")[0]) for d in res.dropped] == [
+        (4, "pixel"),
+        (7, "behind the camera of the solution"),
+    ]
+    assert len(res.correspondences) == 10 and res.inliers == 10
+    assert res.to_dict()["dropped"][1]["line"] == 7
+    with pytest.raises(InputError, match=r"only 5 usable correspondence\(s\) \(1 left out: line 4"):
+        solve_pnp(c.subset(np.arange(6)), _intr())
 
 
 # ------------------------------------------------------------------------------ solver

@@ -220,9 +220,12 @@ def _pairs_text(kitti, n: int) -> list[str]:
 @pytest.mark.parametrize(
     ("case", "message"),
     [
-        ("five pairs", r"only 5 correspondence\(s\); camera-lidar calibration needs at least 6"),
-        ("behind", r"line 4: lidar point \(.*\) lies behind the camera of the initial guess"),
-        ("outside", r"line 6: pixel \(1300, 20\) lies outside the 1224x370 camera image"),
+        ("five pairs", r"only 5 usable correspondence\(s\); camera-lidar calibration needs"),
+        (
+            "seven pairs, two slips",
+            r"only 5 usable correspondence\(s\) \(2 left out: line 4 \(behind the camera of the "
+            r"initial guess .*\), line 6 \(pixel \(1300, 20\) outside the 1224x370 image\)\)",
+        ),
         ("malformed", r"line 5: expected 5 values \(u,v,x,y,z\), got 3"),
         ("size", r"image is 1224x370 px but the intrinsics .* are for 1242x375"),
     ],
@@ -233,10 +236,10 @@ def test_bad_input_one_line_exit_1_nothing_written(kitti, tmp_path, case, messag
     extra = ["--init", str(kitti["calib"])]
     if case == "five pairs":
         rows = rows[:5]
-    elif case == "behind":
+    elif case == "seven pairs, two slips":
+        rows = rows[:7]
         u, v, x, y, z = rows[2].split(",")
         rows[2] = ",".join([u, v, str(-float(x)), y, z])  # a point behind the lidar's front
-    elif case == "outside":
         rows[4] = "1300,20," + ",".join(rows[4].split(",")[2:])
     elif case == "malformed":
         rows[3] = "1,2,3"
@@ -359,3 +362,28 @@ def test_exit_codes_in_help():
     rc, stdout, _ = run_cli(["calibrate", "--help"])
     text = " ".join(stdout.split())
     assert rc == 0 and "3 written, but uncertain" in text and "1 failed" in text
+
+
+def test_slips_in_a_pairs_file_are_left_out_with_a_warning(kitti, tmp_path):
+    """A pixel outside the image and a point behind the camera (of the guess, and of the
+    solution without a guess) no longer refuse the file: those rows are left out, named."""
+    rows = _pairs_text(kitti, 30)
+    u, v, x, y, z = rows[2].split(",")
+    rows[2] = ",".join([u, v, str(-float(x)), str(-float(y)), z])  # behind the camera
+    rows[4] = "1300,20," + ",".join(rows[4].split(",")[2:])  # right of the 1224-px image
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("u,v,X,Y,Z\n" + "\n".join(rows) + "\n")
+    for extra, behind in ((["--init", str(kitti["calib"])], "initial guess"), ([], "solution")):
+        out = tmp_path / behind.replace(" ", "-") / "calib.json"
+        argv = [*_base(kitti, out.parent), "--pairs", str(pairs), *extra]
+        rc, _, err = run_cli(argv)
+        assert rc in (0, 3), err
+        warning = [line for line in err.splitlines() if line.startswith("warning:")]
+        assert len(warning) == 1, err
+        assert f"line 4 (behind the camera of the {behind}" in warning[0]
+        assert "line 6 (pixel (1300, 20) outside the 1224x370 image)" in warning[0]
+        doc = json.loads(out.read_text())
+        assert [d["line"] for d in doc["dropped"]] == [4, 6]
+        assert doc["correspondences"] == 28 and 4 not in [p["line"] for p in doc["pairs"]]
+        T = np.array(doc["T_camera_lidar"])
+        assert rotation_error_deg(T, kitti["T"]) < 0.5 and translation_error_m(T, kitti["T"]) < 0.05

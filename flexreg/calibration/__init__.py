@@ -10,7 +10,8 @@ stage                                 function
 ====================================  =========================================================
 correspondences from a CSV file       :func:`read_correspondences` (``u,v`` + ``X,Y,Z`` or
                                       ``row,col`` of the scan's range image), ``panorama.py``
-input checks                          :func:`check_correspondences`, ``types.py``
+input checks                          :func:`usable_correspondences` (leaves slips out),
+                                      :func:`check_correspondences` (strict), ``types.py``
 PnP (RANSAC + Levenberg-Marquardt)    :func:`solve_pnp`, ``pnp.py`` (over
                                       :func:`flexreg.stages.camera_pose.solve_pnp`)
 Flexion image seen from the camera    :func:`render_flexion_view`, ``auto.py``
@@ -34,6 +35,7 @@ _WHERE = {
     "CalibrationError": "flexreg.errors",
     "CalibrationResult": "flexreg.calibration.types",
     "Correspondences2D3D": "flexreg.core.correspondences",
+    "DroppedPair": "flexreg.calibration.types",
     "FlexionView": "flexreg.calibration.auto",
     "auto_scale": "flexreg.calibration.auto",
     "calibrate": "flexreg.calibration.calibrate",
@@ -51,6 +53,7 @@ _WHERE = {
     "reprojection_errors": "flexreg.stages.camera_pose",
     "scan_range_image": "flexreg.calibration.panorama",
     "solve_pnp": "flexreg.calibration.pnp",
+    "usable_correspondences": "flexreg.calibration.types",
 }
 __getattr__, __dir__ = lazy(globals(), _WHERE)
 __all__ = list(_WHERE)

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from flexreg.calibration.config import CalibrationConfig
 from flexreg.calibration.panorama import normalized_fill
 from flexreg.calibration.pnp import solve_pnp
-from flexreg.calibration.types import CalibrationResult, check_correspondences
+from flexreg.calibration.types import CalibrationResult, DroppedPair, usable_correspondences
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.correspondences import Correspondences2D3D
 from flexreg.core.scan import Scan
@@ -479,8 +479,9 @@ def calibrate_auto(
     t_start = time.perf_counter()
     T0 = as_transform(T_init, name="initial guess")
     img = _checked_image(image, intrinsics)
+    given: tuple[DroppedPair, ...] = ()  # given pairs left out (outside, behind the guess)
     if pairs is not None and len(pairs):
-        check_correspondences(pairs, intrinsics, T_init=T0)
+        pairs, given = usable_correspondences(pairs, intrinsics, T_camera_lidar=T0)
     scale = config.auto_scale if config.auto_scale is not None else auto_scale(scan, intrinsics)
     view = render_flexion_view(scan, intrinsics, T0, scale=scale, n=config.flexion_n)
     cam_edges = _camera_edges(img, intrinsics, view)
@@ -539,6 +540,7 @@ def calibrate_auto(
             best_score, best = score, res
     chosen, spread = _chosen(best, poses, rounds, config)
     chosen.method = "auto"
+    chosen.dropped = given + tuple(d for d in chosen.dropped if d.line > 0)
     chosen.T_init = T0
     chosen.timings_s = {"total": time.perf_counter() - t_start}
     for r in rounds:  # JSON has no infinities

@@ -17,7 +17,118 @@ from flexreg.errors import InputError
 from flexreg.io.intrinsics import CameraIntrinsics
 from flexreg.stages.camera_pose import MIN_CORRESPONDENCES, to_rvec_tvec
 
-__all__ = ["CalibrationResult", "check_correspondences"]
+__all__ = [
+    "CalibrationResult",
+    "DroppedPair",
+    "check_correspondences",
+    "describe_dropped",
+    "usable_correspondences",
+]
+
+
+@dataclass(frozen=True)
+class DroppedPair:
+    """A correspondence left out of a calibration, and why.
+
+    Attributes
+    ----------
+    where : str
+        ``"line 12"`` (its line in the CSV file) or ``"pair 3"``.
+    line : int
+        Its line in the file (1-based), 0 when it was not read from a file.
+    reason : str
+        ``"pixel (1300, 20) outside the 1224x370 image"``, ``"behind the camera of the
+        initial guess (z = -3.10 m)"`` or ``"behind the camera under the solution (z = ...)"``.
+    """
+
+    where: str
+    line: int
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record."""
+        return {"where": self.where, "line": self.line or None, "reason": self.reason}
+
+
+def _outside(c: Correspondences2D3D, intrinsics: CameraIntrinsics) -> NDArray[np.bool_]:
+    """(N,) bool: pixels outside the image (False everywhere when its size is unknown)."""
+    if intrinsics.size is None:
+        return np.zeros(len(c), dtype=bool)
+    W, H = intrinsics.size
+    u, v = c.pixels[:, 0], c.pixels[:, 1]
+    return np.asarray((u < -0.5) | (u > W - 0.5) | (v < -0.5) | (v > H - 0.5))
+
+
+def _depth(c: Correspondences2D3D, T: ArrayLike, name: str) -> NDArray[np.float64]:
+    """(N,) float64 camera-frame depth of the pairs' lidar points under ``T``, metres."""
+    M = as_transform(T, name=name)
+    return np.asarray(c.points @ M[2, :3] + M[2, 3], dtype=np.float64)
+
+
+def usable_correspondences(
+    correspondences: Correspondences2D3D,
+    intrinsics: CameraIntrinsics,
+    *,
+    T_camera_lidar: ArrayLike | None = None,
+    pose: str = "initial guess",
+) -> tuple[Correspondences2D3D, tuple[DroppedPair, ...]]:
+    """The pairs PnP can use, and the ones left out with the reason.
+
+    A pair is left out when its pixel lies outside the image (intrinsics must know its size)
+    or -- with a pose -- its lidar point lies behind that camera (``z <= 0``). A hand-made file
+    often holds a few such slips; one of them should not refuse the whole file.
+
+    Parameters
+    ----------
+    correspondences : Correspondences2D3D
+    intrinsics : CameraIntrinsics
+    T_camera_lidar : (4, 4) float, optional
+        Pose under which points behind the camera are left out.
+    pose : str
+        What the pose is, for the reasons (``"initial guess"``, ``"solution"``).
+
+    Returns
+    -------
+    kept : Correspondences2D3D
+        The usable pairs, in their order (line numbers kept).
+    dropped : tuple of DroppedPair
+        In file order.
+
+    Examples
+    --------
+    >>> from flexreg.io.intrinsics import CameraIntrinsics
+    >>> intr = CameraIntrinsics([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]], [], 640, 480)
+    >>> c = Correspondences2D3D([[10.0, 20], [700, 20]], [[0, 0, 5.0], [1, 0, -5]], [2, 3])
+    >>> kept, dropped = usable_correspondences(c, intr)
+    >>> len(kept), [d.where for d in dropped], dropped[0].reason
+    (1, ['line 3'], 'pixel (700, 20) outside the 640x480 image')
+    """
+    c = correspondences
+    reasons: dict[int, str] = {}
+    out = _outside(c, intrinsics)
+    if out.any():
+        assert intrinsics.size is not None
+        W, H = intrinsics.size
+        for i in np.flatnonzero(out):
+            u, v = c.pixels[i]
+            reasons[int(i)] = f"pixel ({u:g}, {v:g}) outside the {W}x{H} image"
+    if T_camera_lidar is not None:
+        z = _depth(c, T_camera_lidar, pose)
+        for i in np.flatnonzero(~(z > 0)):
+            reasons.setdefault(int(i), f"behind the camera of the {pose} (z = {z[i]:.2f} m)")
+    if not reasons:
+        return c, ()
+    keep = np.ones(len(c), dtype=bool)
+    keep[list(reasons)] = False
+    dropped = tuple(DroppedPair(c.where(i), int(c.lines[i]), reasons[i]) for i in sorted(reasons))
+    return c.subset(keep), dropped
+
+
+def describe_dropped(dropped: tuple[DroppedPair, ...], *, limit: int = 10) -> str:
+    """``"line 4 (pixel (1300, 20) outside ...), line 9 (...)"``: the first ``limit`` pairs,
+    then how many more."""
+    text = ", ".join(f"{d.where} ({d.reason})" for d in dropped[:limit])
+    return text + (f" and {len(dropped) - limit} more" if len(dropped) > limit else "")
 
 
 def check_correspondences(
@@ -26,7 +137,8 @@ def check_correspondences(
     *,
     T_init: ArrayLike | None = None,
 ) -> None:
-    """Reject correspondences PnP cannot use, naming the offending lines.
+    """Reject correspondences PnP cannot use, naming the offending lines (strict: the solver
+    leaves such pairs out instead, see :func:`usable_correspondences`).
 
     Raises
     ------
@@ -93,6 +205,9 @@ class CalibrationResult:
         The initial guess, when one was used.
     auto : dict or None
         Automatic mode: per-round matches, inliers, search radius and edge score.
+    dropped : tuple of DroppedPair
+        Given pairs left out before or after solving (pixel outside the image, point behind
+        the camera of the initial guess or of the solution); not in ``correspondences``.
     verdict : Verdict or None
         Whether the inliers' geometry can be trusted (:mod:`flexreg.calibration.verdict`):
         ``"uncertain"`` with reasons for near-degenerate sets (few inliers, coplanar or
@@ -111,6 +226,7 @@ class CalibrationResult:
     T_init: NDArray[np.float64] | None = None
     auto: dict[str, Any] | None = None
     verdict: Verdict | None = None
+    dropped: tuple[DroppedPair, ...] = ()
 
     def __repr__(self) -> str:
         t = self.translation_m
@@ -200,6 +316,7 @@ class CalibrationResult:
             "T_init": None if self.T_init is None else self.T_init.tolist(),
             "auto": self.auto,
             "verdict": None if self.verdict is None else self.verdict.to_dict(),
+            "dropped": [d.to_dict() for d in self.dropped],
             "timings_s": self.timings_s,
             "seed": self.config.seed,
             "config": self.config.to_dict(),

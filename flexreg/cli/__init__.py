@@ -14,6 +14,7 @@ from flexreg.cli import (  # noqa: F401  (each module registers its commands on 
     convert,
     evaluate,
     odometry,
+    pick,
     register,
     scan_commands,
     synth,

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.calibration.config import CalibrationConfig
-from flexreg.cli._common import console, exit_for, print_verdict, stage, write_all
+from flexreg.cli._common import console, err_console, exit_for, print_verdict, stage, write_all
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -290,7 +290,9 @@ def calibrate_command(
     camera frame).
 
     Correspondences come from --pairs and/or --auto; nothing is written unless everything
-    succeeds.
+    succeeds. Pairs whose pixel lies outside the image, or whose lidar point lies behind the
+    camera (of --init, or of the solution), are left out with a warning naming their lines;
+    fewer than 6 usable pairs is an error.
 
     \b
     Exit status:
@@ -369,6 +371,8 @@ def calibrate_command(
             writers.append((overlay, _png_writer(overlay, picture)))
         writers.append((out, _result_writer(out, result, inputs_meta, truth, errors)))
     write_all(writers)
+    if result is not None and result.dropped:
+        _print_dropped(result, pairs)
     if result is not None:
         _print_summary(result, errors)
         print_verdict(result.verdict)
@@ -428,6 +432,20 @@ def _errors(T: NDArray[np.float64], T_true: NDArray[np.float64]) -> dict[str, fl
         "rotation_deg": rotation_error_deg(T, T_true),
         "translation_m": translation_error_m(T, T_true),
     }
+
+
+def _print_dropped(result: CalibrationResult, pairs: Path | None) -> None:
+    """One warning line naming the given pairs left out (line numbers and reasons)."""
+    from flexreg.calibration.types import describe_dropped
+
+    d = result.dropped
+    src = f"{pairs}: " if pairs is not None else ""
+    err_console.print(
+        f"warning: {src}left out {len(d)} pair(s): {describe_dropped(d)}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 def _print_summary(result: CalibrationResult, errors: dict[str, float] | None) -> None:

@@ -63,11 +63,16 @@ else:  # pragma: no cover - Python 3.10
 
 __all__ = [
     "MAX_GRID_SIZE",
+    "MAX_THRESHOLD_M",
+    "MAX_VOXEL_M",
+    "MIN_VOXEL_M",
     "Config",
     "Finite",
     "OddSize",
     "Positive",
     "Seed",
+    "ThresholdM",
+    "VoxelM",
     "load_config",
     "odd",
     "one_of",
@@ -285,6 +290,16 @@ Seed = Annotated[int, Field(ge=0)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 #: Any finite number.
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: Largest inlier distance of keypoint matches, metres: beyond it almost any match is an
+#: "inlier" and the transform is whatever the outliers make it.
+MAX_THRESHOLD_M = 5.0
+#: Voxel sizes an ICP or a baseline can use, metres: below the smallest the voxel grid's
+#: indices overflow (and no scanner resolves it), above the largest nothing of a scene is left.
+MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 10.0
+#: An inlier distance, metres, in (0, MAX_THRESHOLD_M].
+ThresholdM = Annotated[float, Field(gt=0, le=MAX_THRESHOLD_M, allow_inf_nan=False)]
+#: A voxel size, metres, in [MIN_VOXEL_M, MAX_VOXEL_M].
+VoxelM = Annotated[float, Field(ge=MIN_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)]
 
 
 class Config(BaseModel):

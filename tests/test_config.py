@@ -65,7 +65,7 @@ def test_floats_round_trip_exactly_through_toml(tmp_path):
     [
         (RegistrationConfig, {"n": 4}, "n: must be an odd grid size 3, 5, 7, ... 99 (got 4)"),
         (RegistrationConfig, {"ratio": 1.5}, "ratio: must be in (0, 1] (got 1.5)"),
-        (RegistrationConfig, {"voxel_m": 0}, "voxel_m: must be a positive number of metres"),
+        (RegistrationConfig, {"voxel_m": 0}, "voxel_m: must be in [0.0001, 10] (got 0"),
         (RegistrationConfig, {"seed": -1}, "seed: must be a non-negative integer (got -1)"),
         (RegistrationConfig, {"icp": "p2p"}, "icp: unknown method 'p2p'; known: point-to-plane"),
         (RegistrationConfig, {"upright": "yes"}, "upright: must be one of auto, on, off"),

@@ -141,6 +141,7 @@ def check_outputs(
         ``--out: T.txt: must be a .json file``, ``... is a folder, not a file``,
         ``... is also an input`` / ``is also --txt``.
     """
+    from flexreg.io.files import protect
     from flexreg.io.safety import find_clash, input_files
 
     given = [(option, path, suffix) for option, path, suffix in outputs if path is not None]
@@ -156,6 +157,7 @@ def check_outputs(
             read.append(("an input", files[0]))
             read += [(f"the companion file of input {p}", c) for c in files[1:]]
     read += [(f"the {option} input", p) for option, p in extra_inputs if p is not None]
+    protect(*(p for _, p in read))  # refused again at write time, whatever writes it
     written: list[tuple[str, Path]] = []
     for option, path, _ in given:
         written.append((option, path))

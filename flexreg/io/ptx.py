@@ -219,7 +219,8 @@ def read(path: Path, **_: object) -> list[Scan]:
     size = path.stat().st_size
     check_memory(size, "reading the whole file", source=path)
     buf = np.fromfile(path, dtype=np.uint8)
-    lines = int(np.count_nonzero(buf == 10)) + 1
+    step = 1 << 26  # count newlines 64 MiB at a time: no file-sized temporary
+    lines = 1 + sum(int(np.count_nonzero(buf[i : i + step] == 10)) for i in range(0, size, step))
     check_memory(size + lines * _LINE_BYTES, f"parsing its {lines:,} lines", source=path)
     n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
     head, tail, counts, errors = _parse_all(buf, n_chunks, _POW10)

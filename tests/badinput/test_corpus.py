@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from conftest import BADINPUT_SUMMARY
 from make_corpus import MEMORY_LIMIT_BYTES, Case, build
 
 #: a case that takes longer hangs (a whole corpus runs in well under a minute on 2 cores)
@@ -166,15 +167,12 @@ def corpus() -> tuple[Path, list[Case]]:
     return _BUILT[0]
 
 
-SUMMARY = pytest.StashKey[str]()
-
-
 @pytest.fixture(scope="session")
 def outcomes(pytestconfig) -> dict[str, Outcome]:
     root, cases = corpus()
     with ThreadPoolExecutor(WORKERS) as pool:
         done = list(pool.map(lambda c: run_case(c, root / "cases" / c.id), cases))
-    pytestconfig.stash[SUMMARY] = summary(done)
+    pytestconfig.stash[BADINPUT_SUMMARY] = summary(done)
     return {o.case.id: o for o in done}
 
 

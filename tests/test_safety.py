@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import os
 import resource
+import signal
 import struct
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -259,3 +261,26 @@ def test_las_header_with_more_data_than_points_is_refused(tmp_path):
     (tmp_path / "b.las").write_bytes(bytes(data))
     with pytest.raises(InputError, match="declares 40 points but the file holds data for 10 more"):
         read_scan(tmp_path / "b.las")
+
+
+def test_sigterm_during_a_run_leaves_no_output(tmp_path):
+    """A terminated ``flexreg synth`` removes the station files it had staged (the output
+    folder it made beforehand may stay, empty); exit status 143."""
+    out = tmp_path / "site"
+    synth = ["synth", "--stations", "3", "--resolution", "1024x512", "--out", str(out)]
+    cmd = [sys.executable, "-c", "from flexreg.cli import main; main()", *synth]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out.is_dir() and any(out.iterdir())) and proc.poll() is None:
+            assert time.monotonic() < deadline, "synth wrote nothing within 300 s"
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        staged = [p.name for p in out.iterdir()]
+        assert staged and all(n.startswith(".") and ".partial" in n for n in staged), staged
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(timeout=120)
+    finally:
+        proc.kill()
+    assert rc == 143
+    assert list(tmp_path.rglob("*")) in ([], [out])

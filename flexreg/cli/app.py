@@ -112,6 +112,15 @@ def run(argv: list[str] | None = None) -> int:
     return rv if isinstance(rv, int) else 0
 
 
+def _terminated(signum: int, frame: object) -> None:
+    """SIGTERM: unwind like Ctrl-C, so the command's temporary outputs are removed."""
+    raise SystemExit(128 + signum)
+
+
 def main() -> None:
-    """Console-script entry point."""
+    """Console-script entry point. SIGTERM (a scheduler or ``kill``) ends the command like
+    Ctrl-C: nothing it was writing is left behind; exit status 143."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminated)
     sys.exit(run())

@@ -104,8 +104,11 @@ def read_image(path: Path) -> NDArray[np.uint8]:
     import cv2
     import numpy as np
 
+    from flexreg.io.depth import check_image_size
+
     if not path.is_file():
         raise InputError(path, "no such file")
+    check_image_size(path)  # a PNG header declaring a huge image is refused before decoding
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(path, "not a readable image (PNG, JPEG, ...)")

@@ -307,6 +307,30 @@ def _header(c: Corpus) -> None:
         memory_limit=True,
     )
     c.case(
+        "calibrate-image-header-claims-100000-squared",
+        "header",
+        [
+            "calibrate",
+            "--image",
+            "{d}/camera.png",
+            "--pinhole",
+            "500",
+            "500",
+            "320",
+            "240",
+            "--scan",
+            "{d}/room.ptx",
+            "--pairs",
+            "{d}/pairs.csv",
+            "--out",
+            "{d}/calib.json",
+        ],
+        ["camera.png"],
+        good=("room.ptx",),
+        files={"camera.png": png_header_only(100_000, 100_000), "pairs.csv": "u,v,X,Y,Z\n"},
+        memory_limit=True,
+    )
+    c.case(
         "memory-budget-too-small-for-scan",
         "header",
         ["--memory-budget", "64K", "info", "{d}/room.ptx"],

@@ -40,7 +40,7 @@ class DeclaredScan:
 
     index: int
     record_count: int
-    bits_per_record: int
+    bits_per_record: int  # 0 when a field has no fixed size (its data cannot be counted)
     fields: int
     section_bytes: int | None  # logical length of its binary section
     grid: tuple[int, int] | None  # (rowMaximum + 1, columnMaximum + 1)
@@ -71,7 +71,8 @@ def _local(tag: str) -> str:
     return tag.rsplit("}", 1)[-1]
 
 
-def _bits(node: ET.Element) -> int:
+def _bits(node: ET.Element) -> int | None:
+    """Bits one record of a prototype field takes (None: variable, e.g. a String)."""
     kind = node.get("type")
     if kind == "Float":
         return 32 if node.get("precision") == "single" else 64
@@ -79,7 +80,7 @@ def _bits(node: ET.Element) -> int:
         lo = int(node.get("minimum", -(2**63)))
         hi = int(node.get("maximum", 2**63 - 1))
         return 0 if hi <= lo else math.ceil(math.log2(hi - lo + 1))
-    return 0
+    return None
 
 
 def _int(node: ET.Element | None, default: int = 0) -> int:
@@ -137,7 +138,8 @@ def _declared(f: object, path: Path, i: int, scan: ET.Element, size: int) -> Dec
         raise InputError(path, f"scan {i}: recordCount / fileOffset are not integers") from None
     proto = next((c for c in points if _local(c.tag) == "prototype"), None)
     fields = [] if proto is None else list(proto)
-    bits = sum(_bits(c) for c in fields)
+    each = [_bits(c) for c in fields]
+    bits = 0 if None in each else sum(b for b in each if b is not None)  # 0: not checkable
     section = None
     if 0 < offset < size:
         header = _logical(f, offset, 32, size)

@@ -62,11 +62,17 @@ else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 __all__ = [
+    "MAX_GRID_SIZE",
+    "MAX_THRESHOLD_M",
+    "MAX_VOXEL_M",
+    "MIN_VOXEL_M",
     "Config",
     "Finite",
     "OddSize",
     "Positive",
     "Seed",
+    "ThresholdM",
+    "VoxelM",
     "load_config",
     "odd",
     "one_of",
@@ -258,33 +264,49 @@ def one_of(values: Iterable[Any], noun: str | None = None) -> Any:
     return _OneOf(values, noun)
 
 
-def odd(minimum: int = 3, noun: str = "size") -> Any:
-    """Metadata for ``Annotated[int, odd(...)]``: an odd integer of at least ``minimum``."""
-    rule = f"must be an odd {noun} {minimum}, {minimum + 2}, {minimum + 4}, ..."
+def odd(minimum: int = 3, noun: str = "size", maximum: int | None = None) -> Any:
+    """Metadata for ``Annotated[int, odd(...)]``: an odd integer of at least ``minimum`` (and at
+    most ``maximum``)."""
+    top = "..." if maximum is None else f"... {maximum}"
+    rule = f"must be an odd {noun} {minimum}, {minimum + 2}, {minimum + 4}, {top}"
 
     def check(value: int) -> int:
-        if value < minimum or value % 2 == 0:
+        if value < minimum or value % 2 == 0 or (maximum is not None and value > maximum):
             raise PydanticCustomError("odd", rule)
         return value
 
     return AfterValidator(check)
 
 
-#: An odd window or grid size n >= 3 (Flexion n x n, Bearing Angle neighbourhoods).
-OddSize = Annotated[int, odd(3, "grid size")]
+#: Largest Flexion / Bearing Angle grid size n (neighbours (n - 1) / 2 = 49 pixels away); the
+#: stages refuse larger ones too, and any n larger than the image.
+MAX_GRID_SIZE = 99
+#: An odd window or grid size 3 <= n <= MAX_GRID_SIZE (Flexion n x n, Bearing Angle
+#: neighbourhoods).
+OddSize = Annotated[int, odd(3, "grid size", MAX_GRID_SIZE)]
 #: A seed of the random generators (same seed, same result).
 Seed = Annotated[int, Field(ge=0)]
 #: A finite number > 0 (thresholds, sizes, times).
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 #: Any finite number.
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: Largest inlier distance of keypoint matches, metres: beyond it almost any match is an
+#: "inlier" and the transform is whatever the outliers make it.
+MAX_THRESHOLD_M = 5.0
+#: Voxel sizes an ICP or a baseline can use, metres: below the smallest the voxel grid's
+#: indices overflow (and no scanner resolves it), above the largest nothing of a scene is left.
+MIN_VOXEL_M, MAX_VOXEL_M = 1e-4, 10.0
+#: An inlier distance, metres, in (0, MAX_THRESHOLD_M].
+ThresholdM = Annotated[float, Field(gt=0, le=MAX_THRESHOLD_M, allow_inf_nan=False)]
+#: A voxel size, metres, in [MIN_VOXEL_M, MAX_VOXEL_M].
+VoxelM = Annotated[float, Field(ge=MIN_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)]
 
 
 class Config(BaseModel):
     """Base of every configuration: frozen, unknown keys refused, defaults validated.
 
     Invalid values raise :class:`~flexreg.errors.ConfigError` with one line naming the field
-    and the rule (``n: must be an odd grid size 3, 5, 7, ... (got 4)``). ``"none"``/``"null"``
+    and the rule (``n: must be an odd grid size 3, 5, 7, ... 99 (got 4)``). ``"none"``/``"null"``
     (any case) stand for None in fields that allow None, since TOML has no null.
     """
 

@@ -44,3 +44,8 @@ class CalibrationError(RegistrationError):
 
 class ConfigError(FlexregError, ValueError):
     """An invalid option or configuration value."""
+
+
+class MemoryBudgetError(InputError):
+    """Data a file or option declares would not fit the memory budget
+    (:mod:`flexreg.core.budget`); raised before anything is allocated."""

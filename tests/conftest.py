@@ -90,3 +90,14 @@ def room_walk(n_frames: int) -> list:
     view = np.array([-0.948, 0.12, -0.295])
     step = np.array([-0.95, 0.12, 0.0]) / np.hypot(0.95, 0.12)
     return [look_at(start + 0.02 * k * step, start + 3.0 * view) for k in range(n_frames)]
+
+
+#: the bad-input corpus's summary line (tests/badinput/test_corpus.py), printed at the end
+BADINPUT_SUMMARY = pytest.StashKey[str]()
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    text = config.stash.get(BADINPUT_SUMMARY, None)
+    if text is not None:
+        terminalreporter.write_sep("-", "bad-input corpus")
+        terminalreporter.write_line(text)

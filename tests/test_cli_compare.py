@@ -84,7 +84,7 @@ def test_compare_prints_a_table_and_writes_three_files(files, tmp_path):
     ("extra", "message"),
     [
         (["--methods", "flexreg,icp-fast"], "unknown method 'icp-fast'"),
-        (["--voxel", "-0.1"], "--voxel: must be a positive number of metres"),
+        (["--voxel", "-0.1"], "--voxel: must be in [0.0001, 10] (got -0.1)"),
         (["--success-deg", "0"], "--success-deg"),
         (["--timeout-s", "nan"], "--timeout-s"),
     ],

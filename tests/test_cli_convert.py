@@ -451,5 +451,5 @@ def test_out_may_not_overwrite_the_input(conv, tmp_path, capsys):
     before = src.read_bytes()
     assert run(["convert", str(src), *LASER_ARGS, "--kind", "range", "--out", str(src)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"error: --out: {src}: is also an input"]
+    assert err == [f"error: --out: {src}: is also an input; refusing to overwrite it"]
     assert src.read_bytes() == before

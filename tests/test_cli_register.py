@@ -387,3 +387,28 @@ def test_failed_write_removes_the_outputs_already_written(
     line = one_error_line(capsys.readouterr().err)
     assert str(tmp_path / "blocker" / "T.json") in line
     assert _files(out) == []
+
+
+def test_failed_write_leaves_an_earlier_result_byte_identical(
+    registered, pair, tmp_path, monkeypatch, capsys
+):
+    """An earlier run's T.txt and match image survive a run whose T.json cannot be written
+    (they used to be replaced, then deleted by the clean-up)."""
+    target, source, _ = pair
+    monkeypatch.setattr(
+        flexreg.registration.pipeline, "register", lambda *a, **k: registered["result"]
+    )
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "T.txt").write_bytes(b"earlier matrix\n")
+    (out / "m.png").write_bytes(b"earlier picture")
+    (tmp_path / "blocker").write_text("a file where a folder is needed")
+    argv = [
+        "register", str(target), str(source), "--out", str(tmp_path / "blocker" / "T.json"),
+        "--txt", str(out / "T.txt"), "--matches", str(out / "m.png"),
+    ]  # fmt: skip
+    assert run(argv) == 1
+    assert str(tmp_path / "blocker" / "T.json") in one_error_line(capsys.readouterr().err)
+    assert (out / "T.txt").read_bytes() == b"earlier matrix\n"
+    assert (out / "m.png").read_bytes() == b"earlier picture"
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["T.txt", "blocker", "m.png", "out"]

@@ -63,9 +63,9 @@ def test_floats_round_trip_exactly_through_toml(tmp_path):
 @pytest.mark.parametrize(
     ("cls", "changes", "message"),
     [
-        (RegistrationConfig, {"n": 4}, "n: must be an odd grid size 3, 5, 7, ... (got 4)"),
+        (RegistrationConfig, {"n": 4}, "n: must be an odd grid size 3, 5, 7, ... 99 (got 4)"),
         (RegistrationConfig, {"ratio": 1.5}, "ratio: must be in (0, 1] (got 1.5)"),
-        (RegistrationConfig, {"voxel_m": 0}, "voxel_m: must be a positive number of metres"),
+        (RegistrationConfig, {"voxel_m": 0}, "voxel_m: must be in [0.0001, 10] (got 0"),
         (RegistrationConfig, {"seed": -1}, "seed: must be a non-negative integer (got -1)"),
         (RegistrationConfig, {"icp": "p2p"}, "icp: unknown method 'p2p'; known: point-to-plane"),
         (RegistrationConfig, {"upright": "yes"}, "upright: must be one of auto, on, off"),
@@ -159,7 +159,7 @@ def test_options_and_set_override_the_file(pair, tmp_path):
 @pytest.mark.parametrize(
     ("toml", "extra", "message"),
     [
-        ("n = 4\n", [], "error: {toml}: n: must be an odd grid size 3, 5, 7, ... (got 4)"),
+        ("n = 4\n", [], "error: {toml}: n: must be an odd grid size 3, 5, 7, ... 99 (got 4)"),
         ("nn = 5\n", [], "error: {toml}: nn: unknown setting; known: image, n,"),
         ('ratio = "high"\n', [], "error: {toml}: ratio: must be a valid number"),
         ("n = [\n", [], "error: {toml}: not valid TOML"),

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from flexreg.config import Config, Positive, Seed
+from flexreg.config import Config, Positive, Seed, VoxelM
 
 __all__ = ["DEFAULT_METHODS", "CompareConfig"]
 
@@ -29,7 +29,7 @@ class CompareConfig(Config):
     """
 
     methods: str = DEFAULT_METHODS
-    voxel_m: Positive | None = None
+    voxel_m: VoxelM | None = None
     seed: Seed = 0
     success_deg: Positive = 0.5
     success_m: Positive = 0.05

@@ -22,6 +22,7 @@ from flexreg.bench.types import BenchConfig, BenchResult
 from flexreg.config import Config
 from flexreg.errors import InputError
 from flexreg.io import atomic_write
+from flexreg.io.files import all_or_nothing
 
 __all__ = ["FIGURES", "load_bench", "write_bench", "write_comparison", "write_files"]
 
@@ -58,27 +59,12 @@ def write_comparison(
 
 
 def write_files(writers: list[tuple[Path, Callable[[Path], object]]]) -> list[Path]:
-    """Write each file atomically (temporary name, then rename). On any failure, the files
-    already written here are removed again, and so are the folders created for them."""
-    done: list[Path] = []
-    created: list[Path] = []
-    try:
+    """Write each file atomically, all or none (:func:`flexreg.io.files.all_or_nothing`): on
+    any failure no file is replaced, and the folders made for them are removed again."""
+    with all_or_nothing():
         for path, write in writers:
-            missing = [d for d in (path.parent, *path.parent.parents) if not d.exists()]
-            created += [d for d in reversed(missing) if d not in created]
-            try:
-                atomic_write(path, write)
-            except OSError as e:
-                raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        for d in reversed(created):
-            with contextlib.suppress(OSError):
-                d.rmdir()  # only if empty
-        raise
-    return done
+            atomic_write(path, write)
+    return [path for path, _ in writers]
 
 
 FIGURES = {

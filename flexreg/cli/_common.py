@@ -94,6 +94,28 @@ def read_input(
     return scans if all_scans else scans[:1]
 
 
+@contextmanager
+def about_pair(first: Path, second: Path) -> Iterator[None]:
+    """Name both files in an error of a call that uses two of them (``"a.ptx ↔ b.ptx: too few
+    inliers"``); an error about one named file passes unchanged."""
+    from flexreg.errors import FlexregError, InputError, RegistrationError
+
+    try:
+        yield
+    except FlexregError as e:
+        names = {str(first), str(second)}
+        if isinstance(e, InputError) and e.source in names:
+            raise
+        pair = f"{first} ↔ {second}"
+        if isinstance(e, InputError):
+            raise InputError(pair, str(e)) from e
+        try:
+            again = type(e)(f"{pair}: {e}")
+        except TypeError:
+            again = RegistrationError(f"{pair}: {e}")
+        raise again from e
+
+
 #: exit status of a command that wrote its result but does not trust it (see ``flexreg --help``)
 EXIT_UNCERTAIN = 3
 

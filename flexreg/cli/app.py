@@ -46,9 +46,22 @@ def _root(
     verbose: int = typer.Option(
         0, "--verbose", "-v", count=True, help="More log output (-vv: debug)."
     ),
+    memory_budget: str | None = typer.Option(
+        None,
+        "--memory-budget",
+        metavar="SIZE",
+        help="Most memory the data of one command may take, bytes with K/M/G/T or a "
+        "percentage of the machine's memory (e.g. 8G, 50%); files and options that would need "
+        "more are refused before reading. [default: $FLEXREG_MEMORY_BUDGET, else half the "
+        "machine's memory or of ulimit -v]",
+    ),
 ) -> None:
     """Register 3D scans through 2D Flexion images."""
     import logging
+
+    from flexreg.core.budget import set_memory_budget
+
+    set_memory_budget(memory_budget)
 
     from rich.logging import RichHandler
 
@@ -75,9 +88,16 @@ def _click_classes(name: str) -> tuple[type[BaseException], ...]:
 
 def run(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit status: 0 done (and confident), 1 known error (nothing
-    written), 2 usage error, 3 written but uncertain (``register``, ``calibrate``)."""
+    written), 2 usage error, 3 written but uncertain (``register``, ``calibrate``).
+
+    The command runs inside :func:`flexreg.io.files.all_or_nothing`: its files are renamed into
+    place together when it returns, and none is written (earlier results stay untouched) when
+    it fails or is interrupted."""
+    from flexreg.io.files import all_or_nothing
+
     try:
-        rv = app(args=argv, standalone_mode=False)
+        with all_or_nothing():  # every output of the command is written at its end, or none
+            rv = app(args=argv, standalone_mode=False)
     except FlexregError as e:
         err_console.print(f"error: {e}", markup=False, highlight=False, soft_wrap=True)
         return 1
@@ -92,6 +112,15 @@ def run(argv: list[str] | None = None) -> int:
     return rv if isinstance(rv, int) else 0
 
 
+def _terminated(signum: int, frame: object) -> None:
+    """SIGTERM: unwind like Ctrl-C, so the command's temporary outputs are removed."""
+    raise SystemExit(128 + signum)
+
+
 def main() -> None:
-    """Console-script entry point."""
+    """Console-script entry point. SIGTERM (a scheduler or ``kill``) ends the command like
+    Ctrl-C: nothing it was writing is left behind; exit status 143."""
+    import signal
+
+    signal.signal(signal.SIGTERM, _terminated)
     sys.exit(run())

@@ -10,7 +10,15 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.calibration.config import CalibrationConfig
-from flexreg.cli._common import console, err_console, exit_for, print_verdict, stage, write_all
+from flexreg.cli._common import (
+    about_pair,
+    console,
+    err_console,
+    exit_for,
+    print_verdict,
+    stage,
+    write_all,
+)
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -104,8 +112,11 @@ def read_image(path: Path) -> NDArray[np.uint8]:
     import cv2
     import numpy as np
 
+    from flexreg.io.depth import check_image_size
+
     if not path.is_file():
         raise InputError(path, "no such file")
+    check_image_size(path)  # a PNG header declaring a huge image is refused before decoding
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(path, "not a readable image (PNG, JPEG, ...)")
@@ -323,7 +334,7 @@ def calibrate_command(
         kitti_camera=kitti_camera,
         truth=truth,
     )
-    inputs = [p for p in (image, camera, scan, pairs, init, truth) if p is not None]
+    inputs = [p for p in (image, camera, scan, pairs, init, truth, config_file) if p is not None]
     check_outputs([("--out", out, ".json"), ("--overlay", overlay, ".png")], inputs=inputs)
     check_out_folder("--export-views", export_views)
     dist = _parse_distortion(distortion)
@@ -343,7 +354,10 @@ def calibrate_command(
 
     result = None
     if pairs is not None or auto:
-        with stage("Solving PnP" + (" with automatic proposals" if auto else "")):
+        with (
+            stage("Solving PnP" + (" with automatic proposals" if auto else "")),
+            about_pair(image, scan),
+        ):
             result = calibrate(
                 img, lidar, intr, pairs=corr, T_init=T_init, auto=auto, config=config
             )

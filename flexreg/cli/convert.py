@@ -29,6 +29,7 @@ from flexreg.cli.options import (
 )
 from flexreg.config import Config, OddSize, one_of, parse_sets
 from flexreg.errors import ConfigError, FlexregError, InputError
+from flexreg.io.safety import written_files
 from flexreg.registration.config import MEDIANS
 from flexreg.stages.feature_images import KINDS, Stretch
 
@@ -104,14 +105,22 @@ def _check_camera(
         )
 
 
-def _check_out(out: Path, input: Path, folder: bool) -> None:
-    """``--out`` is a folder when INPUT is one, else a .png file that is not the input."""
+def _check_out(
+    out: Path, input: Path, folder: bool, keep_float: bool, config_file: Path | None
+) -> None:
+    """``--out`` is a folder when INPUT is one, else a .png file that is neither the input nor
+    one of its companion files (nor its ``.npz`` with ``--keep-float``)."""
     if folder:
         check_out_folder("--out", out, (input,))
         return
     if out.suffix.lower() != ".png":
         raise ConfigError(f"--out: {out}: output must be a .png file")
-    check_outputs([("--out", out, None)], inputs=(input,))
+    check_outputs(
+        [("--out", out, None)],
+        inputs=(input,),
+        extra_inputs=[("--config", config_file)],
+        companions={"--out": written_files(out, keep_float=keep_float)[1:]},
+    )
 
 
 def load_range_image(
@@ -147,6 +156,7 @@ def _convert_one(
     import numpy as np
 
     from flexreg.io import atomic_write
+    from flexreg.io.files import discard
     from flexreg.stages.feature_images import convert, quantize, value_range
 
     if not src.is_file():
@@ -183,7 +193,11 @@ def _convert_one(
             atomic_write(dst.with_suffix(".npz"), write_npz)
         atomic_write(dst, write_png)
     except OSError as e:
+        discard(dst.with_suffix(".npz"), dst)
         raise InputError(dst, f"cannot write: {e.strerror or e}") from e
+    except BaseException:
+        discard(dst.with_suffix(".npz"), dst)  # a folder's other images are still written
+        raise
     H, W = image.shape
     return W, H, float(valid.mean()) if valid.size else 0.0
 
@@ -306,7 +320,7 @@ def convert_command(
     )
     _check_camera(pinhole, equirect, depth_kind, depth_scale)
     folder = input.is_dir()
-    _check_out(out, input, folder)
+    _check_out(out, input, folder, keep_float, config_file)
     camera_options: dict[str, object] = dict(
         pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
     )

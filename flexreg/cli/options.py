@@ -110,19 +110,30 @@ def build_config(
 def check_outputs(
     outputs: Sequence[tuple[str, Path | None, str | None]],
     *,
-    inputs: Iterable[Path] = (),
+    inputs: Iterable[Path | None] = (),
     input_folders: Iterable[Path] = (),
+    extra_inputs: Iterable[tuple[str, Path | None]] = (),
+    companions: Mapping[str, Sequence[Path]] | None = None,
 ) -> None:
     """Refuse unusable output paths before anything is read or computed.
+
+    Every output (and every file written beside it) is compared with every input and its
+    companion files (a depth PNG's camera sidecar, a 3DTK scan's pose) by file identity, so
+    symbolic links, hard links and other spellings of an input are refused too.
 
     Parameters
     ----------
     outputs : sequence of (option, path or None, suffix or None)
         Each output file, with the suffix it must have (None: any).
     inputs : iterable of Path
-        Input files no output may overwrite.
+        Input scan files no output may overwrite (their companion files included).
     input_folders : iterable of Path
         Input folders whose existing files no output may overwrite.
+    extra_inputs : iterable of (option, Path or None)
+        Other files the command reads (``--truth``, ``--pairs``, ``--camera``...).
+    companions : mapping of option -> paths, optional
+        Files an output option writes beside its own path (``project``: the ``.npz`` and the
+        camera sidecar).
 
     Raises
     ------
@@ -130,21 +141,37 @@ def check_outputs(
         ``--out: T.txt: must be a .json file``, ``... is a folder, not a file``,
         ``... is also an input`` / ``is also --txt``.
     """
+    from flexreg.io.files import protect
+    from flexreg.io.safety import find_clash, input_files
+
     given = [(option, path, suffix) for option, path, suffix in outputs if path is not None]
     for option, path, suffix in given:
         if suffix is not None and path.suffix.lower() != suffix:
             raise ConfigError(f"{option}: {path}: must be a {suffix} file")
-    seen: dict[Path, str] = {p.resolve(): "an input" for p in inputs}
-    folders = [f.resolve() for f in input_folders]
-    for option, path, _ in given:
         if path.is_dir():
             raise ConfigError(f"{option}: {path}: is a folder, not a file")
+    read: list[tuple[str, Path]] = []
+    for p in inputs:
+        if p is not None:
+            files = input_files(p)
+            read.append(("an input", files[0]))
+            read += [(f"the companion file of input {p}", c) for c in files[1:]]
+    read += [(f"the {option} input", p) for option, p in extra_inputs if p is not None]
+    protect(*(p for _, p in read))  # refused again at write time, whatever writes it
+    written: list[tuple[str, Path]] = []
+    for option, path, _ in given:
+        written.append((option, path))
+        written += [(option, c) for c in (companions or {}).get(option, ())]
+    clash = find_clash(written, read)
+    if clash is not None:
+        option, path, what = clash
+        why = "" if what.startswith("--") else "; refusing to overwrite it"
+        raise ConfigError(f"{option}: {path}: is also {what}{why}")
+    folders = [f.resolve() for f in input_folders]
+    for option, path in written:
         key = path.resolve()
-        if key in seen:
-            raise ConfigError(f"{option}: {path}: is also {seen[key]}")
         if path.exists() and any(f in key.parents for f in folders):
             raise ConfigError(f"{option}: {path}: would overwrite a file of the input")
-        seen[key] = option
 
 
 def check_out_folder(option: str, folder: Path | None, inputs: Iterable[Path] = ()) -> None:

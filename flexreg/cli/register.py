@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.cli._common import (
+    about_pair,
     console,
     exit_for,
     print_verdict,
@@ -276,14 +277,18 @@ def register_command(
         ("--matches", matches, ".png"),
         ("--merged", merged, ".ply"),
     ]
-    check_outputs(outputs, inputs=(target, source))
+    check_outputs(
+        outputs,
+        inputs=(target, source),
+        extra_inputs=[("--truth", truth), ("--config", config_file)],
+    )
     T_true = None if truth is None else read_truth(truth, target, source)
     scans = []
     for path in (target, source):
         with stage(f"Reading {path.name}"):
             (scan,) = read_input(path)
         scans.append(scan)
-    with _StageSpinners() as spinners:
+    with _StageSpinners() as spinners, about_pair(target, source):
         result = register(scans[0], scans[1], config, progress=spinners)
     errors = None if T_true is None else _errors(result, T_true)
     meta = {"target": str(target), "source": str(source), "truth": truth, "errors": errors}
@@ -347,23 +352,47 @@ def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
 
     import numpy as np
 
-    from flexreg.core.transforms import as_transform, invert
+    from flexreg.core.transforms import invert
     from flexreg.io import read_transform
+    from flexreg.io.files import protect
 
+    protect(path)
     if path.suffix.lower() == ".json" and path.is_file():
         try:
             doc = json.loads(path.read_text(errors="replace"))
         except json.JSONDecodeError as e:
             raise InputError(path, f"invalid JSON: {e.msg} (line {e.lineno})") from None
+        except (OSError, UnicodeError) as e:
+            raise InputError(path, f"cannot read: {e}") from None
         if isinstance(doc, dict) and "pairs" in doc and "T_target_source" not in doc:
-            for pair in doc["pairs"]:
+            pairs = doc["pairs"]
+            if not isinstance(pairs, list) or not all(isinstance(p, dict) for p in pairs):
+                raise InputError(path, "'pairs' must be a list of objects")
+            for pair in pairs:
                 names = (pair.get("target"), pair.get("source"))
-                if names == (target.stem, source.stem):
-                    return as_transform(pair["T_target_source"], name=str(path))
-                if names == (source.stem, target.stem):
-                    return invert(as_transform(pair["T_target_source"], name=str(path)))
+                if names in ((target.stem, source.stem), (source.stem, target.stem)):
+                    if "T_target_source" not in pair:
+                        raise InputError(
+                            path, f"pair {names[0]} / {names[1]} has no T_target_source"
+                        )
+                    T = _truth_matrix(pair["T_target_source"], path)
+                    return T if names == (target.stem, source.stem) else invert(T)
             raise InputError(path, f"no pair {target.stem} / {source.stem} in its 'pairs'")
     return np.asarray(read_transform(path), dtype=np.float64)
+
+
+def _truth_matrix(value: Any, path: Path) -> NDArray[np.float64]:
+    """A 4x4 rigid transform from a JSON value, or one error line naming ``path``."""
+    import numpy as np
+
+    from flexreg.core.transforms import as_transform
+
+    try:
+        return as_transform(np.asarray(value, dtype=np.float64), name=str(path))
+    except (ValueError, TypeError) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(path, f"T_target_source is not a 4x4 matrix of numbers ({e})") from None
 
 
 def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str, float]:

@@ -63,6 +63,18 @@ def info(
         console.print(render_scan_summary(s))
 
 
+def check_resolution_deg(resolution_deg: float | None) -> None:
+    """``--resolution-deg``: a finite pixel pitch in (0, 360] degrees."""
+    import math
+
+    from flexreg.errors import InputError
+
+    if resolution_deg is not None and not (
+        math.isfinite(resolution_deg) and 0 < resolution_deg <= 360
+    ):
+        raise InputError("--resolution-deg", f"must be in (0, 360] degrees, got {resolution_deg}")
+
+
 @app.command("project")
 def project(
     scan: Path = typer.Argument(..., help="Scan file (any readable format)."),
@@ -91,14 +103,23 @@ def project(
     """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
     import math
 
+    from flexreg.cli.options import check_outputs
+    from flexreg.core.budget import check_memory
+    from flexreg.core.scan import GRID_CELL_BYTES
     from flexreg.errors import InputError
+    from flexreg.io.files import all_or_nothing
     from flexreg.io.info import write_range_image
+    from flexreg.io.safety import written_files
     from flexreg.stages.projection import range_image
 
     if out.suffix.lower() != ".png":
         raise InputError(out, "output must be a .png file")
-    if resolution_deg is not None and not resolution_deg > 0:
-        raise InputError("--resolution-deg", f"must be positive, got {resolution_deg}")
+    check_outputs(
+        [("--out", out, ".png")],
+        inputs=(scan,),
+        companions={"--out": written_files(out, range_image=True)[1:]},
+    )
+    check_resolution_deg(resolution_deg)
     with stage(f"Reading {scan.name}"):
         scans = read_input(
             scan,
@@ -124,10 +145,16 @@ def project(
                 if (s.camera is not None and res is None)
                 else auto_spherical_camera(s.points, angular_resolution_rad=res)
             )
+            if resolution_deg is not None:
+                check_memory(
+                    cam.height * cam.width * GRID_CELL_BYTES,
+                    f"a {cam.height} x {cam.width} image at {resolution_deg}° per pixel",
+                    source="--resolution-deg",
+                )
             img = zproject(s, cam)
         else:
             img = range_image(s)
-    with stage(f"Writing {out.name}"):
+    with stage(f"Writing {out.name}"), all_or_nothing():
         written = write_range_image(out, img, png_scale_m=scale)
     console.print(
         f"{img.height} x {img.width} range image, {img.n_valid:,} valid pixels "

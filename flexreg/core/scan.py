@@ -9,11 +9,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.budget import check_memory
 from flexreg.core.transforms import as_transform
 from flexreg.errors import InputError
 
 if TYPE_CHECKING:
     from flexreg.core.camera import Camera
+
+#: memory per grid cell of the images a gridded scan becomes (xyz float32, range, index, valid,
+#: intensity, feature image and its working copies), bytes: what the budget is checked against
+GRID_CELL_BYTES = 64
+#: memory per point while a scan is read and used (float64 xyz, attributes, working copies)
+POINT_BYTES = 64
 
 
 @dataclass(eq=False)
@@ -80,6 +87,7 @@ class Scan:
             if rows <= 0 or cols <= 0:
                 raise InputError(src, f"grid shape must be positive, got {rows} x {cols}")
             self.grid_shape = (rows, cols)
+            check_memory(rows * cols * GRID_CELL_BYTES, f"its {rows} x {cols} grid", source=src)
             gi = np.ascontiguousarray(self.grid_index, dtype=np.int32)
             if gi.shape != (n, 2):
                 raise InputError(src, f"grid_index must have shape ({n}, 2), got {gi.shape}")

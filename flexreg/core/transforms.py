@@ -28,7 +28,10 @@ def as_transform(
     InputError
         If the matrix is not finite, not homogeneous, or not rigid/invertible as required.
     """
-    M = np.asarray(T, dtype=np.float64)
+    try:
+        M = np.asarray(T, dtype=np.float64)
+    except (ValueError, TypeError):
+        raise InputError(name, "expected a 4x4 matrix of numbers (ragged or non-numeric)") from None
     if M.shape != (4, 4):
         raise InputError(name, f"expected a 4x4 matrix, got shape {M.shape}")
     if not np.all(np.isfinite(M)):

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from flexreg.errors import InputError
 from flexreg.io import atomic_write
+from flexreg.io.files import protect
 
 __all__ = ["PairTable", "read_pairs", "write_pairs"]
 
@@ -120,6 +121,7 @@ def read_pairs(path: str | PathLike[str]) -> PairTable:
         number of fields or a value that is not a finite number.
     """
     p = Path(path)
+    protect(p)
     if not p.is_file():
         raise InputError(p, "no such file")
     header, rows = _parse_rows(p)

@@ -10,10 +10,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.budget import check_memory
 from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamera, camera_from_dict
 from flexreg.core.range_image import from_depth, to_scan
-from flexreg.core.scan import Scan
+from flexreg.core.scan import GRID_CELL_BYTES, Scan
 from flexreg.errors import InputError
+from flexreg.io.files import protect
 
 TUM_DEPTH_SCALE = 1.0 / 5000.0  # metres per unit of TUM RGB-D depth PNGs
 MM_DEPTH_SCALE = 1.0e-3
@@ -45,6 +47,7 @@ def read_depth_png(
         raise InputError(
             p, f"depth scale must be a positive number of metres per unit, got {depth_scale}"
         )
+    check_image_size(p)
     raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     if raw is None:
         raise InputError(p, "not a readable PNG image")
@@ -56,6 +59,29 @@ def read_depth_png(
     bad = np.isin(raw, np.asarray((*invalid_values, 0), dtype=raw.dtype))
     d[bad] = np.nan
     return d
+
+
+def image_size(path: Path) -> tuple[int, int] | None:
+    """``(width, height)`` a PNG's header declares (None: not a PNG; its reader decides)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+    except OSError as e:
+        raise InputError(path, f"cannot read: {e.strerror or e}") from None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+def check_image_size(path: Path) -> None:
+    """Refuse a PNG whose declared size would not fit the memory budget, before decoding it."""
+    size = image_size(path)
+    if size is None:
+        return
+    w, h = size
+    if w == 0 or h == 0:
+        raise InputError(path, f"PNG header declares an empty {w} x {h} image")
+    check_memory(w * h * GRID_CELL_BYTES, f"its {w} x {h} image", source=path)
 
 
 def sidecar_path(path: Path) -> Path:
@@ -76,16 +102,46 @@ def read_sidecar(path: Path) -> dict[str, Any]:
         Keyword arguments for :func:`read`: ``camera`` and whichever of the others are given.
     """
     side = sidecar_path(path)
+    protect(side)
     try:
         doc = json.loads(side.read_text())
+    except OSError as e:
+        raise InputError(side, f"cannot read: {e.strerror or e}") from None
+    except ValueError as e:
+        raise InputError(side, f"not valid JSON ({e})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("camera"), dict):
+        raise InputError(side, "a camera sidecar needs a 'camera' object (the intrinsics)")
+    try:
         opts: dict[str, Any] = {"camera": camera_from_dict(doc["camera"])}
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise InputError(side, f"not a valid camera sidecar ({e})") from None
-    for key in ("depth_scale", "depth_kind"):
-        if key in doc:
-            opts[key] = doc[key]
+    except InputError as e:
+        raise InputError(side, f"camera: {e.problem}") from None
+    except (ValueError, KeyError, TypeError) as e:
+        what = f"missing field {e}" if isinstance(e, KeyError) else str(e)
+        raise InputError(side, f"camera: not a valid camera ({what})") from None
+    if "depth_scale" in doc:
+        scale = doc["depth_scale"]
+        if (
+            isinstance(scale, bool)
+            or not isinstance(scale, (int, float))
+            or not (np.isfinite(scale) and scale > 0)
+        ):
+            raise InputError(
+                side, f"depth_scale must be a positive number of metres per unit, got {scale!r}"
+            )
+        opts["depth_scale"] = float(scale)
+    if "depth_kind" in doc:
+        if doc["depth_kind"] not in ("z", "range"):
+            raise InputError(side, f'depth_kind must be "z" or "range", got {doc["depth_kind"]!r}')
+        opts["depth_kind"] = doc["depth_kind"]
     if "invalid_values" in doc:
-        opts["invalid_values"] = tuple(int(v) for v in doc["invalid_values"])
+        vals = doc["invalid_values"]
+        if not isinstance(vals, list) or not all(
+            isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 65535 for v in vals
+        ):
+            raise InputError(
+                side, f"invalid_values must be a list of integers 0..65535, got {vals!r}"
+            )
+        opts["invalid_values"] = tuple(vals)
     return opts
 
 

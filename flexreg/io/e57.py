@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import matrix_to_quat, quat_to_matrix
 from flexreg.errors import InputError
+from flexreg.io.e57_header import check_declared
 
 __all__ = ["read", "write"]
 
@@ -68,6 +69,7 @@ def read(path: Path, **options: Any) -> list[Scan]:
     import pye57
     from pye57 import libe57
 
+    check_declared(path)
     try:
         e57 = pye57.E57(str(path))
     except libe57.E57Exception as exc:

@@ -1,14 +1,26 @@
-"""Writing files whole or not at all.
+"""Writing files whole or not at all, and never over an input.
 
-- :func:`atomic_write` writes one file through a temporary sibling renamed into place.
-- :func:`write_all` runs several writers and removes what it wrote when one of them fails, so a
-  command leaves all of its outputs or none.
+- :func:`all_or_nothing` opens the set of outputs of one command (:class:`Outputs`): every
+  :func:`atomic_write` inside it writes a temporary sibling of its target, and the temporaries
+  are renamed into place together when the block ends without an error; on an error (or
+  Ctrl-C) they are removed, and the files already at the targets stay byte-identical. The
+  command line runs every command inside one such block.
+- :func:`protect` marks a file as an input of the running command: an output that resolves to
+  it (symbolic links, hard links) is refused, whatever the command.
+- :func:`atomic_write` writes one file through a temporary sibling renamed into place (at once
+  outside a block, at the block's end inside one).
+- :func:`write_all` runs several writers all or none (a block of its own outside a command).
 - :func:`write_png` writes an image as PNG, atomically.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import contextlib
+import itertools
+import logging
+import os
+from collections.abc import Callable, Iterator, Sequence
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
@@ -17,49 +29,256 @@ from numpy.typing import NDArray
 
 from flexreg.errors import InputError
 
-__all__ = ["atomic_write", "write_all", "write_png"]
+__all__ = [
+    "Outputs",
+    "all_or_nothing",
+    "atomic_write",
+    "discard",
+    "protect",
+    "write_all",
+    "write_png",
+]
+
+log = logging.getLogger(__name__)
+
+_ACTIVE: ContextVar[Outputs | None] = ContextVar("flexreg_outputs", default=None)
+_COUNTER = itertools.count()
+
+
+def _key(path: Path) -> tuple[int, int] | Path:
+    """Identity of a file: (device, inode) when it exists (hard links, symbolic links and
+    relative spellings all agree), else its resolved path."""
+    try:
+        st = path.stat()
+    except OSError:
+        return path.resolve()
+    return (st.st_dev, st.st_ino)
+
+
+def _temporary(path: Path) -> Path:
+    """A fresh hidden sibling of ``path`` keeping its suffix (writers pick formats by it)."""
+    return path.with_name(f".{path.stem}.{os.getpid()}-{next(_COUNTER)}.partial{path.suffix}")
+
+
+class Outputs:
+    """The outputs of one command: staged as temporaries, renamed into place together.
+
+    Use through :func:`all_or_nothing`; library writers join it through :func:`atomic_write`.
+    """
+
+    def __init__(self) -> None:
+        self._staged: dict[Path, Path] = {}  # target (absolute) -> temporary
+        self._created: list[Path] = []  # folders made for the targets, outermost first
+        self._inputs: dict[tuple[int, int] | Path, Path] = {}
+
+    @property
+    def targets(self) -> list[Path]:
+        """The files staged so far, in order."""
+        return list(self._staged)
+
+    def protect(self, path: str | os.PathLike[str]) -> None:
+        """Refuse any output that is the file ``path`` (an input of the command)."""
+        p = Path(path)
+        self._inputs.setdefault(_key(p), p)
+        if p.exists():  # also the spelling, for a file an output would create anew
+            self._inputs.setdefault(p.resolve(), p)
+
+    def check(self, path: Path) -> None:
+        """Raise :class:`InputError` when ``path`` is an input of the command."""
+        for key in (_key(path), path.resolve()):
+            if key in self._inputs:
+                raise InputError(
+                    path, f"is also an input ({self._inputs[key]}); refusing to overwrite it"
+                )
+
+    def stage(self, path: Path, write: Callable[[Path], object]) -> None:
+        """Call ``write(tmp)`` on a temporary sibling of ``path``; rename it at :meth:`commit`.
+
+        Raises
+        ------
+        InputError
+            ``path`` is an input, its folder cannot be made, or the writer fails with an
+            ``OSError`` (naming ``path``); an :class:`InputError` about the temporary is
+            re-raised naming ``path``.
+        """
+        path = Path(os.path.abspath(path))
+        self.check(path)
+        if path.is_dir():
+            raise InputError(path, "is a folder, not a file")
+        self._make_parent(path)
+        tmp = _temporary(path)
+        try:
+            write(tmp)
+        except InputError as e:
+            tmp.unlink(missing_ok=True)
+            if e.source == str(tmp):
+                raise InputError(path, e.problem) from None
+            raise
+        except OSError as e:
+            tmp.unlink(missing_ok=True)
+            raise InputError(path, f"cannot write: {e.strerror or e}") from e
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        if not tmp.is_file():
+            raise InputError(path, "the writer produced no file")
+        old = self._staged.pop(path, None)
+        if old is not None:
+            old.unlink(missing_ok=True)
+        self._staged[path] = tmp
+
+    def discard(self, path: Path) -> None:
+        """Forget a staged output (its temporary is removed; the target stays as it was)."""
+        tmp = self._staged.pop(Path(os.path.abspath(path)), None)
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+
+    def _make_parent(self, path: Path) -> None:
+        missing = [d for d in (path.parent, *path.parent.parents) if not d.exists()]
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(path, f"cannot make its folder: {e.strerror or e}") from e
+        self._created += [d for d in reversed(missing) if d not in self._created]
+
+    def commit(self) -> list[Path]:
+        """Rename every temporary into place; if one rename fails, put back what the earlier
+        ones replaced (the previous files, kept as hard links meanwhile) and raise."""
+        done: list[tuple[Path, Path | None]] = []  # target, backup of its previous content
+        try:
+            for path, tmp in self._staged.items():
+                backup = None
+                if path.exists():
+                    backup = path.with_name(f".{path.name}.{os.getpid()}.previous")
+                    try:
+                        os.link(path, backup)
+                    except OSError:
+                        backup = None
+                try:
+                    tmp.replace(path)
+                except OSError as e:
+                    if backup is not None:
+                        backup.unlink(missing_ok=True)
+                    raise InputError(path, f"cannot write: {e.strerror or e}") from e
+                done.append((path, backup))
+        except BaseException:
+            for path, backup in reversed(done):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        backup.replace(path)
+                    else:
+                        path.unlink()
+            self.abort()
+            raise
+        for _, backup in done:
+            if backup is not None:
+                backup.unlink(missing_ok=True)
+        written = list(self._staged)
+        self._staged.clear()
+        self._created.clear()
+        return written
+
+    def abort(self) -> None:
+        """Remove the temporaries and the folders made for them (when empty)."""
+        for tmp in self._staged.values():
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        self._staged.clear()
+        for d in reversed(self._created):  # innermost first
+            with contextlib.suppress(OSError):
+                d.rmdir()
+        self._created.clear()
+
+
+def active_outputs() -> Outputs | None:
+    """The :class:`Outputs` of the running :func:`all_or_nothing` block, if any."""
+    return _ACTIVE.get()
+
+
+@contextlib.contextmanager
+def all_or_nothing() -> Iterator[Outputs]:
+    """Write every output of the block at its end, or none of them.
+
+    Nested blocks join the outermost one (its end renames everything). On an exception
+    (including ``KeyboardInterrupt``) every temporary is removed and the targets keep their
+    previous content.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> with all_or_nothing():
+    ...     atomic_write(d / "a.txt", lambda tmp: tmp.write_text("a"))
+    ...     (d / "a.txt").exists()
+    False
+    >>> (d / "a.txt").read_text()
+    'a'
+    """
+    outer = _ACTIVE.get()
+    if outer is not None:
+        yield outer
+        return
+    outputs = Outputs()
+    token = _ACTIVE.set(outputs)
+    try:
+        yield outputs
+    except BaseException:
+        outputs.abort()
+        raise
+    finally:
+        _ACTIVE.reset(token)
+    outputs.commit()
+
+
+def protect(*paths: str | os.PathLike[str] | None) -> None:
+    """Mark input files of the running command: no output of it may overwrite them.
+
+    Does nothing outside an :func:`all_or_nothing` block (a library call).
+    """
+    outputs = _ACTIVE.get()
+    if outputs is None:
+        return
+    for p in paths:
+        if p is not None:
+            outputs.protect(p)
+
+
+def discard(*paths: str | os.PathLike[str]) -> None:
+    """Drop staged outputs of the running block (one item of a batch that failed halfway);
+    nothing happens outside a block or for paths not staged."""
+    outputs = _ACTIVE.get()
+    if outputs is not None:
+        for p in paths:
+            outputs.discard(Path(p))
 
 
 def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp)`` on a temporary sibling of ``path``, then rename it into place.
 
-    An :class:`InputError` the writer raises about the temporary file is re-raised naming
-    ``path``, the file the caller asked for.
+    Inside an :func:`all_or_nothing` block the rename waits for the block's end. An
+    :class:`InputError` the writer raises about the temporary file is re-raised naming
+    ``path``, the file the caller asked for; an ``OSError`` becomes an :class:`InputError`
+    naming ``path``.
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    try:
-        write(tmp)
-        tmp.replace(path)
-    except InputError as e:
-        if e.source == str(tmp):
-            raise InputError(path, e.problem) from None
-        raise
-    finally:
-        tmp.unlink(missing_ok=True)
+    with all_or_nothing() as outputs:
+        outputs.stage(Path(path), write)
 
 
 def write_all(writers: Sequence[tuple[Path, Callable[[], Any]]]) -> None:
-    """Run each ``(path, write)``; if one fails, remove the files already written here, so a
-    command leaves all of its outputs or none.
+    """Run each ``(path, write)`` inside one :func:`all_or_nothing` block, so a command leaves
+    all of its outputs or none (and earlier results untouched).
 
     Raises
     ------
     InputError
         An ``OSError`` of a writer, naming its path (the writer's own errors pass unchanged).
     """
-    done: list[Path] = []
-    try:
+    with all_or_nothing():
         for path, write in writers:
             try:
                 write()
             except OSError as e:
                 raise InputError(path, f"cannot write: {e.strerror or e}") from e
-            done.append(path)
-    except BaseException:
-        for p in done:
-            p.unlink(missing_ok=True)
-        raise
 
 
 def write_png(path: Path, image: NDArray[np.uint8] | NDArray[np.uint16]) -> Path:

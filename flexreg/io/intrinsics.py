@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.transforms import as_transform, nearest_rotation
 from flexreg.errors import InputError
+from flexreg.io.files import protect
 
 __all__ = [
     "DISTORTION_LENGTHS",
@@ -258,6 +259,7 @@ def read_intrinsics(path: str | PathLike[str], *, kitti_camera: int = 2) -> Came
         Missing file, unknown suffix, unreadable content, or invalid K / distortion / size.
     """
     p = Path(path)
+    protect(p)
     if not p.is_file():
         raise InputError(p, "no such file")
     suffix = p.suffix.lower()
@@ -513,6 +515,7 @@ def read_extrinsic(path: str | PathLike[str], *, kitti_camera: int = 2) -> NDArr
     (4, 4) float64
     """
     p = Path(path)
+    protect(p)
     if not p.is_file():
         raise InputError(p, "no such file")
     suffix = p.suffix.lower()

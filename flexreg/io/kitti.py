@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
@@ -17,6 +18,31 @@ from flexreg.errors import InputError
 __all__ = ["read"]
 
 RECORD_BYTES = 16  # four little-endian float32
+#: farthest believable coordinate of a Velodyne-style return, metres
+MAX_COORDINATE_M = 10_000.0
+#: nearest non-zero coordinate a sensor reports, metres; smaller magnitudes are what float64
+#: or text bytes look like when read as float32
+MIN_NONZERO_M = 1e-9
+
+
+def _check_plausible(path: Path, rec: NDArray[np.float32]) -> None:
+    """Refuse records that cannot be float32 ``x y z reflectance`` returns: coordinates beyond
+    :data:`MAX_COORDINATE_M`, many tiny non-zero ones (float64 or text bytes read as float32),
+    or a non-finite reflectance."""
+    xyz = np.abs(rec[:, :3])
+    far = int(np.count_nonzero((xyz > MAX_COORDINATE_M).any(axis=1)))
+    tiny = int(np.count_nonzero(((xyz > 0) & (xyz < MIN_NONZERO_M)).any(axis=1)))
+    hint = "not float32 x y z reflectance records (a text or float64 file?)"
+    if far:
+        raise InputError(
+            path, f"{far} of {len(rec)} points lie beyond {MAX_COORDINATE_M:g} m: {hint}"
+        )
+    if tiny > max(1, len(rec) // 100):
+        raise InputError(
+            path, f"{tiny} of {len(rec)} points have coordinates below {MIN_NONZERO_M:g} m: {hint}"
+        )
+    if not np.isfinite(rec[:, 3]).all():
+        raise InputError(path, f"reflectance holds NaN or Inf: {hint}")
 
 
 def read(path: Path, **options: Any) -> list[Scan]:
@@ -38,7 +64,9 @@ def read(path: Path, **options: Any) -> list[Scan]:
     Raises
     ------
     InputError
-        File size not a multiple of 16 bytes, NaN / Inf coordinates, or no points.
+        File size not a multiple of 16 bytes, NaN / Inf coordinates, coordinates that cannot
+        be float32 returns (beyond 10 km, or many below a nanometre: a text or float64 file),
+        or no points.
     """
     if options:
         raise InputError(path, f"unknown KITTI option(s): {', '.join(sorted(options))}")
@@ -61,6 +89,7 @@ def read(path: Path, **options: Any) -> list[Scan]:
     if not finite.all():
         bad = int(np.count_nonzero(~finite))
         raise InputError(path, f"{bad} of {len(rec)} points have NaN or Inf coordinates")
+    _check_plausible(path, rec)
     keep = np.any(xyz != 0.0, axis=1)
     if not keep.any():
         raise InputError(path, f"all {len(rec)} points are (0, 0, 0): no returns")

@@ -14,10 +14,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.scan import Scan
+from flexreg.core.budget import check_memory, format_bytes
+from flexreg.core.scan import POINT_BYTES, Scan
 from flexreg.errors import InputError
 
-__all__ = ["read"]
+__all__ = ["check_declared_points", "read"]
+
+#: largest believable ratio of a LAZ file's points uncompressed to its size (LASzip reaches
+#: 5-15 on real data; even constant points stay far below this)
+MAX_LAZ_RATIO = 200
 
 
 def read(path: Path, **options: Any) -> list[Scan]:
@@ -48,15 +53,21 @@ def read(path: Path, **options: Any) -> list[Scan]:
         raise InputError(path, f"unknown LAS option(s): {', '.join(sorted(options))}")
     import laspy
 
+    _check_signature(path)
     try:
         with laspy.open(path) as reader:
             declared = int(reader.header.point_count)
+            if declared == 0:
+                raise InputError(path, "LAS file holds no points (header point count 0)")
+            check_declared_points(path, reader.header)
             las = reader.read()
-    except (laspy.errors.LaspyException, ValueError, RuntimeError, OSError, EOFError) as exc:
+    except InputError:
+        raise
+    except MemoryError:
+        raise InputError(path, "out of memory while decoding the points") from None
+    except Exception as exc:  # laspy and lazrs raise many kinds on broken headers and data
         raise InputError(path, f"not a readable LAS/LAZ file: {exc}") from None
     n = len(las.points)
-    if declared == 0:
-        raise InputError(path, "LAS file holds no points (header point count 0)")
     if n != declared:
         raise InputError(path, f"truncated: the header declares {declared} points, {n} were read")
     xyz = np.stack(
@@ -70,6 +81,58 @@ def read(path: Path, **options: Any) -> list[Scan]:
     if {"red", "green", "blue"} <= names:
         colors = np.stack([_to_8bit(np.asarray(las[c])) for c in ("red", "green", "blue")], axis=1)
     return [Scan(points=xyz, intensity=intensity, colors=colors, path=path, name=path.stem)]
+
+
+def _check_signature(path: Path) -> None:
+    """The ``LASF`` signature and a version 1.0-1.4, before laspy parses anything."""
+    with open(path, "rb") as f:
+        head = f.read(26)
+    if len(head) < 26 or head[:4] != b"LASF":
+        raise InputError(path, "not a LAS/LAZ file (no LASF signature)")
+    major, minor = head[24], head[25]
+    if major != 1 or minor > 4:
+        raise InputError(path, f"LAS version {major}.{minor} is not supported (1.0 to 1.4)")
+
+
+def check_declared_points(path: Path, header: Any) -> None:
+    """Refuse a header whose point count the file cannot hold or the memory budget cannot take.
+
+    An uncompressed LAS needs ``count x record length`` bytes after the header; a LAZ file
+    cannot be smaller than :data:`MAX_LAZ_RATIO` times less than its points uncompressed.
+
+    Raises
+    ------
+    InputError
+        Naming the declared count, what it needs and what the file holds.
+    """
+    n = int(header.point_count)
+    record = int(header.point_format.size)
+    size = path.stat().st_size
+    raw = n * record
+    if header.are_points_compressed:
+        if raw > MAX_LAZ_RATIO * size:
+            raise InputError(
+                path,
+                f"header declares {n:,} points ({format_bytes(raw)} uncompressed) in a "
+                f"{format_bytes(size)} LAZ file; that cannot be (corrupt header?)",
+            )
+    else:
+        end = int(getattr(header, "start_of_first_evlr", 0) or 0) or size
+        have = min(end, size) - int(header.offset_to_point_data)
+        if raw > have:
+            raise InputError(
+                path,
+                f"truncated: the header declares {n:,} points ({raw:,} bytes) but only "
+                f"{max(have, 0):,} bytes of point data follow",
+            )
+        if have >= raw + record:
+            extra = (have - raw) // record
+            raise InputError(
+                path,
+                f"the header declares {n:,} points but the file holds data for {extra:,} more "
+                "(wrong point count?)",
+            )
+    check_memory(n * (record + POINT_BYTES), f"{n:,} points", source=path)
 
 
 def _to_8bit(channel: NDArray[Any]) -> NDArray[np.uint8]:

@@ -19,13 +19,16 @@ Foreign layouts are accepted too:
 from __future__ import annotations
 
 import json
+import math
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.budget import check_memory
 from flexreg.core.camera import camera_from_dict
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
@@ -50,14 +53,74 @@ def _from_array(path: Path, a: NDArray[Any], name: str) -> Scan:
     raise InputError(path, f"array {name!r} of shape {a.shape} is neither (N, 3+) nor (H, W, 3)")
 
 
+def _array_bytes(path: Path, name: str, fh: Any, stored: int) -> int:
+    """Bytes the ``.npy`` header read from ``fh`` declares; refuses object arrays and arrays
+    larger than the ``stored`` bytes that follow the header."""
+    try:
+        major, _ = np.lib.format.read_magic(fh)
+        read_header = (
+            np.lib.format.read_array_header_1_0
+            if major == 1
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, _, dtype = read_header(fh)
+    except (ValueError, OSError, EOFError, SyntaxError) as e:
+        raise InputError(path, f"not a readable NumPy file ({name}: {e})") from None
+    if dtype.hasobject:
+        raise InputError(path, f"{name}: holds Python objects, which are never loaded")
+    nbytes = math.prod(shape) * dtype.itemsize
+    if nbytes > stored:
+        raise InputError(
+            path,
+            f"{name}: the header declares shape {tuple(shape)} ({nbytes:,} bytes) but only "
+            f"{max(stored, 0):,} bytes of data are stored (truncated or corrupt)",
+        )
+    return int(nbytes)
+
+
+def check_declared(path: Path) -> None:
+    """Compare every array header of a ``.npy`` / ``.npz`` with the bytes stored for it and
+    with the memory budget, before any array is loaded.
+
+    Raises
+    ------
+    InputError
+        A header declaring more data than is stored, object arrays, or a corrupt archive;
+        :class:`~flexreg.errors.MemoryBudgetError` when the arrays would not fit the budget.
+    """
+    total = 0
+    if zipfile.is_zipfile(path):
+        try:
+            with zipfile.ZipFile(path) as z:
+                for info in z.infolist():
+                    if not info.filename.endswith(".npy"):
+                        continue
+                    with z.open(info) as fh:
+                        total += _array_bytes(path, info.filename[:-4], fh, info.file_size)
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError, NotImplementedError) as e:
+            raise InputError(path, f"corrupt npz archive ({e})") from None
+    else:
+        with open(path, "rb") as fh:
+            total = _array_bytes(path, "array", fh, path.stat().st_size)
+    check_memory(2 * total, "loading its arrays", source=path)
+
+
 def read(path: Path, **_: Any) -> list[Scan]:
     """Read scans from ``.npy`` / ``.npz`` (see the module docstring for the layouts)."""
+    check_declared(path)
     try:
         data = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
         raise InputError(path, f"not a readable NumPy file ({e})") from None
     if isinstance(data, np.ndarray):
         return [_from_array(path, data, "array")]
+    try:
+        return _read_npz(path, data)
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as e:
+        raise InputError(path, f"corrupt npz member ({e})") from None
+
+
+def _read_npz(path: Path, data: Any) -> list[Scan]:
     with data:
         keys = set(data.files)
         prefixes = sorted(

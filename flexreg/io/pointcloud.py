@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.scan import Scan
+from flexreg.core.budget import check_memory
+from flexreg.core.scan import POINT_BYTES, Scan
 from flexreg.core.transforms import quat_to_matrix
 from flexreg.errors import InputError
 
@@ -167,6 +168,7 @@ def _check_ply_data(path: Path, ply: _PlyHeader) -> None:
     size = path.stat().st_size - ply.header_bytes
     vertex = ply.element("vertex")
     assert vertex is not None
+    _check_points_budget(path, vertex.count)
     if ply.format != "ascii":
         need = 0
         for el in ply.elements:  # every fixed-size element up to the first with lists
@@ -181,6 +183,12 @@ def _check_ply_data(path: Path, ply: _PlyHeader) -> None:
                 f"truncated: the header declares {vertex.count} vertices ({need} bytes of data) "
                 f"but only {size} bytes follow it",
             )
+        if not any(el.has_list for el in ply.elements) and size - need >= vertex.stride:
+            raise InputError(
+                path,
+                f"the header declares {vertex.count} vertices but {size - need} more bytes of "
+                "data follow them (wrong vertex count?)",
+            )
         return
     with open(path, "rb") as f:
         f.seek(ply.header_bytes)
@@ -190,10 +198,21 @@ def _check_ply_data(path: Path, ply: _PlyHeader) -> None:
         if el is vertex:
             break
         start += el.count
+    total = sum(el.count for el in ply.elements)
+    if len(rows) > total:
+        raise InputError(
+            path,
+            f"the header declares {total} data rows but {len(rows)} follow (wrong vertex count?)",
+        )
     # open3d's ASCII PLY parser stops at 'nan' / 'inf' and pads with zeros: refuse them here
     _check_ascii_rows(
         path, rows[start : start + vertex.count], vertex.count, len(vertex.props), finite=True
     )
+
+
+def _check_points_budget(path: Path, n: int) -> None:
+    """Refuse a declared point count the memory budget cannot take (before open3d reads)."""
+    check_memory(n * POINT_BYTES, f"{n:,} points", source=path)
 
 
 def _check_ascii_rows(
@@ -307,12 +326,19 @@ def _parse_pcd_header(path: Path) -> _PcdHeader:
 def _check_pcd_data(path: Path, pcd: _PcdHeader) -> None:
     size = path.stat().st_size - pcd.header_bytes
     need = pcd.points * pcd.point_bytes
+    _check_points_budget(path, pcd.points)
     if pcd.data == "binary":
         if size < need:
             raise InputError(
                 path,
                 f"truncated: the header declares {pcd.points} points ({need} bytes) "
                 f"but only {size} bytes follow it",
+            )
+        if size - need >= pcd.point_bytes:
+            raise InputError(
+                path,
+                f"the header declares {pcd.points} points but {size - need} more bytes of data "
+                "follow them (wrong POINTS count?)",
             )
     elif pcd.data == "binary_compressed":
         with open(path, "rb") as f:
@@ -335,6 +361,12 @@ def _check_pcd_data(path: Path, pcd: _PcdHeader) -> None:
         with open(path, "rb") as f:
             f.seek(pcd.header_bytes)
             rows = [r for r in f.read().splitlines() if r.strip()]
+        if len(rows) > pcd.points:
+            raise InputError(
+                path,
+                f"the header declares {pcd.points} points but {len(rows)} rows follow "
+                "(wrong POINTS count?)",
+            )
         _check_ascii_rows(path, rows, pcd.points, sum(pcd.counts))
 
 

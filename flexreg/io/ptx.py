@@ -30,6 +30,7 @@ import numpy as np
 from numba import prange
 from numpy.typing import NDArray
 
+from flexreg.core.budget import check_memory
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import InputError
@@ -200,6 +201,8 @@ def _parse_all(
 # ------------------------------------------------------------------------------ reader
 
 _HEADER_COUNTS = [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]
+#: memory the parser takes per line (4 float64 + 3 float32 + 2 int8), bytes
+_LINE_BYTES = 46
 
 
 def read(path: Path, **_: object) -> list[Scan]:
@@ -213,7 +216,12 @@ def read(path: Path, **_: object) -> list[Scan]:
         ``grid_index`` in file order (line ``k`` of a cloud is row ``k % rows`` of column
         ``k // rows``), and ``T_world_scanner`` = the file's (transposed-back) 4x4 matrix.
     """
+    size = path.stat().st_size
+    check_memory(size, "reading the whole file", source=path)
     buf = np.fromfile(path, dtype=np.uint8)
+    step = 1 << 26  # count newlines 64 MiB at a time: no file-sized temporary
+    lines = 1 + sum(int(np.count_nonzero(buf[i : i + step] == 10)) for i in range(0, size, step))
+    check_memory(size + lines * _LINE_BYTES, f"parsing its {lines:,} lines", source=path)
     n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
     head, tail, counts, errors = _parse_all(buf, n_chunks, _POW10)
     del buf

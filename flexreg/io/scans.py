@@ -14,7 +14,7 @@ from typing import Any
 
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
-from flexreg.io.files import atomic_write
+from flexreg.io.files import atomic_write, protect
 from flexreg.io.formats import detect_format
 
 __all__ = ["read_scan", "read_scans", "write_scan"]
@@ -27,6 +27,7 @@ def _module(name: str) -> Any:
 
 
 def _check_file(p: Path) -> None:
+    protect(p)
     if not p.exists():
         raise InputError(p, "no such file")
     if p.is_dir():

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from flexreg.core.trajectory import Trajectory
 from flexreg.core.transforms import matrix_to_quat, nearest_rotation, quat_to_matrix
 from flexreg.errors import InputError
-from flexreg.io.files import atomic_write
+from flexreg.io.files import atomic_write, protect
 
 log = logging.getLogger(__name__)
 
@@ -218,6 +218,7 @@ def read_trajectory(
         a file without poses; an unknown ``fmt``.
     """
     p = Path(path)
+    protect(p)
     if fmt not in ("auto", *FORMATS):
         raise InputError(p, f"unknown trajectory format {fmt!r}; known: auto, {', '.join(FORMATS)}")
     if not p.is_file():

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from flexreg.core.jsonable import to_jsonable
 from flexreg.core.transforms import as_transform, invert, nearest_rotation
 from flexreg.errors import InputError
-from flexreg.io.files import atomic_write
+from flexreg.io.files import atomic_write, protect
 
 
 def write_transform_txt(path: str | PathLike[str], T: ArrayLike) -> Path:
@@ -45,6 +45,7 @@ def read_transform(
     """Read a 4x4 transform from a text file (4 rows of 4 numbers, or 3 rows + implied
     ``0 0 0 1``) or from JSON (``key``, else the single 4x4 list it holds)."""
     p = Path(path)
+    protect(p)
     if not p.is_file():
         raise InputError(p, "no such file")
     text = p.read_text(errors="replace")

@@ -7,7 +7,7 @@ from typing import Annotated
 from pydantic import Field, ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
 
-from flexreg.config import Config, Finite, OddSize, Positive, Seed, one_of
+from flexreg.config import Config, Finite, OddSize, Positive, Seed, ThresholdM, one_of
 from flexreg.stages.keypoints import METHODS as FEATURES
 
 #: units of the RPE interval ``delta``
@@ -96,7 +96,7 @@ class OdometryConfig(Config):
     method: Annotated[str, one_of(METHODS)] = "essential"
     ransac_threshold_px: Positive = 1.0
     ransac_confidence: float = Field(0.999, gt=0, lt=1)
-    threshold_m: Positive | None = None
+    threshold_m: ThresholdM | None = None
     min_inliers: int = Field(12, ge=5)
     max_jump: Positive = 0.03
     seed: Seed = 0

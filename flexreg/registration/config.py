@@ -8,7 +8,7 @@ from typing import Annotated
 
 from pydantic import Field
 
-from flexreg.config import Config, OddSize, Positive, Seed, one_of
+from flexreg.config import Config, OddSize, Positive, Seed, ThresholdM, VoxelM, one_of
 from flexreg.stages.feature_images import KINDS
 from flexreg.stages.keypoints import METHODS
 from flexreg.stages.refinement.icp import IcpMethod
@@ -132,7 +132,7 @@ class RegistrationConfig(Config):
     max_features: int = Field(8000, ge=8)
     ratio: float = Field(0.85, gt=0, le=1)
     mutual: bool = True
-    threshold_m: Positive | None = None
+    threshold_m: ThresholdM | None = None
     threshold_px: Positive = 3.0
     consistency: bool = True
     min_inliers: int = Field(10, ge=3)
@@ -140,7 +140,7 @@ class RegistrationConfig(Config):
     max_iterations: int = Field(50_000, ge=1)
     refine: bool = True
     icp: Annotated[str, one_of(ICP_METHODS, "method")] = "point-to-plane"
-    voxel_m: Positive | None = None
+    voxel_m: VoxelM | None = None
     seed: Seed = 0
     fill_holes: bool = True
     upright: Annotated[str, one_of(UPRIGHT)] = "auto"

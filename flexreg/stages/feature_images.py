@@ -55,6 +55,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from flexreg.config import MAX_GRID_SIZE
 from flexreg.core.range_image import RangeImage
 from flexreg.errors import ConfigError, InputError, RegistrationError
 from flexreg.stages._image_kernels import (
@@ -138,14 +139,25 @@ def _points(data: PointsLike, wrap: bool | None) -> tuple[NDArray[np.floating], 
 
 def _offset(n: int) -> int:
     """Pixel offset ``k = (n - 1) / 2`` of the Flexion n x n grid."""
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3 or n % 2 == 0:
-        raise ConfigError(f"n must be an odd grid size >= 3 (3, 5, 7, ... 13), got {n!r}")
+    if (
+        isinstance(n, bool)
+        or not isinstance(n, (int, np.integer))
+        or not 3 <= n <= MAX_GRID_SIZE
+        or n % 2 == 0
+    ):
+        raise ConfigError(f"n must be an odd grid size 3, 5, 7, ... {MAX_GRID_SIZE}, got {n!r}")
     return (int(n) - 1) // 2
 
 
 def _prepared(data: PointsLike, n: int, median: int, wrap: bool | None):
     k = _offset(n)
     xyz, w = _points(data, wrap)
+    H, W = xyz.shape[:2]
+    if n > H or (n > W and not w):
+        raise ConfigError(
+            f"n: a {n} x {n} grid needs an image of at least {n} x {n} pixels, this one is "
+            f"{W} x {H}"
+        )
     if median:
         xyz = median_prefilter(xyz, window=median, wrap=w)
     return xyz, k, w

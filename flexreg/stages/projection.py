@@ -13,6 +13,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.budget import check_memory
 from flexreg.core.camera import Camera, SphericalCamera, azimuth_polar_extent
 from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
@@ -21,7 +22,7 @@ from flexreg.core.range_image import (
     from_grid,
     from_index,
 )
-from flexreg.core.scan import Scan
+from flexreg.core.scan import GRID_CELL_BYTES, Scan
 from flexreg.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -59,9 +60,19 @@ def project(scan: Scan, camera: Camera) -> RangeImage:
     RangeImage
         The pixel holds the *original* point (not a resampled one), so nothing is lost to
         quantisation; ``index`` points back into ``scan.points``.
+
+    Raises
+    ------
+    MemoryBudgetError
+        The image would not fit the memory budget (:mod:`flexreg.core.budget`).
     """
-    u, v, d = camera.project(scan.points)
     H, W = camera.shape
+    check_memory(
+        H * W * GRID_CELL_BYTES,
+        f"a {H} x {W} range image",
+        source=scan.path if scan.path is not None else (scan.name or "scan"),
+    )
+    u, v, d = camera.project(scan.points)
     with np.errstate(invalid="ignore"):
         iu = np.floor(u + 0.5)
         iv = np.floor(v + 0.5)

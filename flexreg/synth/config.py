@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from flexreg.config import Config, Positive, Seed, one_of
+from flexreg.core.budget import ENV_VAR, format_bytes, memory_budget
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.io.depth import TUM_DEPTH_SCALE
 from flexreg.synth.scenes import SCENE_KINDS
@@ -20,6 +21,14 @@ __all__ = ["FORMATS", "RGBDConfig", "SynthConfig", "TLSConfig"]
 
 #: station file formats of a data set
 FORMATS = ("ptx", "e57", "npz")
+#: widest station grid (height: half of it); the documented maximum, 8192 x 4096 (33.5 M
+#: pixels), takes about 6 GB while simulated
+MAX_WIDTH = 8192
+#: memory a station takes per pixel while it is simulated and written, bytes (measured: 1.34 GB
+#: more for 4096x2048 than for 1024x512, about 170 bytes per pixel; rounded up)
+STATION_PIXEL_BYTES = 180
+#: floor sizes of a procedural scene, metres
+MIN_SIZE_M, MAX_SIZE_M = 1.0, 1000.0
 
 #: a finite number >= 0 (noise levels, ranges, angles)
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -191,7 +200,9 @@ class SynthConfig(Config):
     stations : int
         Number of TLS stations (1..200).
     width, height : int
-        Station grid (azimuth columns x polar rows), within 8x4 .. 20000x10000.
+        Station grid (azimuth columns x polar rows), within 8x4 .. 8192x4096 and within the
+        memory budget (:mod:`flexreg.core.budget`; a station takes about
+        :data:`STATION_PIXEL_BYTES` per pixel while it is simulated and written).
     noise_m : float, metres
         Constant part of the range noise sigma (0..1 m).
     seed : int
@@ -210,7 +221,7 @@ class SynthConfig(Config):
     mesh_up_axis : {"x", "y", "z"}
         Up axis of a mesh scene.
     size_m : (float, float) or None
-        Floor size of a procedural scene.
+        Floor size of a procedural scene, metres, 1..1000 each way.
     embed_poses : bool
         Write each station's true pose into its file instead of the identity.
     """
@@ -265,8 +276,27 @@ class SynthConfig(Config):
     @classmethod
     def _resolution(cls, v: int, info: ValidationInfo) -> int:
         w = info.data.get("width", 8)
-        if not (8 <= int(w) <= 20000 and 4 <= int(v) <= 10000):
-            raise ValueError(f"resolution must be within 8x4 .. 20000x10000, got {w}x{v}")
+        if not (8 <= int(w) <= MAX_WIDTH and 4 <= int(v) <= MAX_WIDTH // 2):
+            raise ValueError(
+                f"resolution must be within 8x4 .. {MAX_WIDTH}x{MAX_WIDTH // 2}, got {w}x{v}"
+            )
+        need, budget = int(w) * int(v) * STATION_PIXEL_BYTES, memory_budget()
+        if need > budget:
+            raise ValueError(
+                f"a {w}x{v} station would need {format_bytes(need)} of memory, more than the "
+                f"memory budget of {format_bytes(budget)} (set {ENV_VAR} or flexreg "
+                "--memory-budget to change it)"
+            )
+        return v
+
+    @field_validator("size_m")
+    @classmethod
+    def _size(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not all(math.isfinite(x) and MIN_SIZE_M <= x <= MAX_SIZE_M for x in v):
+            raise ValueError(
+                f"floor size must be {MIN_SIZE_M:g} to {MAX_SIZE_M:g} m each way, got "
+                f"{v[0]:g}x{v[1]:g}"
+            )
         return v
 
     @field_validator("noise_m")

@@ -71,9 +71,12 @@ def project_figure(kind: str, stations: int, seed: int, out: Path) -> Path:
     ax.set_ylabel("y (m)")
     n_tree = sum(p is not None for p in parent.values())
     shown = sum(o["overlap"] >= project["min_overlap"] for o in links)
-    rooms = gt["scene"]["layout"].get("rooms", "-")
+    lay = gt["scene"]["layout"]
+    what = f"{lay['rooms']} rooms" if "rooms" in lay else f"{lay.get('rack_rows', 0)} rack rows"
+    if kind == "street":
+        what = f"{lay['street_length_m']:.0f} m street"
     ax.set_title(
-        f"{kind} project, seed {seed}: {len(pos)} stations, {rooms} rooms; "
+        f"{kind} project, seed {seed}: {len(pos)} stations, {what}; "
         f"thick: the {n_tree} links the walk set stations up along; thin: the other "
         f"{shown - n_tree} pairs with overlap >= {project['min_overlap']:g}",
         fontsize=10,

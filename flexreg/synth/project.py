@@ -4,9 +4,11 @@ A surveyor covers a building, a warehouse or a street by walking it: every new s
 up a few metres on from one already scanned, where it sees enough of it to be registered,
 until the whole site is covered. :func:`place_project` does the same on the free floor of each
 group's placement zones (``Scene.zones``): a depth-first walk that puts each station at a
-*spacing* from every earlier one (0.8 sqrt(zone area per station), 2-8 m, so the stations
-cover the site like a grid) and within reach of a *parent* it overlaps; when no spot around
-the last station works it steps back to earlier ones. Stations
+*spacing* from every earlier one (sqrt(zone area per station), 2-8 m, so the stations
+cover the site like a grid) and within reach of a *parent* it overlaps, or failing that on a
+doorway the scene marks (``Scene.stand_points``) at half the spacing, as a surveyor links a
+room; when no spot around the last station works it steps back to earlier ones. The walk
+starts on the scene's first stand point (a building's entrance), or anywhere free. Stations
 therefore see their neighbours, not the whole site, and the walk order is the file order.
 
 :func:`overlap_matrix` then measures what every station sees of every other one (the
@@ -170,9 +172,10 @@ def place_project(
         fm = zone_free_map(scene, g)
         rects = [z[:4] for z in scene.zones if z[4] == g] if scene.zones else [scene.region]
         area = sum((x1 - x0) * (y1 - y0) for x0, y0, x1, y1 in rects)  # floor, not free floor
-        spacing = float(np.clip(0.8 * math.sqrt(area / n), dmin, min(8.0, 0.8 * dmax)))
+        spacing = float(np.clip(math.sqrt(area / n), dmin, min(8.0, 0.8 * dmax)))
         walk = _Walk(scene, fm, cfg, gen, dmin, dmax, min_overlap, max_tilt_rad, height_range_m)
         walk.clearance_m = clearance_m
+        walk.stand = np.array([(x, y) for x, y, k in scene.stand_points if k == g]).reshape(-1, 2)
         offset = len(out.poses)
         poses, parents, spacing = walk.run(n, spacing, f"{scene.name or 'scene'} group {g}")
         out.poses += poses
@@ -196,6 +199,7 @@ class _Walk:
     max_tilt_rad: float
     height_range_m: tuple[float, float]
     clearance_m: float = 0.3
+    stand: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
     poses: list[NDArray[np.float64]] = field(default_factory=list)
 
     def _pose(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -216,6 +220,14 @@ class _Walk:
         if len(fx) == 0:
             raise DegenerateGeometryError(f"{label}: no free floor to place a scanner on")
         fm = self.fm
+        if len(self.stand):  # the scene's first stand point (an entrance) and around it
+            xy = self.stand[0] + self.gen.uniform(-0.5, 0.5, size=(_BATCH, 2))
+            xy[0] = self.stand[0]
+            P = self._candidates(xy)
+            idx = np.flatnonzero(np.isfinite(P[:, 2]))
+            idx = idx[_check_positions(self.scene, P[idx], self.clearance_m)]
+            if len(idx):
+                return self._pose(P[idx[0]])
         for _ in range(40):
             pick = self.gen.integers(0, len(fx), size=_BATCH)
             xy = np.column_stack([fm.x0 + fx[pick] * fm.cell_m, fm.y0 + fy[pick] * fm.cell_m])
@@ -234,6 +246,23 @@ class _Walk:
         r = self.gen.uniform(spacing, max(spacing, self.dmax), size=_AROUND)
         a = self.gen.uniform(-math.pi, math.pi, size=_AROUND)
         P = self._candidates(Pp[:2] + r[:, None] * np.column_stack([np.cos(a), np.sin(a)]))
+        return self._pick(parent, P, spacing, hug=True)
+
+    def _from_stand_points(self, parent: int, spacing: float) -> NDArray[np.float64] | None:
+        """A new station on one of the scene's stand points (a doorway) seen from ``parent``,
+        at half the spacing from all others; the nearest first."""
+        if len(self.stand) == 0:
+            return None
+        xy = np.repeat(self.stand, 4, axis=0)
+        xy += self.gen.uniform(-0.3, 0.3, size=xy.shape)
+        return self._pick(parent, self._candidates(xy), 0.5 * spacing, hug=False)
+
+    def _pick(
+        self, parent: int, P: NDArray[np.float64], spacing: float, *, hug: bool
+    ) -> NDArray[np.float64] | None:
+        """The first candidate of ``P`` (N, 3) that passes every test, in order of distance to
+        the placed stations (``hug``) or to the parent."""
+        Pp = self.poses[parent][:3, 3]
         placed = np.array([T[:3, 3] for T in self.poses])
         with np.errstate(invalid="ignore"):
             d_all = np.linalg.norm(P[:, None, :] - placed[None, :, :], axis=2).min(axis=1)
@@ -247,7 +276,8 @@ class _Walk:
         if len(idx):
             idx = idx[_check_positions(self.scene, P[idx], self.clearance_m)]
         # hug the stations already placed: the walk fills the site without leaving holes
-        for i in idx[np.argsort(d_all[idx], kind="stable")][:_OVERLAP_TRIES]:
+        key = d_all if hug else d_par
+        for i in idx[np.argsort(key[idx], kind="stable")][:_OVERLAP_TRIES]:
             T = self._pose(P[i])
             if station_overlap(self.scene, self.poses[parent], T, config=self.cfg) >= (
                 self.min_overlap
@@ -272,8 +302,10 @@ class _Walk:
                 if parent in exhausted:
                     continue
                 T = self._from(parent, spacing)
-                if T is None:  # a second batch before giving up on this parent
+                if T is None:  # a second batch, then the doorways, before giving up on it
                     T = self._from(parent, spacing)
+                if T is None:
+                    T = self._from_stand_points(parent, spacing)
                 if T is not None:
                     self.poses.append(T)
                     parents.append(parent)

@@ -87,6 +87,10 @@ class Scene:
         whose stations stand anywhere in ``region``.
     layout : dict of str to Any
         JSON-ready facts of a project's layout (rooms, bay period, street lengths...).
+    stand_points : tuple of (x, y, group)
+        Spots where a surveyor would set up to link two spaces (in front of and behind each
+        doorway, a corridor junction), metres; placement starts on the first one and tries
+        them when the open floor around a station is taken. Not stored in files.
     """
 
     vertices: NDArray[np.float64]
@@ -102,6 +106,7 @@ class Scene:
     symmetries: tuple[NDArray[np.float64], ...] = ()
     zones: tuple[tuple[float, float, float, float, int], ...] = ()
     layout: dict[str, Any] = field(default_factory=dict)
+    stand_points: tuple[tuple[float, float, int], ...] = ()
     _raycaster: Any = field(default=None, init=False, repr=False)
     _cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 

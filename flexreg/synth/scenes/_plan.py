@@ -274,6 +274,7 @@ def finish(
     symmetries: tuple[NDArray[np.float64], ...] = (),
     zones: tuple[tuple[float, float, float, float, int], ...] = (),
     layout: dict[str, Any] | None = None,
+    stand_points: tuple[tuple[float, float, int], ...] = (),
 ) -> Scene:
     """The built mesh as a :class:`Scene` on floor z = 0, with stations allowed inside the
     ``Lx`` x ``Ly`` footprint less ``margin_m`` (or inside ``region`` when given)."""
@@ -294,6 +295,7 @@ def finish(
         symmetries=symmetries,
         zones=zones,
         layout=layout or {},
+        stand_points=stand_points,
     )
 
 
@@ -323,6 +325,7 @@ def side_by_side(parts: list[Scene], kind: str, seed: int | None, gap_m: float) 
     """
     verts, tris, refl, rgb = [], [], [], []
     zones: list[tuple[float, float, float, float, int]] = []
+    stand: list[tuple[float, float, int]] = []
     objects: dict[str, int] = {}
     n_v, x = 0, float(parts[0].bounds[0][0])  # the first part stays where it is
     offsets: list[float] = []
@@ -336,6 +339,7 @@ def side_by_side(parts: list[Scene], kind: str, seed: int | None, gap_m: float) 
         rgb.append(part.colors)
         own = part.zones or ((*part.region, 0),)
         zones += [(z[0] + dx, z[1], z[2] + dx, z[3], g) for z in own]
+        stand += [(x + dx, y, g) for x, y, _g in part.stand_points]
         for k, v in part.objects.items():
             objects[k] = objects.get(k, 0) + v
         offsets.append(round(dx, 6))
@@ -360,4 +364,5 @@ def side_by_side(parts: list[Scene], kind: str, seed: int | None, gap_m: float) 
         name=f"{kind}-{seed}" if seed is not None else kind,
         zones=tuple(zones),
         layout=layout,
+        stand_points=tuple(stand),
     )

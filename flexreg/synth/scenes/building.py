@@ -18,13 +18,13 @@ import numpy as np
 
 from flexreg.errors import ConfigError
 from flexreg.synth import objects as ob
-from flexreg.synth.mesh import Material, MeshBuilder, rot_z, wall_boxes
+from flexreg.synth.mesh import Material, MeshBuilder, box, rot_z, wall_boxes
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes._plan import Floorplan, Walls, door, exterior, finish, put, window
 from flexreg.synth.seeding import as_rng
 
-#: floor area per station the layout is sized for, m^2 (stations about 5-7 m apart)
-BUILDING_AREA_PER_STATION_M2 = 48.0
+#: floor area per station the layout is sized for, m^2 (a station or two per room)
+BUILDING_AREA_PER_STATION_M2 = 22.0
 
 #: room kinds and their furniture counts (shelves, table groups, desks, sofas, clutter)
 _ROOM_KINDS = {
@@ -65,6 +65,7 @@ class _Site:
     rooms: list[_Room] = field(default_factory=list)
     corridors: list[tuple[float, float, float, float]] = field(default_factory=list)
     strips: list[tuple[float, float, float]] = field(default_factory=list)
+    entrance_y: float = 0.0
 
 
 def building(
@@ -81,7 +82,7 @@ def building(
     stations : int
         Number of stations the floor should hold (about
         :data:`BUILDING_AREA_PER_STATION_M2` of floor each); sets the number of corridor strips
-        (``round(sqrt(stations / 8))``, at least 1) and the building's length.
+        (the floor about 1.5 times as long as deep) and the building's length.
     size_m : (float, float), optional
         Footprint ``(x, y)`` in metres instead (at least 12 x 12 m).
 
@@ -109,8 +110,34 @@ def building(
     }
     zone = (m, m, site.Lx - m, site.Ly - m, 0)
     return finish(
-        site.b, "building", seed, site.Lx, site.Ly, margin_m=m, zones=(zone,), layout=layout
+        site.b,
+        "building",
+        seed,
+        site.Lx,
+        site.Ly,
+        margin_m=m,
+        zones=(zone,),
+        layout=layout,
+        stand_points=_door_stand_points(site),
     )
+
+
+def _door_stand_points(site: _Site) -> tuple[tuple[float, float, int], ...]:
+    """Where a surveyor sets up to link two spaces: inside the main entrance (first: the walk
+    starts there), at each corridor junction, and in and 1 m either side of every doorway."""
+    pts: list[tuple[float, float, int]] = [(site.cw / 2, site.entrance_y, 0)]
+    for _y0, yc0, yc1 in site.strips:
+        pts += [(site.cw / 2, (yc0 + yc1) / 2, 0), (site.cw + 1.5, (yc0 + yc1) / 2, 0)]
+    doorways: list[tuple[float, float, int]] = []
+    for r in site.rooms:
+        for side, a, c in r.doors:
+            m = (a + c) / 2
+            if side in ("n", "s"):
+                y = r.y1 if side == "n" else r.y0
+                doorways += [(m, y + dy, 0) for dy in (-1.0, 0.0, 1.0)]
+            elif side == "e":  # "w" doors are the same doorways seen from the other room
+                doorways += [(r.x1 + dx, m, 0) for dx in (-1.0, 0.0, 1.0)]
+    return tuple(pts + sorted(set(doorways)))
 
 
 def _layout(rng: np.random.Generator, stations: int, size_m: tuple[float, float] | None) -> _Site:
@@ -118,7 +145,8 @@ def _layout(rng: np.random.Generator, stations: int, size_m: tuple[float, float]
     H = float(rng.uniform(3.0, 3.6))
     wt, it = float(rng.uniform(0.25, 0.35)), float(rng.uniform(0.12, 0.16))
     cw = float(rng.uniform(2.2, 3.0))
-    n_strips = max(1, round(math.sqrt(max(stations, 1) / 8.0)))
+    # strips of ~15 m: about 1.5 times as long as deep
+    n_strips = max(1, round(math.sqrt(max(stations, 1) * BUILDING_AREA_PER_STATION_M2 / 360.0)))
     depths = [(float(rng.uniform(5.0, 7.5)), float(rng.uniform(5.0, 7.5))) for _ in range(n_strips)]
     Ly = sum(ds + cw + dn for ds, dn in depths)
     if size_m is None:
@@ -195,11 +223,16 @@ def _wall(
     site.b.count("wall")
 
 
-def _door_at(site: _Site, along_x: bool, line: float, s0: float, s1: float, h: float) -> None:
-    """Casing and an open leaf for a doorway ``[s0, s1]`` in the wall on ``line``."""
+def _door_at(
+    site: _Site, along_x: bool, line: float, s0: float, s1: float, h: float, *, up: bool = True
+) -> None:
+    """Casing and an open leaf for a doorway ``[s0, s1]`` in the wall on ``line``; a leaf in a
+    wall along x opens towards +y (``up``) or -y."""
     t = site.it
-    if along_x:
+    if along_x and up:
         walls = Walls([(s0 - 1.0, line + t / 2), (s1 + 1.0, line + t / 2)])
+    elif along_x:
+        walls = Walls([(s1 + 1.0, line - t / 2), (s0 - 1.0, line - t / 2)])
     else:
         walls = Walls([(line - t / 2, s0 - 1.0), (line - t / 2, s1 + 1.0)])
     door(site.b, walls, 0, 1.0, 1.0 + s1 - s0, h, t, site.rng)
@@ -225,6 +258,7 @@ def _shell(site: _Site) -> None:
     for _y0, yc0, yc1 in site.strips:
         spans[1].append((yc0 + 0.4, yc1 - 0.4))
     entrance = float(rng.uniform(0.2, 0.8)) * (Ly - 3.0) + 1.0
+    site.entrance_y = entrance + 0.9
     for k in range(4):
         openings = [(s0, s1, sill, top) for s0, s1 in sorted(spans[k])]
         if k == 3:
@@ -233,8 +267,11 @@ def _shell(site: _Site) -> None:
         for s0, s1, z0, z1 in openings:
             if z0 > 0:
                 window(b, walls, k, s0, s1, z0, z1, wt, rng)
-            else:
-                door(b, walls, k, s0, s1, z1, wt, rng)
+            else:  # the entrance: a frame, the leaves open outwards
+                for a, c in ((s0 - 0.08, s0), (s1, s1 + 0.08)):
+                    walls.add_local(b, k, box([a, 0, 0], [c, 0.03, z1 + 0.08]), ob.DARK_METAL)
+                walls.add_local(b, k, box([s0, 0, z1], [s1, 0.03, z1 + 0.08]), ob.DARK_METAL)
+                b.count("entrance")
 
 
 def _window_spans(rng: np.random.Generator, a: float, c: float) -> list[tuple[float, float]]:
@@ -270,8 +307,8 @@ def _inner_walls(site: _Site) -> None:
                 True,
                 [(a - cw, c - cw, 0.0, h) for (a, c), h in zip(spans, hs, strict=True)],
             )
-            for (a, c), h in zip(spans, hs, strict=True):
-                _door_at(site, True, line, a, c, h)
+            for (a, c), h in zip(spans, hs, strict=True):  # leaves open into the rooms
+                _door_at(site, True, line, a, c, h, up=side == "s")
         y_end = site.strips[si + 1][0] if si + 1 < len(site.strips) else None
         if y_end is not None:  # wall between this strip's north rooms and the next strip
             _wall(site, cw, Lx, y_end, True, [])

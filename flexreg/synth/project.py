@@ -172,7 +172,7 @@ def place_project(
         fm = zone_free_map(scene, g)
         rects = [z[:4] for z in scene.zones if z[4] == g] if scene.zones else [scene.region]
         area = sum((x1 - x0) * (y1 - y0) for x0, y0, x1, y1 in rects)  # floor, not free floor
-        spacing = float(np.clip(math.sqrt(area / n), dmin, min(8.0, 0.8 * dmax)))
+        spacing = float(np.clip(1.25 * math.sqrt(area / n), dmin, min(8.0, 0.8 * dmax)))
         walk = _Walk(scene, fm, cfg, gen, dmin, dmax, min_overlap, max_tilt_rad, height_range_m)
         walk.clearance_m = clearance_m
         walk.stand = np.array([(x, y) for x, y, k in scene.stand_points if k == g]).reshape(-1, 2)

@@ -22,6 +22,7 @@ from flexreg.synth import (
     make_project_scene,
     overlap_components,
     read_scene,
+    scan_tls,
     station_overlap,
     visible_fraction,
     zone_free_map,
@@ -177,3 +178,41 @@ def test_make_project_refuses_other_kinds(tmp_path):
     with pytest.raises(ConfigError, match="at least 2 stations per group"):
         make_project_scene("building", 0, stations=3, groups=2)
     assert not (tmp_path / "x").exists()
+
+
+def _ranges(scene, T, cfg):
+    return np.linalg.norm(scan_tls(scene, T, config=cfg, rng=0).organized()[0], axis=2)
+
+
+def test_warehouse_bays_repeat_so_a_shifted_station_sees_the_same():
+    scene = make_project_scene("warehouse", 0, stations=40)
+    p = scene.layout["period_m"]
+    fm = zone_free_map(scene, 0)
+    x0, y0, x1, y1 = scene.region
+    cfg = TLSConfig(
+        width=128,
+        height=64,
+        range_noise_m=0.0,
+        range_noise_per_m=0.0,
+        dropout_rate=0.0,
+        mixed_pixel_prob=0.0,
+        intensity_speckle=0.0,
+    )
+    mid = (x0 + x1) / 2
+    xs = np.arange(mid, mid + p, 0.2)
+    spots = [(x, y) for y in np.linspace(y0 + 2, y1 - 2, 9) for x in xs]
+    ok = [fm.lookup(np.array([[x, y], [x + p, y]]))[0].all() for x, y in spots]
+    x, y = spots[int(np.argmax(ok))]
+    assert any(ok)
+    T = np.eye(4)
+    T[:3, 3] = [x, y, 1.5]
+    T2 = T.copy()
+    T2[0, 3] += p
+    a, b = (_ranges(scene, M, cfg) for M in (T, T2))
+    both = (a > 0) & (b > 0)
+    assert np.mean(np.abs(a[both] - b[both]) < 0.02) > 0.9
+    half = T.copy()
+    half[0, 3] += p / 2  # half a period on: a different view
+    c = _ranges(scene, half, cfg)
+    both = (a > 0) & (c > 0)
+    assert np.mean(np.abs(a[both] - c[both]) < 0.02) < 0.8

@@ -20,6 +20,7 @@ groups share a view.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -328,7 +329,7 @@ class _Walk:
 
 
 def overlap_matrix(
-    scene: Scene, poses: list[ArrayLike], *, config: TLSConfig | None = None
+    scene: Scene, poses: Sequence[ArrayLike], *, config: TLSConfig | None = None
 ) -> NDArray[np.float64]:
     """What every station sees of every other one.
 

@@ -99,10 +99,11 @@ def test_project_overlap_graph_is_connected_through_the_walk(project):
     assert len(gt["project"]["components"]) == 1
 
 
-def test_disconnected_groups_share_no_view(tmp_path):
+def test_disconnected_groups_share_no_view(tmp_path, capsys):
     out = tmp_path / "two"
     argv = ["synth", "--scene", "warehouse", "--stations", "5", "--groups", "2"]
     assert run([*argv, "--resolution", "64x32", "--seed", "3", "--out", str(out)]) == 0
+    assert "project: 2 group(s) of 3, 2 stations" in " ".join(capsys.readouterr().out.split())
     gt = json.loads((out / "gt.json").read_text())
     groups = gt["project"]["groups"]
     assert [len(g) for g in groups] == [3, 2]

@@ -319,4 +319,12 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
         console.print(p)
     else:
         err_console.print("no station pair within the distance range and overlap")
+    if res.project:
+        pr = res.project
+        sizes = ", ".join(str(len(g)) for g in pr["groups"])
+        console.print(
+            f"project: {len(pr['groups'])} group(s) of {sizes} stations; overlap graph at "
+            f">= {pr['min_overlap']:g}: {len(pr['components'])} component(s); "
+            f"{len(pr['overlaps'])} pairs share a view (all listed in gt.json)"
+        )
     console.print(f"wrote {len(res.files)} files to {res.out_dir} in {seconds:.1f} s")

@@ -103,7 +103,8 @@ class PairInfo:
 
 @dataclass(eq=False)
 class SynthResult:
-    """What :func:`synthesize` wrote (timings are reported here, never written to files)."""
+    """What :func:`synthesize` wrote (timings are reported here, never written to files);
+    ``project`` is the ``"project"`` part of ``gt.json`` for project scenes (else empty)."""
 
     out_dir: Path
     scene: Scene
@@ -111,6 +112,7 @@ class SynthResult:
     pairs: list[PairInfo]
     files: list[Path] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    project: dict[str, Any] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         return (
@@ -126,6 +128,7 @@ class SynthResult:
             "pairs": [p.to_dict() for p in self.pairs],
             "files": [str(f) for f in self.files],
             "seconds": dict(self.seconds),
+            "project": dict(self.project),
         }
 
 
@@ -424,7 +427,7 @@ def synthesize(
         doc["project"] = project_doc
     _write_json(out / "gt.json", doc)
     files.append(out / "gt.json")
-    return SynthResult(out, scene, stations, pairs, files, secs)
+    return SynthResult(out, scene, stations, pairs, files, secs, project_doc)
 
 
 def _write_stations(

@@ -180,6 +180,27 @@ def _seen_share(
     ``Ta`` sees (the test of :func:`visible_fraction`)."""
     if len(pts) == 0:
         return 0.0
+    ok, d, dist = _seen_rays(Ta, pts, normals, cfg)
+    idx = np.flatnonzero(ok)
+    if len(idx):
+        t = scene.cast(Ta[:3, 3], d[idx]).t
+        ok[idx] = _unblocked(t, dist[idx])
+    return float(np.count_nonzero(ok)) / len(pts)
+
+
+def _unblocked(t: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether rays that first hit at ``t`` reach points at ``dist`` (2 cm + 0.5 %)."""
+    return t >= dist - (0.02 + 0.005 * dist)
+
+
+def _seen_rays(
+    Ta: NDArray[np.float64],
+    pts: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    cfg: TLSConfig,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """The tests of :func:`_seen_share` before the line of sight: ``(ok, directions,
+    distances)`` of every point from the station at ``Ta``."""
     o = Ta[:3, 3]
     v = pts - o
     dist = np.linalg.norm(v, axis=1)
@@ -191,11 +212,7 @@ def _seen_share(
     if cfg.tripod_cone_rad > 0:
         ok &= theta <= math.pi - cfg.tripod_cone_rad
     ok &= np.abs(np.einsum("ij,ij->i", normals, d)) >= math.cos(cfg.max_incidence_rad)
-    idx = np.flatnonzero(ok)
-    if len(idx):
-        t = scene.cast(o, d[idx]).t
-        ok[idx] = t >= dist[idx] - (0.02 + 0.005 * dist[idx])
-    return float(np.count_nonzero(ok)) / len(pts)
+    return ok, d, dist
 
 
 def station_overlap(

@@ -36,7 +36,9 @@ from flexreg.synth.placement import (
     _coarse_config,
     _coarse_points,
     _random_rotation,
+    _seen_rays,
     _seen_share,
+    _unblocked,
     free_map,
     station_overlap,
 )
@@ -366,9 +368,9 @@ def overlap_matrix(
     (N, N) float64
         ``S[i, j]``: share of station ``j``'s coarse returns that station ``i`` also sees
         (:func:`~flexreg.synth.placement.visible_fraction`); the mutual overlap of a pair is
-        ``min(S[i, j], S[j, i])``, exactly :func:`~flexreg.synth.placement.station_overlap`.
-        Stations more than twice the maximal range apart share nothing and are not cast.
-        The diagonal is 1.
+        ``min(S[i, j], S[j, i])``, exactly :func:`~flexreg.synth.placement.station_overlap`
+        (the same tests, with one ray cast per station for all the others). Stations more
+        than twice the maximal range apart share nothing and are not cast. The diagonal is 1.
     """
     cfg = config or TLSConfig()
     Ts = [np.asarray(T, dtype=np.float64) for T in poses]
@@ -378,9 +380,20 @@ def overlap_matrix(
     S = np.eye(n)
     C = np.array([T[:3, 3] for T in Ts]).reshape(n, 3)
     for i in range(n):
-        for j in range(n):
-            if i != j and np.linalg.norm(C[i] - C[j]) <= 2 * cfg.max_range_m:
-                S[i, j] = _seen_share(scene, Ts[i], hits[j][0], hits[j][1], cfg)
+        # the tests of station_overlap, point by point, with one ray cast for all stations j
+        js = [j for j in range(n) if j != i and np.linalg.norm(C[i] - C[j]) <= 2 * cfg.max_range_m]
+        tests = [_seen_rays(Ts[i], hits[j][0], hits[j][1], cfg) for j in js]
+        sel = [np.flatnonzero(ok) for ok, _d, _dist in tests]
+        if not any(len(k) for k in sel):
+            continue
+        t = scene.cast(
+            C[i], np.vstack([d[k] for (_ok, d, _dist), k in zip(tests, sel, strict=True)])
+        ).t
+        start = 0
+        for j, (ok, _d, dist), k in zip(js, tests, sel, strict=True):
+            ok[k] = _unblocked(t[start : start + len(k)], dist[k])
+            start += len(k)
+            S[i, j] = float(np.count_nonzero(ok)) / len(ok) if len(ok) else 0.0
     return S
 
 

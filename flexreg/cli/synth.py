@@ -320,11 +320,11 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
     else:
         err_console.print("no station pair within the distance range and overlap")
     if res.project:
-        pr = res.project
-        sizes = ", ".join(str(len(g)) for g in pr["groups"])
+        proj = res.project
+        sizes = ", ".join(str(len(g)) for g in proj["groups"])
         console.print(
-            f"project: {len(pr['groups'])} group(s) of {sizes} stations; overlap graph at "
-            f">= {pr['min_overlap']:g}: {len(pr['components'])} component(s); "
-            f"{len(pr['overlaps'])} pairs share a view (all listed in gt.json)"
+            f"project: {len(proj['groups'])} group(s) of {sizes} stations; overlap graph at "
+            f">= {proj['min_overlap']:g}: {len(proj['components'])} component(s); "
+            f"{len(proj['overlaps'])} pairs share a view (all listed in gt.json)"
         )
     console.print(f"wrote {len(res.files)} files to {res.out_dir} in {seconds:.1f} s")

@@ -46,6 +46,7 @@ OPTIONS: dict[str, str | tuple[str, ...]] = {
     "--mesh-scale": "mesh_scale",
     "--mesh-up": "mesh_up_axis",
     "--embed-poses": "embed_poses",
+    "--groups": "groups",
 }
 _C = SynthConfig
 
@@ -97,7 +98,9 @@ _SceneOption = Annotated[
         help=(
             "Scene kind: room, courtyard, hall; the ambiguous symmetric-room, tunnel, bays, "
             "or their variants with one asymmetric cue (symmetric-room-cue, tunnel-cue, "
-            "bays-cue); or a mesh file to scan. [default: room]"
+            "bays-cue); a multi-station project sized by --stations: building (rooms, "
+            "corridors, doorways), warehouse (identical rack bays), street (with a side "
+            "street); or a mesh file to scan. [default: room]"
         ),
     ),
 ]
@@ -186,6 +189,18 @@ _MeshUpOption = Annotated[
         "--mesh-up", help=with_default(_C, "mesh_up_axis", "Up axis of a mesh scene: x, y or z.")
     ),
 ]
+_GroupsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--groups",
+        help=with_default(
+            _C,
+            "groups",
+            "Project scenes: disconnected sites sharing the stations, too far apart to see "
+            "each other (1-4).",
+        ),
+    ),
+]
 _EmbedPosesOption = Annotated[
     bool | None,
     typer.Option(
@@ -216,6 +231,7 @@ def synth(
     mesh_scale: _MeshScaleOption = None,
     mesh_up: _MeshUpOption = None,
     embed_poses: _EmbedPosesOption = None,
+    groups: _GroupsOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -223,7 +239,8 @@ def synth(
 
     Writes scene.ply, one file per station, and gt.json with every station pose
     T_world_scanner and the pairwise T_target_source = inv(T_world_target) @ T_world_source;
-    gt.json's configuration reruns it with --config.
+    gt.json's configuration reruns it with --config. Project scenes (building, warehouse,
+    street) also get each station's group and the overlap of every pair in gt.json.
     """
     from flexreg.synth.dataset import synthesize
 
@@ -242,6 +259,7 @@ def synth(
         mixed_pixels=mixed_pixels,
         mesh_scale=mesh_scale,
         embed_poses=embed_poses,
+        groups=groups,
         **converted,
     )
     t0 = time.perf_counter()
@@ -301,4 +319,12 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
         console.print(p)
     else:
         err_console.print("no station pair within the distance range and overlap")
+    if res.project:
+        proj = res.project
+        sizes = ", ".join(str(len(g)) for g in proj["groups"])
+        console.print(
+            f"project: {len(proj['groups'])} group(s) of {sizes} stations; overlap graph at "
+            f">= {proj['min_overlap']:g}: {len(proj['components'])} component(s); "
+            f"{len(proj['overlaps'])} pairs share a view (all listed in gt.json)"
+        )
     console.print(f"wrote {len(res.files)} files to {res.out_dir} in {seconds:.1f} s")

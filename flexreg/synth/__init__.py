@@ -9,8 +9,11 @@ triangle meshes with a reflectance and colour per triangle. Sensors ray-cast the
 :func:`scan_tls` (equirectangular TLS station), :func:`scan_lidar` (spinning lidar),
 :func:`render_rgbd` (pinhole depth + image). :func:`place_stations` finds stations with a
 guaranteed mutual overlap and inter-station distance; :func:`synthesize` writes a whole data set
-(what ``flexreg synth`` runs). Ground truth: ``T_target_source = inv(T_world_target) @
-T_world_source``; scans hold points in the scanner frame with ``T_world_scanner`` as pose.
+(what ``flexreg synth`` runs). Project scenes (:data:`PROJECT_SCENE_KINDS`: ``building``,
+``warehouse``, ``street``) are sized for many stations, which :func:`place_project` sets up as
+a surveyor walks a site; :func:`make_project` writes one. Ground truth:
+``T_target_source = inv(T_world_target) @ T_world_source``; scans hold points in the scanner
+frame with ``T_world_scanner`` as pose.
 """
 
 from flexreg.exports import lazy
@@ -21,6 +24,9 @@ _WHERE = {
     "CUE_SCENE_KINDS": "flexreg.synth.scenes",
     "SCENE_KINDS": "flexreg.synth.scenes",
     "FreeMap": "flexreg.synth.placement",
+    "GROUP_GAP_M": "flexreg.synth.scenes",
+    "PROJECT_SCENE_KINDS": "flexreg.synth.scenes",
+    "ProjectPlacement": "flexreg.synth.project",
     "Material": "flexreg.synth.mesh",
     "MeshBuilder": "flexreg.synth.mesh",
     "RGBDConfig": "flexreg.synth.config",
@@ -33,6 +39,7 @@ _WHERE = {
     "TLSConfig": "flexreg.synth.config",
     "add_mesh_objects": "flexreg.synth.scenes",
     "bays": "flexreg.synth.scenes",
+    "building": "flexreg.synth.scenes",
     "camera_trajectory": "flexreg.synth.dataset",
     "courtyard": "flexreg.synth.scenes",
     "free_map": "flexreg.synth.placement",
@@ -40,7 +47,12 @@ _WHERE = {
     "lidar_config": "flexreg.synth.sensors",
     "lidar_trajectory": "flexreg.synth.dataset",
     "look_at": "flexreg.synth.sensors",
+    "make_project": "flexreg.synth.dataset",
+    "make_project_scene": "flexreg.synth.scenes",
     "make_scene": "flexreg.synth.scenes",
+    "overlap_components": "flexreg.synth.project",
+    "overlap_matrix": "flexreg.synth.project",
+    "place_project": "flexreg.synth.project",
     "place_stations": "flexreg.synth.placement",
     "read_scene": "flexreg.synth.scene",
     "render_rgbd": "flexreg.synth.sensors",
@@ -51,12 +63,15 @@ _WHERE = {
     "smooth_path": "flexreg.synth.dataset",
     "station_overlap": "flexreg.synth.placement",
     "station_pair": "flexreg.synth.placement",
+    "street": "flexreg.synth.scenes",
     "stream": "flexreg.synth.placement",
     "symmetric_room": "flexreg.synth.scenes",
     "synthesize": "flexreg.synth.dataset",
     "tunnel": "flexreg.synth.scenes",
     "visible_fraction": "flexreg.synth.placement",
+    "warehouse": "flexreg.synth.scenes",
     "write_tum_sequence": "flexreg.synth.sensors",
+    "zone_free_map": "flexreg.synth.project",
 }
 __getattr__, __dir__ = lazy(globals(), _WHERE)
 __all__ = list(_WHERE)

@@ -15,9 +15,9 @@ from flexreg.config import Config, Positive, Seed, one_of
 from flexreg.core.budget import ENV_VAR, format_bytes, memory_budget
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.io.depth import TUM_DEPTH_SCALE
-from flexreg.synth.scenes import SCENE_KINDS
+from flexreg.synth.scenes import PROJECT_SCENE_KINDS, SCENE_KINDS
 
-__all__ = ["FORMATS", "RGBDConfig", "SynthConfig", "TLSConfig"]
+__all__ = ["FORMATS", "PROJECT_MIN_OVERLAP", "RGBDConfig", "SynthConfig", "TLSConfig"]
 
 #: station file formats of a data set
 FORMATS = ("ptx", "e57", "npz")
@@ -29,6 +29,10 @@ MAX_WIDTH = 8192
 STATION_PIXEL_BYTES = 180
 #: floor sizes of a procedural scene, metres
 MIN_SIZE_M, MAX_SIZE_M = 1.0, 1000.0
+
+#: default minimal overlap of a station with the one it was set up from, in project scenes
+#: (low enough for links that only see each other through a doorway)
+PROJECT_MIN_OVERLAP = 0.15
 
 #: a finite number >= 0 (noise levels, ranges, angles)
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -196,9 +200,11 @@ class SynthConfig(Config):
     scene : str
         A kind of :data:`~flexreg.synth.scenes.SCENE_KINDS` (``"room"``, ``"courtyard"``,
         ``"hall"``, ``"symmetric-room"``, ``"tunnel"``, ``"bays"`` and their ``"-cue"``
-        variants), or the path of a mesh file to scan.
+        variants), a project kind of :data:`~flexreg.synth.scenes.PROJECT_SCENE_KINDS`
+        (``"building"``, ``"warehouse"``, ``"street"``: sized for the stations, placed as a
+        walked survey), or the path of a mesh file to scan.
     stations : int
-        Number of TLS stations (1..200).
+        Number of TLS stations (1..200; a project needs at least 2 per group).
     width, height : int
         Station grid (azimuth columns x polar rows), within 8x4 .. 8192x4096 and within the
         memory budget (:mod:`flexreg.core.budget`; a station takes about
@@ -210,7 +216,8 @@ class SynthConfig(Config):
     rgbd_frames, lidar_frames : int
         Length of the optional RGB-D sequence and spinning-lidar sequence (0..100000).
     min_overlap : float
-        Minimal mutual overlap of a station with its neighbour, 0..1.
+        Minimal mutual overlap of a station with its neighbour, 0..1 (project kinds:
+        :data:`PROJECT_MIN_OVERLAP` unless given).
     distance_range_m : (float, float), metres
         ``0 < min <= max`` distance between neighbouring stations.
     max_tilt_rad : float, radians
@@ -224,6 +231,9 @@ class SynthConfig(Config):
         Floor size of a procedural scene, metres, 1..1000 each way.
     embed_poses : bool
         Write each station's true pose into its file instead of the identity.
+    groups : int
+        Project kinds only: number of disconnected sites (1..4) sharing the stations, far
+        enough apart that no station of one sees anything of another.
     """
 
     scene: str = "room"
@@ -243,33 +253,61 @@ class SynthConfig(Config):
     mesh_up_axis: Annotated[str, one_of(("x", "y", "z"))] = "z"
     size_m: tuple[float, float] | None = None
     embed_poses: bool = False
+    groups: int = Field(1, ge=1, le=4)
 
     @model_validator(mode="before")
     @classmethod
     def _tilt_in_degrees(cls, data: Any) -> Any:
-        """Accept the ``max_tilt_deg`` that :meth:`to_dict` adds (a result file's config)."""
+        """Accept the ``max_tilt_deg`` that :meth:`to_dict` adds (a result file's config);
+        give project kinds their own default minimal overlap."""
         if isinstance(data, dict) and "max_tilt_deg" in data:
             data = dict(data)
             deg = data.pop("max_tilt_deg")
             data.setdefault("max_tilt_rad", math.radians(float(deg)))
+        if isinstance(data, dict) and data.get("scene") in PROJECT_SCENE_KINDS:
+            if data.get("min_overlap") is None:
+                data = {**data, "min_overlap": PROJECT_MIN_OVERLAP}
         return data
+
+    @field_validator("groups")
+    @classmethod
+    def _groups(cls, v: int, info: ValidationInfo) -> int:
+        scene, n = info.data.get("scene"), info.data.get("stations")
+        if scene in PROJECT_SCENE_KINDS:
+            if n is not None and n < 2 * v:
+                raise ValueError(
+                    f"a {scene} project needs at least 2 stations per group, got {n} "
+                    f"station(s) for {v} group(s)"
+                )
+        elif v != 1 and scene is not None:
+            raise ValueError(
+                f"groups apply to project scenes ({', '.join(PROJECT_SCENE_KINDS)}), "
+                f"not to {scene!r}"
+            )
+        return v
+
+    @property
+    def is_project(self) -> bool:
+        """Whether the scene is a multi-station project kind."""
+        return self.scene in PROJECT_SCENE_KINDS
 
     @field_validator("scene")
     @classmethod
     def _scene(cls, v: str) -> str:
-        if v not in SCENE_KINDS and not Path(v).is_file():
-            raise ValueError(
-                f"scene must be one of {', '.join(SCENE_KINDS)} or an existing mesh file"
-            )
+        if v not in SCENE_KINDS and v not in PROJECT_SCENE_KINDS and not Path(v).is_file():
+            kinds = ", ".join((*SCENE_KINDS, *PROJECT_SCENE_KINDS))
+            raise ValueError(f"scene must be one of {kinds} or an existing mesh file")
         return v
 
     @field_validator("stations", mode="before")
     @classmethod
-    def _stations(cls, v: Any) -> Any:
+    def _stations(cls, v: Any, info: ValidationInfo) -> Any:
         if isinstance(v, bool) or int(v) != v or v < 1:
             raise ValueError("stations must be a positive integer")
         if v > 200:
             raise ValueError("at most 200 stations")
+        if v < 2 and info.data.get("scene") in PROJECT_SCENE_KINDS:
+            raise ValueError(f"a {info.data['scene']} project needs at least 2 stations")
         return v
 
     @field_validator("height")

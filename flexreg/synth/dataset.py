@@ -34,8 +34,20 @@ from flexreg.errors import ConfigError, InputError
 from flexreg.io import atomic_write, write_scan
 from flexreg.synth.config import RGBDConfig, SynthConfig, TLSConfig
 from flexreg.synth.placement import free_map, place_stations, station_overlap, stream
+from flexreg.synth.project import (
+    ProjectPlacement,
+    overlap_matrix,
+    place_project,
+    project_ground_truth,
+)
 from flexreg.synth.scene import Scene
-from flexreg.synth.scenes import SCENE_KINDS, make_scene, scene_from_mesh
+from flexreg.synth.scenes import (
+    PROJECT_SCENE_KINDS,
+    SCENE_KINDS,
+    make_project_scene,
+    make_scene,
+    scene_from_mesh,
+)
 from flexreg.synth.seeding import as_rng
 from flexreg.synth.sensors import (
     lidar_config,
@@ -91,7 +103,8 @@ class PairInfo:
 
 @dataclass(eq=False)
 class SynthResult:
-    """What :func:`synthesize` wrote (timings are reported here, never written to files)."""
+    """What :func:`synthesize` wrote (timings are reported here, never written to files);
+    ``project`` is the ``"project"`` part of ``gt.json`` for project scenes (else empty)."""
 
     out_dir: Path
     scene: Scene
@@ -99,6 +112,7 @@ class SynthResult:
     pairs: list[PairInfo]
     files: list[Path] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    project: dict[str, Any] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         return (
@@ -114,13 +128,23 @@ class SynthResult:
             "pairs": [p.to_dict() for p in self.pairs],
             "files": [str(f) for f in self.files],
             "seconds": dict(self.seconds),
+            "project": dict(self.project),
         }
 
 
 def build_scene(config: SynthConfig) -> Scene:
-    """The scene of a configuration: procedural (seeded) or a mesh file."""
+    """The scene of a configuration: procedural (seeded), a project sized for its stations, or
+    a mesh file."""
     if config.scene in SCENE_KINDS:
         return make_scene(config.scene, config.seed, size_m=config.size_m)
+    if config.scene in PROJECT_SCENE_KINDS:
+        return make_project_scene(
+            config.scene,
+            config.seed,
+            stations=config.stations,
+            groups=config.groups,
+            size_m=config.size_m,
+        )
     return scene_from_mesh(config.scene, scale=config.mesh_scale, up_axis=config.mesh_up_axis)
 
 
@@ -324,15 +348,28 @@ def synthesize(
     scene = build_scene(cfg)
     secs["scene"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    poses = place_stations(
-        scene,
-        cfg.stations,
-        min_overlap=cfg.min_overlap,
-        distance_range_m=cfg.distance_range_m,
-        max_tilt_rad=cfg.max_tilt_rad,
-        config=tls,
-        rng=stream(cfg.seed, _PLACEMENT),
-    )
+    plan: ProjectPlacement | None = None
+    if cfg.is_project:
+        plan = place_project(
+            scene,
+            cfg.stations,
+            min_overlap=cfg.min_overlap,
+            distance_range_m=cfg.distance_range_m,
+            max_tilt_rad=cfg.max_tilt_rad,
+            config=tls,
+            rng=stream(cfg.seed, _PLACEMENT),
+        )
+        poses = plan.poses
+    else:
+        poses = place_stations(
+            scene,
+            cfg.stations,
+            min_overlap=cfg.min_overlap,
+            distance_range_m=cfg.distance_range_m,
+            max_tilt_rad=cfg.max_tilt_rad,
+            config=tls,
+            rng=stream(cfg.seed, _PLACEMENT),
+        )
     secs["placement"] = time.perf_counter() - t0
     traj: list[NDArray[np.float64]] = []
     rgbd_cfg = RGBDConfig()
@@ -356,7 +393,14 @@ def synthesize(
     stations = _write_stations(out, scene, poses, cfg, tls, files, progress)
     secs["stations"] = sum(s.seconds for s in stations)
     t0 = time.perf_counter()
-    pairs = _station_pairs(scene, poses, stations, cfg, tls)
+    project_doc: dict[str, Any] = {}
+    if plan is None:
+        pairs = _station_pairs(scene, poses, stations, cfg, tls)
+    else:
+        overlap = overlap_matrix(scene, poses, config=tls)
+        pairs = _project_pairs(overlap, poses, stations, cfg)
+        names = [s.name for s in stations]
+        project_doc = project_ground_truth(plan, overlap, names, cfg.min_overlap)
     secs["pairs"] = time.perf_counter() - t0
     if cfg.rgbd_frames:
         t0 = time.perf_counter()
@@ -375,9 +419,15 @@ def synthesize(
         lidar_doc = _write_lidar(out, scene, lidar_traj, cfg, files, progress)
         secs["lidar"] = time.perf_counter() - t0
     doc = _ground_truth(cfg, tls, scene, stations, pairs, rgbd_cfg, lidar_doc)
+    if plan is not None:
+        for entry, g, parent in zip(doc["stations"], plan.groups, plan.parents, strict=True):
+            entry["T_world_station"] = entry["T_world_scanner"]
+            entry["group"] = g
+            entry["parent"] = stations[parent].name if parent >= 0 else None
+        doc["project"] = project_doc
     _write_json(out / "gt.json", doc)
     files.append(out / "gt.json")
-    return SynthResult(out, scene, stations, pairs, files, secs)
+    return SynthResult(out, scene, stations, pairs, files, secs, project_doc)
 
 
 def _write_stations(
@@ -391,9 +441,10 @@ def _write_stations(
 ) -> list[StationInfo]:
     """Simulate and write every station (appending to ``files``)."""
     stations: list[StationInfo] = []
+    digits = max(2, len(str(len(poses) - 1)))  # names sort in file order
     for i, T in enumerate(poses):
         t0 = time.perf_counter()
-        name = f"station_{i:02d}"
+        name = f"station_{i:0{digits}d}"
         scan = scan_tls(scene, T, config=tls, rng=stream(cfg.seed, _STATION + i), name=name)
         t_sim = time.perf_counter() - t0
         if not cfg.embed_poses:
@@ -425,6 +476,27 @@ def _station_pairs(
                 continue
             ov = station_overlap(scene, poses[i], poses[j], config=tls)
             if ov >= cfg.min_overlap:
+                pairs.append(
+                    PairInfo(stations[i].name, stations[j].name, invert(poses[i]) @ poses[j], d, ov)
+                )
+    return pairs
+
+
+def _project_pairs(
+    overlap: NDArray[np.float64],
+    poses: list[NDArray[np.float64]],
+    stations: list[StationInfo],
+    cfg: SynthConfig,
+) -> list[PairInfo]:
+    """The pairs of :func:`_station_pairs` (distance within the range, overlap at least the
+    minimum), from a project's overlap matrix."""
+    pairs: list[PairInfo] = []
+    d0, d1 = cfg.distance_range_m
+    for i in range(len(poses)):
+        for j in range(i + 1, len(poses)):
+            d = float(np.linalg.norm(poses[j][:3, 3] - poses[i][:3, 3]))
+            ov = float(min(overlap[i, j], overlap[j, i]))
+            if d0 <= d <= d1 and ov >= cfg.min_overlap:
                 pairs.append(
                     PairInfo(stations[i].name, stations[j].name, invert(poses[i]) @ poses[j], d, ov)
                 )
@@ -493,3 +565,61 @@ def _ground_truth(
     if cfg.lidar_frames:
         doc["lidar"] = {"sensor": lidar_config().to_dict(), "frames": lidar_doc}
     return doc
+
+
+def make_project(
+    kind: str,
+    *,
+    stations: int,
+    out: str | PathLike[str],
+    resolution: tuple[int, int] = (1024, 512),
+    seed: int = 0,
+    groups: int = 1,
+    max_tilt_rad: float = math.radians(3.0),
+    progress: Progress | None = None,
+    **settings: Any,
+) -> SynthResult:
+    """Write a multi-station project: what ``flexreg synth --scene KIND --stations N`` writes.
+
+    >>> make_project("building", stations=36, out="proj", seed=2)  # doctest: +SKIP
+
+    Parameters
+    ----------
+    kind : {"building", "warehouse", "street"}
+    stations : int
+        At least 2 per group.
+    out : path-like
+        Output folder.
+    resolution : (int, int)
+        Station grid ``(width, height)``.
+    seed : int
+    groups : int
+        Disconnected sites (1..4).
+    max_tilt_rad : float, radians
+    progress : callable, optional
+        As for :func:`synthesize`.
+    **settings
+        Further :class:`~flexreg.synth.config.SynthConfig` fields (``format``, ``noise_m``,
+        ``min_overlap``...).
+
+    Returns
+    -------
+    SynthResult
+    """
+    if kind not in PROJECT_SCENE_KINDS:
+        raise ConfigError(
+            f"unknown project kind {kind!r}; choose one of {', '.join(PROJECT_SCENE_KINDS)}"
+        )
+    cfg = SynthConfig(
+        **{
+            "scene": kind,
+            "stations": stations,
+            "width": int(resolution[0]),
+            "height": int(resolution[1]),
+            "seed": seed,
+            "groups": groups,
+            "max_tilt_rad": max_tilt_rad,
+            **settings,
+        }
+    )
+    return synthesize(out, cfg, progress=progress)

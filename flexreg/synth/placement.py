@@ -63,15 +63,23 @@ class FreeMap:
 
 
 def free_map(
-    scene: Scene, *, cell_m: float = 0.1, probe_height_m: float = 2.0, tripod_radius_m: float = 0.35
+    scene: Scene,
+    *,
+    cell_m: float = 0.1,
+    probe_height_m: float = 2.0,
+    tripod_radius_m: float = 0.35,
+    region: tuple[float, float, float, float] | None = None,
 ) -> FreeMap:
-    """Compute (and cache on the scene) the :class:`FreeMap` of its placement region."""
+    """Compute (and cache on the scene) the :class:`FreeMap` of its placement region (or of
+    ``region``, ``(xmin, ymin, xmax, ymax)`` in metres, when given)."""
     key = f"free_map:{cell_m}:{probe_height_m}:{tripod_radius_m}"
+    if region is not None:
+        key += ":" + ",".join(repr(float(v)) for v in region)
     if key in scene._cache:
         return scene._cache[key]
-    x0, y0, x1, y1 = scene.region
+    x0, y0, x1, y1 = scene.region if region is None else region
     if not (x1 > x0 and y1 > y0):
-        raise DegenerateGeometryError(f"scene region is empty: {scene.region}")
+        raise DegenerateGeometryError(f"scene region is empty: {(x0, y0, x1, y1)}")
     xs = np.arange(x0, x1 + 1e-9, cell_m)
     ys = np.arange(y0, y1 + 1e-9, cell_m)
     X, Y = np.meshgrid(xs, ys)
@@ -117,15 +125,23 @@ def _coarse_hits(
     cache = scene._cache.setdefault("coarse_hits", {})
     if key in cache:
         return cache[key]
+    pw, n = _coarse_points(scene, T, cfg)
+    if len(cache) > 32:  # ~0.8 MB per entry
+        cache.clear()
+    cache[key] = (pw, n)
+    return pw, n
+
+
+def _coarse_points(
+    scene: Scene, T: NDArray[np.float64], cfg: TLSConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """World points and normals of a station on the coarse grid ``cfg`` (uncached)."""
     s = scan_tls(scene, T, config=cfg, rng=0)
     pw = s.points_world()
     # normals of what was seen, by re-casting the valid rays (cheap at this size)
     d = pw - T[:3, 3]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     n = scene.cast(T[:3, 3], d).normal.astype(np.float64)
-    if len(cache) > 32:  # ~0.8 MB per entry
-        cache.clear()
-    cache[key] = (pw, n)
     return pw, n
 
 
@@ -150,8 +166,41 @@ def visible_fraction(
     Ta = as_transform(T_world_from, name="T_world_from")
     Tb = as_transform(T_world_to, name="T_world_to")
     pts, normals = _coarse_hits(scene, Tb, cfg)
+    return _seen_share(scene, Ta, pts, normals, cfg)
+
+
+def _seen_share(
+    scene: Scene,
+    Ta: NDArray[np.float64],
+    pts: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    cfg: TLSConfig,
+) -> float:
+    """Share of the world points ``pts`` (with their surface ``normals``) that a station at
+    ``Ta`` sees (the test of :func:`visible_fraction`)."""
     if len(pts) == 0:
         return 0.0
+    ok, d, dist = _seen_rays(Ta, pts, normals, cfg)
+    idx = np.flatnonzero(ok)
+    if len(idx):
+        t = scene.cast(Ta[:3, 3], d[idx]).t
+        ok[idx] = _unblocked(t, dist[idx])
+    return float(np.count_nonzero(ok)) / len(pts)
+
+
+def _unblocked(t: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether rays that first hit at ``t`` reach points at ``dist`` (2 cm + 0.5 %)."""
+    return t >= dist - (0.02 + 0.005 * dist)
+
+
+def _seen_rays(
+    Ta: NDArray[np.float64],
+    pts: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    cfg: TLSConfig,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """The tests of :func:`_seen_share` before the line of sight: ``(ok, directions,
+    distances)`` of every point from the station at ``Ta``."""
     o = Ta[:3, 3]
     v = pts - o
     dist = np.linalg.norm(v, axis=1)
@@ -163,11 +212,7 @@ def visible_fraction(
     if cfg.tripod_cone_rad > 0:
         ok &= theta <= math.pi - cfg.tripod_cone_rad
     ok &= np.abs(np.einsum("ij,ij->i", normals, d)) >= math.cos(cfg.max_incidence_rad)
-    idx = np.flatnonzero(ok)
-    if len(idx):
-        t = scene.cast(o, d[idx]).t
-        ok[idx] = t >= dist[idx] - (0.02 + 0.005 * dist[idx])
-    return float(np.count_nonzero(ok)) / len(pts)
+    return ok, d, dist
 
 
 def station_overlap(

@@ -81,6 +81,16 @@ class Scene:
         ``T_world_scanner``. Empty for scenes without such ambiguity (every scene except the
         ``symmetric-room``, ``tunnel`` and ``bays`` kinds); a tunnel lists samples of its
         continuous family of shifts along the axis.
+    zones : tuple of (xmin, ymin, xmax, ymax, group)
+        Where the stations of a multi-station *project* may stand (metres), each rectangle
+        with the id of the disconnected group it belongs to; empty for single-space scenes,
+        whose stations stand anywhere in ``region``.
+    layout : dict of str to Any
+        JSON-ready facts of a project's layout (rooms, bay period, street lengths...).
+    stand_points : tuple of (x, y, group)
+        Spots where a surveyor would set up to link two spaces (in front of and behind each
+        doorway, a corridor junction), metres; placement starts on the first one and tries
+        them when the open floor around a station is taken. Not stored in files.
     """
 
     vertices: NDArray[np.float64]
@@ -94,6 +104,9 @@ class Scene:
     objects: dict[str, int] = field(default_factory=dict)
     name: str = ""
     symmetries: tuple[NDArray[np.float64], ...] = ()
+    zones: tuple[tuple[float, float, float, float, int], ...] = ()
+    layout: dict[str, Any] = field(default_factory=dict)
+    stand_points: tuple[tuple[float, float, int], ...] = ()
     _raycaster: Any = field(default=None, init=False, repr=False)
     _cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
@@ -119,6 +132,9 @@ class Scene:
             np.broadcast_to(np.asarray(self.colors, dtype=np.uint8), (T, 3))
         )
         self.symmetries = tuple(np.array(S, dtype=np.float64) for S in self.symmetries)
+        self.zones = tuple(
+            (float(a), float(b), float(c), float(d), int(g)) for a, b, c, d, g in self.zones
+        )
         if self.region == (0.0, 0.0, 0.0, 0.0):
             lo, hi = self.bounds
             self.region = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
@@ -146,7 +162,8 @@ class Scene:
         return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (no geometry); ``symmetries`` only when there are any."""
+        """JSON-ready description (no geometry); ``symmetries``, ``zones_m`` and ``layout`` only
+        when there are any."""
         lo, hi = self.bounds
         d = {
             "kind": self.kind,
@@ -161,6 +178,10 @@ class Scene:
         }
         if self.symmetries:
             d["symmetries"] = [S.tolist() for S in self.symmetries]
+        if self.zones:
+            d["zones_m"] = [list(z) for z in self.zones]
+        if self.layout:
+            d["layout"] = dict(self.layout)
         return d
 
     # ------------------------------------------------------------------ ray casting

@@ -272,6 +272,9 @@ def finish(
     margin_m: float,
     region: tuple[float, float, float, float] | None = None,
     symmetries: tuple[NDArray[np.float64], ...] = (),
+    zones: tuple[tuple[float, float, float, float, int], ...] = (),
+    layout: dict[str, Any] | None = None,
+    stand_points: tuple[tuple[float, float, int], ...] = (),
 ) -> Scene:
     """The built mesh as a :class:`Scene` on floor z = 0, with stations allowed inside the
     ``Lx`` x ``Ly`` footprint less ``margin_m`` (or inside ``region`` when given)."""
@@ -290,6 +293,9 @@ def finish(
         objects=b.counts,
         name=f"{kind}-{seed}" if seed is not None else kind,
         symmetries=symmetries,
+        zones=zones,
+        layout=layout or {},
+        stand_points=stand_points,
     )
 
 
@@ -308,3 +314,55 @@ def shift_x(dx: float) -> NDArray[np.float64]:
     T = np.eye(4)
     T[0, 3] = dx
     return T
+
+
+def side_by_side(parts: list[Scene], kind: str, seed: int | None, gap_m: float) -> Scene:
+    """One scene of several, laid out along x with ``gap_m`` metres of nothing between their
+    bounding boxes; part ``g``'s placement zones become group ``g``'s.
+
+    With a gap beyond the scanner's range nothing of one part can be seen from another, so
+    the stations of different parts never overlap.
+    """
+    verts, tris, refl, rgb = [], [], [], []
+    zones: list[tuple[float, float, float, float, int]] = []
+    stand: list[tuple[float, float, int]] = []
+    objects: dict[str, int] = {}
+    n_v, x = 0, float(parts[0].bounds[0][0])  # the first part stays where it is
+    offsets: list[float] = []
+    for g, part in enumerate(parts):
+        lo, hi = part.bounds
+        dx = x - float(lo[0])
+        verts.append(part.vertices + np.array([dx, 0.0, 0.0]))
+        tris.append(part.triangles + n_v)
+        n_v += len(part.vertices)
+        refl.append(part.reflectance)
+        rgb.append(part.colors)
+        own = part.zones or ((*part.region, 0),)
+        zones += [(z[0] + dx, z[1], z[2] + dx, z[3], g) for z in own]
+        stand += [(x + dx, y, g) for x, y, _g in part.stand_points]
+        for k, v in part.objects.items():
+            objects[k] = objects.get(k, 0) + v
+        offsets.append(round(dx, 6))
+        x = float(hi[0]) + dx + gap_m
+    if len(parts) == 1:
+        layout = dict(parts[0].layout)
+    else:
+        layout = {"groups": len(parts), "group_offsets_m": offsets}
+        layout.update({f"group_{g}": dict(p.layout) for g, p in enumerate(parts)})
+    Z = np.array([z[:4] for z in zones])
+    lo_xy, hi_xy = Z[:, :2].min(axis=0), Z[:, 2:].max(axis=0)
+    return Scene(
+        np.vstack(verts),
+        np.vstack(tris),
+        np.concatenate(refl),
+        np.vstack(rgb),
+        kind=kind,
+        seed=seed,
+        floor_z=0.0,
+        region=(float(lo_xy[0]), float(lo_xy[1]), float(hi_xy[0]), float(hi_xy[1])),
+        objects=objects,
+        name=f"{kind}-{seed}" if seed is not None else kind,
+        zones=tuple(zones),
+        layout=layout,
+        stand_points=tuple(stand),
+    )

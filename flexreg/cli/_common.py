@@ -55,6 +55,13 @@ def progress_bar() -> Progress:
     )
 
 
+def scan_file(path: Path) -> Path:
+    """The file of a scan argument (``FILE#N`` / ``FILE#NAME`` -> ``FILE``)."""
+    from flexreg.io.selector import parse_scan_ref
+
+    return parse_scan_ref(path).path
+
+
 def read_input(
     path: Path,
     *,
@@ -64,18 +71,26 @@ def read_input(
     depth_scale: float | None = None,
     all_scans: bool = False,
 ) -> list[Any]:
-    """Read the scans of an input file, building a camera for depth PNGs from the options."""
+    """Read the scans of an input (``FILE``, ``FILE#N`` or ``FILE#NAME``), building a camera for
+    depth PNGs from the options.
+
+    With a setup selector, that setup alone. Without one, every setup when ``all_scans``, else
+    the file's only setup: a file holding several is refused with a line that names them.
+    """
     from flexreg.errors import InputError
     from flexreg.io import detect_format, read_scans
     from flexreg.io.depth import camera_for_image
+    from flexreg.io.selector import parse_scan_ref
 
-    _, fmt = detect_format(path)
+    ref = parse_scan_ref(path)
+    file = ref.path
+    _, fmt = detect_format(file)
     opts: dict[str, Any] = {}
     if fmt == "depth":
-        if not path.is_file():
-            raise InputError(path, "no such file")
+        if not file.is_file():
+            raise InputError(file, "no such file")
         try:
-            opts["camera"] = camera_for_image(path, pinhole=pinhole, equirect=equirect)
+            opts["camera"] = camera_for_image(file, pinhole=pinhole, equirect=equirect)
         except InputError as e:
             if e.source in ("pinhole camera", "spherical camera"):  # name the option at fault
                 raise InputError("--pinhole" if pinhole else "--equirect", e.problem) from None
@@ -88,10 +103,51 @@ def read_input(
             opts["depth_scale"] = depth_scale
     elif pinhole or equirect or depth_kind or depth_scale is not None:
         raise InputError(
-            path, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
+            file, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
         )
+    if fmt == "e57" and ref.selector is None and not all_scans:
+        from flexreg.io.setups import list_setups
+
+        setups = list_setups(file)  # headers only: refuse a project file before reading it
+        if len(setups) > 1:
+            raise _several(file, [s.name for s in setups], [s.points for s in setups])
     scans = read_scans(path, **opts)
-    return scans if all_scans else scans[:1]
+    if len(scans) > 1 and ref.selector is None and not all_scans:
+        raise _several(file, [s.name for s in scans], [len(s) for s in scans])
+    return scans
+
+
+def read_pair(target: Path, source: Path) -> list[Any]:
+    """Read the target and the source scan (one setup each, see :func:`read_input`); the same
+    setup of the same file on both sides is refused."""
+    import numpy as np
+
+    from flexreg.errors import InputError
+
+    scans = []
+    for path in (target, source):
+        with stage(f"Reading {path.name}"):
+            (scan,) = read_input(path)
+        scans.append(scan)
+    t, s = scans
+    same_file = scan_file(target).resolve() == scan_file(source).resolve()
+    if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):
+        raise InputError(
+            source,
+            f"is the same scan as the target {target}: name two setups (FILE#N) or two files",
+        )
+    return scans
+
+
+def _several(file: Path, names: list[str], counts: list[int]) -> Exception:
+    from flexreg.errors import InputError
+    from flexreg.io.selector import setup_choices
+
+    return InputError(
+        file,
+        f"holds {len(names)} setups; name one as FILE#N or FILE#NAME: "
+        f"{setup_choices(file, names, counts)}",
+    )
 
 
 #: exit status of a command that wrote its result but does not trust it (see ``flexreg --help``)

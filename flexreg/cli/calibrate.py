@@ -10,7 +10,15 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.calibration.config import CalibrationConfig
-from flexreg.cli._common import console, exit_for, print_verdict, stage, write_all
+from flexreg.cli._common import (
+    console,
+    exit_for,
+    print_verdict,
+    read_input,
+    scan_file,
+    stage,
+    write_all,
+)
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -302,7 +310,6 @@ def calibrate_command(
          error line, nothing written
     """
     from flexreg.calibration import calibrate, overlay_image, read_correspondences
-    from flexreg.io import read_scan
     from flexreg.io.intrinsics import read_extrinsic
 
     config = build_config(
@@ -321,7 +328,7 @@ def calibrate_command(
         kitti_camera=kitti_camera,
         truth=truth,
     )
-    inputs = [p for p in (image, camera, scan, pairs, init, truth) if p is not None]
+    inputs = [p for p in (image, camera, scan_file(scan), pairs, init, truth) if p is not None]
     check_outputs([("--out", out, ".json"), ("--overlay", overlay, ".png")], inputs=inputs)
     check_out_folder("--export-views", export_views)
     dist = _parse_distortion(distortion)
@@ -333,7 +340,7 @@ def calibrate_command(
     T_init = None if init is None else read_extrinsic(init, kitti_camera=kitti_camera)
     T_true = None if truth is None else read_extrinsic(truth, kitti_camera=kitti_camera)
     with stage(f"Reading {scan.name}"):
-        lidar = read_scan(scan)
+        (lidar,) = read_input(scan)
     corr = None
     if pairs is not None:
         with stage(f"Reading {pairs.name}"):

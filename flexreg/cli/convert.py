@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from flexreg.cli._common import console, err_console, progress_bar, read_input
+from flexreg.cli._common import console, err_console, progress_bar, read_input, scan_file
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -149,8 +149,8 @@ def _convert_one(
     from flexreg.io import atomic_write
     from flexreg.stages.feature_images import convert, quantize, value_range
 
-    if not src.is_file():
-        raise InputError(src, "no such file")
+    if not scan_file(src).is_file():
+        raise InputError(scan_file(src), "no such file")
     rimg = load_range_image(src, **camera_options)  # type: ignore[arg-type]
     kind = config.kind
     image = convert(rimg, kind, n=config.n, median=config.median)

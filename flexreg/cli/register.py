@@ -14,7 +14,8 @@ from flexreg.cli._common import (
     console,
     exit_for,
     print_verdict,
-    read_input,
+    read_pair,
+    scan_file,
     stage,
     write_all,
 )
@@ -117,8 +118,10 @@ _TargetArgument = Annotated[
     Path,
     typer.Argument(
         metavar="TARGET",
-        help="Target scan: any readable scan file, or a depth PNG with its camera sidecar. "
-        "Points are used in the scanner frame; a pose stored in the file is ignored.",
+        help="Target scan: any readable scan file (FILE#N or FILE#NAME for one setup of a "
+        "multi-setup PTX/E57), or a depth PNG with its camera sidecar. Points are used in the "
+        "scanner frame; a pose stored in the file is used only by --init stored and the "
+        "stored-pose check.",
     ),
 ]
 _SourceArgument = Annotated[
@@ -276,13 +279,9 @@ def register_command(
         ("--matches", matches, ".png"),
         ("--merged", merged, ".ply"),
     ]
-    check_outputs(outputs, inputs=(target, source))
+    check_outputs(outputs, inputs=(scan_file(target), scan_file(source)))
     T_true = None if truth is None else read_truth(truth, target, source)
-    scans = []
-    for path in (target, source):
-        with stage(f"Reading {path.name}"):
-            (scan,) = read_input(path)
-        scans.append(scan)
+    scans = read_pair(target, source)
     with _StageSpinners() as spinners:
         result = register(scans[0], scans[1], config, progress=spinners)
     errors = None if T_true is None else _errors(result, T_true)

@@ -31,7 +31,8 @@ DepthScaleOpt = typer.Option(None, "--depth-scale", help="Depth PNG metres per s
 def info(
     scan: Path = typer.Argument(
         ...,
-        help="Scan file (PTX, E57, PLY, PCD, LAS/LAZ, KITTI .bin, 3DTK .3d, npy/npz, depth PNG).",
+        help="Scan file (PTX, E57, PLY, PCD, LAS/LAZ, KITTI .bin, 3DTK .3d, npy/npz, depth "
+        "PNG): every setup it holds, or FILE#N / FILE#NAME for one.",
     ),
     pinhole: tuple[float, float, float, float] | None = PinholeOpt,
     equirect: tuple[float, float] | None = EquirectOpt,
@@ -57,19 +58,29 @@ def info(
     if as_json:
         console.print_json(json.dumps(summaries))
         return
+    from flexreg.cli._common import scan_file
     from flexreg.io.info import render_scan_summary
 
-    for s in summaries:
+    several = len(summaries) > 1
+    for i, s in enumerate(summaries):
+        if several:
+            console.print(f"setup {scan_file(scan)}#{i}", markup=False, soft_wrap=True)
         console.print(render_scan_summary(s))
 
 
 @app.command("project")
 def project(
-    scan: Path = typer.Argument(..., help="Scan file (any readable format)."),
+    scan: Path = typer.Argument(
+        ..., help="Scan file (any readable format); FILE#N or FILE#NAME for one setup."
+    ),
     out: Path = typer.Option(
         ..., "--out", "-o", help="Output 16-bit range PNG (a float32 .npz is written beside it)."
     ),
-    index: int = typer.Option(0, "--index", help="Which scan of a multi-scan file (PTX, E57)."),
+    index: int | None = typer.Option(
+        None,
+        "--index",
+        help="Which setup of a multi-setup file (PTX, E57), from 0; same as SCAN#N.",
+    ),
     resample: bool = typer.Option(
         False, "--resample", help="Z-buffer project even if the scan has a native grid."
     ),
@@ -99,18 +110,22 @@ def project(
         raise InputError(out, "output must be a .png file")
     if resolution_deg is not None and not resolution_deg > 0:
         raise InputError("--resolution-deg", f"must be positive, got {resolution_deg}")
+    if index is not None:
+        from flexreg.io.selector import parse_scan_ref
+
+        if parse_scan_ref(scan).selector is not None:
+            raise InputError("--index", f"{scan} already names a setup; give it one way")
+        if index < 0:
+            raise InputError("--index", f"must be 0 or more, got {index}")
+        scan = Path(f"{scan}#{index}")
     with stage(f"Reading {scan.name}"):
-        scans = read_input(
+        (s,) = read_input(
             scan,
             pinhole=pinhole,
             equirect=equirect,
             depth_kind=depth_kind,
             depth_scale=depth_scale,
-            all_scans=True,
         )
-    if not -len(scans) <= index < len(scans):
-        raise InputError(scan, f"scan index {index} out of range: the file holds {len(scans)}")
-    s = scans[index]
     with stage("Building range image"):
         if resample or not s.has_grid:
             from flexreg.stages.projection import auto_spherical_camera

@@ -51,6 +51,7 @@ OPTIONS = {
     "--threshold": "threshold_m",
     "--seed": "seed",
     "--upright": "upright",
+    "--icp-only": "icp_only",
 }
 _C = RegistrationConfig
 
@@ -224,6 +225,23 @@ _TruthOption = Annotated[
         "report the errors in degrees and metres and store them in the output JSON.",
     ),
 ]
+_InitOption = Annotated[
+    str | None,
+    typer.Option(
+        "--init",
+        metavar="T.txt|T.json|stored",
+        help="Initial T_target_source: a transform file (4x4 .txt, or .json), or 'stored' for "
+        "the relative pose the files store for the two setups (E57 pose, PTX header). It "
+        "competes with the global search unless --icp-only.",
+    ),
+]
+_IcpOnlyOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--icp-only/--search",
+        help=with_default(_C, "icp_only", "Refine from --init only, without global search."),
+    ),
+]
 
 
 @app.command("register")
@@ -244,6 +262,8 @@ def register_command(
     seed: _SeedOption = None,
     upright: _UprightOption = None,
     truth: _TruthOption = None,
+    init: _InitOption = None,
+    icp_only: _IcpOnlyOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -256,6 +276,7 @@ def register_command(
          and in the output JSON under "verdict"; check the pair before using it
       1  failed: one error line, nothing written
     """
+    from flexreg.io.setups import stored_T_target_source
     from flexreg.registration.pipeline import register
 
     config = build_config(
@@ -272,7 +293,10 @@ def register_command(
         threshold_m=threshold,
         seed=seed,
         upright=upright,
+        icp_only=icp_only,
     )
+    if config.icp_only and init is None:
+        raise InputError("--icp-only", "needs --init T.txt or --init stored")
     outputs = [
         ("--out", out, ".json"),
         ("--txt", txt, None),
@@ -281,14 +305,29 @@ def register_command(
     ]
     check_outputs(outputs, inputs=(scan_file(target), scan_file(source)))
     T_true = None if truth is None else read_truth(truth, target, source)
+    T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
     scans = read_pair(target, source)
+    stored = stored_T_target_source(scans[0], scans[1])
+    if init == "stored" and stored is None:
+        raise InputError(
+            "--init stored", f"neither {target} nor {source} stores a setup pose (both identity)"
+        )
+    T_init = stored if init == "stored" else T_file
     with _StageSpinners() as spinners:
-        result = register(scans[0], scans[1], config, progress=spinners)
+        result = register(scans[0], scans[1], config, progress=spinners, init=T_init)
     errors = None if T_true is None else _errors(result, T_true)
-    meta = {"target": str(target), "source": str(source), "truth": truth, "errors": errors}
+    check = None if stored is None or init is not None else _stored_check(result, stored)
+    meta = {
+        "target": str(target),
+        "source": str(source),
+        "truth": truth,
+        "errors": errors,
+        "init": None if init is None else {"from": init, "T_target_source": T_init},
+        "stored_pose_check": check,
+    }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
-    _print_summary(result, config, errors)
+    _print_summary(result, config, errors, check)
     print_verdict(result.verdict, result.T_target_source)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -328,6 +367,13 @@ def _writers(
     meta["flexreg_version"] = __version__
     if inputs["errors"] is not None:
         meta["error_vs_truth"] = {"truth": str(inputs["truth"]), **inputs["errors"]}
+    if inputs["init"] is not None:
+        meta["init"] = {
+            "from": inputs["init"]["from"],
+            "T_target_source": inputs["init"]["T_target_source"].tolist(),
+        }
+    if inputs["stored_pose_check"] is not None:
+        meta["stored_pose_check"] = inputs["stored_pose_check"]
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     return writers
 
@@ -376,10 +422,22 @@ def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str
     }
 
 
+def _stored_check(result: RegistrationResult, stored: NDArray[np.float64]) -> dict[str, Any]:
+    """How far the result is from the relative pose the files store (degrees, metres)."""
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
+
+    return {
+        "rotation_deg": rotation_error_deg(result.T_target_source, stored),
+        "translation_m": translation_error_m(result.T_target_source, stored),
+        "T_target_source_stored": stored.tolist(),
+    }
+
+
 def _print_summary(
     result: RegistrationResult,
     config: RegistrationConfig,
     errors: dict[str, float] | None = None,
+    stored: dict[str, Any] | None = None,
 ) -> None:
     import numpy as np
     from rich.table import Table
@@ -409,6 +467,12 @@ def _print_summary(
             f"coarse {errors['coarse_rotation_deg']:.3f}°, "
             f"{1000 * errors['coarse_translation_m']:.1f} mm; final "
             f"{errors['rotation_deg']:.4f}°, {1000 * errors['translation_m']:.2f} mm",
+        )
+    if stored is not None:
+        t.add_row(
+            "vs stored poses",
+            f"{stored['rotation_deg']:.3f}°, {stored['translation_m']:.3f} m from the relative "
+            "pose the files store (--init stored uses it)",
         )
     if config.refine:
         dr = rotation_error_deg(r.T_target_source, r.T_coarse)

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import invert, is_rigid
 from flexreg.errors import InputError
 from flexreg.io.e57 import headers
 from flexreg.io.formats import detect_format
@@ -36,6 +38,7 @@ __all__ = [
     "pick",
     "select_setup",
     "setup_choices",
+    "stored_T_target_source",
 ]
 
 
@@ -123,3 +126,27 @@ def list_setups(path: str | PathLike[str], **options: Any) -> list[SetupInfo]:
         return [SetupInfo(p, i, n, c, T) for i, (n, c, T) in enumerate(headers(p))]
     scans = read_scans(p, **options)
     return [SetupInfo(p, i, s.name, len(s), s.T_world_scanner.copy()) for i, s in enumerate(scans)]
+
+
+def stored_T_target_source(target: Scan, source: Scan) -> NDArray[np.float64] | None:
+    """The relative pose the files store: ``inv(T_world_target) @ T_world_source``.
+
+    Parameters
+    ----------
+    target, source : Scan
+        Setups whose ``T_world_scanner`` came from their files (E57 ``pose``, PTX header).
+
+    Returns
+    -------
+    (4, 4) float64 or None
+        ``T_target_source`` in the scanners' own frames, or None when neither setup stores a
+        pose (both identity: a file without poses says nothing about where its scanner stood)
+        or a pose is not rigid.
+    """
+    Tt, Ts = target.T_world_scanner, source.T_world_scanner
+    eye = np.eye(4)
+    if np.allclose(Tt, eye, rtol=0.0, atol=1e-12) and np.allclose(Ts, eye, rtol=0.0, atol=1e-12):
+        return None
+    if not (is_rigid(Tt) and is_rigid(Ts)):
+        return None
+    return invert(Tt) @ Ts

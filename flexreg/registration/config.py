@@ -63,6 +63,9 @@ class RegistrationConfig(Config):
     fill_holes : bool
         Fill isolated no-return pixels before the conversion
         (:func:`flexreg.stages.projection.fill_holes`).
+    icp_only : bool
+        Refine the given initial transform (``register(..., init=T)``) only: no descriptor
+        or plan-view search. Requires ``init``.
     upright : {"auto", "on", "off"}
         Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
         (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"``
@@ -143,6 +146,7 @@ class RegistrationConfig(Config):
     voxel_m: Positive | None = None
     seed: Seed = 0
     fill_holes: bool = True
+    icp_only: bool = False
     upright: Annotated[str, one_of(UPRIGHT)] = "auto"
     max_tilt_rad: float = Field(math.radians(10.0), ge=0, lt=math.pi / 2)
     plan_cell_m: Positive = 0.25

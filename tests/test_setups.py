@@ -100,3 +100,18 @@ def test_info_lists_every_setup_and_project_takes_one(two_setup_file, tmp_path):
         ["project", f"{two_setup_file}#1", "--index", "1", "--out", tmp_path / "c.png"]
     )
     assert rc == 1 and "give it one way" in one_error_line(err)
+
+
+def test_ptx_pose_from_the_scanner_registration_lines(tmp_path):
+    """Some exporters leave the 4x4 matrix at identity and store the setup's pose only in the
+    position and axes lines: the pose comes from those then."""
+    R = rotation_about_axis([0, 0, 1], 0.5)[:3, :3]
+    head = ["2", "1", "10.0 20.0 1.5"] + [" ".join(f"{v:.17g}" for v in R[:, k]) for k in range(3)]
+    head += ["1 0 0 0", "0 1 0 0", "0 0 1 0", "0 0 0 1"]
+    path = tmp_path / "reg.ptx"
+    path.write_text("\n".join([*head, "1 2 3 0.5", "2 3 4 0.5"]) + "\n")
+    T = read_scan(path).T_world_scanner
+    np.testing.assert_allclose(T[:3, :3], R, atol=1e-12)
+    np.testing.assert_allclose(T[:3, 3], [10.0, 20.0, 1.5])
+    (info,) = list_setups(path)
+    assert info.has_pose

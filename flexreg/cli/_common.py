@@ -70,12 +70,17 @@ def read_input(
     depth_kind: str | None = None,
     depth_scale: float | None = None,
     all_scans: bool = False,
+    origin: tuple[float, float, float] | None = None,
+    origin_option: str | None = None,
 ) -> list[Any]:
     """Read the scans of an input (``FILE``, ``FILE#N`` or ``FILE#NAME``), building a camera for
     depth PNGs from the options.
 
     With a setup selector, that setup alone. Without one, every setup when ``all_scans``, else
     the file's only setup: a file holding several is refused with a line that names them.
+    With ``origin_option`` (the command's option for the scanner position), a cloud in
+    project coordinates is refused with a line that names that option, and ``origin`` moves
+    the points to the scanner (:mod:`flexreg.io.origin`).
     """
     from flexreg.errors import InputError
     from flexreg.io import detect_format, read_scans
@@ -114,20 +119,53 @@ def read_input(
     scans = read_scans(path, **opts)
     if len(scans) > 1 and ref.selector is None and not all_scans:
         raise _several(file, [s.name for s in scans], [len(s) for s in scans])
+    if origin_option is not None:
+        scans = [_centred(file, s, origin, origin_option) for s in scans]
     return scans
 
 
-def read_pair(target: Path, source: Path) -> list[Any]:
-    """Read the target and the source scan (one setup each, see :func:`read_input`); the same
+def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
+    """The scan moved to ``origin``, or as it is when centred (else an error naming
+    ``option``)."""
+    from flexreg.errors import InputError
+    from flexreg.io.origin import centring_problem, recentre
+
+    if origin is not None:
+        try:
+            return recentre(scan, origin)
+        except InputError as e:
+            raise InputError(option, e.problem) from None
+    why = centring_problem(scan)
+    if why is not None:
+        raise InputError(
+            file,
+            f"not centred on its scanner: {why}; give the scanner position in the file's "
+            f"frame with {option} X Y Z (metres)",
+        )
+    return scan
+
+
+def read_pair(
+    target: Path,
+    source: Path,
+    origins: tuple[Any, Any] | None = None,
+    options: tuple[str, str] | None = None,
+) -> list[Any]:
+    """Read the target and the source scan (one setup each, see :func:`read_input`; with
+    ``options``, the scanner position options of each and ``origins`` their values); the same
     setup of the same file on both sides is refused."""
     import numpy as np
 
     from flexreg.errors import InputError
 
     scans = []
-    for path in (target, source):
+    for k, path in enumerate((target, source)):
         with stage(f"Reading {path.name}"):
-            (scan,) = read_input(path)
+            (scan,) = read_input(
+                path,
+                origin=None if origins is None else origins[k],
+                origin_option=None if options is None else options[k],
+            )
         scans.append(scan)
     t, s = scans
     same_file = scan_file(target).resolve() == scan_file(source).resolve()

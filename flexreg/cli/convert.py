@@ -111,7 +111,7 @@ def _check_out(out: Path, input: Path, folder: bool) -> None:
         return
     if out.suffix.lower() != ".png":
         raise ConfigError(f"--out: {out}: output must be a .png file")
-    check_outputs([("--out", out, None)], inputs=(input,))
+    check_outputs([("--out", out, None)], inputs=(scan_file(input),))
 
 
 def load_range_image(
@@ -121,13 +121,21 @@ def load_range_image(
     equirect: tuple[float, float] | None = None,
     depth_kind: str | None = None,
     depth_scale: float | None = None,
+    origin: tuple[float, float, float] | None = None,
 ) -> RangeImage:
-    """Range image of the first scan of any ``read_scan`` input (depth PNGs: intrinsics from
-    the options or the ``<stem>.camera.json`` sidecar)."""
+    """Range image of the scan (one setup) of any ``read_scan`` input (depth PNGs: intrinsics
+    from the options or the ``<stem>.camera.json`` sidecar; clouds in project coordinates:
+    the scanner position ``origin``)."""
     from flexreg.stages.projection import range_image
 
     (scan,) = read_input(
-        path, pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
+        path,
+        pinhole=pinhole,
+        equirect=equirect,
+        depth_kind=depth_kind,
+        depth_scale=depth_scale,
+        origin=origin,
+        origin_option="--origin",
     )
     return range_image(scan)
 
@@ -268,6 +276,15 @@ _KeepFloatOption = Annotated[
         help="Also write the float32 image as .npz (with the configuration used, as JSON).",
     ),
 ]
+_OriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--origin",
+        metavar="X Y Z",
+        help="Where the scanner stood, in the file's frame, metres: for clouds in project or "
+        "map coordinates.",
+    ),
+]
 
 
 @app.command("convert")
@@ -284,6 +301,7 @@ def convert_command(
     depth_scale: _DepthScaleOption = None,
     stretch: _StretchOption = None,
     keep_float: _KeepFloatOption = False,
+    origin: _OriginOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -308,12 +326,16 @@ def convert_command(
     folder = input.is_dir()
     _check_out(out, input, folder)
     camera_options: dict[str, object] = dict(
-        pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
+        pinhole=pinhole,
+        equirect=equirect,
+        depth_kind=depth_kind,
+        depth_scale=depth_scale,
+        origin=origin,
     )
     options = dict(keep_float=keep_float, camera_options=camera_options)
     if not folder:
-        if not input.exists():
-            raise InputError(input, "no such file or folder")
+        if not scan_file(input).exists():
+            raise InputError(scan_file(input), "no such file or folder")
         W, H, frac = _convert_one(input, out, config, **options)  # type: ignore[arg-type]
         console.print(
             f"wrote {out} ({config.kind}, {W}x{H}, {100 * frac:.1f}% valid)", markup=False

@@ -243,6 +243,24 @@ _IcpOnlyOption = Annotated[
     ),
 ]
 
+_TargetOriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--target-origin",
+        metavar="X Y Z",
+        help="Where the target's scanner stood, in its file's frame, metres: for clouds in "
+        "project or map coordinates (LAS/LAZ, PLY exports).",
+    ),
+]
+_SourceOriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--source-origin",
+        metavar="X Y Z",
+        help="Where the source's scanner stood, in its file's frame, metres.",
+    ),
+]
+
 
 @app.command("register")
 def register_command(
@@ -264,6 +282,8 @@ def register_command(
     truth: _TruthOption = None,
     init: _InitOption = None,
     icp_only: _IcpOnlyOption = None,
+    target_origin: _TargetOriginOption = None,
+    source_origin: _SourceOriginOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -306,7 +326,9 @@ def register_command(
     check_outputs(outputs, inputs=(scan_file(target), scan_file(source)))
     T_true = None if truth is None else read_truth(truth, target, source)
     T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
-    scans = read_pair(target, source)
+    scans = read_pair(
+        target, source, (target_origin, source_origin), ("--target-origin", "--source-origin")
+    )
     stored = stored_T_target_source(scans[0], scans[1])
     if init == "stored" and stored is None:
         raise InputError(

@@ -98,6 +98,13 @@ def project(
     equirect: tuple[float, float] | None = EquirectOpt,
     depth_kind: str | None = DepthKindOpt,
     depth_scale: float | None = DepthScaleOpt,
+    origin: tuple[float, float, float] | None = typer.Option(
+        None,
+        "--origin",
+        metavar="X Y Z",
+        help="Where the scanner stood, in the file's frame, metres: for clouds in project or "
+        "map coordinates.",
+    ),
 ) -> None:
     """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
     import math
@@ -125,6 +132,8 @@ def project(
             equirect=equirect,
             depth_kind=depth_kind,
             depth_scale=depth_scale,
+            origin=origin,
+            origin_option="--origin",
         )
     with stage("Building range image"):
         if resample or not s.has_grid:

@@ -20,7 +20,14 @@ from flexreg.io.selector import parse_scan_ref, pick
 
 __all__ = ["check_file", "read_scan", "read_scans", "write_scan"]
 
-_WRITERS = {".ply": "pointcloud", ".npz": "npz", ".ptx": "ptx", ".e57": "e57"}
+_WRITERS = {
+    ".ply": "pointcloud",
+    ".npz": "npz",
+    ".ptx": "ptx",
+    ".e57": "e57",
+    ".las": "las",
+    ".laz": "las",
+}
 
 
 def _module(name: str) -> Any:
@@ -91,7 +98,8 @@ def read_scan(
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:
-    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``, ``.e57``.
+    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``,
+    ``.e57``, ``.las``, ``.laz``.
 
     The file is written to a temporary name first and renamed at the end, so a failure never
     leaves a partial file behind.

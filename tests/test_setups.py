@@ -39,6 +39,7 @@ def test_parse_scan_ref(tmp_path):
     odd = tmp_path / "odd#1.ply"  # an existing file whose name holds '#' is a file
     odd.write_text("x")
     assert parse_scan_ref(odd).selector is None
+    assert parse_scan_ref("scan#2.ply").selector is None  # '#' inside a file name
     with pytest.raises(InputError, match="nothing after '#'"):
         parse_scan_ref("p.e57#")
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
+from flexreg.io.formats import FORMATS
 
 __all__ = ["ScanRef", "parse_scan_ref", "pick", "select_setup", "setup_choices"]
 
@@ -48,7 +49,8 @@ def parse_scan_ref(text: str | PathLike[str]) -> ScanRef:
     ----------
     text : str or path-like
         What the user gave. When a file exists under the whole name, or the name holds no
-        ``#``, there is no selector; otherwise the text after the last ``#`` is the selector.
+        ``#``, or what precedes the last ``#`` has no scan suffix, there is no selector;
+        otherwise the text after the last ``#`` is the selector.
 
     Raises
     ------
@@ -67,6 +69,8 @@ def parse_scan_ref(text: str | PathLike[str]) -> ScanRef:
     if "#" not in p.name or p.exists():
         return ScanRef(p)
     head, _, sel = s.rpartition("#")
+    if Path(head).suffix.lower() not in FORMATS:  # "scan#2.ply": a file name with '#'
+        return ScanRef(p)
     if not sel.strip():
         raise InputError(s, "nothing after '#': name a setup as FILE#N (index) or FILE#NAME")
     return ScanRef(Path(head), sel)

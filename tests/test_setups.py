@@ -93,6 +93,7 @@ def test_info_lists_every_setup_and_project_takes_one(two_setup_file, tmp_path):
     assert rc == 0 and f"{two_setup_file}#0" in out and f"{two_setup_file}#1" in out
     rc, out, _ = run_cli(["info", f"{two_setup_file}#1", "--json"])
     assert rc == 0 and '"points": 80' in out and '"points": 120' not in out
+    assert f'"setup": "{two_setup_file}#1"' in out
     rc, _, err = run_cli(["project", f"{two_setup_file}#1", "--out", tmp_path / "a.png"])
     assert rc == 0, err
     rc, _, err = run_cli(["project", two_setup_file, "--index", "1", "--out", tmp_path / "b.png"])

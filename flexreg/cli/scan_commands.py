@@ -54,17 +54,19 @@ def info(
             depth_scale=depth_scale,
             all_scans=True,
         )
+    from flexreg.io.info import render_scan_summary
+    from flexreg.io.selector import parse_scan_ref
+
+    ref = parse_scan_ref(scan)
     summaries = [scan_summary(s) for s in scans]
+    for i, s in enumerate(summaries):  # how to name each setup on the command line
+        s["setup"] = str(scan) if ref.selector is not None else f"{ref.path}#{i}"
     if as_json:
         console.print_json(json.dumps(summaries))
         return
-    from flexreg.cli._common import scan_file
-    from flexreg.io.info import render_scan_summary
-
-    several = len(summaries) > 1
-    for i, s in enumerate(summaries):
-        if several:
-            console.print(f"setup {scan_file(scan)}#{i}", markup=False, soft_wrap=True)
+    for s in summaries:
+        if len(summaries) > 1:
+            console.print(f"setup {s['setup']}", markup=False, soft_wrap=True)
         console.print(render_scan_summary(s))
 
 

@@ -124,7 +124,14 @@ def test_surface_normals_of_a_box_point_towards_the_scanner():
 
 
 @pytest.mark.parametrize(
-    ("axis", "tilt_deg"), [((1.0, 2.0, 0.0), 4.0), ((1.0, 0.0, 0.0), 12.0), ((0.0, 1.0, 0.0), 0.0)]
+    ("axis", "tilt_deg"),
+    [
+        ((1.0, 2.0, 0.0), 4.0),
+        ((1.0, 0.0, 0.0), 12.0),
+        ((0.0, 1.0, 0.0), 0.0),
+        ((1.0, 1.0, 0.0), 20.0),  # tilted scanners: the search over verticals finds these
+        ((0.3, 1.0, 0.0), 24.0),
+    ],
 )
 def test_estimate_up_box_room_recovers_tilt(axis, tilt_deg):
     R = rotation_about_axis(axis, math.radians(tilt_deg))
@@ -159,7 +166,7 @@ def test_estimate_up_tilt_beyond_limit_raises():
     R = rotation_about_axis([1.0, 0.0, 0.0], math.radians(12.0))
     img = from_depth(_box_ranges(PANO, R, BOX_LO, BOX_HI), PANO)
     _, nrm, area = topview.surface_normals(img)
-    with pytest.raises(DegenerateGeometryError, match=r"not levelled.*12\.0°.*limit 10\.0°"):
+    with pytest.raises(DegenerateGeometryError, match=r"not levelled: tilt 12\.0°.*10\.0° limit"):
         topview.estimate_up(nrm, area, max_tilt_rad=math.radians(10.0))
 
 

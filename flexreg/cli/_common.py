@@ -55,6 +55,13 @@ def progress_bar() -> Progress:
     )
 
 
+def scan_file(path: Path) -> Path:
+    """The file of a scan argument (``FILE#N`` / ``FILE#NAME`` -> ``FILE``)."""
+    from flexreg.io.selector import parse_scan_ref
+
+    return parse_scan_ref(path).path
+
+
 def read_input(
     path: Path,
     *,
@@ -63,19 +70,32 @@ def read_input(
     depth_kind: str | None = None,
     depth_scale: float | None = None,
     all_scans: bool = False,
+    origin: tuple[float, float, float] | None = None,
+    origin_option: str | None = None,
 ) -> list[Any]:
-    """Read the scans of an input file, building a camera for depth PNGs from the options."""
+    """Read the scans of an input (``FILE``, ``FILE#N`` or ``FILE#NAME``), building a camera for
+    depth PNGs from the options.
+
+    With a setup selector, that setup alone. Without one, every setup when ``all_scans``, else
+    the file's only setup: a file holding several is refused with a line that names them.
+    With ``origin_option`` (the command's option for the scanner position), a cloud in
+    project coordinates is refused with a line that names that option, and ``origin`` moves
+    the points to the scanner (:mod:`flexreg.io.origin`).
+    """
     from flexreg.errors import InputError
     from flexreg.io import detect_format, read_scans
     from flexreg.io.depth import camera_for_image
+    from flexreg.io.selector import parse_scan_ref
 
-    _, fmt = detect_format(path)
+    ref = parse_scan_ref(path)
+    file = ref.path
+    _, fmt = detect_format(file)
     opts: dict[str, Any] = {}
     if fmt == "depth":
-        if not path.is_file():
-            raise InputError(path, "no such file")
+        if not file.is_file():
+            raise InputError(file, "no such file")
         try:
-            opts["camera"] = camera_for_image(path, pinhole=pinhole, equirect=equirect)
+            opts["camera"] = camera_for_image(file, pinhole=pinhole, equirect=equirect)
         except InputError as e:
             if e.source in ("pinhole camera", "spherical camera"):  # name the option at fault
                 raise InputError("--pinhole" if pinhole else "--equirect", e.problem) from None
@@ -88,10 +108,84 @@ def read_input(
             opts["depth_scale"] = depth_scale
     elif pinhole or equirect or depth_kind or depth_scale is not None:
         raise InputError(
-            path, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
+            file, "--pinhole/--equirect/--depth-kind/--depth-scale apply to depth PNGs only"
         )
+    if fmt == "e57" and ref.selector is None and not all_scans:
+        from flexreg.io.setups import list_setups
+
+        setups = list_setups(file)  # headers only: refuse a project file before reading it
+        if len(setups) > 1:
+            raise _several(file, [s.name for s in setups], [s.points for s in setups])
     scans = read_scans(path, **opts)
-    return scans if all_scans else scans[:1]
+    if len(scans) > 1 and ref.selector is None and not all_scans:
+        raise _several(file, [s.name for s in scans], [len(s) for s in scans])
+    if origin_option is not None:
+        scans = [_centred(file, s, origin, origin_option) for s in scans]
+    return scans
+
+
+def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
+    """The scan moved to ``origin``, or as it is when centred (else an error naming
+    ``option``)."""
+    from flexreg.errors import InputError
+    from flexreg.io.origin import centring_problem, recentre
+
+    if origin is not None:
+        try:
+            return recentre(scan, origin)
+        except InputError as e:
+            raise InputError(option, e.problem) from None
+    why = centring_problem(scan)
+    if why is not None:
+        raise InputError(
+            file,
+            f"not centred on its scanner: {why}; give the scanner position in the file's "
+            f"frame with {option} X Y Z (metres)",
+        )
+    return scan
+
+
+def read_pair(
+    target: Path,
+    source: Path,
+    origins: tuple[Any, Any] | None = None,
+    options: tuple[str, str] | None = None,
+) -> list[Any]:
+    """Read the target and the source scan (one setup each, see :func:`read_input`; with
+    ``options``, the scanner position options of each and ``origins`` their values); the same
+    setup of the same file on both sides is refused."""
+    import numpy as np
+
+    from flexreg.errors import InputError
+
+    scans = []
+    for k, path in enumerate((target, source)):
+        with stage(f"Reading {path.name}"):
+            (scan,) = read_input(
+                path,
+                origin=None if origins is None else origins[k],
+                origin_option=None if options is None else options[k],
+            )
+        scans.append(scan)
+    t, s = scans
+    same_file = scan_file(target).resolve() == scan_file(source).resolve()
+    if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):
+        raise InputError(
+            source,
+            f"is the same scan as the target {target}: name two setups (FILE#N) or two files",
+        )
+    return scans
+
+
+def _several(file: Path, names: list[str], counts: list[int]) -> Exception:
+    from flexreg.errors import InputError
+    from flexreg.io.selector import setup_choices
+
+    return InputError(
+        file,
+        f"holds {len(names)} setups; name one as FILE#N or FILE#NAME: "
+        f"{setup_choices(file, names, counts)}",
+    )
 
 
 @contextmanager

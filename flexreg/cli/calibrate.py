@@ -16,6 +16,8 @@ from flexreg.cli._common import (
     err_console,
     exit_for,
     print_verdict,
+    read_input,
+    scan_file,
     stage,
     write_all,
 )
@@ -315,7 +317,6 @@ def calibrate_command(
          error line, nothing written
     """
     from flexreg.calibration import calibrate, overlay_image, read_correspondences
-    from flexreg.io import read_scan
     from flexreg.io.intrinsics import read_extrinsic
 
     config = build_config(
@@ -334,7 +335,11 @@ def calibrate_command(
         kitti_camera=kitti_camera,
         truth=truth,
     )
-    inputs = [p for p in (image, camera, scan, pairs, init, truth, config_file) if p is not None]
+    inputs = [
+        p
+        for p in (image, camera, scan_file(scan), pairs, init, truth, config_file)
+        if p is not None
+    ]
     check_outputs([("--out", out, ".json"), ("--overlay", overlay, ".png")], inputs=inputs)
     check_out_folder("--export-views", export_views)
     dist = _parse_distortion(distortion)
@@ -346,7 +351,7 @@ def calibrate_command(
     T_init = None if init is None else read_extrinsic(init, kitti_camera=kitti_camera)
     T_true = None if truth is None else read_extrinsic(truth, kitti_camera=kitti_camera)
     with stage(f"Reading {scan.name}"):
-        lidar = read_scan(scan)
+        (lidar,) = read_input(scan)
     corr = None
     if pairs is not None:
         with stage(f"Reading {pairs.name}"):

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.bench.config import DEFAULT_METHODS, CompareConfig
-from flexreg.cli._common import console, err_console, progress_bar, read_input, stage
+from flexreg.cli._common import console, err_console, progress_bar, read_pair
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -160,11 +160,7 @@ def compare_command(
     criteria = SuccessCriteria(rotation_deg=config.success_deg, translation_m=config.success_m)
     T_gt = None if gt is None else read_ground_truth(gt, target=target.stem, source=source.stem)
     T_init = None if init is None else read_transform(init)
-    scans = []
-    for path in (target, source):
-        with stage(f"Reading {path.name}"):
-            (scan,) = read_input(path)
-        scans.append(scan)
+    scans = read_pair(target, source)
     with progress_bar() as bar:
         task = bar.add_task("comparing", total=len(chosen))
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from flexreg.cli._common import console, err_console, progress_bar, read_input
+from flexreg.cli._common import console, err_console, progress_bar, read_input, scan_file
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -117,7 +117,7 @@ def _check_out(
         raise ConfigError(f"--out: {out}: output must be a .png file")
     check_outputs(
         [("--out", out, None)],
-        inputs=(input,),
+        inputs=(scan_file(input),),
         extra_inputs=[("--config", config_file)],
         companions={"--out": written_files(out, keep_float=keep_float)[1:]},
     )
@@ -130,13 +130,21 @@ def load_range_image(
     equirect: tuple[float, float] | None = None,
     depth_kind: str | None = None,
     depth_scale: float | None = None,
+    origin: tuple[float, float, float] | None = None,
 ) -> RangeImage:
-    """Range image of the first scan of any ``read_scan`` input (depth PNGs: intrinsics from
-    the options or the ``<stem>.camera.json`` sidecar)."""
+    """Range image of the scan (one setup) of any ``read_scan`` input (depth PNGs: intrinsics
+    from the options or the ``<stem>.camera.json`` sidecar; clouds in project coordinates:
+    the scanner position ``origin``)."""
     from flexreg.stages.projection import range_image
 
     (scan,) = read_input(
-        path, pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
+        path,
+        pinhole=pinhole,
+        equirect=equirect,
+        depth_kind=depth_kind,
+        depth_scale=depth_scale,
+        origin=origin,
+        origin_option="--origin",
     )
     return range_image(scan)
 
@@ -159,8 +167,8 @@ def _convert_one(
     from flexreg.io.files import discard
     from flexreg.stages.feature_images import convert, quantize, value_range
 
-    if not src.is_file():
-        raise InputError(src, "no such file")
+    if not scan_file(src).is_file():
+        raise InputError(scan_file(src), "no such file")
     rimg = load_range_image(src, **camera_options)  # type: ignore[arg-type]
     kind = config.kind
     image = convert(rimg, kind, n=config.n, median=config.median)
@@ -282,6 +290,15 @@ _KeepFloatOption = Annotated[
         help="Also write the float32 image as .npz (with the configuration used, as JSON).",
     ),
 ]
+_OriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--origin",
+        metavar="X Y Z",
+        help="Where the scanner stood, in the file's frame, metres: for clouds in project or "
+        "map coordinates.",
+    ),
+]
 
 
 @app.command("convert")
@@ -298,6 +315,7 @@ def convert_command(
     depth_scale: _DepthScaleOption = None,
     stretch: _StretchOption = None,
     keep_float: _KeepFloatOption = False,
+    origin: _OriginOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -322,12 +340,16 @@ def convert_command(
     folder = input.is_dir()
     _check_out(out, input, folder, keep_float, config_file)
     camera_options: dict[str, object] = dict(
-        pinhole=pinhole, equirect=equirect, depth_kind=depth_kind, depth_scale=depth_scale
+        pinhole=pinhole,
+        equirect=equirect,
+        depth_kind=depth_kind,
+        depth_scale=depth_scale,
+        origin=origin,
     )
     options = dict(keep_float=keep_float, camera_options=camera_options)
     if not folder:
-        if not input.exists():
-            raise InputError(input, "no such file or folder")
+        if not scan_file(input).exists():
+            raise InputError(scan_file(input), "no such file or folder")
         W, H, frac = _convert_one(input, out, config, **options)  # type: ignore[arg-type]
         console.print(
             f"wrote {out} ({config.kind}, {W}x{H}, {100 * frac:.1f}% valid)", markup=False

@@ -15,7 +15,8 @@ from flexreg.cli._common import (
     console,
     exit_for,
     print_verdict,
-    read_input,
+    read_pair,
+    scan_file,
     stage,
     write_all,
 )
@@ -51,6 +52,7 @@ OPTIONS = {
     "--threshold": "threshold_m",
     "--seed": "seed",
     "--upright": "upright",
+    "--icp-only": "icp_only",
 }
 _C = RegistrationConfig
 
@@ -118,8 +120,10 @@ _TargetArgument = Annotated[
     Path,
     typer.Argument(
         metavar="TARGET",
-        help="Target scan: any readable scan file, or a depth PNG with its camera sidecar. "
-        "Points are used in the scanner frame; a pose stored in the file is ignored.",
+        help="Target scan: any readable scan file (FILE#N or FILE#NAME for one setup of a "
+        "multi-setup PTX/E57), or a depth PNG with its camera sidecar. Points are used in the "
+        "scanner frame; a pose stored in the file is used only by --init stored and the "
+        "stored-pose check.",
     ),
 ]
 _SourceArgument = Annotated[
@@ -222,6 +226,41 @@ _TruthOption = Annotated[
         "report the errors in degrees and metres and store them in the output JSON.",
     ),
 ]
+_InitOption = Annotated[
+    str | None,
+    typer.Option(
+        "--init",
+        metavar="T.txt|T.json|stored",
+        help="Initial T_target_source: a transform file (4x4 .txt, or .json), or 'stored' for "
+        "the relative pose the files store for the two setups (E57 pose, PTX header). It "
+        "competes with the global search unless --icp-only.",
+    ),
+]
+_IcpOnlyOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--icp-only/--search",
+        help=with_default(_C, "icp_only", "Refine from --init only, without global search."),
+    ),
+]
+
+_TargetOriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--target-origin",
+        metavar="X Y Z",
+        help="Where the target's scanner stood, in its file's frame, metres: for clouds in "
+        "project or map coordinates (LAS/LAZ, PLY exports).",
+    ),
+]
+_SourceOriginOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--source-origin",
+        metavar="X Y Z",
+        help="Where the source's scanner stood, in its file's frame, metres.",
+    ),
+]
 
 
 @app.command("register")
@@ -242,6 +281,10 @@ def register_command(
     seed: _SeedOption = None,
     upright: _UprightOption = None,
     truth: _TruthOption = None,
+    init: _InitOption = None,
+    icp_only: _IcpOnlyOption = None,
+    target_origin: _TargetOriginOption = None,
+    source_origin: _SourceOriginOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -254,6 +297,7 @@ def register_command(
          and in the output JSON under "verdict"; check the pair before using it
       1  failed: one error line, nothing written
     """
+    from flexreg.io.setups import stored_T_target_source
     from flexreg.registration.pipeline import register
 
     config = build_config(
@@ -270,7 +314,10 @@ def register_command(
         threshold_m=threshold,
         seed=seed,
         upright=upright,
+        icp_only=icp_only,
     )
+    if config.icp_only and init is None:
+        raise InputError("--icp-only", "needs --init T.txt or --init stored")
     outputs = [
         ("--out", out, ".json"),
         ("--txt", txt, None),
@@ -279,22 +326,39 @@ def register_command(
     ]
     check_outputs(
         outputs,
-        inputs=(target, source),
-        extra_inputs=[("--truth", truth), ("--config", config_file)],
+        inputs=(scan_file(target), scan_file(source)),
+        extra_inputs=[
+            ("--truth", truth),
+            ("--config", config_file),
+            ("--init", None if init in (None, "stored") else Path(init)),
+        ],
     )
     T_true = None if truth is None else read_truth(truth, target, source)
-    scans = []
-    for path in (target, source):
-        with stage(f"Reading {path.name}"):
-            (scan,) = read_input(path)
-        scans.append(scan)
+    T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
+    scans = read_pair(
+        target, source, (target_origin, source_origin), ("--target-origin", "--source-origin")
+    )
+    stored = stored_T_target_source(scans[0], scans[1])
+    if init == "stored" and stored is None:
+        raise InputError(
+            "--init stored", f"neither {target} nor {source} stores a setup pose (both identity)"
+        )
+    T_init = stored if init == "stored" else T_file
     with _StageSpinners() as spinners, about_pair(target, source):
-        result = register(scans[0], scans[1], config, progress=spinners)
+        result = register(scans[0], scans[1], config, progress=spinners, init=T_init)
     errors = None if T_true is None else _errors(result, T_true)
-    meta = {"target": str(target), "source": str(source), "truth": truth, "errors": errors}
+    check = None if stored is None or init is not None else _stored_check(result, stored)
+    meta = {
+        "target": str(target),
+        "source": str(source),
+        "truth": truth,
+        "errors": errors,
+        "init": None if init is None else {"from": init, "T_target_source": T_init},
+        "stored_pose_check": check,
+    }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
-    _print_summary(result, config, errors)
+    _print_summary(result, config, errors, check)
     print_verdict(result.verdict, result.T_target_source)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -334,6 +398,13 @@ def _writers(
     meta["flexreg_version"] = __version__
     if inputs["errors"] is not None:
         meta["error_vs_truth"] = {"truth": str(inputs["truth"]), **inputs["errors"]}
+    if inputs["init"] is not None:
+        meta["init"] = {
+            "from": inputs["init"]["from"],
+            "T_target_source": inputs["init"]["T_target_source"].tolist(),
+        }
+    if inputs["stored_pose_check"] is not None:
+        meta["stored_pose_check"] = inputs["stored_pose_check"]
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     return writers
 
@@ -406,10 +477,22 @@ def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str
     }
 
 
+def _stored_check(result: RegistrationResult, stored: NDArray[np.float64]) -> dict[str, Any]:
+    """How far the result is from the relative pose the files store (degrees, metres)."""
+    from flexreg.core.transforms import rotation_error_deg, translation_error_m
+
+    return {
+        "rotation_deg": rotation_error_deg(result.T_target_source, stored),
+        "translation_m": translation_error_m(result.T_target_source, stored),
+        "T_target_source_stored": stored.tolist(),
+    }
+
+
 def _print_summary(
     result: RegistrationResult,
     config: RegistrationConfig,
     errors: dict[str, float] | None = None,
+    stored: dict[str, Any] | None = None,
 ) -> None:
     import numpy as np
     from rich.table import Table
@@ -439,6 +522,12 @@ def _print_summary(
             f"coarse {errors['coarse_rotation_deg']:.3f}°, "
             f"{1000 * errors['coarse_translation_m']:.1f} mm; final "
             f"{errors['rotation_deg']:.4f}°, {1000 * errors['translation_m']:.2f} mm",
+        )
+    if stored is not None:
+        t.add_row(
+            "vs stored poses",
+            f"{stored['rotation_deg']:.3f}°, {stored['translation_m']:.3f} m from the relative "
+            "pose the files store (--init stored uses it)",
         )
     if config.refine:
         dr = rotation_error_deg(r.T_target_source, r.T_coarse)

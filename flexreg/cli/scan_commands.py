@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from flexreg.cli._common import console, read_input, stage
+from flexreg.cli._common import console, read_input, scan_file, stage
 from flexreg.cli.app import app
 
 PinholeOpt = typer.Option(
@@ -31,7 +31,8 @@ DepthScaleOpt = typer.Option(None, "--depth-scale", help="Depth PNG metres per s
 def info(
     scan: Path = typer.Argument(
         ...,
-        help="Scan file (PTX, E57, PLY, PCD, LAS/LAZ, KITTI .bin, 3DTK .3d, npy/npz, depth PNG).",
+        help="Scan file (PTX, E57, PLY, PCD, LAS/LAZ, KITTI .bin, 3DTK .3d, npy/npz, depth "
+        "PNG): every setup it holds, or FILE#N / FILE#NAME for one.",
     ),
     pinhole: tuple[float, float, float, float] | None = PinholeOpt,
     equirect: tuple[float, float] | None = EquirectOpt,
@@ -53,13 +54,19 @@ def info(
             depth_scale=depth_scale,
             all_scans=True,
         )
+    from flexreg.io.info import render_scan_summary
+    from flexreg.io.selector import parse_scan_ref
+
+    ref = parse_scan_ref(scan)
     summaries = [scan_summary(s) for s in scans]
+    for i, s in enumerate(summaries):  # how to name each setup on the command line
+        s["setup"] = str(scan) if ref.selector is not None else f"{ref.path}#{i}"
     if as_json:
         console.print_json(json.dumps(summaries))
         return
-    from flexreg.io.info import render_scan_summary
-
     for s in summaries:
+        if len(summaries) > 1:
+            console.print(f"setup {s['setup']}", markup=False, soft_wrap=True)
         console.print(render_scan_summary(s))
 
 
@@ -77,11 +84,17 @@ def check_resolution_deg(resolution_deg: float | None) -> None:
 
 @app.command("project")
 def project(
-    scan: Path = typer.Argument(..., help="Scan file (any readable format)."),
+    scan: Path = typer.Argument(
+        ..., help="Scan file (any readable format); FILE#N or FILE#NAME for one setup."
+    ),
     out: Path = typer.Option(
         ..., "--out", "-o", help="Output 16-bit range PNG (a float32 .npz is written beside it)."
     ),
-    index: int = typer.Option(0, "--index", help="Which scan of a multi-scan file (PTX, E57)."),
+    index: int | None = typer.Option(
+        None,
+        "--index",
+        help="Which setup of a multi-setup file (PTX, E57), from 0; same as SCAN#N.",
+    ),
     resample: bool = typer.Option(
         False, "--resample", help="Z-buffer project even if the scan has a native grid."
     ),
@@ -99,6 +112,13 @@ def project(
     equirect: tuple[float, float] | None = EquirectOpt,
     depth_kind: str | None = DepthKindOpt,
     depth_scale: float | None = DepthScaleOpt,
+    origin: tuple[float, float, float] | None = typer.Option(
+        None,
+        "--origin",
+        metavar="X Y Z",
+        help="Where the scanner stood, in the file's frame, metres: for clouds in project or "
+        "map coordinates.",
+    ),
 ) -> None:
     """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
     import math
@@ -116,22 +136,28 @@ def project(
         raise InputError(out, "output must be a .png file")
     check_outputs(
         [("--out", out, ".png")],
-        inputs=(scan,),
+        inputs=(scan_file(scan),),
         companions={"--out": written_files(out, range_image=True)[1:]},
     )
     check_resolution_deg(resolution_deg)
+    if index is not None:
+        from flexreg.io.selector import parse_scan_ref
+
+        if parse_scan_ref(scan).selector is not None:
+            raise InputError("--index", f"{scan} already names a setup; give it one way")
+        if index < 0:
+            raise InputError("--index", f"must be 0 or more, got {index}")
+        scan = Path(f"{scan}#{index}")
     with stage(f"Reading {scan.name}"):
-        scans = read_input(
+        (s,) = read_input(
             scan,
             pinhole=pinhole,
             equirect=equirect,
             depth_kind=depth_kind,
             depth_scale=depth_scale,
-            all_scans=True,
+            origin=origin,
+            origin_option="--origin",
         )
-    if not -len(scans) <= index < len(scans):
-        raise InputError(scan, f"scan index {index} out of range: the file holds {len(scans)}")
-    s = scans[index]
     with stage("Building range image"):
         if resample or not s.has_grid:
             from flexreg.stages.projection import auto_spherical_camera

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import hashlib
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +25,9 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import matrix_to_quat, quat_to_matrix
 from flexreg.errors import InputError
 from flexreg.io.e57_header import check_declared
+from flexreg.io.selector import ScanRef, select_setup
 
-__all__ = ["read", "write"]
+__all__ = ["headers", "read", "read_one", "write"]
 
 _CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
 _SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
@@ -66,6 +69,52 @@ def read(path: Path, **options: Any) -> list[Scan]:
         field inconsistent with the point count.
     """
     _no_options(path, options)
+    with _opened(path) as (e57, count):
+        return [_read_checked(e57, i, path) for i in range(count)]
+
+
+def read_one(path: Path, ref: ScanRef) -> Scan:
+    """Read only the setup ``ref`` selects (by index or ``name``), as :func:`read` would.
+
+    The other setups' points are not read: one station of a large project export costs its own
+    points only.
+
+    Raises
+    ------
+    InputError
+        As :func:`read`, or a selector that matches no setup (the message lists them).
+    """
+    with _opened(path) as (e57, count):
+        names = [_name(e57.get_header(i).node, i) for i in range(count)]
+        return _read_checked(e57, select_setup(names, ref), path)
+
+
+def headers(path: Path) -> list[tuple[str, int, NDArray[np.float64]]]:
+    """``(name, stored point count, T_world_scanner)`` of every scan, without reading points.
+
+    Raises
+    ------
+    InputError
+        As :func:`read` for an unreadable file or pose.
+    """
+    out = []
+    with _opened(path) as (e57, count):
+        for i in range(count):
+            try:
+                h = e57.get_header(i)
+                name = _name(h.node, i)
+                label = f"scan {i} ({name})"
+                out.append((name, int(h.point_count), _pose(h.node, path, label)))
+            except InputError:
+                raise
+            except Exception as exc:
+                raise InputError(path, f"scan {i} cannot be read: {_e57_message(exc)}") from None
+    return out
+
+
+@contextmanager
+def _opened(path: Path) -> Iterator[tuple[Any, int]]:
+    """The open pye57 file and its scan count (at least 1); closed on exit."""
     import pye57
     from pye57 import libe57
 
@@ -85,24 +134,29 @@ def read(path: Path, **options: Any) -> list[Scan]:
             ) from None
         if count == 0:
             raise InputError(path, "E57 file holds no scans (its data3D list is empty)")
-        scans = []
-        for i in range(count):
-            try:
-                scans.append(_read_one(e57, i, path))
-            except InputError:
-                raise
-            except Exception as exc:
-                raise InputError(path, f"scan {i} cannot be read: {_e57_message(exc)}") from None
-        return scans
+        yield e57, count
     finally:
         e57.close()
+
+
+def _read_checked(e57: Any, i: int, path: Path) -> Scan:
+    try:
+        return _read_one(e57, i, path)
+    except InputError:
+        raise
+    except Exception as exc:
+        raise InputError(path, f"scan {i} cannot be read: {_e57_message(exc)}") from None
+
+
+def _name(node: Any, i: int) -> str:
+    return str(node["name"].value()) if node.isDefined("name") else f"scan {i}"
 
 
 def _read_one(e57: Any, i: int, path: Path) -> Scan:
     header = e57.get_header(i)
     node = header.node
     named = node.isDefined("name")
-    name = str(node["name"].value()) if named else f"scan {i}"
+    name = _name(node, i)
     label = f"scan {i} ({name})" if named else f"scan {i}"
     fields = set(header.point_fields)
     n_total = int(header.point_count)

@@ -18,7 +18,7 @@ from flexreg.core.budget import check_memory, format_bytes
 from flexreg.core.scan import POINT_BYTES, Scan
 from flexreg.errors import InputError
 
-__all__ = ["check_declared_points", "read"]
+__all__ = ["check_declared_points", "read", "write"]
 
 #: largest believable ratio of a LAZ file's points uncompressed to its size (LASzip reaches
 #: 5-15 on real data; even constant points stay far below this)
@@ -99,7 +99,6 @@ def check_declared_points(path: Path, header: Any) -> None:
 
     An uncompressed LAS needs ``count x record length`` bytes after the header; a LAZ file
     cannot be smaller than :data:`MAX_LAZ_RATIO` times less than its points uncompressed.
-
     Raises
     ------
     InputError
@@ -133,6 +132,44 @@ def check_declared_points(path: Path, header: Any) -> None:
                 "(wrong point count?)",
             )
     check_memory(n * (record + POINT_BYTES), f"{n:,} points", source=path)
+
+
+def write(path: Path, scans: list[Scan], *, resolution_m: float = 1e-4, **options: Any) -> None:
+    """Write one scan as LAS 1.4 (LAZ when the suffix is ``.laz``), coordinates in the file's
+    frame at ``resolution_m``.
+
+    The LAS offset is the floor of the points' minimum (whole metres), so georeferenced
+    coordinates (UTM eastings of 10^5-10^6 m) keep ``resolution_m`` precision in LAS's 32-bit
+    integers: the scan may span up to ``2^31 * resolution_m`` (214 km at 0.1 mm) per axis.
+    Intensity is rounded and clipped to LAS's 16 bits; colours (0..255) are stored as 16-bit
+    values ``c * 257``. LAS has no scanner pose: ``T_world_scanner`` is not written.
+    Raises
+    ------
+    InputError
+        More than one scan, an unknown option, or a scan too large for the resolution.
+    """
+    if options:
+        raise InputError(path, f"unknown LAS option(s): {', '.join(sorted(options))}")
+    if len(scans) != 1:
+        raise InputError(path, f"LAS holds one scan, got {len(scans)}: write one file each")
+    import laspy
+
+    (scan,) = scans
+    pts = scan.points
+    offset = np.floor(pts.min(axis=0)) if len(pts) else np.zeros(3)
+    if len(pts) and float((pts.max(axis=0) - offset).max()) / resolution_m >= 2**31 - 1:
+        raise InputError(path, f"the scan spans too far for {resolution_m} m LAS resolution")
+    header = laspy.LasHeader(point_format=2 if scan.colors is not None else 0, version="1.4")
+    header.offsets = offset
+    header.scales = np.full(3, resolution_m)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    if scan.intensity is not None:
+        las.intensity = np.clip(np.rint(scan.intensity), 0, 65535).astype(np.uint16)
+    if scan.colors is not None:
+        for k, c in enumerate(("red", "green", "blue")):
+            las[c] = scan.colors[:, k].astype(np.uint16) * 257
+    las.write(str(path), do_compress=path.suffix.lower() == ".laz")
 
 
 def _to_8bit(channel: NDArray[Any]) -> NDArray[np.uint8]:

@@ -214,7 +214,9 @@ def read(path: Path, **_: object) -> list[Scan]:
         One per cloud: valid points (N, 3) float64 in the scanner frame, intensity (N,)
         float32, colours (N, 3) uint8 when the file has RGB, grid ``(rows, cols)`` with
         ``grid_index`` in file order (line ``k`` of a cloud is row ``k % rows`` of column
-        ``k // rows``), and ``T_world_scanner`` = the file's (transposed-back) 4x4 matrix.
+        ``k // rows``), and ``T_world_scanner`` = the file's (transposed-back) 4x4 matrix, or
+        the scanner registration lines (position, axes) when the matrix is the identity and
+        they are not.
     """
     size = path.stat().st_size
     check_memory(size, "reading the whole file", source=path)
@@ -246,7 +248,7 @@ def read(path: Path, **_: object) -> list[Scan]:
         if cols_f != int(cols_f) or rows_f != int(rows_f) or cols_f <= 0 or rows_f <= 0:
             raise InputError(path, f"cloud {cloud}: grid size {cols_f:g} x {rows_f:g} is not valid")
         cols, rows = int(cols_f), int(rows_f)
-        M = head[line + 6 : line + 10].T.copy()
+        M = _header_pose(head[line + 2 : line + 10, :4])
         n = cols * rows
         first = line + _HEADER_LINES
         if first + n > n_lines:
@@ -298,6 +300,22 @@ def read(path: Path, **_: object) -> list[Scan]:
     if not scans:
         raise InputError(path, "no cloud in file")
     return scans
+
+
+def _header_pose(rows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``T_world_scanner`` of a cloud's header lines 3-10: the 4x4 transform (written
+    transposed), or, when that is the identity and the scanner registration lines are not,
+    the pose those give (position; the scanner's x, y, z axes as rows)."""
+    M = rows[4:8].T.copy()
+    if not np.array_equal(M, np.eye(4)):
+        return M
+    position, axes = rows[0, :3], rows[1:4, :3]
+    if np.array_equal(position, np.zeros(3)) and np.array_equal(axes, np.eye(3)):
+        return M
+    T = np.eye(4)
+    T[:3, :3] = axes.T
+    T[:3, 3] = position
+    return T
 
 
 # ------------------------------------------------------------------------------ writer

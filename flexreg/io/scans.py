@@ -16,17 +16,27 @@ from flexreg.core.scan import Scan
 from flexreg.errors import InputError
 from flexreg.io.files import atomic_write, protect
 from flexreg.io.formats import detect_format
+from flexreg.io.selector import parse_scan_ref, pick
 
-__all__ = ["read_scan", "read_scans", "write_scan"]
+__all__ = ["check_file", "read_scan", "read_scans", "write_scan"]
 
-_WRITERS = {".ply": "pointcloud", ".npz": "npz", ".ptx": "ptx", ".e57": "e57"}
+_WRITERS = {
+    ".ply": "pointcloud",
+    ".npz": "npz",
+    ".ptx": "ptx",
+    ".e57": "e57",
+    ".las": "las",
+    ".laz": "las",
+}
 
 
 def _module(name: str) -> Any:
     return importlib.import_module(f"flexreg.io.{name}")
 
 
-def _check_file(p: Path) -> None:
+def check_file(p: Path) -> None:
+    """Raise :class:`InputError` for a missing path, a folder or an empty file (and mark the
+    file as an input that no output may replace)."""
     protect(p)
     if not p.exists():
         raise InputError(p, "no such file")
@@ -39,11 +49,13 @@ def _check_file(p: Path) -> None:
 def read_scans(
     path: str | PathLike[str], *, format: str | None = None, **options: Any
 ) -> list[Scan]:
-    """Read every scan (cloud, station) in a file.
+    """Read every scan (cloud, station, setup) in a file, or the one setup ``FILE#N`` /
+    ``FILE#NAME`` names (see :mod:`flexreg.io.setups`).
 
     Parameters
     ----------
     path : path-like
+        A file, or a file and a setup selector: ``project.e57#2``, ``project.e57#Station 7``.
     format : str, optional
         Override the suffix: ``ptx``, ``e57``, ``ply``, ``pcd``, ``las``, ``laz``, ``kitti``,
         ``3dtk``, ``npy``, ``npz``, ``depth``.
@@ -56,32 +68,40 @@ def read_scans(
     InputError
         Unknown suffix, missing/empty file, or any inconsistency in its content.
     """
-    p = Path(path)
+    ref = parse_scan_ref(path)
+    p = ref.path
     mod, _ = detect_format(p, format)
-    _check_file(p)
+    check_file(p)
+    if ref.selector is not None and mod == "e57" and not options:
+        return [_module(mod).read_one(p, ref)]  # one setup of a large project file: only it
     scans: list[Scan] = _module(mod).read(p, **options)
     if not scans:
         raise InputError(p, "file holds no scan")
     if all(len(s) == 0 for s in scans):
         raise InputError(p, "file holds no valid point (every cell is a no-return)")
-    return scans
+    return scans if ref.selector is None else [pick(scans, ref)]
 
 
 def read_scan(
     path: str | PathLike[str], *, format: str | None = None, index: int = 0, **options: Any
 ) -> Scan:
-    """Read one scan of a file (the first unless ``index`` says otherwise).
+    """Read one scan of a file: the setup a ``FILE#N`` / ``FILE#NAME`` selector names, else the
+    one at ``index`` (the first by default).
 
-    See :func:`read_scans` for formats and options.
+    See :func:`read_scans` for formats and options; :func:`flexreg.io.setups.list_setups`
+    lists a file's setups.
     """
     scans = read_scans(path, format=format, **options)
+    if parse_scan_ref(path).selector is not None:
+        return scans[0]
     if not -len(scans) <= index < len(scans):
         raise InputError(path, f"scan index {index} out of range: the file holds {len(scans)}")
     return scans[index]
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:
-    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``, ``.e57``.
+    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``,
+    ``.e57``, ``.las``, ``.laz``.
 
     The file is written to a temporary name first and renamed at the end, so a failure never
     leaves a partial file behind.

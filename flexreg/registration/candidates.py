@@ -31,9 +31,18 @@ from flexreg.stages.verification import classify_points
 
 log = logging.getLogger(__name__)
 
-#: a candidate: (origin, T_target_source); origin is "plan" or "descriptors", with
-#: "+keypoints" when refined by guided matching
+#: a candidate: (origin, T_target_source); origin is "plan", "descriptors" or "init" (a
+#: given T_target_source), with "+keypoints" when refined by guided matching
 Candidate = tuple[str, NDArray[np.float64]]
+
+#: priors that stay candidates themselves (judged by the dense check alone, not needing
+#: keypoint inliers): plan-view overlays and a given initial transform
+DENSE_PRIORS = ("plan", "init")
+
+
+def dense_prior(origin: str) -> bool:
+    """Whether a candidate's origin is a :data:`DENSE_PRIORS` prior (refined or not)."""
+    return origin.split("+")[0] in DENSE_PRIORS
 
 
 @dataclass(frozen=True)
@@ -197,11 +206,11 @@ def families(
     thr: float,
     config: RegistrationConfig,
 ) -> list[list[Candidate]]:
-    """Each prior with its keypoint-refined version (plan priors stay candidates themselves;
-    a descriptor prior only through its refinement)."""
+    """Each prior with its keypoint-refined version (plan and init priors stay candidates
+    themselves; a descriptor prior only through its refinement)."""
     out = []
     for origin, T0 in priors:
-        fam = [(origin, T0)] if origin == "plan" else []
+        fam = [(origin, T0)] if dense_prior(origin) else []
         est = _guided(kt, ks, T0, thr, config)
         if est is not None and est[1] >= max(3, config.min_inliers):
             fam.append((f"{origin}+keypoints", est[0]))
@@ -274,7 +283,7 @@ def choose(
         raise RegistrationError(
             f"no overlap: the best transform explains {100 * ok:.1f}% of the source's sampled "
             f"points and contradicts {100 * bad:.1f}% (need {100 * config.min_overlap:.0f}%); "
-            f"{counts}"
+            f"{counts}" + (f"; {'; '.join(notes)}" if notes else "")
         )
     finalists = list(fams[best])
     if polished is not None:
@@ -299,6 +308,7 @@ __all__ = [
     "Judged",
     "Keypoints3D",
     "choose",
+    "dense_prior",
     "families",
     "polisher",
 ]

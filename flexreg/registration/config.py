@@ -63,13 +63,19 @@ class RegistrationConfig(Config):
     fill_holes : bool
         Fill isolated no-return pixels before the conversion
         (:func:`flexreg.stages.projection.fill_holes`).
+    icp_only : bool
+        Refine the given initial transform (``register(..., init=T)``) only: no descriptor
+        or plan-view search. Requires ``init``.
     upright : {"auto", "on", "off"}
         Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
         (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"``
         uses it when both scans are panoramas or native grids that look levelled, ``"on"``
         requires it.
     max_tilt_rad : float, radians
-        Largest tilt of a scan still treated as levelled, in [0, pi/2).
+        Largest tilt of a scan still treated as levelled, in [0, pi/2): 25° (the vertical is
+        estimated reliably up to about that, see :data:`flexreg.stages.priors.MAX_TILT_RAD`).
+        A scan tilted more gets no plan-view prior; the reason, with its measured tilt, is in
+        the error message when registration fails (and ``upright="on"`` fails with it).
     plan_cell_m : float, metres
         Plan-view cell size.
     plan_hypotheses : int
@@ -143,8 +149,9 @@ class RegistrationConfig(Config):
     voxel_m: VoxelM | None = None
     seed: Seed = 0
     fill_holes: bool = True
+    icp_only: bool = False
     upright: Annotated[str, one_of(UPRIGHT)] = "auto"
-    max_tilt_rad: float = Field(math.radians(10.0), ge=0, lt=math.pi / 2)
+    max_tilt_rad: float = Field(math.radians(25.0), ge=0, lt=math.pi / 2)
     plan_cell_m: Positive = 0.25
     plan_hypotheses: int = Field(3, ge=1)
     guided_radius_m: Positive = 0.25

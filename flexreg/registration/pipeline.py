@@ -36,6 +36,7 @@ from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.results import Verdict
 from flexreg.core.scan import Scan, as_points
+from flexreg.core.transforms import as_transform
 from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationError
 from flexreg.registration.candidates import (
     Candidate,
@@ -43,6 +44,7 @@ from flexreg.registration.candidates import (
     Coarse,
     Keypoints3D,
     choose,
+    dense_prior,
     polisher,
 )
 from flexreg.registration.config import RegistrationConfig
@@ -445,7 +447,7 @@ def _verdict(
         target_normals=vt.normals,
         inlier_points=c.target_points[c.inliers],
         matches=len(c.pairs),
-        fit_to_matches="keypoints" in c.origin or "plan" not in c.origin,
+        fit_to_matches="keypoints" in c.origin or not dense_prior(c.origin),
         runner_up=ups,
         candidates=len(c.judged),
         inlier_rmse_m=stage[0],
@@ -465,9 +467,13 @@ def _finish(
     plan_priors: list[Candidate],
     config: RegistrationConfig,
     run: _Run,
+    init: NDArray[np.float64] | None = None,
 ) -> RegistrationResult:
     """Candidates, the coarse transform and its checks, the refinement (kept when it scores
-    better), the verdict, the result."""
+    better), the verdict, the result.
+
+    ``init`` (a given ``T_target_source``) competes as one more prior; with
+    ``config.icp_only`` it is the only one."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.measured is not None and vt.slack is not None and vt.normals is not None
     assert vs.sample is not None and vs.polish_sample is not None
@@ -476,11 +482,13 @@ def _finish(
     two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
     polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if config.polish else None
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
+    given: list[Candidate] = [] if init is None else [("init", init)]
+    priors = given if config.icp_only else given + plan_priors + m.priors
     with run.stage("estimation"):
-        c = choose(plan_priors + m.priors, kt, ks, check, polish, thr, config, counts, m.notes)
+        c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes)
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
-    if "plan" not in c.origin:
+    if not dense_prior(c.origin):
         if inl.sum() < max(3, config.min_inliers):
             raise RegistrationError(
                 f"only {int(inl.sum())} inliers within {thr:.3g} m (need "
@@ -553,6 +561,16 @@ def _check_upright(config: RegistrationConfig) -> None:
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.upright!r}")
 
 
+def _check_init(
+    config: RegistrationConfig, init: NDArray[np.float64] | None
+) -> NDArray[np.float64] | None:
+    if init is None:
+        if config.icp_only:
+            raise ConfigError("icp_only needs an initial T_target_source (init)")
+        return None
+    return as_transform(init, name="init")
+
+
 def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
     """Plan views for these images: ``upright="on"``, or ``"auto"`` and all panoramas."""
     panoramic = all(not isinstance(i.camera, PinholeCamera) for i in images)
@@ -579,6 +597,7 @@ def register(
     config: RegistrationConfig = RegistrationConfig(),
     *,
     progress: Progress = None,
+    init: NDArray[np.float64] | None = None,
 ) -> RegistrationResult:
     """Register ``source`` onto ``target``: returns ``T_target_source``.
 
@@ -600,14 +619,21 @@ def register(
     progress : callable, optional
         Called with the name of each stage as it starts; for the stages that run in background
         threads (plan views, preparation), when the call starts waiting for them.
+    init : (4, 4) float64, optional
+        A known rough ``T_target_source`` (a stored pose, a guess): it competes with the other
+        priors on the same dense check (result ``prior`` ``"init"`` when it wins). With
+        ``config.icp_only`` it is the only prior: no global search, ICP from it.
 
     Raises
     ------
     RegistrationError
         Too few matches or inliers, degenerate (collinear) inliers, or ICP without overlap;
         the message gives the counts. No transform is returned then.
+    ConfigError
+        ``config.icp_only`` without ``init``.
     """
     _check_upright(config)
+    init = _check_init(config, init)
     run = _Run(progress)
     scans = [target, source]
     with run.stage("range images"):
@@ -616,7 +642,7 @@ def register(
     with _single_threaded(2) as pool:
         plan_job = (
             pool.submit(run.background("plan views", _pair_plan_priors, images, config))
-            if _plan_wanted(config, images)
+            if _plan_wanted(config, images) and not config.icp_only
             else None
         )
         view_job = pool.submit(run.background("preparation", _views, scans, images, config, roles))
@@ -625,7 +651,7 @@ def register(
         plans = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
         views = view_job.result()
-    return _finish(scans, kps, views, matched, plans, config, run)
+    return _finish(scans, kps, views, matched, plans, config, run, init)
 
 
 class Registration:
@@ -669,11 +695,17 @@ class Registration:
         return PreparedScan(scan, images[0], kp, plan, view, config, run.timings)
 
     def align(
-        self, target: PreparedScan, source: PreparedScan, *, progress: Progress = None
+        self,
+        target: PreparedScan,
+        source: PreparedScan,
+        *,
+        progress: Progress = None,
+        init: NDArray[np.float64] | None = None,
     ) -> RegistrationResult:
         """Register two prepared scans: ``T_target_source`` and the evidence (as
-        :func:`register`)."""
+        :func:`register`, ``init`` included)."""
         config = self.config
+        init = _check_init(config, init)
         if target.config != config or source.config != config:
             raise ConfigError("align needs scans prepared with the same configuration")
         run = _Run(progress)
@@ -686,13 +718,13 @@ class Registration:
                 pool.submit(
                     run.background("plan views", _plan_priors, target.plan, source.plan, config)
                 )
-                if _plan_wanted(config, images)
+                if _plan_wanted(config, images) and not config.icp_only
                 else None
             )
             matched = _match(images, kps, config, run)
             plans = _plan_candidates(plan_job, config, run, matched.notes)
         scans, views = [target.scan, source.scan], [target.view, source.view]
-        return _finish(scans, kps, views, matched, plans, config, run)
+        return _finish(scans, kps, views, matched, plans, config, run, init)
 
 
 __all__ = [

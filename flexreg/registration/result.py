@@ -44,8 +44,9 @@ class RegistrationResult(PairResult):
     keypoints : tuple of (K, 2) arrays
         Target and source keypoint positions of the lifted matches (for drawing).
     prior : str
-        Which prior led to the estimate: ``"plan"`` (plan-view overlay) or ``"descriptors"``
-        (global descriptor matching), ``"+keypoints"`` when refined by guided matching.
+        Which prior led to the estimate: ``"plan"`` (plan-view overlay), ``"descriptors"``
+        (global descriptor matching) or ``"init"`` (the given initial transform),
+        ``"+keypoints"`` when refined by guided matching.
     wall_s : float
         Seconds the whole call took.
     verdict : Verdict

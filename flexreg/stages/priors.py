@@ -77,6 +77,73 @@ def _cone_moments(normals, area, u, cos_h, sin_v):  # pragma: no cover - compile
     return ah, av, Mh, Mv
 
 
+#: largest tilt of a scan treated as levelled (radians): verticals are estimated reliably up to
+#: about 25° (a scanner's own compensator keeps it within a few degrees; tripods set up
+#: without levelling, handheld and mobile scanners lean more). Beyond it, plan-view priors are
+#: not made (the reason names the measured tilt) and registration rests on the descriptors.
+MAX_TILT_RAD = math.radians(25.0)
+#: tilts the search for a tilted scanner's vertical covers, and its step (radians)
+SEARCH_TILT_RAD, SEARCH_STEP_RAD = math.radians(45.0), math.radians(5.0)
+#: the searched vertical must explain this many times the surface the first one explains
+SEARCH_GAIN = 1.1
+#: normals the search scores each candidate vertical with
+SEARCH_NORMALS = 20_000
+
+
+def _refine_up(
+    nrm: NDArray[np.float64], wts: NDArray[np.float64], u: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float, float]:
+    """The vertical from shrinking cones (20°, 10°, 5°, 3°) around a start ``u``, and the
+    horizontal and vertical surface areas of the last cone."""
+    ah = av = 0.0
+    for cone in (20.0, 10.0, 5.0, 3.0):
+        ah, av, Mh, Mv = _cone_moments(
+            nrm, wts, u, math.cos(math.radians(cone)), math.sin(math.radians(cone))
+        )
+        if ah <= 0.0 and av <= 0.0:
+            break
+        M = np.zeros((3, 3))
+        if ah > 0:
+            M += Mh / ah
+        if av > 0:
+            M -= Mv / av
+        w, V = np.linalg.eigh(M)
+        u = V[:, int(np.argmax(w))]
+        if u[2] < 0:
+            u = -u
+    return u, ah, av
+
+
+def _explained(nrm: NDArray[np.float64], wts: NDArray[np.float64], u: NDArray[np.float64]) -> float:
+    """Surface area within 3° of horizontal or vertical for the vertical ``u``."""
+    c, s = math.cos(math.radians(3.0)), math.sin(math.radians(3.0))
+    ah, av, _, _ = _cone_moments(nrm, wts, u, c, s)
+    return float(ah + av)
+
+
+def _search_up(nrm: NDArray[np.float64], wts: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The tilted vertical (5° to 45° from Z, 5° steps) that explains the most surface within
+    10° of horizontal or vertical, judged on an even subset of the normals; None without
+    normals."""
+    if len(nrm) == 0:
+        return None
+    step = max(1, len(nrm) // SEARCH_NORMALS)
+    n, w = np.ascontiguousarray(nrm[::step]), np.ascontiguousarray(wts[::step])
+    c, s = math.cos(math.radians(10.0)), math.sin(math.radians(10.0))
+    best, best_u = -1.0, None
+    n_tilts = round(SEARCH_TILT_RAD / SEARCH_STEP_RAD)
+    for i in range(1, n_tilts + 1):
+        t = i * SEARCH_STEP_RAD
+        n_az = max(1, math.ceil(2 * math.pi * math.sin(t) / SEARCH_STEP_RAD))
+        for j in range(n_az):
+            a = 2 * math.pi * j / n_az
+            u = np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
+            ah, av, _, _ = _cone_moments(n, w, u, c, s)
+            if ah + av > best:
+                best, best_u = ah + av, u
+    return best_u
+
+
 @dataclass(eq=False)
 class Levelling:
     """A scan's estimated vertical.
@@ -105,15 +172,19 @@ def estimate_up(
     normals: NDArray[np.float64],
     area: NDArray[np.float64],
     *,
-    max_tilt_rad: float = math.radians(15.0),
+    max_tilt_rad: float = MAX_TILT_RAD,
 ) -> Levelling:
-    """Estimate the vertical of a levelled scan from its surface normals.
+    """Estimate the vertical of a levelled (or tilted) scan from its surface normals.
 
     Starting from the scanner's Z axis, surfaces whose normals lie within a shrinking cone
     (20°, 10°, 5°, 3°) of the current vertical count as horizontal (floors, ceilings, tables),
     those within the same angle of the horizontal plane as vertical (walls); the new vertical
     is the unit vector that best aligns with the first and best stands perpendicular to the
     second: the leading eigenvector of ``sum_h a n n^T / A_h - sum_v a n n^T / A_v``.
+    The same refinement also starts from the best of a coarse search over verticals 5° to 45°
+    from Z (5° steps); its answer is taken when both horizontal and vertical surfaces support
+    it and it explains at least 1.1 times the surface within 3° of horizontal or vertical (a
+    scanner tilted 15° or more: the cones around Z may settle on a wrong vertical there).
 
     Parameters
     ----------
@@ -130,25 +201,18 @@ def estimate_up(
         Not enough horizontal or vertical surface to tell the vertical, or a vertical more
         than ``max_tilt_rad`` from the scanner's Z axis (the scan is not levelled).
     """
-    u = np.array([0.0, 0.0, 1.0])
-    ah = av = 0.0
     nrm = np.ascontiguousarray(normals, dtype=np.float64)
     wts = np.ascontiguousarray(area, dtype=np.float64)
-    for cone in (20.0, 10.0, 5.0, 3.0):
-        ah, av, Mh, Mv = _cone_moments(
-            nrm, wts, u, math.cos(math.radians(cone)), math.sin(math.radians(cone))
-        )
-        if ah <= 0.0 and av <= 0.0:
-            break
-        M = np.zeros((3, 3))
-        if ah > 0:
-            M += Mh / ah
-        if av > 0:
-            M -= Mv / av
-        w, V = np.linalg.eigh(M)
-        u = V[:, int(np.argmax(w))]
-        if u[2] < 0:
-            u = -u
+    u, ah, av = _refine_up(nrm, wts, np.array([0.0, 0.0, 1.0]))
+    # a tilted scanner: the cones around Z may settle on a wrong vertical; a coarse search
+    # over tilted verticals finds the one that explains the most surface, and it replaces
+    # the first answer only when it explains clearly more (a levelled scan keeps its answer)
+    seed = _search_up(nrm, wts)
+    if seed is not None:
+        u2, ah2, av2 = _refine_up(nrm, wts, seed)
+        both = ah2 > 0 and av2 > 0  # floors and walls agree on a tilted vertical
+        if both and _explained(nrm, wts, u2) > SEARCH_GAIN * _explained(nrm, wts, u):
+            u, ah, av = u2, ah2, av2
     total = float(area.sum())
     if total <= 0 or (ah < 0.02 * total and av < 0.05 * total):
         raise DegenerateGeometryError(
@@ -158,8 +222,9 @@ def estimate_up(
     tilt = math.acos(min(1.0, float(u[2])))
     if tilt > max_tilt_rad:
         raise DegenerateGeometryError(
-            f"the scan is not levelled: its vertical is {math.degrees(tilt):.1f}° from the "
-            f"scanner's Z axis (limit {math.degrees(max_tilt_rad):.1f}°)"
+            f"the scan is not levelled: tilt {math.degrees(tilt):.1f}° (its vertical from the "
+            f"scanner's Z axis), more than the {math.degrees(max_tilt_rad):.1f}° limit "
+            "(max_tilt_rad)"
         )
     return Levelling(u, _rotation_onto_z(u), tilt, ah, av)
 
@@ -611,7 +676,7 @@ class PlanView:
 def plan_view(
     image: RangeImage,
     *,
-    max_tilt_rad: float = math.radians(10.0),
+    max_tilt_rad: float = MAX_TILT_RAD,
     plan_cell_m: float = 0.25,
     max_pixels: int = PLAN_PIXELS,
 ) -> PlanView:
@@ -684,7 +749,7 @@ def upright_priors(
     target: RangeImage,
     source: RangeImage,
     *,
-    max_tilt_rad: float = math.radians(10.0),
+    max_tilt_rad: float = MAX_TILT_RAD,
     plan_cell_m: float = 0.25,
     plan_hypotheses: int = 3,
 ) -> list[NDArray[np.float64]]:
@@ -709,6 +774,7 @@ def upright_priors(
 
 
 __all__ = [
+    "MAX_TILT_RAD",
     "PLAN_PIXELS",
     "Levelling",
     "PlanMatch",

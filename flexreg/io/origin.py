@@ -1,0 +1,103 @@
+"""Clouds in project coordinates: tell them from clouds centred on their scanner, and move them.
+
+Range images are made from where the scanner stood: a scan's points must be in the scanner's
+own frame (origin at the scanner). An exported cloud often is not: a georeferenced LAS/LAZ holds
+UTM-sized coordinates (eastings of 10^5-10^6 m), and an export moved into a site frame has its
+scanner anywhere. Seen from the file's origin such a cloud covers a sliver of the sphere, and
+the projection fails with messages about the field of view or the range. :func:`centring_problem`
+says when that is the case; :func:`recentre` moves the cloud to the scanner position the user
+gives (``--origin X Y Z`` on the command line), in float64, so that georeferenced coordinates
+keep their precision (10^-9 m at 10^6 m).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from flexreg.core.scan import Scan
+from flexreg.core.transforms import make_transform
+from flexreg.errors import InputError
+
+__all__ = ["GEOREFERENCED_M", "centring_problem", "recentre"]
+
+#: a cloud whose centre lies this far from the origin has georeferenced (project) coordinates
+GEOREFERENCED_M = 10_000.0
+
+
+def centring_problem(scan: Scan) -> str | None:
+    """Why ``scan`` looks not centred on its scanner, or None when it looks centred.
+
+    Only scans without a grid and without a camera are judged (a grid or a camera fixes the
+    projection, wherever the points are). A scan is not centred when its origin lies outside
+    the points' bounding box and
+
+    - the box's centre is more than :data:`GEOREFERENCED_M` from the origin (georeferenced
+      coordinates), or
+    - the origin is farther from the box than half the box's diagonal (the cloud fills less
+      than about a quarter of the sphere around the origin: a scanner sees around itself).
+
+    A single view of a distant object (a lidar looking at a far wall) also matches the second
+    rule; ``--origin 0 0 0`` says that the file's origin is the scanner.
+
+    Parameters
+    ----------
+    scan : Scan
+
+    Returns
+    -------
+    str or None
+        One clause for a message, e.g. ``"its points lie 5.4e+06 m from the file's origin
+        (project coordinates)"``.
+    """
+    if scan.grid_shape is not None or scan.camera is not None or len(scan) == 0:
+        return None
+    lo, hi = scan.points.min(axis=0), scan.points.max(axis=0)
+    outside = np.maximum(np.maximum(lo, -hi), 0.0)  # per axis: how far 0 lies outside [lo, hi]
+    gap = float(np.linalg.norm(outside))
+    if gap == 0.0:
+        return None
+    centre = float(np.linalg.norm((lo + hi) / 2))
+    half_diagonal = float(np.linalg.norm(hi - lo)) / 2
+    if centre > GEOREFERENCED_M:
+        return (
+            f"its points lie {centre:.3g} m from the file's origin (project or map "
+            "coordinates, not the scanner's frame)"
+        )
+    if gap > half_diagonal:
+        return (
+            f"the file's origin lies {gap:.3g} m outside its points' bounding box "
+            f"({2 * half_diagonal:.3g} m across), so it is not where the scanner stood"
+        )
+    return None
+
+
+def recentre(scan: Scan, origin: ArrayLike) -> Scan:
+    """The scan with its points relative to the scanner position ``origin``.
+
+    Parameters
+    ----------
+    scan : Scan
+    origin : (3,) float, metres
+        Where the scanner stood, in the file's frame (the scanner's axes are taken parallel to
+        the file's).
+
+    Returns
+    -------
+    Scan
+        ``points - origin`` (float64) and ``T_world_scanner = T_world_scanner @ translation
+        (origin)``, so that the pose still maps the points into the file's frame.
+
+    Raises
+    ------
+    InputError
+        ``origin`` is not three finite numbers.
+    """
+    o = np.asarray(origin, dtype=np.float64).reshape(-1)
+    if o.shape != (3,) or not all(math.isfinite(v) for v in o):
+        raise InputError("origin", f"must be three finite numbers X Y Z, got {o.tolist()}")
+    T = scan.T_world_scanner @ make_transform(np.eye(3), o)
+    return replace(scan, points=scan.points - o, T_world_scanner=T)

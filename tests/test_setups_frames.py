@@ -1,0 +1,80 @@
+"""Clouds in project coordinates: a georeferenced LAZ (written by flexreg's LAS writer) is
+refused with the fix in one line, and read with ``--origin`` / ``--target-origin`` /
+``--source-origin`` in full float64 precision."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import one_error_line, run_cli
+from test_setups_register import T_TRUE, _stations
+
+from flexreg import Scan, read_scan, write_scan
+from flexreg.core.transforms import apply, make_transform, rotation_error_deg
+from flexreg.io.origin import centring_problem, recentre
+
+#: a UTM-sized position of the first station (easting, northing, height), metres
+UTM = np.array([500123.25, 5432109.5, 312.75])
+
+
+@pytest.fixture(scope="module")
+def laz(tmp_path_factory):
+    """Both stations as georeferenced LAZ files (no grid, no pose), and their positions."""
+    folder = tmp_path_factory.mktemp("frames")
+    first, second = _stations()
+    W1 = make_transform(np.eye(3), UTM)
+    W2 = W1 @ T_TRUE
+    write_scan(folder / "t.laz", Scan(points=apply(W1, first.points[::3])))
+    write_scan(folder / "s.laz", Scan(points=apply(W2, second.points[::3])))
+    return folder / "t.laz", folder / "s.laz", UTM, W2[:3, 3]
+
+
+def test_detection_and_recentring_keep_float64_precision():
+    rng = np.random.default_rng(3)
+    around = rng.normal(size=(500, 3)) * 10.0  # a scanner sees around itself: centred
+    assert centring_problem(Scan(points=around)) is None
+    assert "project or map" in centring_problem(Scan(points=around + UTM))
+    site = np.abs(around) + [60.0, 0.0, 0.0]  # a site frame with the scanner 60 m away
+    assert "outside its points' bounding box" in centring_problem(Scan(points=site))
+    moved = recentre(Scan(points=around + UTM), UTM)
+    np.testing.assert_allclose(moved.points, around, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(moved.T_world_scanner[:3, 3], UTM)
+
+
+def test_laz_keeps_utm_coordinates_to_the_written_resolution(laz):
+    t, *_ = laz
+    first = _stations()[0]
+    pts = read_scan(t).points
+    assert np.abs(pts - (first.points[::3] + UTM)).max() < 1e-4  # LAS 0.1 mm integers
+
+
+def test_project_refuses_a_project_frame_cloud_and_takes_origin(laz, tmp_path):
+    t, _, o, _ = laz
+    out = tmp_path / "t.png"
+    rc, _, err = run_cli(["project", t, "--out", out])
+    line = one_error_line(err)
+    assert rc == 1 and not out.exists()
+    assert "not centred on its scanner" in line and "--origin X Y Z" in line
+    rc, stdout, err = run_cli(["project", t, "--out", out, "--origin", *map(repr, map(float, o))])
+    assert rc == 0 and out.exists(), err
+    assert "valid pixels" in stdout
+
+
+def test_register_two_project_frame_clouds_with_their_origins(laz, tmp_path):
+    t, s, o_t, o_s = laz
+    out = tmp_path / "T.json"
+    rc, _, err = run_cli(["register", t, s, "--out", out])
+    assert rc == 1 and "--target-origin X Y Z" in one_error_line(err)
+    # the scanners' axes are the map's here: T_target_source is the offset of the positions
+    truth = make_transform(np.eye(3), o_s - o_t)
+    np.savetxt(tmp_path / "init.txt", truth @ make_transform(np.eye(3), [0.05, -0.05, 0.02]))
+    argv = ["register", t, s, "--out", out, "--init", tmp_path / "init.txt", "--icp-only"]
+    argv += ["--target-origin", *map(repr, map(float, o_t))]
+    argv += ["--source-origin", *map(repr, map(float, o_s))]
+    rc, _, err = run_cli(argv)
+    assert rc == 0, err
+    T = np.asarray(json.loads(out.read_text())["T_target_source"])
+    assert rotation_error_deg(T, truth) < 0.3
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.03

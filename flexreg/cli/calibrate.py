@@ -390,6 +390,18 @@ def calibrate_command(
             writers.append((overlay, _png_writer(overlay, picture)))
         writers.append((out, _result_writer(out, result, inputs_meta, truth, errors)))
     write_all(writers)
+    _report(result, errors, pairs, writers, out, overlay)
+
+
+def _report(
+    result: CalibrationResult | None,
+    errors: Any,
+    pairs: Path | None,
+    writers: list[tuple[Path, Any]],
+    out: Path | None,
+    overlay: Path | None,
+) -> None:
+    """What ``calibrate`` tells once everything is written, and its exit status."""
     if result is not None and result.dropped:
         _print_dropped(result, pairs)
     if result is not None:

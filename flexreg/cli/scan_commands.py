@@ -82,6 +82,21 @@ def check_resolution_deg(resolution_deg: float | None) -> None:
         raise InputError("--resolution-deg", f"must be in (0, 360] degrees, got {resolution_deg}")
 
 
+def _with_index(scan: Path, index: int | None) -> Path:
+    """``project --index N``: the scan reference ``FILE#N`` (refused when ``scan`` already
+    names a setup)."""
+    if index is None:
+        return scan
+    from flexreg.errors import InputError
+    from flexreg.io.selector import parse_scan_ref
+
+    if parse_scan_ref(scan).selector is not None:
+        raise InputError("--index", f"{scan} already names a setup; give it one way")
+    if index < 0:
+        raise InputError("--index", f"must be 0 or more, got {index}")
+    return Path(f"{scan}#{index}")
+
+
 @app.command("project")
 def project(
     scan: Path = typer.Argument(
@@ -140,14 +155,7 @@ def project(
         companions={"--out": written_files(out, range_image=True)[1:]},
     )
     check_resolution_deg(resolution_deg)
-    if index is not None:
-        from flexreg.io.selector import parse_scan_ref
-
-        if parse_scan_ref(scan).selector is not None:
-            raise InputError("--index", f"{scan} already names a setup; give it one way")
-        if index < 0:
-            raise InputError("--index", f"must be 0 or more, got {index}")
-        scan = Path(f"{scan}#{index}")
+    scan = _with_index(scan, index)
     with stage(f"Reading {scan.name}"):
         (s,) = read_input(
             scan,

@@ -70,11 +70,12 @@ def test_multiway_places_every_station_of_a_small_room(room_project, room_result
         assert translation_error_m(pose, T) < 0.05
     np.testing.assert_allclose(r.poses[0], np.eye(4), atol=1e-9)
     for lk in r.links:
-        assert lk.status == "kept" and lk.information is not None
+        assert lk.status == "accepted" and lk.information is not None
         assert lk.information.shape == (6, 6) and lk.fitness > 0.5
     d = r.to_dict()
     assert d["reference"] == "station_0" and set(d["stations"]) == set(r.names)
     assert d["stations"]["station_2"]["placed"] is True
+    assert d["groups"] == [{"id": 0, "reference": "station_0", "stations": r.names, "placed": True}]
     assert {"ransac", "icp", "optimisation", "total"} <= set(r.timings_s)
 
 
@@ -130,7 +131,7 @@ def _link(truth, t, s, kind, *, error=None):
         target=t,
         source=s,
         kind=kind,
-        status="kept",
+        status="accepted",
         T_target_source=T,
         T_coarse=T,
         information=_information(t * 10 + s),
@@ -156,7 +157,7 @@ def test_pose_graph_prunes_a_planted_wrong_loop_closure():
     failed = MultiwayLink(3, 1, "loop", "failed", None, None, None, 0, 0.0, np.nan, 0, 0.0)
     links.append(failed)
     poses, out, groups = optimise(links, 5, fine_distance_m=0.05)
-    assert [lk.status for lk in out] == ["kept"] * 6 + ["pruned", "failed"]
+    assert [lk.status for lk in out] == ["accepted"] * 6 + ["rejected", "failed"]
     assert groups.tolist() == [0] * 5
     for k in range(5):
         T = invert(truth[0]) @ truth[k]

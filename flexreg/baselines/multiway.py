@@ -117,8 +117,9 @@ class MultiwayLink:
         Station indices; ``T_target_source`` maps source points into the target frame.
     kind : {"odometry", "loop"}
         Consecutive stations (certain edge) or any other pair (uncertain edge).
-    status : {"kept", "pruned", "failed"}
-        Kept by the optimisation, pruned by its line process, or no result (no edge).
+    status : {"accepted", "rejected", "failed"}
+        Kept by the optimisation, pruned by its line process (the words of a survey's
+        ``poses.json``), or no result (no edge).
     T_target_source : (4, 4) float64 or None
         After ICP.
     T_coarse : (4, 4) float64 or None
@@ -208,27 +209,51 @@ class MultiwayResult:
         return self.groups == 0
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready, in the layout of a survey's ``poses.json``: ``reference`` (the first
-        station), ``stations`` ({name: ``T_reference_station``, ``placed``, ``group``,
-        ``points``}), ``links``, plus ``method``, ``config`` and ``timings_s``."""
+        """JSON-ready, in the layout of a survey's ``poses.json`` (the fields this method has):
+        ``reference`` (the first station), ``stations`` ({name: ``T_reference_station``
+        (None outside group 0), ``placed``, ``group`` (None: no pose), ``group_reference``,
+        ``T_group_station``, ``points``}), ``groups``, ``links``, plus ``method``, ``config``
+        and ``timings_s``."""
+        first = {int(g): k for k in reversed(range(len(self.names))) if (g := self.groups[k]) >= 0}
+        stations: dict[str, Any] = {}
+        for k, name in enumerate(self.names):
+            g, pose = int(self.groups[k]), self.poses[k]
+            ref = first.get(g)
+            stations[name] = {
+                "points": self.station_points[k] if self.station_points else None,
+                "placed": g == 0,
+                "T_reference_station": pose if g == 0 else None,
+                "group": g if g >= 0 else None,
+                "group_reference": None if ref is None else self.names[ref],
+                "T_group_station": (
+                    None if pose is None or ref is None else invert(_pose(self, ref)) @ pose
+                ),
+            }
         return {
             "method": "open3d-multiway",
             "reference": self.names[REFERENCE_NODE],
-            "stations": {
-                name: {
-                    "T_reference_station": pose,
-                    "placed": bool(g == 0),
-                    "group": int(g),
-                    "points": pts,
+            "stations": stations,
+            "groups": [
+                {
+                    "id": g,
+                    "reference": self.names[ref],
+                    "stations": [
+                        n for n, gg in zip(self.names, self.groups, strict=True) if gg == g
+                    ],
+                    "placed": g == 0,
                 }
-                for name, pose, g, pts in zip(
-                    self.names, self.poses, self.groups, self.station_points, strict=True
-                )
-            },
+                for g, ref in sorted(first.items())
+            ],
             "links": [link.to_dict(self.names) for link in self.links],
             "config": self.config.to_dict(),
             "timings_s": dict(self.timings_s),
         }
+
+
+def _pose(result: MultiwayResult, k: int) -> NDArray[np.float64]:
+    pose = result.poses[k]
+    assert pose is not None
+    return pose
 
 
 def link_seed(seed: int, target: int, source: int) -> int:
@@ -498,7 +523,7 @@ def _register_pairs(
                 target=t,
                 source=s,
                 kind=kind,
-                status="failed" if error else "kept",
+                status="failed" if error else "accepted",
                 T_target_source=T,
                 T_coarse=T_coarse,
                 information=info,
@@ -575,7 +600,7 @@ def optimise(
     poses : list of (4, 4) float64 or None
         ``T_first_k``; None for stations no successful link reaches.
     links : list of MultiwayLink
-        The same, with ``status`` "pruned" for edges the optimisation removed.
+        The same, with ``status`` "rejected" for edges the optimisation pruned.
     groups : (N,) int
         Connected components of the kept edges (0: the first station's; -1: no pose).
     """
@@ -619,7 +644,7 @@ def optimise(
     for li in edge_links:
         lk = out[li]
         if (index[lk.source], index[lk.target]) not in kept:
-            out[li] = replace(lk, status="pruned")
+            out[li] = replace(lk, status="rejected")
     poses: list[NDArray[np.float64] | None] = [None] * n
     for k in nodes:
         poses[k] = np.array(graph.nodes[index[k]].pose, dtype=np.float64)
@@ -640,7 +665,7 @@ def _components(
         return a
 
     for lk in links:
-        if lk.status == "kept":
+        if lk.status == "accepted":
             parent[root(lk.target)] = root(lk.source)
     groups = np.full(n, -1, dtype=np.int64)
     numbers: dict[int, int] = {}

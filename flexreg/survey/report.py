@@ -70,6 +70,9 @@ COLOURS = {
     "rejected": "#D55E00",
     "failed": "#7F7F7F",
 }
+STATION_COLOUR, FRAME_COLOUR = "#0072B2", "#CC79A7"
+STYLES = {"confident": "-", "uncertain": "-", "rejected": "--", "failed": ":"}
+WIDTHS = {"confident": 1.6, "uncertain": 2.4, "rejected": 1.4, "failed": 1.0}
 KIND_WORDS = {
     "confident": "accepted, confident",
     "uncertain": "accepted, uncertain",
@@ -110,32 +113,38 @@ def _links_between(
     return segs, labels
 
 
-def _draw_group(ax: Any, doc: Mapping[str, Any], stems: list[str], frame: str) -> int:
-    """Draw one group's stations and links on ``ax``; return how many links it drew."""
+def _draw_group(ax: Any, doc: Mapping[str, Any], stems: list[str], frame: str) -> dict[str, int]:
+    """Draw one group's stations and links on ``ax``; return how many links of each kind it
+    drew."""
     from matplotlib.collections import LineCollection
 
     pos = _xy(doc, stems)
     segs, labels = _links_between(doc, pos)
-    styles = {"confident": "-", "uncertain": "-", "rejected": "--", "failed": ":"}
-    widths = {"confident": 1.6, "uncertain": 2.4, "rejected": 1.4, "failed": 1.0}
     for kind in ("failed", "confident", "uncertain", "rejected"):
         if segs[kind]:
             ax.add_collection(
                 LineCollection(
                     segs[kind],
                     colors=COLOURS[kind],
-                    linestyles=styles[kind],
-                    linewidths=widths[kind],
-                    label=f"{KIND_WORDS[kind]} ({len(segs[kind])})",
+                    linestyles=STYLES[kind],
+                    linewidths=WIDTHS[kind],
                     zorder=3 if kind == "rejected" else 2,
                 )
             )
     for mid, text in labels:
-        ax.annotate(text, mid, fontsize=7, color=COLOURS["rejected"], ha="center", zorder=6)
+        ax.annotate(
+            text,
+            mid,
+            fontsize=7,
+            color=COLOURS["rejected"],
+            ha="center",
+            zorder=6,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+        )
     xy = np.array(list(pos.values())).reshape(-1, 2)
-    ax.scatter(xy[:, 0], xy[:, 1], s=24, c="#0072B2", zorder=4, label="station")
+    ax.scatter(xy[:, 0], xy[:, 1], s=24, c=STATION_COLOUR, zorder=4)
     if frame in pos:
-        ax.scatter(*pos[frame], s=160, marker="*", c="#CC79A7", zorder=5, label="frame origin")
+        ax.scatter(*pos[frame], s=160, marker="*", c=FRAME_COLOUR, zorder=5)
     for s, p in pos.items():
         ax.annotate(s, p, xytext=(3, 3), textcoords="offset points", fontsize=7, zorder=6)
     ax.set_aspect("equal", adjustable="datalim")
@@ -144,8 +153,44 @@ def _draw_group(ax: Any, doc: Mapping[str, Any], stems: list[str], frame: str) -
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, frameon=False)
-    return sum(len(v) for v in segs.values())
+    return {k: len(v) for k, v in segs.items()}
+
+
+def _legend(fig: Any, drawn: Mapping[str, int]) -> None:
+    """One legend under all panels: the kinds of link drawn (with their counts), stations and
+    the frame origin."""
+    from matplotlib.lines import Line2D
+
+    handles = [
+        Line2D([], [], color=COLOURS[k], ls=STYLES[k], lw=WIDTHS[k], label=f"{KIND_WORDS[k]} ({n})")
+        for k, n in drawn.items()
+        if n
+    ]
+    handles += [
+        Line2D([], [], ls="", marker="o", color=STATION_COLOUR, label="station"),
+        Line2D([], [], ls="", marker="*", ms=12, color=FRAME_COLOUR, label="frame origin"),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False
+    )
+
+
+def _layout(doc: Mapping[str, Any], f: ReportFigures) -> tuple[tuple[float, float], list[float]]:
+    """Figure size (inches) and column width ratios: up to three groups side by side, each
+    panel as wide as its stations' plan extent needs at a common height; more groups in rows
+    of three equal panels."""
+    n = len(f.groups)
+    if n > 3:
+        return (13.0, 4.8 * math.ceil(n / 3)), [1.0, 1.0, 1.0]
+    ratios = []
+    for stems in f.groups.values():
+        xy = np.array(list(_xy(doc, stems).values())).reshape(-1, 2)
+        dx, dy = (np.ptp(xy, axis=0) + 4.0) if len(xy) else (4.0, 4.0)
+        ratios.append(float(np.clip(dx / dy, 0.6, 4.0)))
+    ratios = ratios or [1.0]
+    width = 10.0 if n <= 1 else 13.0
+    height = (width - 0.9 * len(ratios)) / sum(ratios) + 1.6  # titles, labels, legends
+    return (width, float(np.clip(height, 3.8, 9.0))), ratios
 
 
 def station_graph_svg(doc: Mapping[str, Any], figures: ReportFigures | None = None) -> str:
@@ -168,23 +213,27 @@ def station_graph_svg(doc: Mapping[str, Any], figures: ReportFigures | None = No
     from matplotlib.figure import Figure
 
     f = report_figures(doc) if figures is None else figures
-    n = max(len(f.groups), 1)
-    cols = 1 if n == 1 else 2
-    rows = math.ceil(n / cols)
-    fig = Figure(figsize=(9.0 if n == 1 else 12.0, 6.0 * rows), dpi=96, layout="constrained")
+    size, ratios = _layout(doc, f)
+    fig = Figure(figsize=size, dpi=96, layout="constrained")
+    cols = len(ratios)
+    grid = fig.add_gridspec(max(1, math.ceil(len(f.groups) / cols)), cols, width_ratios=ratios)
     reference = str(doc.get("reference", ""))
     if not f.groups:
-        ax = fig.add_subplot(1, 1, 1)
+        ax = fig.add_subplot(grid[0, 0])
         ax.text(0.5, 0.5, "no station placed", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
+    drawn = dict.fromkeys(COLOURS, 0)
     for i, (g, stems) in enumerate(f.groups.items()):
-        ax = fig.add_subplot(rows, cols, i + 1)
+        ax = fig.add_subplot(grid[i // cols, i % cols])
         frame = f.group_frames.get(g, "")
-        drawn = _draw_group(ax, doc, stems, frame)
-        where = "reference frame" if frame == reference else "own frame, not joined to reference"
+        counts = _draw_group(ax, doc, stems, frame)
+        drawn = {k: drawn[k] + counts[k] for k in drawn}
+        where = "reference frame" if frame == reference else "own frame, not joined"
         ax.set_title(
-            f"group {g}: {len(stems)} stations, {drawn} links ({where}: {frame})", fontsize=9
+            f"group {g}: {len(stems)} stations, {sum(counts.values())} links\n({where}: {frame})",
+            fontsize=9,
         )
+    _legend(fig, drawn)
     buf = io.StringIO()
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "flexreg-survey"}):
         fig.savefig(buf, format="svg", metadata={"Date": None})

@@ -15,7 +15,7 @@ import pytest
 
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
-from flexreg.survey.report import render_report, write_report
+from flexreg.survey.report import drawn_groups, render_report, write_report
 from flexreg.survey.report_data import link_errors, report_figures
 
 CHROMIUM_ARGS = [
@@ -208,6 +208,16 @@ def test_outcome_computed_without_a_summary() -> None:
     assert report_figures(doc).outcome == "failed"
 
 
+def test_a_station_alone_in_its_group_is_counted_not_drawn() -> None:
+    doc = grid_project(4, 5)
+    doc["stations"]["lone"] = station(None, False, 1, reason="no link was tried")
+    f = report_figures(doc)
+    assert f.groups == {0: ["st_000", "st_001", "st_002", "st_003"], 1: ["lone"]}
+    assert f.group_frames == {0: "st_000", 1: "lone"}
+    assert list(drawn_groups(doc, f)) == [0]
+    assert f.outcome == "uncertain" and f.unplaced == ["lone"]
+
+
 @pytest.mark.parametrize(
     ("edit", "problem"),
     [
@@ -294,6 +304,14 @@ def test_page_content() -> None:
         "hall_02", "yes", "0", "confident", "6.000", "0.500", "0.000", "120,000", "2 / 3",
     ]  # fmt: skip
     assert "Problems reported lone_01: unplaced (no accepted link)" in text
+    # the graph: both groups drawn, text kept as text; what is not drawn is said
+    svg = page[page.index("<svg") : page.index("</svg>")]
+    assert "group 0: 3 stations, 3 links" in svg and "group 1: 2 stations, 1 link" in svg
+    assert "rejected (1)" in svg and "12.3° / 3.41 m" in svg
+    assert (
+        "2 links not drawn: an end is not drawn or in another group. Not drawn (no pose, or "
+        "alone in its group): lone_01."
+    ) in text
 
 
 def test_large_project_renders() -> None:

@@ -61,7 +61,7 @@ from flexreg.survey.report_data import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["render_report", "station_graph_svg", "write_report"]
+__all__ = ["drawn_groups", "render_report", "station_graph_svg", "write_report"]
 
 #: link colours by kind (Okabe-Ito: distinguishable when colour-blind)
 COLOURS = {
@@ -175,22 +175,39 @@ def _legend(fig: Any, drawn: Mapping[str, int]) -> None:
     )
 
 
-def _layout(doc: Mapping[str, Any], f: ReportFigures) -> tuple[tuple[float, float], list[float]]:
+def drawn_groups(doc: Mapping[str, Any], f: ReportFigures) -> dict[int, list[str]]:
+    """The groups the station graph draws: the reference's and every group with at least two
+    stations that have a pose (a station alone in its group is listed, not drawn)."""
+    reference = str(doc.get("reference", ""))
+    return {
+        g: stems
+        for g, stems in f.groups.items()
+        if len(_xy(doc, stems)) >= 2 or (reference in stems and _xy(doc, stems))
+    }
+
+
+def _layout(
+    doc: Mapping[str, Any], groups: Mapping[int, list[str]]
+) -> tuple[tuple[float, float], list[float]]:
     """Figure size (inches) and column width ratios: up to three groups side by side, each
     panel as wide as its stations' plan extent needs at a common height; more groups in rows
     of three equal panels."""
-    n = len(f.groups)
+    n = len(groups)
     if n > 3:
         return (13.0, 4.8 * math.ceil(n / 3)), [1.0, 1.0, 1.0]
     ratios = []
-    for stems in f.groups.values():
+    for stems in groups.values():
         xy = np.array(list(_xy(doc, stems).values())).reshape(-1, 2)
         dx, dy = (np.ptp(xy, axis=0) + 4.0) if len(xy) else (4.0, 4.0)
         ratios.append(float(np.clip(dx / dy, 0.6, 4.0)))
     ratios = ratios or [1.0]
     width = 10.0 if n <= 1 else 13.0
-    height = (width - 0.9 * len(ratios)) / sum(ratios) + 1.6  # titles, labels, legends
-    return (width, float(np.clip(height, 3.8, 9.0))), ratios
+    extra_w, extra_h = 0.9 * len(ratios), 1.6  # axis labels; titles and the legend
+    height = (width - extra_w) / sum(ratios) + extra_h
+    if height > 9.0:  # a tall project: narrower, not taller
+        height = 9.0
+        width = max((height - extra_h) * sum(ratios) + extra_w, 7.0)
+    return (width, max(height, 3.8)), ratios
 
 
 def station_graph_svg(doc: Mapping[str, Any], figures: ReportFigures | None = None) -> str:
@@ -213,24 +230,26 @@ def station_graph_svg(doc: Mapping[str, Any], figures: ReportFigures | None = No
     from matplotlib.figure import Figure
 
     f = report_figures(doc) if figures is None else figures
-    size, ratios = _layout(doc, f)
+    shown = drawn_groups(doc, f)
+    size, ratios = _layout(doc, shown)
     fig = Figure(figsize=size, dpi=96, layout="constrained")
     cols = len(ratios)
-    grid = fig.add_gridspec(max(1, math.ceil(len(f.groups) / cols)), cols, width_ratios=ratios)
+    grid = fig.add_gridspec(max(1, math.ceil(len(shown) / cols)), cols, width_ratios=ratios)
     reference = str(doc.get("reference", ""))
-    if not f.groups:
+    if not shown:
         ax = fig.add_subplot(grid[0, 0])
         ax.text(0.5, 0.5, "no station placed", ha="center", va="center", transform=ax.transAxes)
         ax.set_axis_off()
     drawn = dict.fromkeys(COLOURS, 0)
-    for i, (g, stems) in enumerate(f.groups.items()):
+    for i, (g, stems) in enumerate(shown.items()):
         ax = fig.add_subplot(grid[i // cols, i % cols])
         frame = f.group_frames.get(g, "")
         counts = _draw_group(ax, doc, stems, frame)
         drawn = {k: drawn[k] + counts[k] for k in drawn}
         where = "reference frame" if frame == reference else "own frame, not joined"
         ax.set_title(
-            f"group {g}: {len(stems)} stations, {sum(counts.values())} links\n({where}: {frame})",
+            f"group {g}: {_plural(len(stems), 'station')}, "
+            f"{_plural(sum(counts.values()), 'link')}\n({where}: {frame})",
             fontsize=9,
         )
     _legend(fig, drawn)
@@ -550,7 +569,7 @@ h3{font-size:15px;margin:8px 0}
 .kpi{background:#fff;border:1px solid #ddd;border-radius:6px;padding:6px 10px;min-width:110px}
 .kpi .v{font-size:17px;font-weight:600}.kpi .l{font-size:12px;color:#555}
 figure{margin:0;background:#fff;border:1px solid #ddd;border-radius:6px;padding:8px}
-figure svg{display:block;width:100%;height:auto}
+figure svg{display:block;max-width:100%;height:auto;margin:0 auto}
 figcaption{font-size:12px;color:#444}
 .scroll{overflow-x:auto}
 table{border-collapse:collapse;background:#fff;font-size:12.5px;white-space:nowrap}
@@ -600,23 +619,19 @@ document.querySelectorAll("table.sortable th").forEach(function (th, col) {
 
 def _caption(doc: Mapping[str, Any], f: ReportFigures) -> str:
     st = doc["stations"]
-    drawn = {s for stems in f.groups.values() for s in stems}
+    panel = {s: g for g, stems in drawn_groups(doc, f).items() for s in _xy(doc, stems)}
     hidden = sum(
-        1
-        for lk in doc["links"]
-        if lk["target"] not in drawn
-        or lk["source"] not in drawn
-        or group_of(st[lk["target"]]) != group_of(st[lk["source"]])
+        1 for lk in doc["links"] if panel.get(lk["target"], -1) != panel.get(lk["source"], -2)
     )
     text = (
         "Plan view of the stations (x, y in metres, each group in its own frame); links "
         "coloured by status, rejected links dashed and labelled with their loop error."
     )
     if hidden:
-        text += f" {_plural(hidden, 'link')} not drawn: an end has no pose or is in another group."
-    missing = [s for s in st if s not in drawn]
+        text += f" {_plural(hidden, 'link')} not drawn: an end is not drawn or in another group."
+    missing = [s for s in st if s not in panel]
     if missing:
-        text += f" Without a pose: {', '.join(missing)}."
+        text += f" Not drawn (no pose, or alone in its group): {', '.join(missing)}."
     return text
 
 

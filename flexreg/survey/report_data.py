@@ -302,7 +302,7 @@ class ReportFigures:
     stations, placed : int
         All stations; those placed in the reference frame.
     groups : dict
-        Group number -> its stations, in document order.
+        Group number -> its stations, in document order (unreadable stations belong to none).
     group_frames : dict
         Group number -> the station whose frame the group is solved in.
     links : dict
@@ -336,12 +336,13 @@ class ReportFigures:
 
 
 def _groups(doc: Mapping[str, Any]) -> tuple[dict[int, list[str]], dict[int, str]]:
-    """Group number -> stations, and -> the station whose frame it is solved in."""
+    """Group number -> stations (every station with a group number, also one alone in its
+    group), and -> the station whose frame the group is solved in."""
     stations = doc["stations"]
     members: dict[int, list[str]] = {}
     for stem, st in stations.items():
         g = group_of(st)
-        if g is not None and station_pose(st) is not None:
+        if g is not None:
             members.setdefault(g, []).append(stem)
     frames: dict[int, str] = {}
     for g in doc.get("groups") or []:

@@ -6,15 +6,18 @@ Run::
     .venv/bin/python scripts/survey_report_figure.py --poses RUN/poses.json
     .venv/bin/python scripts/survey_report_figure.py            # the hand-made example project
 
-With ``--poses`` it renders the report of a real ``flexreg survey`` run (the figure in the docs
-comes from ``flexreg synth --scene hall --stations 8 --resolution 1024x512 --out X`` then
-``flexreg survey X --out Y``). Without it, it renders a hand-made example project (12 stations
-of a building: two halls joined by a corridor, a store room no link reaches, a link rejected
-by its loop, an uncertain corridor link, a failed link), seeded, so reruns give the same page.
+With ``--poses`` it renders the report of a real ``flexreg survey`` run: the docs' figure comes
+from ``flexreg synth --scene hall --stations 8 --resolution 1024x512 --out X``, then ``flexreg
+survey X/station_*.ptx --out Y``, then ``--poses Y/poses.json --height 1900``. Without it, it
+renders a hand-made example project (12 stations of a building: two halls joined by a
+corridor, a store room no link reaches, a link rejected by its loop, an uncertain corridor link,
+a failed link), seeded, so reruns give the same page: the docs' second figure, with ``--out
+docs/figures/survey-report-example.png``.
 
-Writes ``docs/figures/survey-report.png`` (the top of the page: outcome, figures, what needs a
-look, the station graph and the first links) and, with ``--html``, the page itself. Needs
-Debian's ``chromium`` and Playwright (``make install`` and ``make test`` set both up).
+Writes the top of the page (outcome, figures, what needs a look, the station graph and the
+first links) to ``--out`` (default ``docs/figures/survey-report.png``) and, with ``--html``, the
+page itself. Needs Debian's ``chromium`` and Playwright (``make install`` and ``make test`` set
+both up).
 """
 
 from __future__ import annotations

@@ -123,8 +123,9 @@ def small_project() -> dict:
         "verdict": "uncertain",
         "reasons": [{"code": "ambiguous", "message": "two poses 3.4 m apart along x fit"}],
     }
-    uncertain = link(doc, "hall_02", "hall_03", verdict="uncertain", loop_error_deg=0.021)
+    uncertain = link(doc, "hall_02", "hall_03", verdict="uncertain", confirmed_by_loop=False)
     uncertain |= {
+        "loop_error_deg": 0.021,
         "loop_error_m": 0.0031,
         "strength": uncertain["strength"] | {"x": 0.0012},
         "reasons": [{"code": "weak_axis", "message": "the scans constrain almost nothing along x"}],
@@ -277,7 +278,10 @@ def test_page_content() -> None:
     assert f"lone_01 : no accepted link {EVIL}" in text
     assert EVIL not in page  # escaped, never markup
     assert "annex_02 : in group 1: no accepted link joins it" in text
-    assert "link 1: hall_02 ← hall_03 : the scans constrain almost nothing along x" in text
+    assert (
+        "link 1: hall_02 ← hall_03 : the scans constrain almost nothing along x (no closed loop "
+        "confirms it)"
+    ) in text
     assert (
         "link 2: hall_01 ← hall_03 (loop error 12.30° / 3.412 m): disagrees with the loop "
         "hall_01-hall_02-hall_03 it closes; two poses 3.4 m apart along x fit"

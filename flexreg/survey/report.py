@@ -482,9 +482,11 @@ def _attention_section(doc: Mapping[str, Any], f: ReportFigures) -> str:
         f"<li><b>{_e(s)}</b>: {_e('; '.join(station_reasons(st[s])) or 'no link placed it')}</li>"
         for s in f.unplaced
     ]
+    loop = {True: " (a closed loop confirms it)", False: " (no closed loop confirms it)"}
     uncertain = [
         f"<li>link {i}: {_arrow(links[i])}: "
-        f"{_e('; '.join(link_reasons(links[i])) or 'uncertain')}</li>"
+        f"{_e('; '.join(link_reasons(links[i])) or 'uncertain')}"
+        f"{loop.get(links[i].get('confirmed_by_loop'), '')}</li>"
         for i in f.uncertain_links
     ]
     rejected = [

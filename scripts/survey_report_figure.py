@@ -61,9 +61,10 @@ def _perturbed(T: np.ndarray, rng: np.random.Generator, deg: float, m: float) ->
     return D @ T
 
 
-def example_project() -> dict[str, Any]:
-    """A hand-made poses document of 12 stations (see the module's docstring)."""
-    rng = np.random.default_rng(SEED)
+def _example_stations(
+    rng: np.random.Generator,
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """True poses and the stations of the example (two store rooms in a group of their own)."""
     where = {
         "hall_a_01": (0.0, 0.0, 0.0),
         "hall_a_02": (7.5, 0.4, 35.0),
@@ -98,6 +99,11 @@ def example_project() -> dict[str, Any]:
             "error": None,
         }
     stations["corridor_02"]["confidence"] = "uncertain"
+    return truth, stations
+
+
+def _example_links(rng: np.random.Generator, truth: dict[str, np.ndarray]) -> list[dict]:
+    """The example's links, all accepted and consistent (a few changed afterwards)."""
     pairs = [
         ("hall_a_01", "hall_a_02", "sequential"),
         ("hall_a_02", "hall_a_03", "sequential"),
@@ -144,6 +150,11 @@ def example_project() -> dict[str, Any]:
                 "loop_error_m": round(m, 4),
             }
         )
+    return links
+
+
+def _example_trouble(links: list[dict]) -> None:
+    """An uncertain corridor link, a link rejected by its loop, a failed link."""
     corridor = links[3]
     corridor["verdict"] = "uncertain"
     corridor["strength"]["x"] = 0.0021
@@ -187,6 +198,16 @@ def example_project() -> dict[str, Any]:
         "loop_error_deg": None,
         "loop_error_m": None,
     }
+
+
+def example_project() -> dict[str, Any]:
+    """A hand-made poses document of 12 stations (see the module's docstring)."""
+    rng = np.random.default_rng(SEED)
+    truth, stations = _example_stations(rng)
+    links = _example_links(rng, truth)
+    _example_trouble(links)
+    where = list(truth)
+    stores = {"store_01", "store_02"}
     return {
         "schema": "flexreg.survey/1",
         "reference": "hall_a_01",

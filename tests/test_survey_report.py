@@ -318,6 +318,24 @@ def test_page_content() -> None:
     ) in text
 
 
+def test_station_names_stay_text() -> None:
+    """A name with markup, an ampersand and dollars is escaped in the page and drawn as it is
+    (no mathematics) in the figure; numpy numbers are numbers."""
+    doc = grid_project(3, 3)
+    name = 'a<b&"c$x$'
+    doc["stations"][name] = doc["stations"].pop("st_001")
+    doc["stations"][name]["points"] = np.int64(5)
+    for lk in doc["links"]:
+        for end in ("target", "source"):
+            lk[end] = name if lk[end] == "st_001" else lk[end]
+    page = render_report(doc)
+    svg = page[page.index("<svg") : page.index("</svg>")]
+    assert "<tspan" not in svg  # matplotlib's mathtext would split the label into glyphs
+    assert re.search(r"<text[^>]*>a&lt;b&amp;(&quot;|\")c\$x\$</text>", svg)
+    assert f"<td>{html.escape(name)}</td>" in page
+    assert '<td data-sort="5">5</td>' in page
+
+
 def test_large_project_renders() -> None:
     doc = grid_project(64, 400)
     page = render_report(doc)

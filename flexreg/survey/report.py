@@ -33,6 +33,7 @@ import io
 import logging
 import math
 from collections.abc import Mapping, Sequence
+from numbers import Real
 from pathlib import Path
 from typing import Any
 
@@ -82,6 +83,11 @@ KIND_WORDS = {
 
 
 # --------------------------------------------------------------------------- station graph
+
+
+def _plain(text: str) -> str:
+    """``text`` for matplotlib as it is (a ``$`` in a station's name is not mathematics)."""
+    return text.replace("$", r"\$")
 
 
 def _xy(doc: Mapping[str, Any], stems: Sequence[str]) -> dict[str, np.ndarray]:
@@ -146,7 +152,7 @@ def _draw_group(ax: Any, doc: Mapping[str, Any], stems: list[str], frame: str) -
     if frame in pos:
         ax.scatter(*pos[frame], s=160, marker="*", c=FRAME_COLOUR, zorder=5)
     for s, p in pos.items():
-        ax.annotate(s, p, xytext=(3, 3), textcoords="offset points", fontsize=7, zorder=6)
+        ax.annotate(_plain(s), p, xytext=(3, 3), textcoords="offset points", fontsize=7, zorder=6)
     ax.set_aspect("equal", adjustable="datalim")
     ax.autoscale_view()
     ax.margins(0.08)
@@ -249,7 +255,7 @@ def station_graph_svg(doc: Mapping[str, Any], figures: ReportFigures | None = No
         where = "reference frame" if frame == reference else "own frame, not joined"
         ax.set_title(
             f"group {g}: {_plural(len(stems), 'station')}, "
-            f"{_plural(sum(counts.values()), 'link')}\n({where}: {frame})",
+            f"{_plural(sum(counts.values()), 'link')}\n({where}: {_plain(frame)})",
             fontsize=9,
         )
     _legend(fig, drawn)
@@ -267,9 +273,9 @@ def _e(x: Any) -> str:
     return html.escape(str(x), quote=True)
 
 
-def _num(x: float | None, fmt: str, unit: str = "") -> str:
-    """A number as text (``–`` when missing or not finite)."""
-    if x is None or not math.isfinite(float(x)):
+def _num(x: Any, fmt: str, unit: str = "") -> str:
+    """A number as text (``–`` when missing, not a number or not finite)."""
+    if not isinstance(x, Real) or isinstance(x, bool) or not math.isfinite(x):
         return "–"
     return format(float(x), fmt) + unit
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -150,7 +151,8 @@ def _evidence(link: Mapping[str, Any], *keys: str) -> Any:
 
 
 def _float(x: Any) -> float | None:
-    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else None
+    """``x`` as a float when it is a real number (numpy's too), else None."""
+    return float(x) if isinstance(x, Real) and not isinstance(x, bool) else None
 
 
 def link_overlap(link: Mapping[str, Any]) -> tuple[float | None, float | None]:

@@ -31,6 +31,7 @@ Usage::
     .venv/bin/python benchmarks/survey.py --resume benchmarks/results/survey-<timestamp>
     .venv/bin/python benchmarks/survey.py --write-docs --from-json \
         benchmarks/results/survey-<timestamp>/results.json      # render a saved run again
+                                                                # (several: one page)
 """
 
 from __future__ import annotations
@@ -216,7 +217,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--results", type=Path, default=RESULTS, help="parent of the result folder")
     ap.add_argument("--resume", type=Path, metavar="FOLDER", help="continue a results folder")
     ap.add_argument("--write-docs", action="store_true", help=f'rewrite "{SECTION}" in the docs')
-    ap.add_argument("--from-json", type=Path, metavar="RESULTS_JSON", help="render a saved run")
+    ap.add_argument("--from-json", type=Path, nargs="+", metavar="RESULTS_JSON",
+                    help="render saved runs (several: their records on one page)")  # fmt: skip
     ap.add_argument("--run-multiway", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--multiway-pairs", default="all", help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, help=argparse.SUPPRESS)
@@ -228,9 +230,13 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.run_multiway is not None:
         return run_multiway(args.run_multiway, args.out, args.multiway_pairs)
-    if args.from_json is not None:
-        state = json.loads(args.from_json.read_text())
-        return finish(state, args.from_json.parent, write_docs=args.write_docs)
+    if args.from_json:
+        state = json.loads(args.from_json[0].read_text())
+        for extra in args.from_json[1:]:  # runs made in parallel: one page of all their records
+            more = json.loads(extra.read_text())
+            state["records"] += more["records"]
+            state["command"] += "; " + more["command"]
+        return finish(state, args.from_json[0].parent, write_docs=args.write_docs)
     folder = args.resume or results_folder(args.results, "survey")
     folder.mkdir(parents=True, exist_ok=True)
     args.data.mkdir(parents=True, exist_ok=True)

@@ -9,6 +9,7 @@ import typer
 
 from flexreg.cli._common import EXIT_UNCERTAIN, console, err_console
 from flexreg.cli.app import app
+from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
     ConfigFileOption,
     SetOption,
@@ -28,6 +29,8 @@ if TYPE_CHECKING:
 
 #: options that set a field of SurveyConfig (option -> field)
 OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine"}
+add_config("survey", SurveyConfig)
+
 PHASES = {"prepare": "Preparing stations", "links": "Registering links", "refine": "Refining"}
 
 _ScansArgument = Annotated[
@@ -150,7 +153,9 @@ class _Bars:
 
     def __call__(self, ev: ProgressEvent) -> None:
         if ev.phase not in self.tasks or self.progress.tasks[self.tasks[ev.phase]].finished:
-            self.tasks[ev.phase] = self.progress.add_task(PHASES.get(ev.phase, ev.phase), total=0)
+            self.tasks[ev.phase] = self.progress.add_task(
+                PHASES.get(ev.phase, ev.phase), total=0, counts=""
+            )
         counts = ""
         if ev.phase == "links":
             counts = f"confident {ev.confident}, uncertain {ev.uncertain}, failed {ev.failed}"

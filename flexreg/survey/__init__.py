@@ -88,7 +88,8 @@ value does not exist (failed link, unplaced station)::
           "confirmed_by_loop": true,         # a closed loop agrees with it
           "loop_error_deg": 0.01,            # accepted: disagreement with the final poses;
           "loop_error_m": 0.002,             # rejected: with the loop it closes; null: none
-          "seconds": 3.8                     # wall time of the pairwise registration
+          "seconds": 3.8,                    # wall time of the pairwise registration
+          "cached": false                    # read from DIR/cache/links/ (an earlier run)
         }, ...
       ],
       "summary": {
@@ -106,7 +107,8 @@ value does not exist (failed link, unplaced station)::
         "wall_s": 95.2,
         "timings_s": {"prepare": 60.1, "links": 30.2, "graph": 0.3},
         "workers": 2,
-        "prepared": 8, "from_cache": 0       # stations prepared now / read from the cache
+        "prepared": 8, "from_cache": 0,      # stations prepared now / read from the cache
+        "links_from_cache": 0                # links read from the cache
       },
       "config": {...}                        # SurveyConfig.to_dict() (registration nested)
     }

@@ -15,15 +15,17 @@ from __future__ import annotations
 
 import logging
 import os
+import pickle
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from flexreg.errors import ConfigError, FlexregError
+from flexreg.errors import ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import Registration
 from flexreg.survey.graph import Link
@@ -106,6 +108,9 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
             client.close()
         return
     n = workers or default_workers()
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # the nannies' shutdown chatter is not the user's business
     with (
         LocalCluster(
             n_workers=n,
@@ -116,7 +121,10 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
         ) as cluster,
         Client(cluster) as client,
     ):
-        yield client
+        try:
+            yield client
+        finally:
+            quiet.setLevel(level)
 
 
 def run_tasks(
@@ -153,16 +161,51 @@ def _strength(evidence: dict[str, Any]) -> dict[str, float]:
     return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
 
 
+def link_cache_path(target_file: str, source_file: str) -> Path:
+    """Where a link's result is cached: beside the prepared stations, named by both
+    stations' cache keys (file content and configuration)."""
+    t = Path(target_file).name.removesuffix(".prepared.pkl")
+    s = Path(source_file).name.removesuffix(".prepared.pkl")
+    return Path(target_file).parent / "links" / f"{t}__{s}.link.pkl"
+
+
+def _cached_link(path: Path, cand: Candidate) -> Link | None:
+    try:
+        with path.open("rb") as f:
+            link = pickle.load(f)
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError):
+        return None
+    if not isinstance(link, Link):
+        return None
+    return replace(link, origin=cand.origin, place_score=cand.place_score, cached=True)
+
+
+def _store_link(path: Path, link: Link) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial")
+    try:
+        with tmp.open("wb") as f:
+            pickle.dump(link, f, protocol=pickle.HIGHEST_PROTOCOL)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def align_link(
     target_file: str, source_file: str, config: RegistrationConfig, cand: Candidate
 ) -> Link:
     """Register one candidate pair from the cache (runs on a worker); a failure is returned
-    as a ``failed`` link with its reason, not raised."""
+    as a ``failed`` link with its reason, not raised. The pairwise result is cached too (the
+    stations' cache keys name it), so a re-run registers only the links it has not seen."""
+    cache = link_cache_path(target_file, source_file)
+    hit = _cached_link(cache, cand)
+    if hit is not None:
+        return hit
     t0 = time.perf_counter()
     try:
         r = Registration(config).align(load_prepared(target_file), load_prepared(source_file))
     except FlexregError as e:
-        return Link(
+        link = Link(
             cand.target,
             cand.source,
             status="failed",
@@ -171,10 +214,13 @@ def align_link(
             origin=cand.origin,
             place_score=cand.place_score,
         )
+        if not isinstance(e, InputError):  # a missing cache file is not the link's answer
+            _store_link(cache, link)
+        return link
     v = r.verdict
     ev = v.evidence if v is not None else {}
     ov = ev.get("overlap") or {}
-    return Link(
+    link = Link(
         cand.target,
         cand.source,
         T_target_source=np.asarray(r.T_target_source, dtype=np.float64),
@@ -192,6 +238,8 @@ def align_link(
         origin=cand.origin,
         place_score=cand.place_score,
     )
+    _store_link(cache, link)
+    return link
 
 
 __all__ = [
@@ -201,5 +249,6 @@ __all__ = [
     "align_link",
     "dask_client",
     "default_workers",
+    "link_cache_path",
     "run_tasks",
 ]

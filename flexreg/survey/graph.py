@@ -79,6 +79,7 @@ class Link:
     confirmed_by_loop: bool = False
     loop_error_deg: float | None = None
     loop_error_m: float | None = None
+    cached: bool = False
 
     @property
     def overlap(self) -> float:
@@ -118,6 +119,7 @@ class Link:
             "loop_error_deg": self.loop_error_deg,
             "loop_error_m": self.loop_error_m,
             "seconds": self.seconds,
+            "cached": self.cached,
         }
 
 

@@ -136,6 +136,7 @@ class SurveyResult:
             "workers": self.workers,
             "prepared": sum(p.computed for p in self.prepared.values()),
             "from_cache": sum((not p.computed) and p.error is None for p in self.prepared.values()),
+            "links_from_cache": sum(e.cached for e in self.links),
         }
         return {
             "schema": SCHEMA,

@@ -260,7 +260,7 @@ def plot_figures(state: Record, folder: Path) -> list[Path]:
             if s["rot_deg"] is not None and s["rot_deg"] > 0
         ]
         if pts:
-            label = f"{NAMES[method]} ({len(pts)} stations)"
+            label = f"{NAMES[method]} ({len(pts)} stations besides the references)"
             ax.scatter(*zip(*pts, strict=True), s=14, marker=marker, alpha=0.7,
                        color=COLOURS[method], label=label)  # fmt: skip
     ax.axvline(SUCCESS_ROT_DEG, color="#009E73", lw=1, ls="--")
@@ -360,6 +360,17 @@ def markdown(state: Record, figures: Sequence[str]) -> str:
     lines += ["### Acceptance (issue 18)", "", "| criterion | measured | |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in acceptance(state)]
     lines += ["", "### Side by side", ""] + comparison_table(recs)
+    if any(r["method"] == "multiway" and _ok(r) and r["evaluation"]["wrong"] for r in recs):
+        lines += [
+            "",
+            "How the documented multiway pipeline places stations wrongly: its pose graph "
+            "treats the edges between consecutive stations (odometry) as certain, and the line "
+            "process of `global_optimization` can prune only loop closures. When one "
+            "consecutive pair registers wrongly (FPFH + RANSAC on a repetitive or low-overlap "
+            "pair), every later station follows it, while the loop closures that disagree are "
+            "pruned; nothing in its output tells the user (`runs/*/poses.json` of the results "
+            "folder lists each link with its fitness and status).",
+        ]
     lines += ["", "### Every project", ""] + project_table(
         [r for r in recs if r["set"] != "scaling"]
     )

@@ -235,3 +235,18 @@ def test_place_score_is_invariant_to_the_station_pose():
     other = GlobalDescriptor(rng.normal(size=(200, 32)).astype(np.float32), pts, False)
     assert place_score(a, b) >= 150
     assert place_score(a, other) <= 3
+
+
+def test_a_link_within_the_loop_tolerance_but_centimetres_off_is_dropped():
+    P = _grid(3, seed=8)
+    links = _grid_links(P, 3)
+    off = make_transform(np.eye(3), [0.06, 0.0, 0.0])  # inside 3 cm + 1 cm per link of 3+
+    bad = _link(P, "s04", "s05", T=off @ invert(P["s04"]) @ P["s05"], overlap=0.05)
+    links.append(_link(P, "s00", "s04"))
+    links.remove(next(e for e in links if (e.target, e.source) == ("s04", "s05")))
+    links.append(bad)
+    sol = solve_graph(sorted(P), links)
+    assert bad.status == "rejected" and "optimis" in bad.why  # line process or residual
+    assert all(e.status == "accepted" for e in links if e is not bad)
+    # the optimisation without it converges back onto the exact poses
+    assert all(r < 1e-3 and t < 1e-4 for r, t in _errors(sol, P).values())

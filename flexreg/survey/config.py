@@ -44,6 +44,13 @@ class SurveyConfig(Config):
         Loop tolerance added per link of the closed cycle (errors add up along a path).
     prune_threshold : float
         Open3D's line-process weight under which an uncertain edge is pruned (0..1).
+    residual_factor : float
+        After the optimisation, a link whose residual exceeds this many times the median
+        residual of the accepted links is dropped and the graph solved again (worst first).
+    residual_floor_m : float, metres
+        ... but never for a translation residual under this.
+    residual_floor_deg : float, degrees
+        ... nor for a rotation residual under this.
     joint_refine : bool
         Joint multi-view ICP on the accepted links after the graph (``--refine``).
     refine_voxel_m : float, metres
@@ -59,10 +66,13 @@ class SurveyConfig(Config):
     max_links_per_station: float = Field(6.0, gt=0, le=100)
     proximity_rounds: int = Field(1, ge=0, le=5)
     proximity_m: float = Field(12.0, gt=0)
-    loop_max_deg: float = Field(1.0, gt=0, le=30)
-    loop_max_m: float = Field(0.10, gt=0)
-    loop_per_link_m: float = Field(0.02, ge=0)
+    loop_max_deg: float = Field(0.3, gt=0, le=30)
+    loop_max_m: float = Field(0.03, gt=0)
+    loop_per_link_m: float = Field(0.01, ge=0)
     prune_threshold: float = Field(0.25, gt=0, lt=1)
+    residual_factor: float = Field(10.0, gt=1)
+    residual_floor_m: float = Field(0.02, gt=0)
+    residual_floor_deg: float = Field(0.2, gt=0)
     joint_refine: bool = False
     refine_voxel_m: float = Field(0.05, gt=0)
     refine_iterations: int = Field(2, ge=1, le=10)

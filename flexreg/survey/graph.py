@@ -20,6 +20,11 @@ link must not place a station, so the graph is built in steps that each trust le
    rejected and the optimisation rerun.
 5. **Groups**: connected components of the kept links, never fused. Group 0 holds the
    reference (the given station, or the best-connected one).
+6. **Residuals**: a link can agree with its loops within the loop tolerance and still be a
+   few centimetres off, pulling the optimised poses. The accepted link that fits the
+   optimised poses worst is dropped when it is beyond ``residual_factor`` times the median
+   residual of the accepted links (at least ``residual_floor_m`` / ``residual_floor_deg``),
+   and everything is solved again without it, until every link fits.
 """
 
 from __future__ import annotations
@@ -498,7 +503,7 @@ def solve_graph(
     *,
     reference: str | None = None,
 ) -> GraphSolution:
-    """Steps 1-5 of this module: statuses of ``links`` (set in place), poses and groups.
+    """Steps 1-6 of this module: statuses of ``links`` (set in place), poses and groups.
 
     Parameters
     ----------
@@ -523,12 +528,54 @@ def solve_graph(
         ``reference`` is not one of ``stations``.
     """
     config = config if config is not None else SurveyConfig()
+    dropped: dict[int, str] = {}
+    sol = _solve_once(stations, links, config, reference, dropped)
+    for _ in range(len(links)):
+        worst = _worst_residual(links, config)
+        if worst is None:
+            break
+        dropped[id(worst[0])] = worst[1]
+        sol = _solve_once(stations, links, config, reference, dropped)
+    return sol
+
+
+def _worst_residual(links: list[Link], config: SurveyConfig) -> tuple[Link, str] | None:
+    """Step 6: the accepted link that fits the optimised poses worst, when it is beyond
+    ``residual_factor`` times the median link residual (at least the floors), else None."""
+    acc = [e for e in links if e.status == "accepted" and e.loop_error_m is not None]
+    if len(acc) < 3:
+        return None
+    med_m = float(np.median([e.loop_error_m for e in acc]))
+    med_d = float(np.median([e.loop_error_deg for e in acc]))
+    thr_m = max(config.residual_floor_m, config.residual_factor * med_m)
+    thr_d = max(config.residual_floor_deg, config.residual_factor * med_d)
+    worst = max(acc, key=lambda e: max(e.loop_error_m / thr_m, e.loop_error_deg / thr_d))  # type: ignore[operator]
+    m, d = float(worst.loop_error_m), float(worst.loop_error_deg)  # type: ignore[arg-type]
+    if m <= thr_m and d <= thr_d:
+        return None
+    return worst, (
+        f"fits the optimised poses {1000 * m:.1f} mm / {d:.3f}° off, beyond "
+        f"{1000 * thr_m:.1f} mm / {thr_d:.3f}° ({config.residual_factor:g} x the project's "
+        "median link residual)"
+    )
+
+
+def _solve_once(
+    stations: list[str],
+    links: list[Link],
+    config: SurveyConfig,
+    reference: str | None,
+    dropped: dict[int, str],
+) -> GraphSolution:
+    """Steps 1-5 with the links of ``dropped`` rejected beforehand."""
     for e in links:
         e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
         e.loop_error_deg = e.loop_error_m = None
         if e.T_target_source is None:
             e.status = "failed"
             e.why = e.why or "registration failed"
+        elif id(e) in dropped:
+            e.status, e.why = "rejected", dropped[id(e)]
     forest = _confident_tree(stations, links, config)
     _bridge(stations, forest, links, config)
     comp = forest.root

@@ -100,7 +100,9 @@ def acceptance(state: Record) -> list[tuple[str, str, str]]:
         (
             f"zero stations placed wrongly (> {WRONG_ROT_DEG:g}° or > "
             f"{100 * WRONG_TRANS_M:.0f} cm), every project",
-            str(len(wrong)) + (": " + ", ".join(f"{p} {s}" for p, s in wrong[:6]) if wrong else ""),
+            str(len(wrong))
+            + (": " + ", ".join(f"{p} {s}" for p, s in wrong[:6]) if wrong else "")
+            + (f" and {len(wrong) - 6} more (table below)" if len(wrong) > 6 else ""),
             _met(not wrong if recs else None),
         )
     )
@@ -227,7 +229,7 @@ def scaling_rows(state: Record) -> tuple[list[str], list[tuple[int, float]]]:
     if rates:
         st = sum(a for a, _ in rates) / len(rates)
         pair = sum(b for _, b in rates) / len(rates)
-        for n in sorted({r["project"]["stations"] for r in recs} | {10}):
+        for n in sorted({r["project"]["stations"] for r in recs} | {10, 36, 64}):
             t = n * st + n * (n - 1) / 2 * pair
             est.append((n, t))
             lines.append(

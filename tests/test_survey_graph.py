@@ -134,11 +134,13 @@ def test_an_uncertain_link_alone_places_nothing_two_agreeing_ones_do():
     lone = _link(P, "s02", "s03", verdict="uncertain")
     sol = solve_graph(names, [*base, lone])
     assert "s03" not in sol.groups[0]
-    assert lone.status == "rejected" and "no second link" in lone.why
+    assert lone.status == "rejected" and "uncertain" in lone.why
     assert "separate" not in sol.reasons["s03"]
     second = _link(P, "s01", "s03", verdict="uncertain")
     lone = _link(P, "s02", "s03", verdict="uncertain")
-    sol = solve_graph(names, [*base, lone, second])
+    sol = solve_graph(names, [*base, lone, second])  # by default, never through uncertain links
+    assert "s03" not in sol.groups[0] and lone.status == second.status == "rejected"
+    sol = solve_graph(names, [*base, lone, second], SurveyConfig(uncertain_joins=True))
     assert "s03" in sol.groups[0] and sol.confidence["s03"] == "uncertain"
     assert lone.status == second.status == "accepted"
     assert _errors(sol, P)["s03"][1] < 1e-9
@@ -151,7 +153,7 @@ def test_two_uncertain_links_that_disagree_place_nothing():
     off = make_transform(np.eye(3), [2.0, 0, 0])
     a = _link(P, "s02", "s03", verdict="uncertain")
     b = _link(P, "s01", "s03", verdict="uncertain", T=off @ invert(P["s01"]) @ P["s03"])
-    sol = solve_graph(names, [*base, a, b])
+    sol = solve_graph(names, [*base, a, b], SurveyConfig(uncertain_joins=True))
     assert "s03" not in sol.groups[0]
     assert a.status == b.status == "rejected"
 

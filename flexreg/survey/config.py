@@ -44,6 +44,11 @@ class SurveyConfig(Config):
         Loop tolerance added per link of the closed cycle (errors add up along a path).
     prune_threshold : float
         Open3D's line-process weight under which an uncertain edge is pruned (0..1).
+    uncertain_joins : bool
+        Let two or more *uncertain* links that agree on the same relative pose join two
+        groups (their stations then marked uncertain). Off by default: repeating structure
+        makes several stations register wrongly in the same way, so agreeing uncertain links
+        can fuse two separate sites.
     residual_factor : float
         After the optimisation, a link whose residual exceeds this many times the median
         residual of the accepted links is dropped and the graph solved again (worst first).
@@ -70,6 +75,7 @@ class SurveyConfig(Config):
     loop_max_m: float = Field(0.03, gt=0)
     loop_per_link_m: float = Field(0.01, ge=0)
     prune_threshold: float = Field(0.25, gt=0, lt=1)
+    uncertain_joins: bool = False
     residual_factor: float = Field(10.0, gt=1)
     residual_floor_m: float = Field(0.02, gt=0)
     residual_floor_deg: float = Field(0.2, gt=0)

@@ -12,8 +12,8 @@ link must not place a station, so the graph is built in steps that each trust le
    which link is wrong) every link of that cycle is dropped. What is left disagreeing is
    rejected, with its loop error.
 3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
-   with the group's poses; between groups, two or more uncertain links that agree on the same
-   relative pose (a loop through both) join the groups; a single one is rejected.
+   with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
+   two or more that agree on the same relative pose (a loop through both) join the groups.
 4. **Robust pose-graph optimisation** per group (Open3D's ``PoseGraph`` with its line
    process): tree links are trusted edges, the others loop-closure edges the line process
    may switch off; a pruned edge, or one that still disagrees with the optimised poses, is
@@ -317,7 +317,7 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
     )
     comp = forest.root
     tol_m = config.loop_max_m + 2 * config.loop_per_link_m
-    changed = True
+    changed = config.uncertain_joins
     while changed:
         changed = False
         between: dict[tuple[str, str], list[tuple[Link, Matrix]]] = {}
@@ -362,7 +362,12 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
         if e.in_tree:
             continue
         if comp[e.target] != comp[e.source]:
-            _reject(e, "uncertain, and no second link confirms it")
+            why = (
+                "uncertain, and no second link confirms it"
+                if config.uncertain_joins
+                else "uncertain, and it would join two groups (uncertain links never do)"
+            )
+            _reject(e, why)
             continue
         err = loop_error(
             np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]

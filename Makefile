@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.flexreg-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-compare clean
+.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare clean
 
 install: $(STAMP)
 
@@ -48,6 +48,9 @@ bench-calibration: $(STAMP)
 
 bench-verdict: $(STAMP)
 	$(BIN)/python benchmarks/verdict.py --write-docs
+
+bench-survey: $(STAMP)
+	$(BIN)/python benchmarks/survey.py --write-docs
 
 bench-compare: $(STAMP)
 	$(BIN)/flexreg bench --suite all --out bench-results

@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
-# Install the system packages flexreg needs at run time and in its tests: the libraries its wheels
-# load (open3d needs libusb-1.0) and Debian's chromium, the browser the `flexreg pick` tests drive
-# (Playwright is pointed at the system executable: no browser download).
+# Install the system packages flexreg needs: the libraries its wheels load at run time (open3d
+# needs libusb-1.0) and Debian's chromium, the headless browser the picker and report tests drive
+# through Playwright (pointed at the system executable: no browser download).
 # As root it installs them with apt-get; otherwise it prints the exact command and fails.
 set -euo pipefail
 missing=()
 have_lib() { ldconfig -p 2>/dev/null | grep -q "$1"; }
 have_lib 'libusb-1.0.so.0' || missing+=(libusb-1.0-0)
 have_lib 'libgomp.so.1' || missing+=(libgomp1)
-command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+have_cmd() { command -v "$1" >/dev/null 2>&1; }
+have_cmd chromium || have_cmd chromium-browser || missing+=(chromium)
 [ ${#missing[@]} -eq 0 ] && exit 0
 if ! command -v apt-get >/dev/null 2>&1; then
     echo "flexreg needs the system packages: ${missing[*]} (no apt-get here: install them with your package manager)" >&2

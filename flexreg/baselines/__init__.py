@@ -16,6 +16,14 @@ name            what                                                            
 ``small-gicp``  small_gicp GICP, only when ``small_gicp`` is installed (:mod:`.smallgicp`) identity
 ==============  =====================================================================  =========
 
+A multi-station baseline stands beside these pairwise ones: :func:`flexreg.baselines.multiway.
+multiway` runs Open3D's documented multiway registration (FPFH + RANSAC + point-to-plane ICP
+for every pair, then a pose graph with odometry and loop-closure edges and
+``global_optimization``) on N stations and returns their poses in the first station's frame
+(:class:`~flexreg.baselines.multiway.MultiwayResult`, in the layout of a survey's
+``poses.json``); ``benchmarks/survey.py`` runs it beside ``flexreg survey``. It is not in
+:data:`BASELINES` (those take one pair).
+
 The local methods start from the identity, or from ``T_init`` when given. All sizes derive
 from one scale parameter, the voxel ``voxel_m`` (default from the scan resolution: twice the
 target's median point spacing, enlarged until at most 20,000 target points remain;

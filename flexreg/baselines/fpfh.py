@@ -112,20 +112,11 @@ def fpfh_ransac(
     tgt, src = tgt_full.voxel_down_sample(v), src_full.voxel_down_sample(v)
     t1 = time.perf_counter()
     timings["downsampling"] = t1 - t0
-    normal = o3d.geometry.KDTreeSearchParamHybrid(
-        radius=NORMAL_RADIUS_VOXELS * v, max_nn=NORMAL_MAX_NN
-    )
-    feature = o3d.geometry.KDTreeSearchParamHybrid(
-        radius=FPFH_RADIUS_VOXELS * v, max_nn=FPFH_MAX_NN
-    )
-    feats = []
-    for pc in (tgt, src):
-        pc.estimate_normals(normal)
-        feats.append(reg.compute_fpfh_feature(pc, feature))
+    feats = [fpfh_features(pc, v) for pc in (tgt, src)]
     t2 = time.perf_counter()
     timings["features"] = t2 - t1
     dist = RANSAC_DISTANCE_VOXELS * v
-    coarse = _ransac(src, tgt, feats, dist, int(seed), ransac_threads)
+    coarse = ransac_on_features(tgt, src, feats[0], feats[1], dist, int(seed), ransac_threads)
     timings["ransac"] = time.perf_counter() - t2
     n_inl = len(coarse.correspondence_set)
     if n_inl < 3:
@@ -166,10 +157,46 @@ def fpfh_ransac(
     )
 
 
-def _ransac(
-    src: Any, tgt: Any, feats: list[Any], dist: float, seed: int, ransac_threads: int | None
+def fpfh_features(cloud: Any, v: float) -> Any:
+    """Normals (within ``2 v``, at most 30 neighbours, set on ``cloud``) and FPFH features
+    (within ``5 v``, at most 100 neighbours) of a voxel-downsampled Open3D cloud.
+
+    Parameters
+    ----------
+    cloud : open3d.geometry.PointCloud
+        Downsampled at ``v``; its normals are (re)estimated in place.
+    v : float, metres
+        The scale voxel.
+
+    Returns
+    -------
+    open3d.pipelines.registration.Feature
+        (33, N) FPFH histograms, one column per point.
+    """
+    import open3d as o3d  # heavy: loaded only when the baseline runs
+
+    reg: Any = o3d.pipelines.registration
+    cloud.estimate_normals(
+        o3d.geometry.KDTreeSearchParamHybrid(radius=NORMAL_RADIUS_VOXELS * v, max_nn=NORMAL_MAX_NN)
+    )
+    return reg.compute_fpfh_feature(
+        cloud,
+        o3d.geometry.KDTreeSearchParamHybrid(radius=FPFH_RADIUS_VOXELS * v, max_nn=FPFH_MAX_NN),
+    )
+
+
+def ransac_on_features(
+    tgt: Any,
+    src: Any,
+    tgt_feature: Any,
+    src_feature: Any,
+    dist: float,
+    seed: int,
+    ransac_threads: int | None,
 ) -> Any:
-    """Open3D's RANSAC on mutual FPFH matches (the tutorial's checkers and criteria)."""
+    """Open3D's RANSAC on mutual FPFH matches (the tutorial's checkers and criteria), seeded
+    with :func:`open3d.utility.random.seed`; ``dist`` is the inlier distance (metres).
+    Returns Open3D's ``RegistrationResult`` (its transformation maps ``src`` into ``tgt``)."""
     import open3d as o3d  # heavy: loaded only when the baseline runs
 
     reg: Any = o3d.pipelines.registration
@@ -178,8 +205,8 @@ def _ransac(
         return reg.registration_ransac_based_on_feature_matching(
             src,
             tgt,
-            feats[1],
-            feats[0],
+            src_feature,
+            tgt_feature,
             True,
             dist,
             reg.TransformationEstimationPointToPoint(False),

@@ -17,6 +17,7 @@ from flexreg.cli import (  # noqa: F401  (each module registers its commands on 
     pick,
     register,
     scan_commands,
+    survey,
     synth,
 )
 from flexreg.cli.app import app, main, run

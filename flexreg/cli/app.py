@@ -20,9 +20,10 @@ app = typer.Typer(
     name="flexreg",
     help="Register 3D scans through 2D Flexion images.\n\n"
     "\b\nExit status of the commands:\n"
-    "  0  done (register, calibrate: the result is confident)\n"
+    "  0  done (register, calibrate: the result is confident; survey: every station\n"
+    "     placed through confident links)\n"
     "  3  written, but uncertain (register, calibrate): the reasons are on screen and in\n"
-    '     the output JSON under "verdict"\n'
+    '     the output JSON under "verdict"; survey: some station unplaced or uncertain\n'
     "  1  failed: one error line, nothing written\n"
     "  2  wrong usage (unknown option, missing argument)",
     no_args_is_help=True,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -256,7 +256,7 @@ def _pose(node: Any, path: Path, label: str) -> NDArray[np.float64]:
     return T
 
 
-def write(path: Path, scans: list[Scan], **options: Any) -> None:
+def write(path: Path, scans: Sequence[Scan], **options: Any) -> None:
     """Write scans to one E57 file, coordinates in double precision.
 
     Each scan becomes a ``data3D`` entry with its name, pose (``T_world_scanner`` as quaternion
@@ -269,8 +269,10 @@ def write(path: Path, scans: list[Scan], **options: Any) -> None:
     ----------
     path : Path
         Destination (``write_scan`` passes a temporary name and renames it afterwards).
-    scans : list of Scan
-        At least one scan, each with at least one point.
+    scans : sequence of Scan
+        At least one scan, each with at least one point. Walked three times in order
+        (checks, content GUID, points), so a sequence that reads each scan when asked for
+        writes a project without holding all of it in memory.
 
     Raises
     ------

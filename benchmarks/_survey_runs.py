@@ -1,0 +1,389 @@
+"""The runs of ``benchmarks/survey.py``: synthetic projects, one measured child process per
+method and project, and the evaluation of a ``poses.json`` against the project's ``gt.json``.
+
+A *project* is a folder ``<data>/<name>/`` holding ``scans/`` (the station files only) and
+``gt.json`` (every station's ``T_world_scanner``; for a project of several sites, the site of
+each station). It is made once by :func:`flexreg.synth.synthesize` and reused by later runs.
+
+A *run* is one method on one project in a child process, its output folder
+``<results>/runs/<project>--<method>/``:
+
+* ``survey``: ``flexreg survey <project>/scans --out <run> [--pairs P] [--workers W]``;
+* ``multiway``: ``python benchmarks/survey.py --run-multiway <project>/scans --out <run>``
+  (:func:`flexreg.baselines.multiway.multiway`, the result written as ``poses.json``).
+
+Measured per run: wall time, exit status, peak memory -- the largest sum of the resident sets
+of the child and all its descendants (Dask workers included), sampled every 0.25 s -- and the
+kernel's high-water mark of the largest single process of the tree (``ru_maxrss`` of
+``wait4``).
+
+``survey.py`` imports this module as a sibling: ``python benchmarks/survey.py`` puts
+``benchmarks/`` on ``sys.path``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+
+REPO = Path(__file__).resolve().parents[1]
+PYTHON = Path(sys.executable)
+FLEXREG = PYTHON.with_name("flexreg")
+
+# acceptance criteria (issue 18)
+SUCCESS_ROT_DEG, SUCCESS_TRANS_M = 0.05, 0.01  # a station within these of the truth
+WRONG_ROT_DEG, WRONG_TRANS_M = 1.0, 0.10  # a placed station beyond either is placed wrongly
+TARGET_SUCCESS = 0.95
+
+METHODS = ("survey", "multiway")
+#: sample period of the process-tree memory (seconds)
+SAMPLE_S = 0.25
+
+
+@dataclass(frozen=True)
+class ProjectSpec:
+    """A synthetic project: one site, or several sites side by side in one folder.
+
+    Attributes
+    ----------
+    sites : tuple of (kind, stations, seed)
+        Each site a ``flexreg synth`` scene; with more than one, station files are prefixed
+        ``a_``, ``b_``, ... and no site overlaps another (the truth: separate groups).
+    width, height : int
+        Station grid.
+    """
+
+    sites: tuple[tuple[str, int, int], ...]
+    width: int
+    height: int
+
+    @property
+    def name(self) -> str:
+        parts = "+".join(f"{k}{n}s{s}" for k, n, s in self.sites)
+        return f"{parts}-{self.width}x{self.height}"
+
+    @property
+    def stations(self) -> int:
+        return sum(n for _, n, _ in self.sites)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "sites": [list(s) for s in self.sites],
+            "width": self.width,
+            "height": self.height,
+            "stations": self.stations,
+        }
+
+
+def make_project(spec: ProjectSpec, data: Path) -> Path:
+    """The project folder (made once; an existing complete one is reused).
+
+    Returns
+    -------
+    Path
+        ``data / spec.name`` with ``scans/`` and ``gt.json``.
+    """
+    from flexreg.synth import SynthConfig, synthesize
+
+    folder = data / spec.name
+    if (folder / "gt.json").is_file():
+        return folder
+    tmp = data / (spec.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    (tmp / "scans").mkdir(parents=True)
+    stations: list[dict[str, Any]] = []
+    multi = len(spec.sites) > 1
+    for i, (kind, n, seed) in enumerate(spec.sites):
+        site = chr(ord("a") + i)
+        raw = tmp / f"raw-{site}"
+        cfg = SynthConfig(scene=kind, stations=n, width=spec.width, height=spec.height, seed=seed)
+        synthesize(raw, cfg)
+        gt = json.loads((raw / "gt.json").read_text())
+        for st in gt["stations"]:
+            name = f"{site}_{st['name']}" if multi else st["name"]
+            dst = tmp / "scans" / (name + Path(st["file"]).suffix)
+            (raw / st["file"]).rename(dst)
+            stations.append(
+                {"name": name, "file": f"scans/{dst.name}", "site": site, "scene": kind}
+                | {"T_world_scanner": st["T_world_scanner"]}
+            )
+        shutil.rmtree(raw)
+    doc = {"project": spec.to_dict(), "stations": stations}
+    (tmp / "gt.json").write_text(json.dumps(doc, indent=1) + "\n")
+    if folder.exists():
+        shutil.rmtree(folder)
+    tmp.rename(folder)
+    return folder
+
+
+# ------------------------------------------------------------------ measured child processes
+
+
+def _tree_rss(pid: int) -> int:
+    """Resident bytes of a process and all its descendants (0 once it is gone)."""
+    import psutil
+
+    try:
+        root = psutil.Process(pid)
+        procs = [root, *root.children(recursive=True)]
+    except psutil.Error:
+        return 0
+    total = 0
+    for p in procs:
+        try:
+            total += p.memory_info().rss
+        except psutil.Error:
+            pass
+    return total
+
+
+def measure(argv: Sequence[str], log: Path, *, timeout_s: float) -> dict[str, Any]:
+    """Run ``argv`` in its own process group and measure it.
+
+    Returns
+    -------
+    dict
+        ``exit`` (exit status; None on timeout), ``timeout`` (bool), ``wall_s``,
+        ``peak_tree_mb`` (sampled sum over the process tree), ``peak_process_mb``
+        (``ru_maxrss`` of the largest waited-for process of the tree), ``argv``.
+    """
+    peak = [0]
+    with log.open("w") as out:
+        t0 = time.perf_counter()
+        p = subprocess.Popen(
+            list(argv), stdout=out, stderr=subprocess.STDOUT, start_new_session=True, cwd=REPO
+        )
+        done = threading.Event()
+
+        def sample() -> None:
+            while not done.wait(SAMPLE_S):
+                peak[0] = max(peak[0], _tree_rss(p.pid))
+
+        th = threading.Thread(target=sample, daemon=True)
+        th.start()
+        timer = threading.Timer(timeout_s, lambda: os.killpg(p.pid, signal.SIGKILL))
+        timer.start()
+        try:
+            _, status, usage = os.wait4(p.pid, 0)
+        except BaseException:  # interrupted: leave no orphaned run behind
+            os.killpg(p.pid, signal.SIGKILL)
+            os.wait4(p.pid, 0)
+            raise
+        finally:
+            timer.cancel()
+            done.set()
+        wall = time.perf_counter() - t0
+        th.join()
+        p.returncode = os.waitstatus_to_exitcode(status)
+    killed = p.returncode == -signal.SIGKILL
+    return {
+        "argv": [str(a) for a in argv],
+        "exit": None if killed else p.returncode,
+        "timeout": killed,
+        "wall_s": wall,
+        "peak_tree_mb": peak[0] / 2**20,
+        "peak_process_mb": usage.ru_maxrss / 1024.0,  # Linux: KiB
+    }
+
+
+def command(
+    method: str, project: Path, out: Path, *, pairs: str | None, workers: int | None
+) -> list[str]:
+    """The command line of one run."""
+    scans = project / "scans"
+    if method == "survey":
+        argv = [str(FLEXREG), "survey", str(scans), "--out", str(out)]
+        if pairs:
+            argv += ["--pairs", pairs]
+        if workers:
+            argv += ["--workers", str(workers)]
+        return argv
+    if method == "multiway":
+        argv = [str(PYTHON), str(REPO / "benchmarks" / "survey.py"), "--run-multiway", str(scans)]
+        argv += ["--out", str(out)]
+        if pairs:
+            argv += ["--multiway-pairs", pairs]
+        return argv
+    raise ValueError(f"unknown method {method!r}")
+
+
+def run_multiway(scans: Path, out: Path, pairs: str = "all") -> int:
+    """The baseline on every scan of a folder; ``out/poses.json`` (exit 0, or 1 on error)."""
+    from flexreg.baselines.multiway import multiway
+    from flexreg.bench.harness import write_json
+    from flexreg.errors import FlexregError
+
+    files = sorted(p for p in scans.iterdir() if p.suffix.lower() in {".ptx", ".e57", ".ply"})
+    out.mkdir(parents=True, exist_ok=True)
+
+    def progress(stage: str, done: int, total: int) -> None:
+        print(f"{stage} {done}/{total}", flush=True)
+
+    try:
+        result = multiway(files, pairs=pairs, seed=0, progress=progress)  # type: ignore[arg-type]
+    except FlexregError as exc:
+        print(f"error: {exc}", flush=True)
+        return 1
+    tmp = out / "poses.json.tmp"
+    write_json(tmp, result.to_dict())
+    tmp.replace(out / "poses.json")
+    return 0
+
+
+# ------------------------------------------------------------------ evaluation
+
+
+def _T(x: Any) -> np.ndarray | None:
+    return None if x is None else np.asarray(x, dtype=np.float64)
+
+
+def evaluate(doc: dict[str, Any], gt: dict[str, Any]) -> dict[str, Any]:
+    """Per-station error of a ``poses.json`` against the truth, and the project's counts.
+
+    A station *placed* in the reference frame is compared with the truth aligned on the
+    reference station; a station posed only in another group's frame is compared within its
+    group (aligned on that group's reference). A posed station off by more than 1 deg or
+    10 cm, or posed in a group with stations of another site (fused), is *wrong*.
+
+    Returns
+    -------
+    dict
+        ``stations`` (one record each), ``n``, ``success`` (placed within 0.05 deg / 1 cm),
+        ``success_rate``, ``placed``, ``wrong``, ``unplaced``, ``groups``, ``fused_groups``,
+        ``sites``, ``links_attempted``, ``links_accepted``, error statistics.
+    """
+    truth = {s["name"]: s for s in gt["stations"]}
+    W = {n: np.asarray(s["T_world_scanner"], dtype=np.float64) for n, s in truth.items()}
+    est = doc.get("stations", {})
+    ref = doc.get("reference")
+    groups: dict[Any, list[str]] = {}
+    for name, st in est.items():
+        if st.get("group") is not None and _pose_in_group(st, ref)[0] is not None:
+            groups.setdefault(st["group"], []).append(name)
+    fused = [g for g, names in groups.items() if len({truth[n]["site"] for n in names}) > 1]
+    records = []
+    for name in truth:
+        st = est.get(name, {})
+        rec: dict[str, Any] = {"station": name, "site": truth[name]["site"]}
+        pose, anchor = _pose_in_group(st, ref)
+        rec["placed"] = bool(st.get("placed")) and pose is not None
+        rec["group"] = st.get("group")
+        rec["posed"] = pose is not None
+        if pose is not None and anchor in truth:
+            same_site = truth[anchor]["site"] == truth[name]["site"]
+            T_true = invert(W[anchor]) @ W[name]
+            rec["rot_deg"] = rotation_error_deg(pose, T_true) if same_site else None
+            rec["trans_m"] = translation_error_m(pose, T_true) if same_site else None
+            rec["cross_site"] = not same_site
+            off = not same_site or rec["rot_deg"] > WRONG_ROT_DEG or rec["trans_m"] > WRONG_TRANS_M
+            rec["wrong"] = bool(off)
+            rec["success"] = bool(
+                rec["placed"]
+                and same_site
+                and rec["rot_deg"] <= SUCCESS_ROT_DEG
+                and rec["trans_m"] <= SUCCESS_TRANS_M
+            )
+        else:
+            rec.update(rot_deg=None, trans_m=None, cross_site=False, wrong=False, success=False)
+        records.append(rec)
+    return _summary(records, doc, groups, fused, truth)
+
+
+def _pose_in_group(st: dict[str, Any], ref: str | None) -> tuple[np.ndarray | None, str | None]:
+    """A station's pose and the station whose frame it is in: the reference frame when
+    placed, else its group's frame."""
+    if st.get("placed") and st.get("T_reference_station") is not None:
+        return _T(st["T_reference_station"]), ref
+    if st.get("T_group_station") is not None:
+        return _T(st["T_group_station"]), st.get("group_reference")
+    return None, None
+
+
+def _summary(
+    records: list[dict[str, Any]],
+    doc: dict[str, Any],
+    groups: dict[Any, list[str]],
+    fused: list[Any],
+    truth: dict[str, Any],
+) -> dict[str, Any]:
+    n = len(records)
+    ok = [r for r in records if r["placed"] and r["rot_deg"] is not None]
+    rot = [r["rot_deg"] for r in ok]
+    trans = [r["trans_m"] for r in ok]
+    links = doc.get("links", [])
+    return {
+        "stations": records,
+        "n": n,
+        "sites": len({s["site"] for s in truth.values()}),
+        "success": sum(r["success"] for r in records),
+        "success_rate": sum(r["success"] for r in records) / n if n else 0.0,
+        "placed": sum(r["placed"] for r in records),
+        "wrong": sum(r["wrong"] for r in records),
+        "wrong_stations": [r["station"] for r in records if r["wrong"]],
+        "unplaced": [r["station"] for r in records if not r["placed"]],
+        "groups": len(groups),
+        "fused_groups": len(fused),
+        "links_attempted": len(links),
+        "links_accepted": sum(1 for lk in links if lk.get("status") == "accepted"),
+        "median_rot_deg": float(np.median(rot)) if rot else None,
+        "max_rot_deg": float(np.max(rot)) if rot else None,
+        "median_trans_m": float(np.median(trans)) if trans else None,
+        "max_trans_m": float(np.max(trans)) if trans else None,
+    }
+
+
+def run_one(
+    spec: ProjectSpec,
+    method: str,
+    *,
+    data: Path,
+    runs: Path,
+    pairs: str | None,
+    workers: int | None,
+    timeout_s: float,
+    label: str | None = None,
+) -> dict[str, Any]:
+    """Make the project (if needed), run one method on it in a measured child process and
+    evaluate its ``poses.json``; one JSON-ready record."""
+    project = make_project(spec, data)
+    tag = label or method + (f"-pairs-{pairs}" if pairs else "")
+    out = runs / f"{spec.name}--{tag}"
+    shutil.rmtree(out, ignore_errors=True)  # a cold run: no cache from an earlier attempt
+    out.mkdir(parents=True)
+    argv = command(method, project, out, pairs=pairs, workers=workers)
+    rec: dict[str, Any] = {
+        "project": spec.to_dict(),
+        "method": method,
+        "label": tag,
+        "pairs": pairs,
+        "workers": workers,
+        "load_before": list(os.getloadavg()),
+    }
+    rec |= measure(argv, out / "log.txt", timeout_s=timeout_s)
+    rec["load_after"] = list(os.getloadavg())
+    poses = out / "poses.json"
+    if poses.is_file():
+        doc = json.loads(poses.read_text())
+        gt = json.loads((project / "gt.json").read_text())
+        rec["evaluation"] = evaluate(doc, gt)
+        rec["summary"] = doc.get("summary")
+        rec["timings_s"] = doc.get("timings_s") or (doc.get("summary") or {}).get("timings_s")
+    else:
+        rec["evaluation"] = None
+        rec["log_tail"] = (out / "log.txt").read_text()[-2000:]
+    return rec

@@ -1,0 +1,303 @@
+"""`flexreg survey`: register a whole project of stations -> poses.json, stations/, report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from flexreg.cli._common import EXIT_UNCERTAIN, console, err_console
+from flexreg.cli.app import app
+from flexreg.cli.config_cmd import add_config
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_out_folder,
+    check_outputs,
+)
+from flexreg.errors import ConfigError, RegistrationError
+from flexreg.registration.config import RegistrationConfig
+from flexreg.survey.config import SurveyConfig
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
+
+    from flexreg.survey.execute import ProgressEvent
+    from flexreg.survey.project import SurveyResult
+
+#: options that set a field of SurveyConfig (option -> field)
+OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine"}
+add_config("survey", SurveyConfig)
+
+PHASES = {"prepare": "Preparing stations", "links": "Registering links", "refine": "Refining"}
+
+_ScansArgument = Annotated[
+    list[Path],
+    typer.Argument(
+        metavar="SCAN...",
+        help="Scan files, or folders (every .ptx .e57 .ply .pcd .las .laz .npz .3d file in "
+        "them). Each file is one station, named by its file name without extension.",
+    ),
+]
+_OutOption = Annotated[
+    Path,
+    typer.Option(
+        "--out",
+        metavar="DIR",
+        help="Output folder: poses.json, stations/STEM.txt, report.html; prepared stations "
+        "are cached in DIR/cache/ (a re-run prepares only new or changed scans).",
+    ),
+]
+_PairsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--pairs",
+        metavar="auto|all|sequential|FILE.csv",
+        help="Links to try: place recognition + file-order neighbours (auto), every pair, "
+        "file-order neighbours, or the target,source rows of a CSV. [default: auto]",
+    ),
+]
+_WorkersOption = Annotated[
+    int | None,
+    typer.Option(
+        "--workers",
+        help="Worker processes of the local Dask cluster [default: the machine's cores; 1 "
+        "runs without Dask].",
+    ),
+]
+_SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        metavar="tcp://HOST:8786",
+        help="Run on an existing Dask cluster (see docs/survey.md: every worker needs "
+        "flexreg, the scans and DIR at the same paths).",
+    ),
+]
+_ReferenceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--reference",
+        metavar="STEM",
+        help="Station whose frame the poses are in [default: the best-connected station].",
+    ),
+]
+_RefineOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--refine/--no-refine",
+        help="Multi-view ICP on the accepted links, then the pose graph again. [default: no]",
+    ),
+]
+_MergedOption = Annotated[
+    Path | None,
+    typer.Option("--merged", help="Write all placed stations as one .ply in the reference frame."),
+]
+_VoxelOption = Annotated[
+    float,
+    typer.Option("--voxel", metavar="METRES", help="Voxel of the merged cloud, metres."),
+]
+_E57Option = Annotated[
+    Path | None,
+    typer.Option("--e57", help="Write every placed station with its pose to one .e57 file."),
+]
+_SeedOption = Annotated[
+    int | None,
+    typer.Option("--seed", help="Random seed of every link (same seed, same poses). [default: 0]"),
+]
+
+
+def _configs(
+    config_file: Path | None,
+    sets: list[str] | None,
+    pairs: str | None,
+    refine: bool | None,
+    seed: int | None,
+) -> tuple[SurveyConfig, Path | None]:
+    """The survey configuration (``--set`` keys of the registration go to its nested
+    ``registration``; ``registration.KEY`` works too) and the pairs CSV, if any."""
+    survey_sets, reg_sets = [], []
+    for item in sets or ():
+        key = item.partition("=")[0].strip()
+        if key.startswith("registration."):
+            reg_sets.append(item.removeprefix("registration."))
+        elif key in SurveyConfig.model_fields:
+            survey_sets.append(item)
+        elif key in RegistrationConfig.model_fields:
+            reg_sets.append(item)
+        else:
+            raise ConfigError(f"--set {key}: no such field of the survey or the registration")
+    pairs_file = None
+    if pairs is not None and pairs not in ("auto", "all", "sequential"):
+        pairs_file = Path(pairs)
+        if pairs_file.suffix.lower() != ".csv":
+            raise ConfigError(f"--pairs: {pairs}: must be auto, all, sequential or a .csv file")
+        pairs = None
+    cfg = build_config(
+        SurveyConfig, config_file, survey_sets, OPTIONS, pairs=pairs, joint_refine=refine
+    )
+    reg = build_config(
+        RegistrationConfig, None, reg_sets, {"--seed": "seed"}, base=cfg.registration, seed=seed
+    )
+    return cfg.replace(registration=reg), pairs_file
+
+
+class _Bars:
+    """Draws the library's progress events: one bar per phase with its counts and ETA."""
+
+    def __init__(self, progress: Progress) -> None:
+        self.progress = progress
+        self.tasks: dict[str, Any] = {}
+
+    def __call__(self, ev: ProgressEvent) -> None:
+        if ev.phase not in self.tasks or self.progress.tasks[self.tasks[ev.phase]].finished:
+            self.tasks[ev.phase] = self.progress.add_task(
+                PHASES.get(ev.phase, ev.phase), total=0, counts=""
+            )
+        counts = ""
+        if ev.phase == "links":
+            counts = f"confident {ev.confident}, uncertain {ev.uncertain}, failed {ev.failed}"
+        elif ev.failed:
+            counts = f"unreadable {ev.failed}"
+        self.progress.update(self.tasks[ev.phase], completed=ev.done, total=ev.total, counts=counts)
+
+
+def _progress() -> Progress:
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[counts]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err_console,
+    )
+
+
+def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    s = doc["summary"]
+    t = Table(title=f"Survey: reference {doc['reference']}", title_justify="left")
+    for col in ("station", "placed", "group", "links", "confidence", "note"):
+        t.add_column(col)
+    for stem, st in doc["stations"].items():
+        t.add_row(
+            stem,
+            "yes" if st["placed"] else "NO",
+            "-" if st["group"] is None else str(st["group"]),
+            f"{st['degree']}/{st['links_attempted']}",
+            st["confidence"] or "-",
+            st["error"] or st["reason"] or "",
+        )
+    console.print(t)
+
+    def fmt(v: float | None, scale: float, unit: str) -> str:
+        return "-" if v is None else f"{scale * v:.2f} {unit}"
+
+    console.print(
+        f"{s['placed']} of {s['stations']} stations placed in {s['groups']} group(s); links "
+        f"{s['links_attempted']} tried: {s['links_accepted']} accepted, {s['links_rejected']} "
+        f"rejected, {s['links_failed']} failed; bundle error "
+        f"{fmt(s['bundle_error_m'], 1000, 'mm')} / {fmt(s['bundle_error_deg'], 1, '°')}, max "
+        f"link error {fmt(s['max_link_error_m'], 1000, 'mm')} / "
+        f"{fmt(s['max_link_error_deg'], 1, '°')}; {s['prepared']} station(s) prepared, "
+        f"{s['from_cache']} from the cache; {s['wall_s']:.1f} s on {s['workers']} worker(s)",
+        markup=False,
+        soft_wrap=True,
+    )
+    for e in doc["links"]:
+        if e["status"] == "rejected" and e["loop_error_deg"] is not None:
+            console.print(
+                f"rejected {e['target']} - {e['source']}: {e['why']} (loop error "
+                f"{e['loop_error_deg']:.2f}°, {e['loop_error_m']:.3f} m)",
+                markup=False,
+                soft_wrap=True,
+            )
+
+
+@app.command("survey")
+def survey_command(
+    scans: _ScansArgument,
+    out: _OutOption,
+    pairs: _PairsOption = None,
+    workers: _WorkersOption = None,
+    scheduler: _SchedulerOption = None,
+    reference: _ReferenceOption = None,
+    refine: _RefineOption = None,
+    merged: _MergedOption = None,
+    voxel: _VoxelOption = 0.02,
+    e57: _E57Option = None,
+    seed: _SeedOption = None,
+    config_file: ConfigFileOption = None,
+    sets: SetOption = None,
+) -> None:
+    """Register a whole project: every station placed in one frame, every link checked.
+
+    \b
+    Exit status:
+      0  every station placed through confident links
+      3  written, but some station is unplaced, unreadable or placed only through
+         uncertain links (one line each on screen, and in poses.json under
+         summary.problems)
+      1  failed: nothing could be registered (one error line; nothing written
+         but the cache)
+    """
+    from flexreg.survey.outputs import write_outputs
+    from flexreg.survey.project import run_survey
+
+    cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
+    if voxel <= 0:
+        raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
+    check_out_folder("--out", out, scans)
+    check_outputs(
+        [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
+        inputs=[p for p in scans if p.is_file()],
+        input_folders=[p for p in scans if p.is_dir()],
+    )
+    with _progress() as bar:
+        result = run_survey(
+            scans,
+            out,
+            cfg,
+            workers=workers,
+            scheduler=scheduler,
+            reference=reference,
+            pairs_file=pairs_file,
+            progress=_Bars(bar),
+        )
+    if result.exit_status == 1:
+        problems = result.problems()
+        raise RegistrationError(
+            f"no station could be placed: no link was accepted ({len(result.links)} tried)"
+            + (f"; {problems[0]}" if problems else "")
+        )
+    written = write_outputs(result, out, merged=merged, voxel_m=voxel, e57=e57)
+    doc = result.to_dict()
+    _summary(result, doc)
+    for p in written:
+        if p.parent.name != "stations":
+            console.print(f"wrote {p}", markup=False, soft_wrap=True)
+    console.print(f"wrote {len(result.placed)} station matrices to {out / 'stations'}")
+    if result.exit_status == EXIT_UNCERTAIN:
+        for line in result.problems():
+            err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        err_console.print(
+            f"partial or uncertain (exit status {EXIT_UNCERTAIN}): {out / 'poses.json'} and "
+            f"{out / 'report.html'} say which stations and links to check.",
+            markup=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(EXIT_UNCERTAIN)

@@ -1,0 +1,87 @@
+"""Every knob of :func:`flexreg.survey.run_survey`, validated in one place."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from flexreg.config import Config
+from flexreg.registration.config import RegistrationConfig
+
+PairsMode = Literal["auto", "all", "sequential"]
+
+
+class SurveyConfig(Config):
+    """Every knob of a survey; saved in poses.json.
+
+    Attributes
+    ----------
+    registration : RegistrationConfig
+        The pairwise registration of every link (its ``seed`` seeds every link alike).
+    pairs : {"auto", "all", "sequential"}
+        Candidate links: place recognition plus file-order neighbours (``auto``), every pair,
+        or file-order neighbours only. A CSV of pairs is given to :func:`run_survey` instead.
+    neighbours : int
+        File-order neighbours linked on each side when the names are sequential (``auto`` and
+        ``sequential``).
+    place_candidates : int
+        Best place-recognition matches tried per station (``auto``).
+    max_links_per_station : float
+        Cap of attempted links, times the number of stations (``auto``).
+    proximity_rounds : int
+        Extra rounds (``auto``): after a first graph, stations whose solved positions lie
+        within ``proximity_m`` are linked when not yet tried (closes loops), and unplaced
+        stations try their next place-recognition candidates.
+    proximity_m : float, metres
+        Distance between solved station positions under which a pair is tried in a proximity
+        round.
+    loop_max_deg : float, degrees
+        A link that disagrees by more than this with the cycle it closes is rejected.
+    loop_max_m : float, metres
+        The same, in translation (plus ``loop_per_link_m`` per link of the cycle).
+    loop_per_link_m : float, metres
+        Loop tolerance added per link of the closed cycle (errors add up along a path).
+    prune_threshold : float
+        Open3D's line-process weight under which an uncertain edge is pruned (0..1).
+    uncertain_joins : bool
+        Let two or more *uncertain* links that agree on the same relative pose join two
+        groups (their stations then marked uncertain). Off by default: repeating structure
+        makes several stations register wrongly in the same way, so agreeing uncertain links
+        can fuse two separate sites.
+    residual_factor : float
+        After the optimisation, a link whose residual exceeds this many times the median
+        residual of the accepted links is dropped and the graph solved again (worst first).
+    residual_floor_m : float, metres
+        ... but never for a translation residual under this.
+    residual_floor_deg : float, degrees
+        ... nor for a rotation residual under this.
+    joint_refine : bool
+        Joint multi-view ICP on the accepted links after the graph (``--refine``).
+    refine_voxel_m : float, metres
+        Voxel of the clouds the multi-view ICP aligns.
+    refine_iterations : int
+        Rounds of pairwise ICP + pose-graph optimisation of the multi-view refinement.
+    """
+
+    registration: RegistrationConfig = RegistrationConfig()
+    pairs: PairsMode = "auto"
+    neighbours: int = Field(1, ge=0, le=5)
+    place_candidates: int = Field(3, ge=0, le=20)
+    max_links_per_station: float = Field(6.0, gt=0, le=100)
+    proximity_rounds: int = Field(1, ge=0, le=5)
+    proximity_m: float = Field(12.0, gt=0)
+    loop_max_deg: float = Field(0.3, gt=0, le=30)
+    loop_max_m: float = Field(0.03, gt=0)
+    loop_per_link_m: float = Field(0.01, ge=0)
+    prune_threshold: float = Field(0.25, gt=0, lt=1)
+    uncertain_joins: bool = False
+    residual_factor: float = Field(10.0, gt=1)
+    residual_floor_m: float = Field(0.02, gt=0)
+    residual_floor_deg: float = Field(0.2, gt=0)
+    joint_refine: bool = False
+    refine_voxel_m: float = Field(0.05, gt=0)
+    refine_iterations: int = Field(2, ge=1, le=10)
+
+
+__all__ = ["PairsMode", "SurveyConfig"]

@@ -1,0 +1,254 @@
+"""Running a survey's work on Dask: station preparations and pairwise links.
+
+By default a :class:`distributed.LocalCluster` of ``workers`` processes (one thread each) runs
+on this machine; with a scheduler address the same tasks run on an existing cluster (see
+docs/survey.md: every worker needs flexreg installed and the scans and the output folder's
+``cache/`` at the same paths). With one worker and no scheduler everything runs in the calling
+process, without Dask.
+
+A task's result depends only on its inputs: the prepared stations are read back from the cache
+(bit for bit what was stored) and every link uses the registration's own seed, so the poses
+are identical whatever the number of workers or the order tasks finish in.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexreg.errors import ConfigError, FlexregError, InputError
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.pipeline import Registration
+from flexreg.survey.graph import Link
+from flexreg.survey.pairs import Candidate
+from flexreg.survey.stations import load_prepared
+
+log = logging.getLogger(__name__)
+
+#: axes of the per-axis strength, as the verdict's evidence names them
+AXES = ("roll", "pitch", "yaw", "x", "y", "z")
+
+
+@dataclass(frozen=True)
+class ProgressEvent:
+    """What the library reports while it works (the CLI draws it).
+
+    Attributes
+    ----------
+    phase : {"prepare", "links", "refine"}
+    done, total : int
+        Tasks finished and in all, in this phase.
+    confident, uncertain, failed : int
+        Links so far by pairwise outcome (before the graph's checks).
+    elapsed_s : float
+        Seconds since the phase started.
+    """
+
+    phase: str
+    done: int
+    total: int
+    confident: int = 0
+    uncertain: int = 0
+    failed: int = 0
+    elapsed_s: float = 0.0
+
+    @property
+    def eta_s(self) -> float | None:
+        """Seconds left at the pace so far (None before the first task ends)."""
+        if self.done <= 0 or self.done >= self.total:
+            return None if self.done <= 0 else 0.0
+        return self.elapsed_s / self.done * (self.total - self.done)
+
+
+Progress = Callable[[ProgressEvent], None] | None
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextmanager
+def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    """A Dask client (a local cluster of ``workers`` processes, or the cluster at
+    ``scheduler``), or None to run in this process (one worker, no scheduler).
+
+    Raises
+    ------
+    ConfigError
+        ``workers`` below 1, or the scheduler cannot be reached.
+    """
+    if workers is not None and workers < 1:
+        raise ConfigError(f"--workers: must be at least 1 (got {workers})")
+    if scheduler is None and (workers or default_workers()) == 1:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as e:
+            raise ConfigError(f"--scheduler: cannot reach {scheduler}: {e}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers or default_workers()
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # the nannies' shutdown chatter is not the user's business
+    with (
+        LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        try:
+            yield client
+        finally:
+            quiet.setLevel(level)
+
+
+def run_tasks(
+    client: Any,
+    fn: Callable[..., Any],
+    items: Sequence[tuple[Any, ...]],
+    *,
+    on_result: Callable[[int, Any], None] | None = None,
+) -> list[Any]:
+    """``fn(*item)`` for every item, on the client's workers (or here when ``client`` is
+    None); results in item order, ``on_result(i, result)`` as each finishes."""
+    out: list[Any] = [None] * len(items)
+    if client is None:
+        for i, args in enumerate(items):
+            out[i] = fn(*args)
+            if on_result is not None:
+                on_result(i, out[i])
+        return out
+    from distributed import as_completed
+
+    futures = [client.submit(fn, *args, pure=False) for args in items]
+    index = {f.key: i for i, f in enumerate(futures)}
+    for fut in as_completed(futures):
+        i = index[fut.key]
+        out[i] = fut.result()
+        if on_result is not None:
+            on_result(i, out[i])
+        fut.release()
+    return out
+
+
+def _strength(evidence: dict[str, Any]) -> dict[str, float]:
+    s = evidence.get("axis_strength") or {}
+    return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
+
+
+def link_cache_path(target_file: str, source_file: str) -> Path:
+    """Where a link's result is cached: beside the prepared stations, named by both
+    stations' cache keys (file content and configuration)."""
+    t = Path(target_file).name.removesuffix(".prepared.pkl")
+    s = Path(source_file).name.removesuffix(".prepared.pkl")
+    return Path(target_file).parent / "links" / f"{t}__{s}.link.pkl"
+
+
+def _cached_link(path: Path, cand: Candidate) -> Link | None:
+    try:
+        with path.open("rb") as f:
+            link = pickle.load(f)
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError):
+        return None
+    if not isinstance(link, Link):
+        return None
+    return replace(link, origin=cand.origin, place_score=cand.place_score, cached=True)
+
+
+def _store_link(path: Path, link: Link) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial")
+    try:
+        with tmp.open("wb") as f:
+            pickle.dump(link, f, protocol=pickle.HIGHEST_PROTOCOL)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def align_link(
+    target_file: str, source_file: str, config: RegistrationConfig, cand: Candidate
+) -> Link:
+    """Register one candidate pair from the cache (runs on a worker); a failure is returned
+    as a ``failed`` link with its reason, not raised. The pairwise result is cached too (the
+    stations' cache keys name it), so a re-run registers only the links it has not seen."""
+    cache = link_cache_path(target_file, source_file)
+    hit = _cached_link(cache, cand)
+    if hit is not None:
+        return hit
+    t0 = time.perf_counter()
+    try:
+        r = Registration(config).align(load_prepared(target_file), load_prepared(source_file))
+    except FlexregError as e:
+        link = Link(
+            cand.target,
+            cand.source,
+            status="failed",
+            why=str(e),
+            seconds=time.perf_counter() - t0,
+            origin=cand.origin,
+            place_score=cand.place_score,
+        )
+        if not isinstance(e, InputError):  # a missing cache file is not the link's answer
+            _store_link(cache, link)
+        return link
+    v = r.verdict
+    ev = v.evidence if v is not None else {}
+    ov = ev.get("overlap") or {}
+    link = Link(
+        cand.target,
+        cand.source,
+        T_target_source=np.asarray(r.T_target_source, dtype=np.float64),
+        information=np.asarray(r.information, dtype=np.float64),
+        verdict=None if v is None else v.status,
+        reasons=[] if v is None else [{"code": x.code, "message": x.message} for x in v.reasons],
+        overlap_target=ov.get("target_explained"),
+        overlap_source=ov.get("source_explained"),
+        matches=int(r.matches),
+        inliers=int(r.inliers),
+        rmse_m=float(r.inlier_rmse_m),
+        fitness=float(r.fitness),
+        strength=_strength(ev),
+        seconds=time.perf_counter() - t0,
+        origin=cand.origin,
+        place_score=cand.place_score,
+    )
+    _store_link(cache, link)
+    return link
+
+
+__all__ = [
+    "AXES",
+    "Progress",
+    "ProgressEvent",
+    "align_link",
+    "dask_client",
+    "default_workers",
+    "link_cache_path",
+    "run_tasks",
+]

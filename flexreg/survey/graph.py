@@ -1,0 +1,648 @@
+"""The station graph: which links to keep, where each station is, which groups exist.
+
+Each registered link carries its transform, its verdict and its information matrix. A wrong
+link must not place a station, so the graph is built in steps that each trust less:
+
+1. **Spanning tree of the confident links**, strongest first (Kruskal; strength = overlap).
+2. **Loop closure**: every other confident link closes a cycle with the tree; it agrees with
+   the cycle when the composed transforms meet within ``loop_max_deg`` and ``loop_max_m``
+   (+ ``loop_per_link_m`` per link of the cycle). A disagreeing cycle blames the tree links
+   on it, an agreeing one supports them. A tree link blamed more than supported is dropped
+   and the tree rebuilt without it; when the blame is tied (one triangle, nobody can tell
+   which link is wrong) every link of that cycle is dropped. What is left disagreeing is
+   rejected, with its loop error.
+3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
+   with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
+   two or more that agree on the same relative pose (a loop through both) join the groups.
+4. **Robust pose-graph optimisation** per group (Open3D's ``PoseGraph`` with its line
+   process): tree links are trusted edges, the others loop-closure edges the line process
+   may switch off; a pruned edge, or one that still disagrees with the optimised poses, is
+   rejected and the optimisation rerun.
+5. **Groups**: connected components of the kept links, never fused. Group 0 holds the
+   reference (the given station, or the best-connected one).
+6. **Residuals**: a link can agree with its loops within the loop tolerance and still be a
+   few centimetres off, pulling the optimised poses. The accepted link that fits the
+   optimised poses worst is dropped when it is beyond ``residual_factor`` times the median
+   residual of the accepted links (at least ``residual_floor_m`` / ``residual_floor_deg``),
+   and everything is solved again without it, until every link fits.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+from flexreg.errors import InputError
+from flexreg.survey.config import SurveyConfig
+
+log = logging.getLogger(__name__)
+
+Matrix = NDArray[np.float64]
+
+
+@dataclass(eq=False)
+class Link:
+    """One attempted link and what the graph made of it (see poses.json in
+    :mod:`flexreg.survey`).
+
+    Attributes
+    ----------
+    target, source : str
+    T_target_source : (4, 4) float64 or None
+        None when the registration failed.
+    information : (6, 6) float64 or None
+        Information matrix, (rx, ry, rz, tx, ty, tz) as Open3D orders it.
+    verdict : {"confident", "uncertain"} or None
+    status : {"pending", "accepted", "rejected", "failed"}
+    """
+
+    target: str
+    source: str
+    T_target_source: Matrix | None = None
+    information: Matrix | None = None
+    verdict: str | None = None
+    reasons: list[dict[str, str]] = field(default_factory=list)
+    overlap_target: float | None = None
+    overlap_source: float | None = None
+    matches: int | None = None
+    inliers: int | None = None
+    rmse_m: float | None = None
+    fitness: float | None = None
+    strength: dict[str, float] = field(default_factory=dict)
+    origin: str = ""
+    place_score: float | None = None
+    seconds: float | None = None
+    status: str = "pending"
+    why: str | None = None
+    in_tree: bool = False
+    confirmed_by_loop: bool = False
+    loop_error_deg: float | None = None
+    loop_error_m: float | None = None
+    cached: bool = False
+
+    @property
+    def overlap(self) -> float:
+        """The smaller overlap of both directions (0 when unknown)."""
+        vals = [v for v in (self.overlap_target, self.overlap_source) if v is not None]
+        return float(min(vals)) if vals else 0.0
+
+    @property
+    def usable(self) -> bool:
+        return self.T_target_source is not None and self.status != "failed"
+
+    def to_dict(self) -> dict[str, Any]:
+        def m(a: Matrix | None) -> Any:
+            return None if a is None else np.asarray(a, dtype=np.float64).tolist()
+
+        return {
+            "target": self.target,
+            "source": self.source,
+            "origin": self.origin,
+            "place_score": self.place_score,
+            "status": self.status,
+            "why": self.why,
+            "T_target_source": m(self.T_target_source),
+            "verdict": self.verdict,
+            "reasons": list(self.reasons),
+            "overlap": self.overlap if self.T_target_source is not None else None,
+            "overlap_target": self.overlap_target,
+            "overlap_source": self.overlap_source,
+            "matches": self.matches,
+            "inliers": self.inliers,
+            "rmse_m": self.rmse_m,
+            "fitness": self.fitness,
+            "strength": dict(self.strength),
+            "information": m(self.information),
+            "in_tree": self.in_tree,
+            "confirmed_by_loop": self.confirmed_by_loop,
+            "loop_error_deg": self.loop_error_deg,
+            "loop_error_m": self.loop_error_m,
+            "seconds": self.seconds,
+            "cached": self.cached,
+        }
+
+
+@dataclass(eq=False)
+class GraphSolution:
+    """Where each station is and which groups exist.
+
+    Attributes
+    ----------
+    reference : str
+        The station of group 0 whose frame the poses are given in.
+    poses : dict of str -> (4, 4) float64
+        ``T_groupref_station`` of every station in a group of two or more, in its group's
+        frame (group 0: the reference frame).
+    groups : list of list of str
+        Stations per group, group 0 first (the reference's), then by size; single stations
+        form their own groups.
+    group_reference : list of str
+    confidence : dict of str -> str
+        ``confident`` or ``uncertain`` (placed only through loop-confirmed uncertain links).
+    reasons : dict of str -> str
+        Why a station is not in the reference's group.
+    stats : dict
+        Bundle error (RMS), mean and max link residuals, degrees and metres.
+    """
+
+    reference: str
+    poses: dict[str, Matrix]
+    groups: list[list[str]]
+    group_reference: list[str]
+    confidence: dict[str, str]
+    reasons: dict[str, str]
+    stats: dict[str, float | None]
+
+    def group_of(self, stem: str) -> int:
+        for i, g in enumerate(self.groups):
+            if stem in g:
+                return i
+        raise KeyError(stem)
+
+
+# ------------------------------------------------------------------------------ helpers
+
+
+def loop_error(T_link: Matrix, P_target: Matrix, P_source: Matrix) -> tuple[float, float]:
+    """How far a link is from the relative pose of two solved stations: degrees, metres."""
+    rel = invert(P_target) @ P_source
+    return rotation_error_deg(T_link, rel), translation_error_m(T_link, rel)
+
+
+class _Forest:
+    """Spanning forest of a set of links with the poses it implies."""
+
+    def __init__(self, stems: list[str], tree: list[Link]) -> None:
+        self.adj: dict[str, list[tuple[str, Link]]] = {s: [] for s in stems}
+        for e in tree:
+            self.adj[e.target].append((e.source, e))
+            self.adj[e.source].append((e.target, e))
+        self.parent: dict[str, tuple[str, Link] | None] = {}
+        self.depth: dict[str, int] = {}
+        self.root: dict[str, str] = {}
+        self.pose: dict[str, Matrix] = {}
+        for s in stems:
+            if s not in self.parent:
+                self._walk(s)
+
+    def _walk(self, root: str) -> None:
+        self.parent[root], self.depth[root], self.root[root] = None, 0, root
+        self.pose[root] = np.eye(4)
+        queue = deque([root])
+        while queue:
+            a = queue.popleft()
+            for b, e in self.adj[a]:
+                if b in self.parent:
+                    continue
+                T = np.asarray(e.T_target_source)
+                self.pose[b] = self.pose[a] @ (T if e.target == a else invert(T))
+                self.parent[b], self.depth[b], self.root[b] = (a, e), self.depth[a] + 1, root
+                queue.append(b)
+
+    def path(self, a: str, b: str) -> list[Link]:
+        """The tree links between two stations of one tree."""
+        out: list[Link] = []
+        while a != b:
+            if self.depth[a] >= self.depth[b]:
+                pa = self.parent[a]
+                assert pa is not None
+                out.append(pa[1])
+                a = pa[0]
+            else:
+                pb = self.parent[b]
+                assert pb is not None
+                out.append(pb[1])
+                b = pb[0]
+        return out
+
+    def components(self) -> dict[str, list[str]]:
+        out: dict[str, list[str]] = {}
+        for s, r in self.root.items():
+            out.setdefault(r, []).append(s)
+        return out
+
+
+def _kruskal(stems: list[str], links: list[Link]) -> tuple[list[Link], list[Link]]:
+    """Tree links (strongest first, joining separate trees) and the rest."""
+    up = {s: s for s in stems}
+
+    def find(x: str) -> str:
+        while up[x] != x:
+            up[x] = up[up[x]]
+            x = up[x]
+        return x
+
+    tree, rest = [], []
+    for e in sorted(links, key=lambda e: -e.overlap):
+        a, b = find(e.target), find(e.source)
+        if a != b:
+            up[a] = b
+            tree.append(e)
+        else:
+            rest.append(e)
+    return tree, rest
+
+
+def _consistent(err: tuple[float, float], hops: int, config: SurveyConfig) -> bool:
+    tol_m = config.loop_max_m + config.loop_per_link_m * hops
+    return err[0] <= config.loop_max_deg and err[1] <= tol_m
+
+
+def _reject(e: Link, why: str, err: tuple[float, float] | None = None) -> None:
+    e.status, e.why, e.in_tree = "rejected", why, False
+    if err is not None:
+        e.loop_error_deg, e.loop_error_m = float(err[0]), float(err[1])
+
+
+# ------------------------------------------------------------------------------ steps
+
+
+def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -> _Forest:
+    """Steps 1 and 2: the tree of confident links after the loop checks."""
+    active = [e for e in links if e.verdict == "confident"]
+    while True:
+        tree, rest = _kruskal(stems, active)
+        forest = _Forest(stems, tree)
+        blame: dict[int, int] = {}
+        support: dict[int, int] = {}
+        bad: list[tuple[Link, list[Link], tuple[float, float]]] = []
+        for e in rest:
+            p = forest.path(e.target, e.source)
+            err = loop_error(
+                np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
+            )
+            if _consistent(err, len(p) + 1, config):
+                e.confirmed_by_loop = True
+                e.loop_error_deg, e.loop_error_m = err
+                for t in p:
+                    support[id(t)] = support.get(id(t), 0) + 1
+                    t.confirmed_by_loop = True
+            else:
+                bad.append((e, p, err))
+                for t in p:
+                    blame[id(t)] = blame.get(id(t), 0) + 1
+        if not bad:
+            break
+        net = {id(t): blame.get(id(t), 0) - support.get(id(t), 0) for t in tree}
+        worst = max(net.values(), default=0)
+        if worst <= 0:  # every blamed tree link is better supported: the closers are wrong
+            for e, _, err in bad:
+                _reject(e, "disagrees with the loop it closes", err)
+            active = [e for e in active if e.status != "rejected"]
+            continue
+        culprits = [t for t in tree if net[id(t)] == worst]
+        for t in culprits:
+            _reject(t, f"on {blame.get(id(t), 0)} disagreeing loop(s), confirmed by none")
+        for e, p, err in bad:
+            if len(culprits) > 1 and any(t in culprits for t in p):
+                _reject(e, "closes a loop whose links disagree, undecidable which", err)
+        active = [e for e in active if e.status != "rejected"]
+    for e in tree:
+        e.in_tree = True
+    return forest
+
+
+def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: SurveyConfig) -> None:
+    """Step 3: uncertain links join groups only in agreeing pairs; inside a group they are
+    kept when they agree with its poses."""
+    uncertain = sorted(
+        (e for e in links if e.verdict == "uncertain" and e.status == "pending"),
+        key=lambda e: -e.overlap,
+    )
+    comp = forest.root
+    tol_m = config.loop_max_m + 2 * config.loop_per_link_m
+    changed = config.uncertain_joins
+    while changed:
+        changed = False
+        between: dict[tuple[str, str], list[tuple[Link, Matrix]]] = {}
+        for e in uncertain:
+            ct, cs = comp[e.target], comp[e.source]
+            if ct == cs:
+                continue
+            # pose of the source's group frame in the target's group frame, by this link
+            rel = (
+                forest.pose[e.target]
+                @ np.asarray(e.T_target_source)
+                @ invert(forest.pose[e.source])
+            )
+            if ct < cs:
+                between.setdefault((ct, cs), []).append((e, rel))
+            else:
+                between.setdefault((cs, ct), []).append((e, invert(rel)))
+        for (ct, cs), items in sorted(between.items()):
+            best: list[tuple[Link, Matrix]] = []
+            for _, r0 in items:
+                agree = [
+                    (e, r)
+                    for e, r in items
+                    if rotation_error_deg(r, r0) <= config.loop_max_deg
+                    and translation_error_m(r, r0) <= tol_m
+                ]
+                if len(agree) > len(best):
+                    best = agree
+            if len(best) < 2:
+                continue
+            rel = best[0][1]
+            for s in stems:
+                if comp[s] == cs:
+                    forest.pose[s] = rel @ forest.pose[s]
+                    comp[s] = ct
+            for i, (e, _) in enumerate(best):
+                e.confirmed_by_loop = True
+                e.in_tree = i == 0
+            changed = True
+            break
+    for e in uncertain:
+        if e.in_tree:
+            continue
+        if comp[e.target] != comp[e.source]:
+            why = (
+                "uncertain, and no second link confirms it"
+                if config.uncertain_joins
+                else "uncertain, and it would join two groups (uncertain links never do)"
+            )
+            _reject(e, why)
+            continue
+        err = loop_error(
+            np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
+        )
+        if _consistent(err, 2, config):
+            e.confirmed_by_loop = True
+            e.loop_error_deg, e.loop_error_m = err
+        else:
+            _reject(e, "uncertain and disagrees with the group's poses", err)
+
+
+def _optimise(
+    group: list[str], ref: str, poses: dict[str, Matrix], links: list[Link], config: SurveyConfig
+) -> tuple[dict[str, Matrix], list[Link]]:
+    """Step 4 for one group: Open3D's robust pose-graph optimisation; returns the poses and
+    the loop-closure links its line process switched off."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    idx = {s: i for i, s in enumerate(group)}
+    graph = reg.PoseGraph()
+    for s in group:
+        graph.nodes.append(reg.PoseGraphNode(np.asarray(poses[s], dtype=np.float64)))
+    edges = [e for e in links if e.status == "pending" and e.target in idx and e.source in idx]
+    for e in edges:
+        info = np.asarray(e.information, dtype=np.float64) if e.information is not None else None
+        if info is None or info.shape != (6, 6) or not np.all(np.isfinite(info)):
+            info = np.eye(6)
+        graph.edges.append(
+            reg.PoseGraphEdge(
+                idx[e.source],
+                idx[e.target],
+                np.asarray(e.T_target_source, dtype=np.float64),
+                info,
+                uncertain=not e.in_tree,
+            )
+        )
+    if not edges:
+        return dict(poses), []
+    option = reg.GlobalOptimizationOption(
+        max_correspondence_distance=config.loop_max_m,
+        edge_prune_threshold=config.prune_threshold,
+        preference_loop_closure=1.0,
+        reference_node=idx[ref],
+    )
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        reg.global_optimization(
+            graph,
+            reg.GlobalOptimizationLevenbergMarquardt(),
+            reg.GlobalOptimizationConvergenceCriteria(),
+            option,
+        )
+    kept = {(int(e.source_node_id), int(e.target_node_id)) for e in graph.edges}
+    pruned = [e for e in edges if (idx[e.source], idx[e.target]) not in kept]
+    out = {s: np.asarray(graph.nodes[idx[s]].pose, dtype=np.float64) for s in group}
+    ref_inv = invert(out[ref])  # the reference node stays fixed; guard against drift anyway
+    return {s: ref_inv @ P for s, P in out.items()}, pruned
+
+
+def _reference(
+    stems: list[str], comp: dict[str, str], links: list[Link], reference: str | None
+) -> str:
+    if reference is not None:
+        if reference not in comp:
+            raise InputError("--reference", f"{reference!r} is not one of the stations")
+        return reference
+    degree = {s: 0 for s in stems}
+    for e in links:
+        if e.status == "pending":
+            degree[e.target] += 1
+            degree[e.source] += 1
+    size: dict[str, int] = {}
+    for s in stems:
+        size[comp[s]] = size.get(comp[s], 0) + 1
+    return max(stems, key=lambda s: (size[comp[s]], degree[s], -stems.index(s)))
+
+
+def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
+    """``confident`` when joined to ``ref`` by confident accepted links alone."""
+    adj: dict[str, list[str]] = {s: [] for s in group}
+    for e in links:
+        if e.status == "accepted" and e.verdict == "confident" and e.target in adj:
+            adj[e.target].append(e.source)
+            adj[e.source].append(e.target)
+    seen, queue = {ref}, deque([ref])
+    while queue:
+        for b in adj[queue.popleft()]:
+            if b not in seen:
+                seen.add(b)
+                queue.append(b)
+    return {s: "confident" if s in seen else "uncertain" for s in group}
+
+
+def _why_unplaced(stem: str, group: list[str], links: list[Link]) -> str:
+    mine = [e for e in links if stem in (e.target, e.source)]
+    if len(group) > 1:
+        return (
+            f"in a separate group of {len(group)} stations: no confident or loop-confirmed "
+            "link joins it to the reference's group"
+        )
+    if not mine:
+        return "no link was tried (no candidate pair)"
+    if all(e.status == "failed" for e in mine):
+        return f"all {len(mine)} link(s) failed to register"
+    whys = sorted({e.why or e.status for e in mine if e.status != "accepted"})
+    return f"no accepted link ({len(mine)} tried: {'; '.join(whys)})"
+
+
+def _stats(links: list[Link]) -> dict[str, float | None]:
+    acc = [e for e in links if e.status == "accepted" and e.loop_error_m is not None]
+    if not acc:
+        return dict.fromkeys(
+            (
+                "bundle_error_m",
+                "bundle_error_deg",
+                "mean_link_error_m",
+                "max_link_error_m",
+                "mean_link_error_deg",
+                "max_link_error_deg",
+            ),
+        )
+    m = np.array([e.loop_error_m for e in acc], dtype=np.float64)
+    d = np.array([e.loop_error_deg for e in acc], dtype=np.float64)
+    return {
+        "bundle_error_m": float(np.sqrt(np.mean(m**2))),
+        "bundle_error_deg": float(np.sqrt(np.mean(d**2))),
+        "mean_link_error_m": float(m.mean()),
+        "max_link_error_m": float(m.max()),
+        "mean_link_error_deg": float(d.mean()),
+        "max_link_error_deg": float(d.max()),
+    }
+
+
+def solve_graph(
+    stations: list[str],
+    links: list[Link],
+    config: SurveyConfig | None = None,
+    *,
+    reference: str | None = None,
+) -> GraphSolution:
+    """Steps 1-6 of this module: statuses of ``links`` (set in place), poses and groups.
+
+    Parameters
+    ----------
+    stations : list of str
+        Station stems, in file order (ties are broken by it).
+    links : list of Link
+        Attempted links; those without a transform are ``failed``. Statuses, loop errors,
+        ``in_tree`` and ``confirmed_by_loop`` are written into them.
+    config : SurveyConfig, optional
+        Loop tolerances and the line process's prune threshold (default: defaults).
+    reference : str, optional
+        The station whose frame group 0 is solved in (default: the best-connected station of
+        the largest group).
+
+    Returns
+    -------
+    GraphSolution
+
+    Raises
+    ------
+    InputError
+        ``reference`` is not one of ``stations``.
+    """
+    config = config if config is not None else SurveyConfig()
+    dropped: dict[int, str] = {}
+    sol = _solve_once(stations, links, config, reference, dropped)
+    for _ in range(len(links)):
+        worst = _worst_residual(links, config)
+        if worst is None:
+            break
+        dropped[id(worst[0])] = worst[1]
+        sol = _solve_once(stations, links, config, reference, dropped)
+    return sol
+
+
+def _worst_residual(links: list[Link], config: SurveyConfig) -> tuple[Link, str] | None:
+    """Step 6: the accepted link that fits the optimised poses worst, when it is beyond
+    ``residual_factor`` times the median link residual (at least the floors), else None."""
+    acc = [e for e in links if e.status == "accepted" and e.loop_error_m is not None]
+    if len(acc) < 3:
+        return None
+    med_m = float(np.median([e.loop_error_m for e in acc]))
+    med_d = float(np.median([e.loop_error_deg for e in acc]))
+    thr_m = max(config.residual_floor_m, config.residual_factor * med_m)
+    thr_d = max(config.residual_floor_deg, config.residual_factor * med_d)
+    worst = max(acc, key=lambda e: max(e.loop_error_m / thr_m, e.loop_error_deg / thr_d))  # type: ignore[operator]
+    m, d = float(worst.loop_error_m), float(worst.loop_error_deg)  # type: ignore[arg-type]
+    if m <= thr_m and d <= thr_d:
+        return None
+    return worst, (
+        f"fits the optimised poses {1000 * m:.1f} mm / {d:.3f}° off, beyond "
+        f"{1000 * thr_m:.1f} mm / {thr_d:.3f}° ({config.residual_factor:g} x the project's "
+        "median link residual)"
+    )
+
+
+def _solve_once(
+    stations: list[str],
+    links: list[Link],
+    config: SurveyConfig,
+    reference: str | None,
+    dropped: dict[int, str],
+) -> GraphSolution:
+    """Steps 1-5 with the links of ``dropped`` rejected beforehand."""
+    for e in links:
+        e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
+        e.loop_error_deg = e.loop_error_m = None
+        if e.T_target_source is None:
+            e.status = "failed"
+            e.why = e.why or "registration failed"
+        elif id(e) in dropped:
+            e.status, e.why = "rejected", dropped[id(e)]
+    forest = _confident_tree(stations, links, config)
+    _bridge(stations, forest, links, config)
+    comp = forest.root
+    ref = _reference(stations, comp, links, reference)
+    members: dict[str, list[str]] = {}
+    for s in stations:
+        members.setdefault(comp[s], []).append(s)
+    ordered = sorted(
+        members.values(),
+        key=lambda g: (ref not in g, -len(g), stations.index(g[0])),
+    )
+    poses: dict[str, Matrix] = {}
+    grefs: list[str] = []
+    confidence: dict[str, str] = {}
+    for g in ordered:
+        gref = ref if ref in g else _reference(g, comp, links, None)
+        grefs.append(gref)
+        if len(g) < 2:
+            continue
+        inv = invert(forest.pose[gref])
+        start = {s: inv @ forest.pose[s] for s in g}
+        for _ in range(3):
+            solved, pruned = _optimise(g, gref, start, links, config)
+            late = []
+            for e in links:
+                if e.status != "pending" or e.target not in solved or e.in_tree:
+                    continue
+                err = loop_error(np.asarray(e.T_target_source), solved[e.target], solved[e.source])
+                if e in pruned:
+                    _reject(e, "switched off by the robust pose-graph optimisation", err)
+                    late.append(e)
+                elif not _consistent(err, 2, config):
+                    _reject(e, "disagrees with the optimised poses", err)
+                    late.append(e)
+            start = solved
+            if not late:
+                break
+        poses.update(start)
+        for e in links:
+            if e.status == "pending" and e.target in start:
+                e.status = "accepted"
+                e.loop_error_deg, e.loop_error_m = loop_error(
+                    np.asarray(e.T_target_source), start[e.target], start[e.source]
+                )
+        confidence.update(_confidence(g, gref, links))
+    for e in links:  # anything left (between groups) was never confirmed
+        if e.status == "pending":
+            _reject(e, "joins two groups with no confirming loop")
+        if (
+            e.status == "rejected"
+            and e.loop_error_m is None
+            and e.target in poses
+            and e.source in poses
+            and comp[e.target] == comp[e.source]
+        ):  # a dropped tree link: how far it is from the final poses
+            e.loop_error_deg, e.loop_error_m = loop_error(
+                np.asarray(e.T_target_source), poses[e.target], poses[e.source]
+            )
+    reasons = {s: _why_unplaced(s, g, links) for g in ordered[1:] for s in g}
+    if len(ordered[0]) < 2:
+        reasons[ordered[0][0]] = _why_unplaced(ordered[0][0], ordered[0], links)
+    return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
+
+
+__all__ = ["GraphSolution", "Link", "loop_error", "solve_graph"]

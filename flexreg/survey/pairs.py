@@ -1,0 +1,239 @@
+"""Candidate links of a survey: which station pairs to register.
+
+Registering every pair costs ``N (N - 1) / 2`` links (19,900 for 200 stations) although a
+station overlaps only its few neighbours. The candidates come from two cheap cues:
+
+* **file order**: stations named ``prefix + number`` (``station_07``, ``Scan 12``) are usually
+  scanned one after the other, each beside the previous one; each station is linked to its
+  ``neighbours`` next ones in that order;
+* **place recognition**: each station keeps its few hundred strongest keypoints with their 3D
+  points (:func:`flexreg.survey.stations.global_descriptor`). Two stations score by how many
+  of their mutual ratio-test matches are *geometrically consistent* (the largest set whose
+  pairwise 3D distances agree, :func:`flexreg.stages.alignment.consistent_subset`): distances
+  between points do not change with the scanner's position or heading, so the score is
+  invariant to yaw (and any rotation) and counts only structure both stations really see.
+  Each station's best ``place_candidates`` partners are tried.
+
+The total is capped at ``max_links_per_station * N``; the file-order links come first, then
+the place-recognition links by score. Later rounds (:mod:`flexreg.survey.project`) add pairs
+whose solved positions are close.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass
+from itertools import combinations
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexreg.errors import InputError
+from flexreg.stages.alignment import consistent_subset
+from flexreg.survey.stations import GlobalDescriptor
+
+#: Lowe's ratio of the place-recognition matches
+PLACE_RATIO = 0.85
+#: distance tolerance of the consistency check, metres, plus this share of the distance
+PLACE_TOLERANCE_M, PLACE_RELATIVE = 0.15, 0.02
+#: a place-recognition score under this many consistent matches proposes no link
+MIN_PLACE_MATCHES = 4
+
+_NUMBERED = re.compile(r"^(.*?)(\d+)$")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A pair to register.
+
+    Attributes
+    ----------
+    target, source : str
+        Station stems (``T_target_source`` maps the source into the target).
+    origin : str
+        Why: ``sequential``, ``place``, ``proximity``, ``all`` or ``file``.
+    place_score : float or None
+        Consistent place-recognition matches (None: not ranked).
+    """
+
+    target: str
+    source: str
+    origin: str
+    place_score: float | None = None
+
+    @property
+    def key(self) -> frozenset[str]:
+        return frozenset((self.target, self.source))
+
+
+def sequential_order(stems: list[str]) -> list[str] | None:
+    """The stems in scanning order when every name is ``prefix + number`` with one prefix,
+    else None."""
+    parts = [_NUMBERED.match(s) for s in stems]
+    if not stems or any(p is None for p in parts):
+        return None
+    prefixes = {p.group(1) for p in parts if p is not None}
+    if len(prefixes) != 1:
+        return None
+    return sorted(stems, key=lambda s: int(_NUMBERED.match(s).group(2)))  # type: ignore[union-attr]
+
+
+def _knn(a: Any, b: Any, binary: bool) -> Any:
+    import cv2
+
+    matcher = cv2.BFMatcher(cv2.NORM_HAMMING if binary else cv2.NORM_L2)
+    return matcher.knnMatch(a, b, k=2)
+
+
+def _ratio_best(knn: Any) -> dict[int, int]:
+    out: dict[int, int] = {}
+    for m in knn:
+        if len(m) == 2 and m[0].distance < PLACE_RATIO * m[1].distance:
+            out[m[0].queryIdx] = m[0].trainIdx
+        elif len(m) == 1:
+            out[m[0].queryIdx] = m[0].trainIdx
+    return out
+
+
+def place_score(a: GlobalDescriptor, b: GlobalDescriptor) -> int:
+    """Geometrically consistent mutual matches between two stations' global descriptors.
+
+    Parameters
+    ----------
+    a, b : GlobalDescriptor
+
+    Returns
+    -------
+    int
+        Size of the largest set of mutual ratio-test matches whose 3D distances agree
+        (0 when fewer than 3 match).
+    """
+    if len(a.descriptors) < 2 or len(b.descriptors) < 2 or a.binary != b.binary:
+        return 0
+    ab = _ratio_best(_knn(a.descriptors, b.descriptors, a.binary))
+    ba = _ratio_best(_knn(b.descriptors, a.descriptors, a.binary))
+    pairs = np.array([(i, j) for i, j in sorted(ab.items()) if ba.get(j) == i], dtype=np.int64)
+    if len(pairs) < 3:
+        return int(len(pairs) > 0)
+    keep = consistent_subset(
+        a.points[pairs[:, 0]],
+        b.points[pairs[:, 1]],
+        threshold_m=PLACE_TOLERANCE_M,
+        relative=PLACE_RELATIVE,
+    )
+    return len(keep)
+
+
+def place_scores(descriptors: dict[str, GlobalDescriptor]) -> dict[frozenset[str], int]:
+    """:func:`place_score` of every station pair (a few milliseconds each)."""
+    stems = list(descriptors)
+    return {
+        frozenset((a, b)): place_score(descriptors[a], descriptors[b])
+        for a, b in combinations(stems, 2)
+    }
+
+
+def _ordered(a: str, b: str, order: dict[str, int]) -> tuple[str, str]:
+    return (a, b) if order[a] < order[b] else (b, a)
+
+
+def sequential_pairs(stems: list[str], neighbours: int) -> list[Candidate]:
+    """Each station with its ``neighbours`` next ones in scanning order (file order when the
+    names are not numbered)."""
+    seq = sequential_order(stems) or stems
+    return [
+        Candidate(seq[i], seq[j], "sequential")
+        for i in range(len(seq))
+        for j in range(i + 1, min(len(seq), i + 1 + neighbours))
+    ]
+
+
+def all_pairs(stems: list[str]) -> list[Candidate]:
+    """Every pair, in file order."""
+    return [Candidate(a, b, "all") for a, b in combinations(stems, 2)]
+
+
+def ranked_partners(
+    stem: str, stems: list[str], scores: dict[frozenset[str], int]
+) -> list[tuple[str, int]]:
+    """The other stations by place-recognition score, best first (ties by file order)."""
+    others = [(o, scores.get(frozenset((stem, o)), 0)) for o in stems if o != stem]
+    return sorted(others, key=lambda t: -t[1])
+
+
+def auto_pairs(
+    stems: list[str],
+    scores: dict[frozenset[str], int],
+    *,
+    neighbours: int,
+    place_candidates: int,
+    max_links: int,
+) -> list[Candidate]:
+    """File-order neighbours (when the names are numbered) plus each station's best
+    ``place_candidates`` partners, at most ``max_links`` in all."""
+    order = {s: i for i, s in enumerate(stems)}
+    chosen: dict[frozenset[str], Candidate] = {}
+    if sequential_order(stems) is not None:
+        for c in sequential_pairs(stems, neighbours):
+            chosen[c.key] = Candidate(c.target, c.source, c.origin, scores.get(c.key))
+    ranked: list[Candidate] = []
+    for s in stems:
+        for o, sc in ranked_partners(s, stems, scores)[:place_candidates]:
+            if sc >= MIN_PLACE_MATCHES:
+                t, src = _ordered(s, o, order)
+                ranked.append(Candidate(t, src, "place", float(sc)))
+    ranked.sort(key=lambda c: (-(c.place_score or 0.0), order[c.target], order[c.source]))
+    for c in ranked:
+        if len(chosen) >= max_links:
+            break
+        chosen.setdefault(c.key, c)
+    return list(chosen.values())[:max_links]
+
+
+def read_pairs_csv(path: Path, stems: list[str]) -> list[Candidate]:
+    """Pairs from a CSV file of ``target,source`` station stems (a header row is allowed).
+
+    Raises
+    ------
+    InputError
+        Unreadable file, a row without two names, an unknown station, a pair with itself, or
+        no pair at all.
+    """
+    known = set(stems)
+    try:
+        with path.open(newline="") as f:
+            rows = [r for r in csv.reader(f) if r and any(x.strip() for x in r)]
+    except OSError as e:
+        raise InputError(path, f"cannot read: {e.strerror or e}") from None
+    if rows and [x.strip().lower() for x in rows[0][:2]] == ["target", "source"]:
+        rows = rows[1:]
+    out: dict[frozenset[str], Candidate] = {}
+    for n, row in enumerate(rows, 1):
+        if len(row) < 2:
+            raise InputError(path, f"row {n}: expected target,source")
+        t, s = (Path(x.strip()).stem for x in row[:2])
+        for name in (t, s):
+            if name not in known:
+                raise InputError(path, f"row {n}: {name!r} is not one of the stations")
+        if t == s:
+            raise InputError(path, f"row {n}: a station cannot be linked to itself")
+        out.setdefault(frozenset((t, s)), Candidate(t, s, "file"))
+    if not out:
+        raise InputError(path, "no pairs in the file")
+    return list(out.values())
+
+
+__all__ = [
+    "MIN_PLACE_MATCHES",
+    "Candidate",
+    "all_pairs",
+    "auto_pairs",
+    "place_score",
+    "place_scores",
+    "ranked_partners",
+    "read_pairs_csv",
+    "sequential_order",
+    "sequential_pairs",
+]

@@ -1,0 +1,315 @@
+"""Stations of a survey: the scan files, their preparation once, and the cache.
+
+Each station is prepared once (:meth:`flexreg.registration.Registration.prepare`) and stored in
+``DIR/cache/`` under a key made of the file's content (SHA-256) and the registration
+configuration, so a re-run, or a run with stations added, prepares only what is new. Next to
+each prepared station the cache holds its *global descriptor* (a few hundred of its strongest
+keypoints with their 3D points, a few kilobytes) for place recognition
+(:mod:`flexreg.survey.pairs`).
+
+A prepared station is what :meth:`~flexreg.registration.Registration.align` needs and no
+more: the scan's full point list is dropped when the refinement works on the range images
+(the default projective point-to-plane ICP reads only the images and their samples), so a
+cached station of 1024x512 holds about 45 MB (range image, normals, the dense check's images
+and samples, keypoints). Only the stations of the link at hand are in memory; each worker
+keeps the last :data:`KEEP_LOADED` it loaded.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import pickle
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg._version import __version__
+from flexreg.core.scan import Scan
+from flexreg.errors import FlexregError, InputError
+from flexreg.io import read_scan
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.pipeline import PreparedScan, Registration
+from flexreg.stages.refinement import uses_projective
+
+log = logging.getLogger(__name__)
+
+#: suffixes a folder contributes (depth PNGs need a camera; .npy/.bin carry no station grid)
+FOLDER_SUFFIXES = (".ptx", ".e57", ".ply", ".pcd", ".las", ".laz", ".npz", ".3d")
+#: keypoints kept per station for place recognition (strongest lifted ones)
+GLOBAL_KEYPOINTS = 300
+#: prepared stations a worker keeps loaded (a link needs two; neighbours share stations)
+KEEP_LOADED = 4
+#: bumped when the cached layout changes (old entries are then ignored)
+CACHE_FORMAT = 1
+
+_loaded: OrderedDict[str, PreparedScan] = OrderedDict()
+
+
+@dataclass(frozen=True)
+class Station:
+    """One station of the project.
+
+    Attributes
+    ----------
+    stem : str
+        The file name without extension: the station's name everywhere.
+    path : Path
+        The scan file (its first scan is the station).
+    """
+
+    stem: str
+    path: Path
+
+
+@dataclass(frozen=True)
+class GlobalDescriptor:
+    """What place recognition knows of one station.
+
+    Attributes
+    ----------
+    descriptors : (K, D) float32 or uint8
+        The strongest lifted keypoints' descriptors.
+    points : (K, 3) float64, metres
+        Their 3D points in the scanner frame.
+    binary : bool
+        Hamming descriptors.
+    """
+
+    descriptors: NDArray[Any]
+    points: NDArray[np.float64]
+    binary: bool
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """The outcome of preparing one station (small: it travels back from the workers).
+
+    Attributes
+    ----------
+    stem : str
+    cache_file : str or None
+        The prepared station in the cache (None: unreadable).
+    points : int
+        Valid returns of the scan.
+    computed : bool
+        Prepared now (False: found in the cache).
+    seconds : float
+    error : str or None
+        The one-line error of an unreadable station.
+    """
+
+    stem: str
+    cache_file: str | None
+    points: int
+    computed: bool
+    seconds: float
+    error: str | None = None
+
+
+def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
+    """The scan files among ``paths``: files as given, folders by :data:`FOLDER_SUFFIXES`.
+
+    Folders are listed (not recursively) in name order; hidden files are skipped.
+
+    Raises
+    ------
+    InputError
+        A path that does not exist, or a folder without any scan file.
+    """
+    found: list[Path] = []
+    for p in paths:
+        if p.is_dir():
+            inside = sorted(
+                f
+                for f in p.iterdir()
+                if f.is_file()
+                and not f.name.startswith(".")
+                and f.suffix.lower() in FOLDER_SUFFIXES
+            )
+            if not inside:
+                raise InputError(p, f"no scan files in this folder ({', '.join(FOLDER_SUFFIXES)})")
+            found.extend(inside)
+        elif p.exists():
+            found.append(p)
+        else:
+            raise InputError(p, "no such file or folder")
+    return found
+
+
+def stations_of(files: list[Path]) -> list[Station]:
+    """One :class:`Station` per file, named by stem.
+
+    Raises
+    ------
+    InputError
+        Two files with the same stem (every output is keyed by it).
+    """
+    seen: dict[str, Path] = {}
+    for f in files:
+        if f.stem in seen and seen[f.stem].resolve() != f.resolve():
+            raise InputError(f, f"same station name {f.stem!r} as {seen[f.stem]}")
+        seen.setdefault(f.stem, f)
+    return [Station(stem, path) for stem, path in seen.items()]
+
+
+def file_hash(path: Path, *, chunk: int = 1 << 23) -> str:
+    """SHA-256 of a file's content (hex), read in chunks."""
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def config_hash(config: RegistrationConfig) -> str:
+    """SHA-256 (hex) of the registration configuration, the flexreg version and the cache
+    layout: anything that changes a prepared station."""
+    text = json.dumps(
+        {"config": config.to_dict(), "version": __version__, "format": CACHE_FORMAT},
+        sort_keys=True,
+        default=str,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def cache_paths(cache_dir: Path, content: str, config: str) -> tuple[Path, Path]:
+    """The prepared station's pickle and its global descriptor's npz."""
+    base = cache_dir / f"{content[:24]}-{config[:12]}"
+    return base.with_suffix(".prepared.pkl"), base.with_suffix(".global.npz")
+
+
+def _compact(p: PreparedScan) -> PreparedScan:
+    """Drop what :meth:`Registration.align` does not read: the scan's own points when the
+    refinement works on the range images, else its attributes (colours, intensity)."""
+    cfg = p.config
+    if cfg.refine and not uses_projective(cfg.icp, cfg.voxel_m) and isinstance(p.scan, Scan):
+        return replace(p, scan=Scan(points=p.scan.points, name=p.scan.name))
+    return replace(p, scan=p.image)
+
+
+def global_descriptor(p: PreparedScan, k: int = GLOBAL_KEYPOINTS) -> GlobalDescriptor:
+    """The ``k`` strongest lifted keypoints of a prepared station and their 3D points."""
+    kp = p.keypoints
+    idx = np.flatnonzero(kp.lifted)
+    order = np.argsort(-kp.features.response[idx], kind="stable")[:k]
+    idx = np.sort(idx[order])
+    return GlobalDescriptor(
+        descriptors=np.ascontiguousarray(kp.features.descriptors[idx]),
+        points=np.ascontiguousarray(kp.points[idx], dtype=np.float64),
+        binary=bool(kp.features.binary),
+    )
+
+
+def _atomic_bytes(path: Path, write: Any) -> None:
+    """Write through a temporary sibling unique to this process, then rename (workers on
+    several machines may prepare the same station at once: the last rename wins, and both
+    wrote the same content)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial")
+    try:
+        with tmp.open("wb") as f:
+            write(f)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig) -> Prepared:
+    """Prepare one station unless the cache holds it; store it and its global descriptor.
+
+    Runs on a Dask worker (or in the calling process). An unreadable station is returned with
+    its error, not raised, so the rest of the project goes on.
+    """
+    t0 = time.perf_counter()
+    folder = Path(cache_dir)
+    try:
+        content = file_hash(station.path)
+    except OSError as e:
+        return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
+    pkl, npz = cache_paths(folder, content, config_hash(config))
+    if pkl.exists() and npz.exists():
+        with np.load(npz) as z:
+            n = int(z["n_points"])
+        return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0)
+    try:
+        scan = read_scan(station.path)
+        n = len(scan)
+        prepared = _compact(Registration(config).prepare(scan))
+        del scan
+    except (FlexregError, ValueError, MemoryError) as e:
+        return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
+    g = global_descriptor(prepared)
+    folder.mkdir(parents=True, exist_ok=True)
+    _atomic_bytes(
+        npz,
+        lambda f: np.savez(
+            f,
+            descriptors=g.descriptors,
+            points=g.points,
+            binary=np.bool_(g.binary),
+            n_points=np.int64(n),
+        ),
+    )
+    _atomic_bytes(pkl, lambda f: pickle.dump(prepared, f, protocol=pickle.HIGHEST_PROTOCOL))
+    log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
+    return Prepared(station.stem, str(pkl), n, True, time.perf_counter() - t0)
+
+
+def load_descriptor(cache_file: str) -> GlobalDescriptor:
+    """The global descriptor stored beside a prepared station."""
+    npz = Path(cache_file.removesuffix(".prepared.pkl") + ".global.npz")
+    with np.load(npz) as z:
+        return GlobalDescriptor(z["descriptors"], z["points"], bool(z["binary"]))
+
+
+def load_prepared(cache_file: str) -> PreparedScan:
+    """A prepared station from the cache; the last :data:`KEEP_LOADED` stay in memory.
+
+    Raises
+    ------
+    InputError
+        The cache file is missing or unreadable (another run cleared it, or the cache is not
+        on a path every worker sees).
+    """
+    hit = _loaded.get(cache_file)
+    if hit is not None:
+        _loaded.move_to_end(cache_file)
+        return hit
+    try:
+        with open(cache_file, "rb") as f:
+            prepared: PreparedScan = pickle.load(f)
+    except (OSError, pickle.UnpicklingError, EOFError) as e:
+        raise InputError(
+            cache_file, f"cannot read the prepared station ({e}); is the cache shared?"
+        ) from None
+    _loaded[cache_file] = prepared
+    while len(_loaded) > KEEP_LOADED:
+        _loaded.popitem(last=False)
+    return prepared
+
+
+__all__ = [
+    "CACHE_FORMAT",
+    "FOLDER_SUFFIXES",
+    "GLOBAL_KEYPOINTS",
+    "KEEP_LOADED",
+    "GlobalDescriptor",
+    "Prepared",
+    "Station",
+    "cache_paths",
+    "config_hash",
+    "file_hash",
+    "find_scans",
+    "global_descriptor",
+    "load_descriptor",
+    "load_prepared",
+    "prepare_station",
+    "stations_of",
+]

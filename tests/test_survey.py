@@ -1,0 +1,195 @@
+"""`flexreg survey` end to end on a small synthetic project (low resolution, a few stations)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import one_error_line, run_cli
+
+from flexreg.io import read_scans
+from flexreg.survey import SurveyConfig, evaluate, run_survey, write_outputs
+
+STATIONS = ["station_00", "station_01", "station_02"]
+
+
+@pytest.fixture(scope="module")
+def project(tmp_path_factory) -> Path:
+    """Four stations of a seeded synthetic room at 512 x 256, with gt.json."""
+    folder = tmp_path_factory.mktemp("project")
+    rc, _, err = run_cli(
+        ["synth", "--scene", "room", "--stations", "4", "--resolution", "512x256", "--seed", "0",
+         "--out", folder]
+    )  # fmt: skip
+    assert rc == 0, err
+    return folder
+
+
+def _files(project: Path, names=STATIONS) -> list[Path]:
+    return [project / f"{n}.ptx" for n in names]
+
+
+def _with_cache(src: Path, dst: Path, *, links: bool = True) -> Path:
+    """``dst`` with a copy of ``src``'s cache (prepared stations; and links unless not)."""
+    shutil.copytree(
+        src / "cache", dst / "cache", ignore=None if links else shutil.ignore_patterns("links")
+    )
+    return dst
+
+
+@pytest.fixture(scope="module")
+def first(project, tmp_path_factory):
+    out = tmp_path_factory.mktemp("survey") / "run"
+    rc, stdout, err = run_cli(["survey", *_files(project), "--out", out, "--workers", "1"])
+    return rc, stdout, err, out
+
+
+def _doc(out: Path) -> dict:
+    return json.loads((out / "poses.json").read_text())
+
+
+def test_every_station_placed_confidently_exit_0(first, project):
+    rc, stdout, err, out = first
+    assert rc == 0, err + stdout
+    doc = _doc(out)
+    assert doc["schema"] == "flexreg.survey/1"
+    assert set(doc["stations"]) == set(STATIONS)
+    assert doc["reference"] in STATIONS
+    for stem, st in doc["stations"].items():
+        assert st["placed"] is True and st["group"] == 0 and st["confidence"] == "confident"
+        T = np.loadtxt(out / "stations" / f"{stem}.txt")
+        np.testing.assert_array_equal(T, np.asarray(st["T_reference_station"]))
+    ref = doc["stations"][doc["reference"]]["T_reference_station"]
+    np.testing.assert_allclose(ref, np.eye(4), atol=1e-12)
+    s = doc["summary"]
+    assert s["placed"] == 3 and s["exit_status"] == 0 and s["problems"] == []
+    assert s["links_accepted"] >= 2 and s["links_attempted"] <= 6 * 3
+    for link in doc["links"]:
+        assert link["status"] in ("accepted", "rejected", "failed")
+        if link["status"] == "accepted":
+            assert set(link["strength"]) == {"roll", "pitch", "yaw", "x", "y", "z"}
+            assert np.asarray(link["information"]).shape == (6, 6)
+            assert link["loop_error_m"] is not None
+    # accurate against the synthetic truth
+    ev = evaluate(doc, json.loads((project / "gt.json").read_text()))
+    assert len(ev["stations"]) == 3 and ev["wrong"] == []
+    for e in ev["stations"].values():
+        assert e["rotation_deg"] < 0.3 and e["translation_m"] < 0.03
+    assert (out / "report.html").is_file()
+    assert "3 of 3 stations placed" in stdout
+
+
+def test_a_rerun_prepares_nothing_and_a_new_station_only_itself(first, project, tmp_path):
+    out = _with_cache(first[3], tmp_path)
+    result = run_survey(_files(project), out, workers=1)
+    assert [p.computed for p in result.prepared.values()] == [False] * 3
+    doc, before = result.to_dict(), _doc(first[3])
+    assert doc["summary"]["prepared"] == 0 and doc["summary"]["from_cache"] == 3
+    assert doc["summary"]["links_from_cache"] == len(doc["links"])
+    for stem in STATIONS:
+        assert (
+            doc["stations"][stem]["T_reference_station"]
+            == (before["stations"][stem]["T_reference_station"])
+        )
+    more = run_survey(_files(project, [*STATIONS, "station_03"]), out, workers=1)
+    assert {s: p.computed for s, p in more.prepared.items()} == {
+        "station_00": False, "station_01": False, "station_02": False, "station_03": True,
+    }  # fmt: skip
+
+
+def test_two_dask_worker_processes_give_the_same_poses(first, project, tmp_path):
+    out = _with_cache(first[3], tmp_path, links=False)  # the links run on the workers
+    result = run_survey(_files(project), out, SurveyConfig(), workers=2)
+    assert result.to_dict()["summary"]["links_from_cache"] == 0
+    assert result.workers == 2
+    doc, before = result.to_dict(), _doc(first[3])
+    assert doc["reference"] == before["reference"]
+    for stem in STATIONS:
+        assert (
+            doc["stations"][stem]["T_reference_station"]
+            == (before["stations"][stem]["T_reference_station"])
+        )
+    assert [(e["target"], e["source"], e["status"]) for e in doc["links"]] == [
+        (e["target"], e["source"], e["status"]) for e in before["links"]
+    ]
+
+
+def test_an_unreadable_station_is_reported_the_rest_registered_exit_3(first, project, tmp_path):
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for f in _files(project):
+        shutil.copy(f, folder / f.name)
+    (folder / "broken.ptx").write_text("512\n256\nthis is not a PTX file\n")
+    out = _with_cache(first[3], tmp_path / "out")
+    rc, _, err = run_cli(["survey", folder, "--out", out, "--workers", "1"])
+    assert rc == 3, err
+    doc = _doc(out)
+    assert doc["stations"]["broken"]["placed"] is False
+    assert "broken.ptx" in doc["stations"]["broken"]["error"]
+    assert all(doc["stations"][s]["placed"] for s in STATIONS)
+    assert "broken: unreadable" in err
+    assert not (out / "stations" / "broken.txt").exists()
+
+
+def test_an_unplaced_station_exit_3_one_line(first, project, tmp_path):
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("target,source\nstation_00,station_01\n")
+    out = _with_cache(first[3], tmp_path / "out")
+    rc, _, err = run_cli(
+        ["survey", *_files(project), "--out", out, "--workers", "1", "--pairs", pairs]
+    )
+    assert rc == 3, err
+    doc = _doc(out)
+    assert doc["stations"]["station_02"]["placed"] is False
+    assert doc["stations"]["station_02"]["T_reference_station"] is None
+    assert [ln for ln in err.splitlines() if ln.startswith("station_02: unplaced")]
+    assert sorted(p.stem for p in (out / "stations").iterdir()) == ["station_00", "station_01"]
+
+
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("missing", "no such file or folder"),
+        ("empty", "no scan files in this folder"),
+        ("one", "only one scan"),
+    ],
+)
+def test_bad_input_one_line_exit_1_nothing_written(case, message, project, tmp_path):
+    scans = {
+        "missing": [tmp_path / "nope"],
+        "empty": [tmp_path],
+        "one": [project / "station_00.ptx"],
+    }[case]
+    out = tmp_path / "out"
+    rc, _, err = run_cli(["survey", *scans, "--out", out, "--workers", "1"])
+    assert rc == 1
+    assert message in one_error_line(err)
+    assert not out.exists()
+
+
+def test_refine_merged_cloud_and_e57(first, project, tmp_path):
+    out = _with_cache(first[3], tmp_path)
+    result = run_survey(_files(project), out, SurveyConfig(joint_refine=True), workers=1)
+    assert result.refined and result.exit_status == 0
+    assert result.to_dict()["summary"]["links_from_cache"] == len(result.links)
+    ev = evaluate(result.to_dict(), json.loads((project / "gt.json").read_text()))
+    assert ev["wrong"] == [] and len(ev["stations"]) == 3
+    for e in ev["stations"].values():
+        assert e["rotation_deg"] < 0.3 and e["translation_m"] < 0.03
+    merged, e57 = tmp_path / "merged.ply", tmp_path / "project.e57"
+    write_outputs(result, out, merged=merged, voxel_m=0.05, e57=e57)
+    cloud = read_scans(merged)[0]
+    assert len(cloud) > 1000 and cloud.colors is not None
+    # one point per 5 cm voxel (the mean of a voxel's points lies in that voxel)
+    keys = np.floor(cloud.points / 0.05 + 1e-9).astype(np.int64)
+    assert len(np.unique(keys, axis=0)) >= 0.999 * len(keys)
+    scans = read_scans(e57)
+    assert [s.name for s in scans] == result.placed
+    doc = result.to_dict()
+    for s in scans:
+        np.testing.assert_allclose(
+            s.T_world_scanner, doc["stations"][s.name]["T_reference_station"], atol=1e-12
+        )

@@ -1,0 +1,254 @@
+"""The survey's station graph on hand-built graphs, and its candidate pairs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexreg.core.transforms import (
+    invert,
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+from flexreg.errors import InputError
+from flexreg.survey.config import SurveyConfig
+from flexreg.survey.graph import Link, solve_graph
+from flexreg.survey.pairs import (
+    auto_pairs,
+    place_score,
+    read_pairs_csv,
+    sequential_order,
+    sequential_pairs,
+)
+from flexreg.survey.stations import GlobalDescriptor
+
+INFO = np.diag([2e5, 2e5, 2e5, 1e4, 1e4, 1e4])
+
+
+def _grid(n_side: int, spacing: float = 5.0, seed: int = 0) -> dict[str, np.ndarray]:
+    """World poses of stations on a grid, each turned about z and a little tilted."""
+    rng = np.random.default_rng(seed)
+    poses = {}
+    for i in range(n_side * n_side):
+        R = rotation_about_axis([rng.normal(0, 0.02), rng.normal(0, 0.02), 1], rng.uniform(-3, 3))
+        t = [spacing * (i % n_side), spacing * (i // n_side), rng.uniform(-0.1, 0.1)]
+        poses[f"s{i:02d}"] = make_transform(R, t)
+    return poses
+
+
+def _link(P, a, b, verdict="confident", *, T=None, overlap=0.5, noise=0.0, rng=None):
+    T_true = invert(P[a]) @ P[b]
+    if T is None:
+        T = T_true
+        if noise:
+            dR = rotation_about_axis(rng.normal(size=3), np.radians(noise * 2))
+            T = make_transform(dR, rng.normal(0, noise, 3)) @ T_true
+    return Link(a, b, T, INFO, verdict, overlap_target=overlap, overlap_source=overlap)
+
+
+def _grid_links(P, n_side, **kw):
+    names = sorted(P)
+    links = []
+    for i in range(n_side * n_side):
+        if i % n_side < n_side - 1:
+            links.append(_link(P, names[i], names[i + 1], **kw))
+        if i + n_side < n_side * n_side:
+            links.append(_link(P, names[i], names[i + n_side], **kw))
+    return links
+
+
+def _errors(sol, P):
+    ref = sol.reference
+    out = {}
+    for s, T in sol.poses.items():
+        if s in sol.groups[0]:
+            truth = invert(P[ref]) @ P[s]
+            out[s] = (rotation_error_deg(T, truth), translation_error_m(T, truth))
+    return out
+
+
+def test_a_planted_wrong_link_is_rejected_with_its_loop_error():
+    P = _grid(3)
+    links = _grid_links(P, 3)
+    # the strongest link of all, 30 degrees and 3 m wrong: it enters the first tree
+    wrong = make_transform(rotation_about_axis([0, 0, 1], np.radians(30)), [3, 0, 0])
+    bad = _link(P, "s00", "s04", T=wrong @ invert(P["s00"]) @ P["s04"], overlap=0.9)
+    links.append(bad)
+    sol = solve_graph(sorted(P), links, SurveyConfig())
+    assert bad.status == "rejected"
+    assert bad.loop_error_deg == pytest.approx(30.0, abs=0.5)
+    assert bad.loop_error_m > 1.0
+    assert all(e.status == "accepted" for e in links if e is not bad)
+    assert sorted(sol.groups[0]) == sorted(P)
+    assert all(r < 1e-6 and t < 1e-9 for r, t in _errors(sol, P).values())
+    assert sol.stats["max_link_error_m"] < 1e-9
+
+
+def test_a_wrong_link_closing_a_loop_is_rejected_and_the_rest_kept():
+    P = _grid(3, seed=1)
+    links = _grid_links(P, 3)
+    wrong = make_transform(rotation_about_axis([0, 0, 1], np.radians(2)), [0.5, 0.2, 0])
+    bad = _link(P, "s01", "s05", T=wrong @ invert(P["s01"]) @ P["s05"], overlap=0.1)
+    links.append(bad)
+    solve_graph(sorted(P), links)
+    assert bad.status == "rejected" and "loop" in (bad.why or "")
+    assert bad.loop_error_deg == pytest.approx(2.0, abs=0.05)
+
+
+def test_noisy_links_are_optimised_into_consistent_poses():
+    rng = np.random.default_rng(3)
+    P = _grid(3, seed=2)
+    links = _grid_links(P, 3, noise=0.002, rng=rng)
+    sol = solve_graph(sorted(P), links, reference="s04")
+    assert sol.reference == "s04"
+    assert all(e.status == "accepted" for e in links)
+    errs = _errors(sol, P)
+    assert len(errs) == 9
+    assert max(t for _, t in errs.values()) < 0.02
+    assert max(r for r, _ in errs.values()) < 0.2
+    # the optimised poses spread the noise: every link's residual is within the loop limits
+    assert sol.stats["max_link_error_m"] < 0.02
+
+
+def test_one_triangle_cannot_tell_which_link_is_wrong_so_nothing_is_placed_wrongly():
+    P = _grid(2, seed=4)
+    names = ["s00", "s01", "s02"]
+    wrong = make_transform(rotation_about_axis([0, 0, 1], np.radians(20)), [1, 0, 0])
+    links = [
+        _link(P, "s00", "s01", T=wrong @ invert(P["s00"]) @ P["s01"], overlap=0.9),
+        _link(P, "s01", "s02", overlap=0.6),
+        _link(P, "s00", "s02", overlap=0.5),
+    ]
+    sol = solve_graph(names, links)
+    for s, (r, t) in _errors(sol, P).items():
+        assert r < 1e-6 and t < 1e-9, s  # placed only where right
+    assert links[0].status == "rejected"
+
+
+def test_an_uncertain_link_alone_places_nothing_two_agreeing_ones_do():
+    P = _grid(2, seed=5)
+    names = sorted(P)
+    base = [_link(P, "s00", "s01"), _link(P, "s01", "s02"), _link(P, "s00", "s02")]
+    lone = _link(P, "s02", "s03", verdict="uncertain")
+    sol = solve_graph(names, [*base, lone])
+    assert "s03" not in sol.groups[0]
+    assert lone.status == "rejected" and "uncertain" in lone.why
+    assert "separate" not in sol.reasons["s03"]
+    second = _link(P, "s01", "s03", verdict="uncertain")
+    lone = _link(P, "s02", "s03", verdict="uncertain")
+    sol = solve_graph(names, [*base, lone, second])  # by default, never through uncertain links
+    assert "s03" not in sol.groups[0] and lone.status == second.status == "rejected"
+    sol = solve_graph(names, [*base, lone, second], SurveyConfig(uncertain_joins=True))
+    assert "s03" in sol.groups[0] and sol.confidence["s03"] == "uncertain"
+    assert lone.status == second.status == "accepted"
+    assert _errors(sol, P)["s03"][1] < 1e-9
+
+
+def test_two_uncertain_links_that_disagree_place_nothing():
+    P = _grid(2, seed=6)
+    names = sorted(P)
+    base = [_link(P, "s00", "s01"), _link(P, "s01", "s02")]
+    off = make_transform(np.eye(3), [2.0, 0, 0])
+    a = _link(P, "s02", "s03", verdict="uncertain")
+    b = _link(P, "s01", "s03", verdict="uncertain", T=off @ invert(P["s01"]) @ P["s03"])
+    sol = solve_graph(names, [*base, a, b], SurveyConfig(uncertain_joins=True))
+    assert "s03" not in sol.groups[0]
+    assert a.status == b.status == "rejected"
+
+
+def test_separate_groups_are_reported_never_fused():
+    P = _grid(3, seed=7)
+    names = sorted(P)
+    links = [
+        _link(P, "s00", "s01"),
+        _link(P, "s01", "s02"),
+        _link(P, "s00", "s02"),
+        _link(P, "s06", "s07"),
+        _link(P, "s07", "s08"),
+    ]
+    sol = solve_graph(names, links)
+    assert sorted(sol.groups[0]) == ["s00", "s01", "s02"]
+    assert sorted(sol.groups[1]) == ["s06", "s07", "s08"]
+    assert "separate group of 3" in sol.reasons["s07"]
+    # the second group is solved in its own frame, correctly
+    g1 = sol.group_reference[1]
+    T = sol.poses["s08"] if g1 != "s08" else sol.poses["s06"]
+    other = "s08" if g1 != "s08" else "s06"
+    truth = invert(P[g1]) @ P[other]
+    assert translation_error_m(T, truth) < 1e-9
+    for single in ("s03", "s04", "s05"):
+        assert "no link was tried" in sol.reasons[single]
+
+
+def test_failed_links_and_an_unknown_reference():
+    P = _grid(2)
+    names = sorted(P)
+    failed = Link("s00", "s03", why="only 2 inliers")
+    links = [_link(P, "s00", "s01"), failed]
+    sol = solve_graph(names, links)
+    assert failed.status == "failed"
+    assert "failed" in sol.reasons["s03"]
+    with pytest.raises(InputError, match="not one of the stations"):
+        solve_graph(names, links, reference="nope")
+
+
+def test_candidate_pairs():
+    stems = [f"scan_{i}" for i in (10, 2, 1)]
+    assert sequential_order(stems) == ["scan_1", "scan_2", "scan_10"]
+    assert sequential_order(["a1", "b2"]) is None
+    seq = sequential_pairs(["s1", "s2", "s3"], 1)
+    assert [(c.target, c.source) for c in seq] == [("s1", "s2"), ("s2", "s3")]
+    # 64 stations, every pair scored: at most 6 N links, about linear in N
+    stems = [f"st{i:02d}" for i in range(64)]
+    rng = np.random.default_rng(0)
+    scores = {
+        frozenset((a, b)): int(rng.integers(0, 40))
+        for i, a in enumerate(stems)
+        for b in stems[i + 1 :]
+    }
+    cands = auto_pairs(stems, scores, neighbours=1, place_candidates=3, max_links=6 * 64)
+    assert 63 <= len(cands) <= 4 * 64
+    assert len({c.key for c in cands}) == len(cands)
+
+
+def test_pairs_csv(tmp_path):
+    f = tmp_path / "pairs.csv"
+    f.write_text("target,source\na,b\nb.ptx,c\n")
+    got = read_pairs_csv(f, ["a", "b", "c"])
+    assert [(c.target, c.source, c.origin) for c in got] == [("a", "b", "file"), ("b", "c", "file")]
+    f.write_text("a,x\n")
+    with pytest.raises(InputError, match="'x' is not one of the stations"):
+        read_pairs_csv(f, ["a", "b"])
+
+
+def test_place_score_is_invariant_to_the_station_pose():
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(-10, 10, (200, 3))
+    desc = rng.normal(size=(200, 32)).astype(np.float32)
+    a = GlobalDescriptor(desc, pts, False)
+    T = make_transform(rotation_about_axis([0, 0, 1], 2.0), [4, -3, 0.2])
+    moved = (pts - T[:3, 3]) @ T[:3, :3]  # the same points seen from another station
+    order = rng.permutation(200)
+    b = GlobalDescriptor(
+        desc[order] + rng.normal(0, 0.01, desc.shape).astype(np.float32), moved[order], False
+    )
+    other = GlobalDescriptor(rng.normal(size=(200, 32)).astype(np.float32), pts, False)
+    assert place_score(a, b) >= 150
+    assert place_score(a, other) <= 3
+
+
+def test_a_link_within_the_loop_tolerance_but_centimetres_off_is_dropped():
+    P = _grid(3, seed=8)
+    links = _grid_links(P, 3)
+    off = make_transform(np.eye(3), [0.06, 0.0, 0.0])  # inside 3 cm + 1 cm per link of 3+
+    bad = _link(P, "s04", "s05", T=off @ invert(P["s04"]) @ P["s05"], overlap=0.05)
+    links.append(_link(P, "s00", "s04"))
+    links.remove(next(e for e in links if (e.target, e.source) == ("s04", "s05")))
+    links.append(bad)
+    sol = solve_graph(sorted(P), links)
+    assert bad.status == "rejected" and "optimis" in bad.why  # line process or residual
+    assert all(e.status == "accepted" for e in links if e is not bad)
+    # the optimisation without it converges back onto the exact poses
+    assert all(r < 1e-3 and t < 1e-4 for r, t in _errors(sol, P).values())

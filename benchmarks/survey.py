@@ -64,19 +64,23 @@ PREFERRED_KINDS = ("building", "warehouse", "street")
 FALLBACK_KINDS = ("hall", "courtyard", "room", "bays-cue")
 
 
-def default_kinds() -> list[str]:
-    """Four scene kinds: the multi-station projects when present, then the older scenes."""
-    from flexreg.synth import SCENE_KINDS
+def _known_kinds() -> set[str]:
+    """Every scene kind ``flexreg synth`` makes: single scenes and multi-station projects."""
+    from flexreg.synth import PROJECT_SCENE_KINDS, SCENE_KINDS
 
-    kinds = [k for k in PREFERRED_KINDS if k in SCENE_KINDS]
-    kinds += [k for k in FALLBACK_KINDS if k in SCENE_KINDS and k not in kinds]
+    return set(SCENE_KINDS) | set(PROJECT_SCENE_KINDS)
+
+
+def default_kinds() -> list[str]:
+    """Four scene kinds: the multi-station projects, then the older scenes."""
+    known = _known_kinds()
+    kinds = [k for k in PREFERRED_KINDS if k in known]
+    kinds += [k for k in FALLBACK_KINDS if k in known and k not in kinds]
     return kinds[:4]
 
 
 def default_scaling_kind() -> str:
-    from flexreg.synth import SCENE_KINDS
-
-    return "warehouse" if "warehouse" in SCENE_KINDS else "hall"
+    return "warehouse" if "warehouse" in _known_kinds() else "hall"
 
 
 def plan(args: argparse.Namespace) -> list[dict[str, Any]]:

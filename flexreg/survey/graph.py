@@ -435,8 +435,8 @@ def _reference(
             raise InputError("--reference", f"{reference!r} is not one of the stations")
         return reference
     degree = {s: 0 for s in stems}
-    for e in links:
-        if e.status == "pending":
+    for e in links:  # a group's own reference: only its links count (others reach outside it)
+        if e.status == "pending" and e.target in degree and e.source in degree:
             degree[e.target] += 1
             degree[e.source] += 1
     size: dict[str, int] = {}

@@ -248,7 +248,7 @@ def test_bad_documents_are_refused_and_nothing_written(
 def test_unwritable_place_is_one_input_error(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    with pytest.raises(InputError, match="cannot (write|make its folder)"):
+    with pytest.raises(InputError, match=r"cannot (write|make its folder)"):
         write_report(small_project(), blocker / "report.html")
 
 

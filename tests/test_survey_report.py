@@ -6,27 +6,18 @@ from __future__ import annotations
 import html
 import math
 import re
-import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from browser import chromium_page
 
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.survey.report import drawn_groups, render_report, write_report
 from flexreg.survey.report_data import link_errors, report_figures
 
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 EVIL = "<script>alert('x')</script>"
 
 
@@ -347,44 +338,28 @@ def test_large_project_renders() -> None:
 # ------------------------------------------------------------------------------ in a browser
 
 
-def _chromium() -> str:
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
-        pytest.skip("Debian's chromium is not installed (make test installs it)")
-    return exe
-
-
 def test_report_in_headless_chromium(tmp_path: Path) -> None:
-    exe = _chromium()
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install -e '.[dev]'")
     doc = small_project()
     out = write_report(doc, tmp_path / "report.html")
     shot = tmp_path / "report.png"
-    problems: list[str] = []
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, headless=True, args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: problems.append(str(e)))
-            page.on("requestfailed", lambda r: problems.append(f"request {r.url}"))
-            page.goto(out.as_uri())
-            page.wait_for_load_state("load")
-            graph = page.locator("#station-graph svg")
-            assert graph.is_visible()
-            box = graph.bounding_box()
-            assert box is not None and box["width"] > 400 and box["height"] > 200
-            rows = page.locator("#link-table tbody tr")
-            assert rows.count() == len(doc["links"])
-            assert page.locator("#station-table tbody tr").count() == 6
-            assert page.locator("#unplaced li").count() == 3
-            # the script sorts: loop error, descending, puts the rejected link first
-            head = page.locator("#link-table th", has_text="loop err °")
-            head.click()
-            head.click()
-            assert rows.first.get_attribute("class") == "link rejected"
-            page.screenshot(path=str(shot), full_page=True)
-        finally:
-            browser.close()
+    with chromium_page(1400, 900) as page:
+        problems: list[str] = page.errors  # console and page errors
+        page.on("requestfailed", lambda r: problems.append(f"request {r.url}"))
+        page.goto(out.as_uri())
+        page.wait_for_load_state("load")
+        graph = page.locator("#station-graph svg")
+        assert graph.is_visible()
+        box = graph.bounding_box()
+        assert box is not None and box["width"] > 400 and box["height"] > 200
+        rows = page.locator("#link-table tbody tr")
+        assert rows.count() == len(doc["links"])
+        assert page.locator("#station-table tbody tr").count() == 6
+        assert page.locator("#unplaced li").count() == 3
+        # the script sorts: loop error, descending, puts the rejected link first
+        head = page.locator("#link-table th", has_text="loop err °")
+        head.click()
+        head.click()
+        assert rows.first.get_attribute("class") == "link rejected"
+        page.screenshot(path=str(shot), full_page=True)
     assert problems == []
     assert shot.stat().st_size > 20_000

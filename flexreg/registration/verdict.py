@@ -211,8 +211,8 @@ def gather(
     # free space at the candidates' coarse tolerance: a surface clearly in front of what the
     # other scanner saw, not range noise
     free_tol = FREE_SPACE_TOLERANCE * threshold_m
-    badf = two.forward.classify(final.T, free_tol, FREE_SPACE_REL)[2]
-    badb = two.backward.classify(invert(final.T), free_tol, FREE_SPACE_REL)[2]
+    answer = duel_masks(two, final.T, threshold_m)
+    (_, badf), (_, badb) = answer
     sf, sb = _frac(okf), _frac(okb)
     overlap_q = qf[okf]
     std_xyz, std_pc = spread(inlier_points)
@@ -259,7 +259,7 @@ def gather(
     ups = []
     for h in runner_up:
         D = np.asarray(h.T_target_source) @ invert(final.T)
-        won, lost = duel(two, final.T, h.T_target_source, threshold_m)
+        won, lost = duel(answer, duel_masks(two, h.T_target_source, threshold_m))
         ups.append(
             {
                 "score_ratio": h.score_ratio,
@@ -277,41 +277,52 @@ def gather(
     return ev
 
 
-def duel(
-    two: TwoWay, A: NDArray[np.float64], B: NDArray[np.float64], threshold_m: float
-) -> tuple[float, float]:
-    """Direct evidence between two poses of the same pair: the share of both scans' samples
-    that ``A`` explains and ``B`` puts in the other scanner's free space, and the reverse.
+Masks = tuple[tuple[NDArray[np.bool_], NDArray[np.bool_]], ...]
 
-    A symmetric room or repeating bays give both poses the same surfaces to fit, so overall
-    scores tie; a unique object (a cue) fits under the right pose and lands in open space
-    under the other. Conflicts are judged at the free-space test's tolerance
-    (:data:`FREE_SPACE_TOLERANCE` inlier thresholds plus 1% of the range), consistency at the
-    fine tolerance (half an inlier threshold plus 0.2%).
+
+def duel_masks(two: TwoWay, T: NDArray[np.float64], threshold_m: float) -> Masks:
+    """Per direction (source in the target's view, target in the source's), which sampled
+    points a pose explains (fine tolerance: half an inlier threshold plus 0.2 %) and which it
+    puts in the other scanner's free space (:data:`FREE_SPACE_TOLERANCE` inlier thresholds
+    plus 1 %): the inputs of :func:`duel`.
 
     Parameters
     ----------
     two : TwoWay
-    A, B : (4, 4) float64
-        Two ``T_target_source``.
+    T : (4, 4) float64
+        A ``T_target_source``.
     threshold_m : float, metres
         The registration's inlier threshold.
+
+    Returns
+    -------
+    ((explained, conflicting), (explained, conflicting))
+        (N,) bool masks of the forward and the backward sample.
+    """
+    fine, free = threshold_m / 2, FREE_SPACE_TOLERANCE * threshold_m
+    return tuple(
+        (check.classify(TT, fine, FINE_REL)[1], check.classify(TT, free, FREE_SPACE_REL)[2])
+        for check, TT in ((two.forward, T), (two.backward, invert(T)))
+    )
+
+
+def duel(A: Masks, B: Masks) -> tuple[float, float]:
+    """Direct evidence between two poses of the same pair (their :func:`duel_masks`): the
+    share of both scans' samples that ``A`` explains and ``B`` puts in the other scanner's
+    free space, and the reverse.
+
+    A symmetric room or repeating bays give both poses the same surfaces to fit, so overall
+    scores tie; a unique object (a cue) fits under the right pose and lands in open space
+    under the other.
 
     Returns
     -------
     won, lost : float
         Shares (of all sampled points of both directions) that favour ``A`` and ``B``.
     """
-    won = lost = n = 0
-    fine, free = threshold_m / 2, FREE_SPACE_TOLERANCE * threshold_m
-    for check, TA, TB in ((two.forward, A, B), (two.backward, invert(A), invert(B))):
-        okA = check.classify(TA, fine, FINE_REL)[1]
-        okB = check.classify(TB, fine, FINE_REL)[1]
-        badA = check.classify(TA, free, FREE_SPACE_REL)[2]
-        badB = check.classify(TB, free, FREE_SPACE_REL)[2]
-        won += int((okA & badB).sum())
-        lost += int((okB & badA).sum())
-        n += len(okA)
+    won = sum(int((okA & badB).sum()) for (okA, _), (_, badB) in zip(A, B, strict=True))
+    lost = sum(int((okB & badA).sum()) for (_, badA), (okB, _) in zip(A, B, strict=True))
+    n = sum(len(ok) for ok, _ in A)
     return (won / n, lost / n) if n else (0.0, 0.0)
 
 
@@ -530,6 +541,7 @@ __all__ = [
     "decide",
     "decisive",
     "duel",
+    "duel_masks",
     "gather",
     "runner_ups",
 ]

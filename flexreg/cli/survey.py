@@ -38,7 +38,10 @@ _ScansArgument = Annotated[
     typer.Argument(
         metavar="SCAN...",
         help="Scan files, or folders (every .ptx .e57 .ply .pcd .las .laz .npz .3d file in "
-        "them). Each file is one station, named by its file name without extension.",
+        "them). Each file is one station, named by its file name without extension; an E57 or "
+        "PTX file holding several setups gives one station per setup, named STEM#N. Poses "
+        "the files store seed the links and are checked against the result (--set "
+        "stored_poses=check|ignore to change that).",
     ),
 ]
 _OutOption = Annotated[
@@ -186,6 +189,12 @@ def _progress() -> Progress:
     )
 
 
+def _stored_note(check: dict[str, Any] | None) -> str:
+    if check is None or check["agrees"]:
+        return ""
+    return f"stored pose disagrees by {check['rotation_deg']:.2f}° / {check['translation_m']:.3f} m"
+
+
 def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
     from rich.table import Table
 
@@ -200,7 +209,7 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
             "-" if st["group"] is None else str(st["group"]),
             f"{st['degree']}/{st['links_attempted']}",
             st["confidence"] or "-",
-            st["error"] or st["reason"] or "",
+            st["error"] or st["reason"] or _stored_note(st.get("stored_pose_check")),
         )
     console.print(t)
 

@@ -27,6 +27,7 @@ from flexreg.core.transforms import invert, is_rigid
 from flexreg.errors import InputError
 from flexreg.io.e57 import headers
 from flexreg.io.formats import detect_format
+from flexreg.io.ptx import _header_pose
 from flexreg.io.scans import check_file, read_scans
 from flexreg.io.selector import ScanRef, parse_scan_ref, pick, select_setup, setup_choices
 
@@ -36,6 +37,7 @@ __all__ = [
     "list_setups",
     "parse_scan_ref",
     "pick",
+    "ptx_headers",
     "select_setup",
     "setup_choices",
     "stored_T_target_source",
@@ -108,8 +110,10 @@ def list_setups(path: str | PathLike[str], **options: Any) -> list[SetupInfo]:
     Returns
     -------
     list of SetupInfo
-        In file order. E57 setups are listed from the file's headers without reading any point;
-        other formats are read whole (a single-setup format lists one setup).
+        In file order. E57 setups are listed from the file's headers without reading any point,
+        PTX clouds from their headers while the point lines are only counted (``points`` is
+        then the grid size, no-returns included); other formats are read whole (a
+        single-setup format lists one setup).
 
     Raises
     ------
@@ -124,8 +128,86 @@ def list_setups(path: str | PathLike[str], **options: Any) -> list[SetupInfo]:
     check_file(p)
     if mod == "e57" and not options:
         return [SetupInfo(p, i, n, c, T) for i, (n, c, T) in enumerate(headers(p))]
+    if mod == "ptx" and not options:
+        return [SetupInfo(p, i, n, c, T) for i, (n, c, T) in enumerate(ptx_headers(p))]
     scans = read_scans(p, **options)
     return [SetupInfo(p, i, s.name, len(s), s.T_world_scanner.copy()) for i, s in enumerate(scans)]
+
+
+#: bytes read at a time while counting a PTX cloud's point lines
+_BLOCK = 1 << 24
+
+
+def _skip_lines(f: Any, n: int) -> bool:
+    """Move ``f`` (binary, buffered) past ``n`` newline characters; False at end of file."""
+    while n > 0:
+        start = f.tell()
+        block = f.read(_BLOCK)
+        if not block:
+            return False
+        k = block.count(b"\n")
+        if k < n:
+            n -= k
+            continue
+        ends = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
+        f.seek(start + int(ends[n - 1]) + 1)
+        return True
+    return True
+
+
+def _ptx_header(f: Any, path: Path, cloud: int) -> list[list[float]] | None:
+    """The next cloud's 10 header lines as numbers (None at end of file)."""
+    lines: list[bytes] = []
+    while len(lines) < 10:
+        raw = f.readline()
+        if not raw:
+            if not lines:
+                return None
+            raise InputError(path, f"cloud {cloud}: truncated header")
+        if raw.strip() or lines:
+            lines.append(raw)
+    try:
+        rows = [[float(v) for v in ln.split()] for ln in lines]
+    except ValueError:
+        rows = []
+    if [len(r) for r in rows] != [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]:
+        raise InputError(
+            path,
+            f"cloud {cloud}: malformed header (expected COLS, ROWS, position, 3 axes, "
+            "transposed 4x4 transform)",
+        )
+    return rows
+
+
+def ptx_headers(path: Path) -> list[tuple[str, int, NDArray[np.float64]]]:
+    """``(name, grid cells, T_world_scanner)`` of every cloud of a PTX file, from the headers:
+    the point lines are counted, not parsed (the file is read once at disk speed, with one
+    block in memory), so listing the setups of a large project export costs no parsing.
+
+    Raises
+    ------
+    InputError
+        A malformed or truncated header, or fewer point lines than a header announces.
+    """
+    out: list[tuple[str, int, NDArray[np.float64]]] = []
+    with open(path, "rb") as f:
+        while (rows := _ptx_header(f, path, len(out))) is not None:
+            cols, n_rows = rows[0][0], rows[1][0]
+            if cols != int(cols) or n_rows != int(n_rows) or cols <= 0 or n_rows <= 0:
+                raise InputError(path, f"cloud {len(out)}: grid size {cols:g} x {n_rows:g}")
+            n = int(cols) * int(n_rows)
+            pose = np.zeros((8, 4))
+            for i, r in enumerate(rows[2:]):
+                pose[i, : len(r)] = r
+            name = path.stem if not out else f"{path.stem}#{len(out)}"
+            out.append((name, n, _header_pose(pose)))
+            if not _skip_lines(f, n):
+                raise InputError(
+                    path, f"cloud {len(out) - 1}: header announces {n} points; the file ends early"
+                )
+    if not out:
+        raise InputError(path, "no cloud in file")
+    return out
 
 
 def stored_T_target_source(target: Scan, source: Scan) -> NDArray[np.float64] | None:

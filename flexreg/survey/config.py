@@ -10,6 +10,7 @@ from flexreg.config import Config
 from flexreg.registration.config import RegistrationConfig
 
 PairsMode = Literal["auto", "all", "sequential"]
+StoredPoses = Literal["prior", "check", "ignore"]
 
 
 class SurveyConfig(Config):
@@ -62,6 +63,16 @@ class SurveyConfig(Config):
         Voxel of the clouds the multi-view ICP aligns.
     refine_iterations : int
         Rounds of pairwise ICP + pose-graph optimisation of the multi-view refinement.
+    stored_poses : {"prior", "check", "ignore"}
+        Poses the files store per setup (E57 ``pose``, PTX header; identity means none):
+        ``prior`` seeds every link between two such stations with the stored relative pose
+        (it competes with what the images find on the registration's dense check) and checks
+        every placed station against it; ``check`` only checks; ``ignore`` does neither.
+    stored_max_deg : float, degrees
+        A placed station whose stored pose disagrees with its registered pose by more than
+        this (after the stored frame is aligned on the stations that agree) is flagged.
+    stored_max_m : float, metres
+        The same, in translation.
     """
 
     registration: RegistrationConfig = RegistrationConfig()
@@ -82,6 +93,9 @@ class SurveyConfig(Config):
     joint_refine: bool = False
     refine_voxel_m: float = Field(0.05, gt=0)
     refine_iterations: int = Field(2, ge=1, le=10)
+    stored_poses: StoredPoses = "prior"
+    stored_max_deg: float = Field(1.0, gt=0)
+    stored_max_m: float = Field(0.10, gt=0)
 
 
-__all__ = ["PairsMode", "SurveyConfig"]
+__all__ = ["PairsMode", "StoredPoses", "SurveyConfig"]

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from flexreg.errors import ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
@@ -161,12 +162,14 @@ def _strength(evidence: dict[str, Any]) -> dict[str, float]:
     return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
 
 
-def link_cache_path(target_file: str, source_file: str) -> Path:
+def link_cache_path(target_file: str, source_file: str, *, prior: bool = False) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
-    stations' cache keys (file content and configuration)."""
+    stations' cache keys (file content, setup and configuration) and whether the stored
+    poses seeded it."""
     t = Path(target_file).name.removesuffix(".prepared.pkl")
     s = Path(source_file).name.removesuffix(".prepared.pkl")
-    return Path(target_file).parent / "links" / f"{t}__{s}.link.pkl"
+    tag = ".stored" if prior else ""
+    return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.pkl"
 
 
 def _cached_link(path: Path, cand: Candidate) -> Link | None:
@@ -192,18 +195,28 @@ def _store_link(path: Path, link: Link) -> None:
 
 
 def align_link(
-    target_file: str, source_file: str, config: RegistrationConfig, cand: Candidate
+    target_file: str,
+    source_file: str,
+    config: RegistrationConfig,
+    cand: Candidate,
+    init: NDArray[np.float64] | None = None,
 ) -> Link:
     """Register one candidate pair from the cache (runs on a worker); a failure is returned
     as a ``failed`` link with its reason, not raised. The pairwise result is cached too (the
-    stations' cache keys name it), so a re-run registers only the links it has not seen."""
-    cache = link_cache_path(target_file, source_file)
+    stations' cache keys name it), so a re-run registers only the links it has not seen.
+
+    ``init`` (the relative pose the files store, ``T_target_source``) competes as one more
+    hypothesis on the registration's dense check; it wins only when it explains the data
+    better than what the images found (the link cache's name then says so)."""
+    cache = link_cache_path(target_file, source_file, prior=init is not None)
     hit = _cached_link(cache, cand)
     if hit is not None:
         return hit
     t0 = time.perf_counter()
     try:
-        r = Registration(config).align(load_prepared(target_file), load_prepared(source_file))
+        r = Registration(config).align(
+            load_prepared(target_file), load_prepared(source_file), init=init
+        )
     except FlexregError as e:
         link = Link(
             cand.target,

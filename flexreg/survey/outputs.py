@@ -104,7 +104,7 @@ PALETTE = np.array(
 )
 
 
-def _station_points(path: Path, voxel_m: float) -> Scan:
+def _station_points(path: Path | str, voxel_m: float) -> Scan:
     import open3d as o3d
 
     scan = read_scan(path)
@@ -120,9 +120,9 @@ def _station_points(path: Path, voxel_m: float) -> Scan:
     return Scan(points=np.asarray(down.points), colors=colors, name=scan.name)
 
 
-def merged_cloud(files: Sequence[tuple[Path, NDArray[np.float64]]], voxel_m: float) -> Scan:
-    """Placed stations ``(file, T_reference_station)`` merged into one cloud, one point per
-    ``voxel_m`` voxel (mean position; the stations' own colours, else one colour each)."""
+def merged_cloud(files: Sequence[tuple[Path | str, NDArray[np.float64]]], voxel_m: float) -> Scan:
+    """Placed stations ``(FILE or FILE#N, T_reference_station)`` merged into one cloud, one
+    point per ``voxel_m`` voxel (mean position; the stations' own colours, else one colour each)."""
     if voxel_m <= 0:
         raise InputError("--voxel", f"must be a positive number of metres (got {voxel_m})")
     acc = _Voxels(voxel_m)
@@ -141,7 +141,7 @@ class _LazyScans(Sequence[Scan]):
     """The placed stations with their poses, each read from its file when asked for (the E57
     writer walks them one at a time; the last one read is kept)."""
 
-    def __init__(self, files: Sequence[tuple[Path, str, NDArray[np.float64]]]) -> None:
+    def __init__(self, files: Sequence[tuple[Path | str, str, NDArray[np.float64]]]) -> None:
         self.files = list(files)
         self._last: tuple[int, Scan] | None = None
 
@@ -194,7 +194,7 @@ def write_outputs(
     doc = _finite(result.to_dict())
     placed = result.placed
     poses = {s: np.asarray(doc["stations"][s]["T_reference_station"]) for s in placed}
-    paths = {st.stem: st.path for st in result.stations}
+    paths: dict[str, Path | str] = {st.stem: st.ref for st in result.stations}
     writers: list[tuple[Path, Callable[[], Any]]] = []
     for s in placed:
         txt = out_dir / "stations" / f"{s}.txt"

@@ -46,6 +46,7 @@ from flexreg.survey.stations import (
     prepare_station,
     stations_of,
 )
+from flexreg.survey.stored import check_stations, deviation, stored_T_target_source
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +79,16 @@ class SurveyResult:
     wall_s: float = 0.0
     timings_s: dict[str, float] = field(default_factory=dict)
     refined: bool = False
+    stored: dict[str, Any] = field(default_factory=dict)
+
+    def stored_checks(self) -> dict[str, dict[str, Any]]:
+        """Every placed station against the pose its file stores
+        (:func:`~flexreg.survey.stored.check_stations`); empty with ``stored_poses="ignore"``
+        or fewer than two placed stations storing a pose."""
+        sol = self.solution
+        poses = {s: sol.poses[s] for s in self.placed if s in sol.poses}
+        c = self.config
+        return check_stations(poses, self.stored, c.stored_max_deg, c.stored_max_m)
 
     @property
     def placed(self) -> list[str]:
@@ -98,6 +109,13 @@ class SurveyResult:
                 out.append(
                     f"{st.stem}: placed only through uncertain links that a loop confirms; "
                     "check them"
+                )
+        for stem, chk in self.stored_checks().items():
+            if not chk["agrees"]:
+                out.append(
+                    f"{stem}: the pose stored in its file disagrees with the registration by "
+                    f"{chk['rotation_deg']:.2f}° / {chk['translation_m']:.3f} m; check which is "
+                    "right"
                 )
         for e in self.links:
             if e.status == "accepted" and e.verdict == "uncertain":
@@ -123,7 +141,7 @@ class SurveyResult:
         stations: dict[str, Any] = {}
         for st in self.stations:
             stations[st.stem] = self._station(st, placed)
-        links = [e.to_dict() for e in self.links]
+        links = [self._link(e) for e in self.links]
         count = {k: sum(e.status == k for e in self.links) for k in ("accepted", "rejected")}
         summary = {
             "stations": len(self.stations),
@@ -157,6 +175,16 @@ class SurveyResult:
             "config": self.config.to_dict(),
         }
 
+    def _link(self, e: Link) -> dict[str, Any]:
+        d = e.to_dict()
+        T_stored = stored_T_target_source(self.stored, e.target, e.source)
+        d["stored_deviation"] = (
+            None
+            if T_stored is None or e.T_target_source is None
+            else deviation(e.T_target_source, T_stored)
+        )
+        return d
+
     def _readable(self, stem: str) -> bool:
         return self.prepared[stem].error is None
 
@@ -175,6 +203,15 @@ class SurveyResult:
         return out
 
     def _station(self, st: Station, placed: set[str]) -> dict[str, Any]:
+        setup = {"setup": st.setup, "setup_name": st.setup_name}
+        T_stored = self.stored.get(st.stem)
+        stored = {
+            "T_world_station_stored": None if T_stored is None else np.asarray(T_stored).tolist(),
+            "stored_pose_check": self.stored_checks().get(st.stem),
+        }
+        return {**self._station_core(st, placed), **setup, **stored}
+
+    def _station_core(self, st: Station, placed: set[str]) -> dict[str, Any]:
         sol, p = self.solution, self.prepared[st.stem]
         if p.error is not None:
             return {
@@ -327,9 +364,20 @@ def _register(
     files: dict[str, str],
     config: SurveyConfig,
     progress: Progress,
+    stored: dict[str, Any],
     phase: str = "links",
 ) -> list[Link]:
-    items = [(files[c.target], files[c.source], config.registration, c) for c in cands]
+    prior = config.stored_poses == "prior"
+    items = [
+        (
+            files[c.target],
+            files[c.source],
+            config.registration,
+            c,
+            stored_T_target_source(stored, c.target, c.source) if prior else None,
+        )
+        for c in cands
+    ]
     return run_tasks(client, align_link, items, on_result=_Counter(phase, len(items), progress))
 
 
@@ -416,7 +464,16 @@ def run_survey(
         cands, scores = _candidates(stems, files, config, pairs_file, max_links)
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
-        links = _register(client, cands, files, config, progress)
+        stored = (
+            {}
+            if config.stored_poses == "ignore"
+            else {
+                p.stem: p.T_world_scanner
+                for p in prepared_list
+                if p.T_world_scanner is not None and p.stem in files
+            }
+        )
+        links = _register(client, cands, files, config, progress, stored)
         sol = solve_graph(stems, links, config, reference=reference)
         auto = pairs_file is None and config.pairs == "auto"
         for _ in range(config.proximity_rounds if auto else 0):
@@ -424,7 +481,7 @@ def run_survey(
             more = _more_candidates(stems, sol, tried, scores, config, max_links - len(links))
             if not more:
                 break
-            links += _register(client, more, files, config, progress)
+            links += _register(client, more, files, config, progress, stored)
             sol = solve_graph(stems, links, config, reference=reference)
         timings["links"] = time.perf_counter() - t
         if config.joint_refine:
@@ -445,6 +502,7 @@ def run_survey(
         time.perf_counter() - t_start,
         timings,
         config.joint_refine,
+        stored,
     )
 
 

@@ -137,8 +137,15 @@ def link_reasons(link: Mapping[str, Any]) -> list[str]:
 
 
 def station_reasons(station: Mapping[str, Any]) -> list[str]:
-    """Why a station is unplaced or unreadable, in words."""
-    return _unique(t for k in ("reason", "why", "error") for t in _texts(station.get(k)))
+    """Why a station is unplaced or unreadable, or where its stored pose disagrees, in words."""
+    own = [t for k in ("reason", "why", "error") for t in _texts(station.get(k))]
+    chk = station.get("stored_pose_check")
+    if isinstance(chk, Mapping) and chk.get("agrees") is False:
+        own.append(
+            f"the pose stored in its file disagrees by {float(chk['rotation_deg']):.2f}° / "
+            f"{float(chk['translation_m']):.3f} m"
+        )
+    return _unique(own)
 
 
 def _evidence(link: Mapping[str, Any], *keys: str) -> Any:

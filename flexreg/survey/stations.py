@@ -33,8 +33,10 @@ from numpy.typing import NDArray
 
 from flexreg._version import __version__
 from flexreg.core.scan import Scan
+from flexreg.core.transforms import is_rigid
 from flexreg.errors import FlexregError, InputError
 from flexreg.io import read_scan
+from flexreg.io.setups import list_setups
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import PreparedScan, Registration
 from flexreg.stages.refinement import uses_projective
@@ -50,23 +52,39 @@ KEEP_LOADED = 4
 #: bumped when the cached layout changes (old entries are then ignored)
 CACHE_FORMAT = 1
 
+#: file suffixes that may hold several setups (each becomes a station)
+MULTI_SETUP_SUFFIXES = (".e57", ".ptx")
+
 _loaded: OrderedDict[str, PreparedScan] = OrderedDict()
+_hashes: dict[tuple[str, int, int], str] = {}
 
 
 @dataclass(frozen=True)
 class Station:
-    """One station of the project.
+    """One station of the project: a scan file, or one setup of a multi-setup file.
 
     Attributes
     ----------
     stem : str
-        The file name without extension: the station's name everywhere.
+        The station's name everywhere: the file name without extension, and for a setup of a
+        file holding several ``STEM#N`` (N its index in the file, as ``FILE#N`` reads it).
     path : Path
-        The scan file (its first scan is the station).
+        The scan file.
+    setup : int or None
+        The setup's index in a multi-setup file (None: the file holds one scan).
+    setup_name : str or None
+        The name the file gives the setup (E57 ``name``).
     """
 
     stem: str
     path: Path
+    setup: int | None = None
+    setup_name: str | None = None
+
+    @property
+    def ref(self) -> str:
+        """How to read this station: ``FILE`` or ``FILE#N``."""
+        return str(self.path) if self.setup is None else f"{self.path}#{self.setup}"
 
 
 @dataclass(frozen=True)
@@ -104,6 +122,9 @@ class Prepared:
     seconds : float
     error : str or None
         The one-line error of an unreadable station.
+    T_world_scanner : (4, 4) float64 or None
+        The pose the file stores for this setup (E57 ``pose``, PTX header); None when it
+        stores none (identity).
     """
 
     stem: str
@@ -112,6 +133,7 @@ class Prepared:
     computed: bool
     seconds: float
     error: str | None = None
+    T_world_scanner: NDArray[np.float64] | None = None
 
 
 def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
@@ -144,29 +166,58 @@ def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
     return found
 
 
+def _setups_of(path: Path) -> list[Station]:
+    """The stations of one file: one per setup of an E57 / PTX file holding several (listed
+    from the headers, no point read), else the file itself. A file whose setups cannot be
+    listed stays one station; its preparation then reports what is wrong with it."""
+    if path.suffix.lower() not in MULTI_SETUP_SUFFIXES:
+        return [Station(path.stem, path)]
+    try:
+        setups = list_setups(path)
+    except (FlexregError, OSError, ValueError) as e:
+        log.debug("%s: setups not listed (%s)", path, e)
+        return [Station(path.stem, path)]
+    if len(setups) == 1:
+        return [Station(path.stem, path)]
+    return [Station(f"{path.stem}#{s.index}", path, s.index, s.name) for s in setups]
+
+
 def stations_of(files: list[Path]) -> list[Station]:
-    """One :class:`Station` per file, named by stem.
+    """The stations of the given files: one per file, or one per setup of a file that holds
+    several (every setup of every file).
 
     Raises
     ------
     InputError
-        Two files with the same stem (every output is keyed by it).
+        Two stations with the same name (every output is keyed by it).
     """
-    seen: dict[str, Path] = {}
+    seen: dict[str, Station] = {}
     for f in files:
-        if f.stem in seen and seen[f.stem].resolve() != f.resolve():
-            raise InputError(f, f"same station name {f.stem!r} as {seen[f.stem]}")
-        seen.setdefault(f.stem, f)
-    return [Station(stem, path) for stem, path in seen.items()]
+        for st in _setups_of(f):
+            old = seen.get(st.stem)
+            if old is not None and (old.path.resolve(), old.setup) != (f.resolve(), st.setup):
+                raise InputError(f, f"same station name {st.stem!r} as {old.path}")
+            seen.setdefault(st.stem, st)
+    return list(seen.values())
 
 
 def file_hash(path: Path, *, chunk: int = 1 << 23) -> str:
-    """SHA-256 of a file's content (hex), read in chunks."""
+    """SHA-256 of a file's content (hex), read in chunks.
+
+    Remembered per process by path, size and modification time, so the setups of one
+    project file are hashed once per worker, not once per setup.
+    """
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    hit = _hashes.get(key)
+    if hit is not None:
+        return hit
     h = hashlib.sha256()
     with path.open("rb") as f:
         while block := f.read(chunk):
             h.update(block)
-    return h.hexdigest()
+    _hashes[key] = h.hexdigest()
+    return _hashes[key]
 
 
 def config_hash(config: RegistrationConfig) -> str:
@@ -180,10 +231,15 @@ def config_hash(config: RegistrationConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def cache_paths(cache_dir: Path, content: str, config: str) -> tuple[Path, Path]:
-    """The prepared station's pickle and its global descriptor's npz."""
+def cache_paths(
+    cache_dir: Path, content: str, config: str, setup: int | None = None
+) -> tuple[Path, Path]:
+    """The prepared station's pickle and its global descriptor's npz (one per setup of a
+    multi-setup file)."""
     base = cache_dir / f"{content[:24]}-{config[:12]}"
-    return base.with_suffix(".prepared.pkl"), base.with_suffix(".global.npz")
+    if setup is not None:
+        base = base.with_name(f"{base.name}-s{setup}")
+    return base.with_name(base.name + ".prepared.pkl"), base.with_name(base.name + ".global.npz")
 
 
 def _compact(p: PreparedScan) -> PreparedScan:
@@ -233,14 +289,16 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         content = file_hash(station.path)
     except OSError as e:
         return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
-    pkl, npz = cache_paths(folder, content, config_hash(config))
+    pkl, npz = cache_paths(folder, content, config_hash(config), station.setup)
     if pkl.exists() and npz.exists():
         with np.load(npz) as z:
             n = int(z["n_points"])
-        return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0)
+            stored = _stored_pose(z["T_world_scanner"]) if "T_world_scanner" in z else None
+        return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0, None, stored)
     try:
-        scan = read_scan(station.path)
+        scan = read_scan(station.ref)
         n = len(scan)
+        T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
         prepared = _compact(Registration(config).prepare(scan))
         del scan
     except (FlexregError, ValueError, MemoryError) as e:
@@ -255,11 +313,22 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
             points=g.points,
             binary=np.bool_(g.binary),
             n_points=np.int64(n),
+            T_world_scanner=T_world,
         ),
     )
     _atomic_bytes(pkl, lambda f: pickle.dump(prepared, f, protocol=pickle.HIGHEST_PROTOCOL))
     log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
-    return Prepared(station.stem, str(pkl), n, True, time.perf_counter() - t0)
+    dt = time.perf_counter() - t0
+    return Prepared(station.stem, str(pkl), n, True, dt, None, _stored_pose(T_world))
+
+
+def _stored_pose(T: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """A stored pose worth using: rigid and not the identity (which files write when they
+    store none)."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4) or not is_rigid(T) or np.allclose(T, np.eye(4), rtol=0.0, atol=1e-12):
+        return None
+    return T
 
 
 def load_descriptor(cache_file: str) -> GlobalDescriptor:
@@ -300,6 +369,7 @@ __all__ = [
     "FOLDER_SUFFIXES",
     "GLOBAL_KEYPOINTS",
     "KEEP_LOADED",
+    "MULTI_SETUP_SUFFIXES",
     "GlobalDescriptor",
     "Prepared",
     "Station",

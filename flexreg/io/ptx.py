@@ -222,7 +222,7 @@ Lines = tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArra
 
 def _parse(buf: NDArray[np.uint8]) -> Lines:
     n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
-    return _parse_all(buf, n_chunks, _POW10)  # type: ignore[no-any-return]
+    return _parse_all(buf, n_chunks, _POW10)
 
 
 def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
@@ -236,7 +236,7 @@ def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
             if filled == len(buf):  # one line fills the buffer: grow it
                 check_memory(2 * len(buf), "a line longer than the buffer", source=path)
                 buf = np.concatenate([buf, np.empty_like(buf)])
-            got = f.readinto(memoryview(buf)[filled:])  # type: ignore[call-overload]
+            got = f.readinto(memoryview(buf)[filled:])  # type: ignore[arg-type]
             if not got:
                 if filled:  # the last line has no newline
                     yield offset, _parse(buf[:filled])
@@ -415,7 +415,7 @@ def read(path: Path, **_: object) -> list[Scan]:
     hdr_line = 0
     base = 0  # file line number of the chunk's first line
     for offset, lines in _chunks(path, size):
-        head, _, counts, errors = lines
+        head, counts, errors = lines[0], lines[2], lines[3]
         n_lines, i = len(counts), 0
         while i < n_lines:
             if cloud is not None:

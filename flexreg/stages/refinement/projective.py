@@ -30,7 +30,7 @@ from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.stages.normals import grid_normals
+from flexreg.stages.normals import grid_normals, masked_xyz
 from flexreg.stages.refinement.result import IcpResult
 
 log = logging.getLogger(__name__)
@@ -214,7 +214,7 @@ class _Side:
     ) -> None:
         self.kind, self.cam = _camera_params(image)
         self.normals = grid_normals(image) if normals is None else normals
-        self.xyz = np.ascontiguousarray(np.where(image.valid[..., None], image.xyz, np.nan))
+        self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
         self.reverse = reverse
         self.lateral = 2.0 * angular_step(image)

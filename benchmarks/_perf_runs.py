@@ -14,12 +14,28 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-FLEXREG = [sys.executable, "-c", "from flexreg.cli import main; main()"]
+#: environment variable naming the file a measured child writes its peak RSS to
+HWM_ENV = "FLEXREG_PERF_HWM_FILE"
+#: Python code run first in a measured child: at exit it writes the kernel's high-water mark
+#: of its own memory (``VmHWM``, kB) to the file ``$FLEXREG_PERF_HWM_FILE`` names. The
+#: parent's ``ru_maxrss`` cannot be used: a child started with vfork + exec inherits the
+#: parent's high-water mark, which here (the benchmark process, with Open3D loaded) can be
+#: larger than a small child's own peak.
+_HWM = (
+    "import atexit, os\n"
+    "def _hwm():\n"
+    "    for line in open('/proc/self/status'):\n"
+    "        if line.startswith('VmHWM:'):\n"
+    f"            open(os.environ['{HWM_ENV}'], 'w').write(line.split()[1])\n"
+    "atexit.register(_hwm)\n"
+)
+FLEXREG = [sys.executable, "-c", _HWM + "from flexreg.cli import main; main()"]
 
 #: targets of the memory-and-speed acceptance (issue 20)
 TARGET_PEAK_2048_GB = 0.6
@@ -56,18 +72,25 @@ print(json.dumps({"base_kib": base, "peak_kib": kib("VmHWM"), "after_kib": kib("
 
 
 def run_measured(cmd: list[str], *, cwd: Path | None = None) -> dict[str, Any]:
-    """Run ``cmd`` to its end: wall seconds, CPU seconds (user + system), peak RSS (GB) of
-    the child process, exit status and its output."""
-    t = time.perf_counter()
-    p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    out = p.stdout.read() if p.stdout is not None else b""
-    _, status, ru = os.wait4(p.pid, 0)
-    wall = time.perf_counter() - t
-    p.returncode = os.waitstatus_to_exitcode(status)
+    """Run ``cmd`` to its end: wall seconds, CPU seconds (user + system), the child's own
+    peak RSS (GB; a Python child must start with :data:`_HWM`, else None), exit status and
+    its output."""
+    with tempfile.TemporaryDirectory() as tmp:
+        hwm = Path(tmp) / "hwm"
+        env = {**os.environ, HWM_ENV: str(hwm)}
+        t = time.perf_counter()
+        p = subprocess.Popen(
+            cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        )
+        out = p.stdout.read() if p.stdout is not None else b""
+        _, status, ru = os.wait4(p.pid, 0)
+        wall = time.perf_counter() - t
+        p.returncode = os.waitstatus_to_exitcode(status)
+        peak_kib = int(hwm.read_text()) if hwm.exists() else None
     return {
         "wall_s": wall,
         "cpu_s": ru.ru_utime + ru.ru_stime,
-        "peak_gb": ru.ru_maxrss * 1024 / 1e9,
+        "peak_gb": None if peak_kib is None else peak_kib * 1024 / 1e9,
         "exit": p.returncode,
         "output": out.decode(errors="replace")[-2000:],
     }
@@ -140,11 +163,14 @@ def _median(values: list[Any]) -> float | None:
 
 def import_time(repeats: int) -> dict[str, Any]:
     """Interpreter start and the command line's imports (``import flexreg.cli``)."""
-    runs = [run_measured([sys.executable, "-c", "import flexreg.cli"]) for _ in range(repeats)]
-    base = [run_measured([sys.executable, "-c", "pass"]) for _ in range(repeats)]
+    runs = [
+        run_measured([sys.executable, "-c", _HWM + "import flexreg.cli"]) for _ in range(repeats)
+    ]
+    base = [run_measured([sys.executable, "-c", _HWM]) for _ in range(repeats)]
     return {
         "median_wall_s": _median([r["wall_s"] for r in runs]),
         "median_peak_gb": _median([r["peak_gb"] for r in runs]),
+        "interpreter_peak_gb": _median([r["peak_gb"] for r in base]),
         "interpreter_s": _median([r["wall_s"] for r in base]),
     }
 
@@ -153,7 +179,7 @@ def prepare_station(path: Path) -> dict[str, Any]:
     """One station read and prepared (``Registration.prepare``, what a survey caches) in a
     fresh process: the peak RSS above the process's size after its imports, against the
     station's float32 xyz grid (rows x cols x 3 x 4 bytes)."""
-    r = run_measured([sys.executable, "-c", _PREPARE_CHILD, str(path)])
+    r = run_measured([sys.executable, "-c", _HWM + _PREPARE_CHILD, str(path)])
     if r["exit"] != 0:
         return {"station": path.name, "failure": r["output"]}
     d = json.loads(r["output"].strip().splitlines()[-1])

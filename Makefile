@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.flexreg-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare clean
+.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare bench-perf clean
 
 install: $(STAMP)
 
@@ -54,6 +54,11 @@ bench-survey: $(STAMP)
 
 bench-compare: $(STAMP)
 	$(BIN)/flexreg bench --suite all --out bench-results
+
+# memory and speed: whole-process peak RSS and time of `flexreg register` up to 8192x4096, one
+# station's preparation, the call against Open3D FPFH + RANSAC + ICP (about 30 min, 8 GB disk)
+bench-perf: $(STAMP)
+	$(BIN)/python benchmarks/perf.py --write-docs
 
 clean:
 	rm -rf $(VENV) $(DEMO) .pytest_cache .ruff_cache .mypy_cache

@@ -24,9 +24,30 @@ verification / picking aids           :func:`overlay_image`, :func:`picking_view
 Conventions: see :mod:`flexreg.calibration.calibrate`.
 """
 
-# bound now: the submodule of the same name would otherwise shadow it once imported
-from flexreg.calibration.calibrate import calibrate as calibrate
+import importlib
+import sys
+import types
+from typing import Any
+
 from flexreg.exports import lazy
+
+
+class _Face(types.ModuleType):
+    """This package's module type. ``calibrate`` names both a function and its submodule:
+    importing the submodule binds the name on the package, which would hide the function, so
+    the name is a property that always gives the function (loaded on first use, like the
+    other names: the command line imports ``flexreg.calibration.config`` at start-up)."""
+
+    @property
+    def calibrate(self) -> Any:
+        return importlib.import_module("flexreg.calibration.calibrate").calibrate
+
+    @calibrate.setter
+    def calibrate(self, value: Any) -> None:  # the import system binding the submodule
+        pass
+
+
+sys.modules[__name__].__class__ = _Face
 
 #: public name -> the module that defines it (loaded on first use: see flexreg.exports)
 _WHERE = {

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -117,16 +118,24 @@ def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
     if scan.grid_shape is None or scan.grid_index is None:
         raise InputError(scan.path or scan.name, "scan has no native grid; project it instead")
     H, W = scan.grid_shape
-    r, c = scan.grid_index[:, 0], scan.grid_index[:, 1]
-    index = np.full((H, W), -1, dtype=np.int64)
-    index[r, c] = np.arange(len(scan), dtype=np.int64)
-    if stride == 1:
-        return from_index(scan, index, scan.camera)
-    return from_index(
-        scan,
-        np.ascontiguousarray(index[::stride, ::stride]),
-        _subsampled_camera(scan.camera, H, W, stride),
-    )
+    s = max(1, int(stride))
+    # only the kept rows and columns: no full-size index (or point-number array) first
+    index = _grid_index(scan.grid_index, (H + s - 1) // s, (W + s - 1) // s, s)
+    camera = scan.camera if s == 1 else _subsampled_camera(scan.camera, H, W, s)
+    return from_index(scan, index, camera)
+
+
+@numba.njit(cache=True, nogil=True)
+def _grid_index(grid_index, h, w, s):  # pragma: no cover - compiled
+    """(h, w) int64 index of the points on every ``s``-th row and column of their grid
+    (``grid_index`` (N, 2) row, column); -1 where none. A later point wins a shared cell."""
+    index = np.full((h, w), -1, dtype=np.int64)
+    for i in range(grid_index.shape[0]):
+        r = grid_index[i, 0]
+        c = grid_index[i, 1]
+        if r % s == 0 and c % s == 0:
+            index[r // s, c // s] = i
+    return index
 
 
 def from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> RangeImage:

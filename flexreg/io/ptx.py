@@ -23,6 +23,7 @@ raises :class:`~flexreg.errors.InputError` naming the file and the line.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import numba
@@ -201,12 +202,199 @@ def _parse_all(
 # ------------------------------------------------------------------------------ reader
 
 _HEADER_COUNTS = [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]
-#: memory the parser takes per line (4 float64 + 3 float32 + 2 int8), bytes
-_LINE_BYTES = 46
+#: bytes of text parsed at a time: the parser's buffers are bounded by this, not by the file
+_CHUNK_BYTES = 1 << 24
+#: shortest possible point line (``0 0 0`` and its newline), bytes: bounds a cloud's lines
+_MIN_LINE_BYTES = 6
+
+
+@numba.njit(cache=True, nogil=True)
+def _last_newline(buf: NDArray[np.uint8], n: int) -> int:
+    """Index of the last ``\\n`` in ``buf[:n]``, -1 when there is none."""
+    for i in range(n - 1, -1, -1):
+        if buf[i] == 10:
+            return i
+    return -1
+
+
+Lines = tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]
+
+
+def _parse(buf: NDArray[np.uint8]) -> Lines:
+    n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
+    return _parse_all(buf, n_chunks, _POW10)
+
+
+def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
+    """The file's lines parsed about :data:`_CHUNK_BYTES` at a time (whole lines only):
+    ``(offset of the chunk's first byte, (head, tail, counts, errors))`` of
+    :func:`_parse_all`. One buffer is reused; it grows only for a line longer than a chunk."""
+    buf = np.empty(min(_CHUNK_BYTES, max(size, 1)), dtype=np.uint8)
+    filled, offset = 0, 0
+    with open(path, "rb") as f:
+        while True:
+            if filled == len(buf):  # one line fills the buffer: grow it
+                check_memory(2 * len(buf), "a line longer than the buffer", source=path)
+                buf = np.concatenate([buf, np.empty_like(buf)])
+            got = f.readinto(memoryview(buf)[filled:])  # type: ignore[arg-type]
+            if not got:
+                if filled:  # the last line has no newline
+                    yield offset, _parse(buf[:filled])
+                return
+            filled += got
+            cut = _last_newline(buf, filled) + 1
+            if cut == 0:
+                continue
+            yield offset, _parse(buf[:cut])
+            rest = filled - cut
+            buf[:rest] = buf[cut:filled].copy()
+            offset += cut
+            filled = rest
+
+
+class _Cloud:
+    """One cloud's point lines as they stream past: valid points written straight into their
+    final arrays (no file- or line-sized intermediate); problems are kept in the order
+    :func:`read` reports them and raised once the cloud's lines are all seen."""
+
+    def __init__(self, path: Path, index: int, first: int, rows: int, cols: int, cap: int):
+        self.path, self.index, self.first, self.rows, self.cols = path, index, first, rows, cols
+        self.n, self.cap, self.seen, self.kept = rows * cols, cap, 0, 0
+        self.ncol = -1
+        self.bad: tuple[int, int] | None = None  # (line, error code) of the first bad number
+        self.wrong: tuple[int, int] | None = None  # (line, count) of the first ragged line
+        self.points: NDArray[np.float64] | None = None
+        self.grid_index: NDArray[np.int32] | None = None
+        self.intensity: NDArray[np.float32] | None = None
+        self.colors: NDArray[np.uint8] | None = None
+
+    @property
+    def remaining(self) -> int:
+        return self.n - self.seen
+
+    def _allocate(self, ncol: int) -> None:
+        cap = self.cap
+        per = 24 + 8 + (4 if ncol >= 4 else 0) + (3 if ncol == 7 else 0)
+        check_memory(cap * per, f"cloud {self.index}: its {self.n:,} points", source=self.path)
+        self.points = np.empty((cap, 3), dtype=np.float64)
+        self.grid_index = np.empty((cap, 2), dtype=np.int32)
+        self.intensity = np.empty(cap, dtype=np.float32) if ncol >= 4 else None
+        self.colors = np.empty((cap, 3), dtype=np.uint8) if ncol == 7 else None
+
+    def add(self, lines: Lines, lo: int, hi: int, line0: int) -> None:
+        """Take lines ``lo:hi`` of a parsed chunk whose line ``lo`` is file line ``line0``."""
+        _, _, counts, errors = lines
+        if self.seen == 0:
+            self.ncol = int(counts[lo])
+            if self.ncol in (3, 4, 7):
+                self._allocate(self.ncol)
+        if self.bad is None:
+            bad = np.flatnonzero(errors[lo:hi])
+            if len(bad):
+                self.bad = (line0 + int(bad[0]), int(errors[lo + bad[0]]))
+        if self.wrong is None:
+            wrong = np.flatnonzero(counts[lo:hi] != self.ncol)
+            if len(wrong):
+                self.wrong = (line0 + int(wrong[0]), int(counts[lo + wrong[0]]))
+        if self.bad is None and self.wrong is None and self.points is not None:
+            self._keep(lines, lo, hi)
+        self.seen += hi - lo
+
+    def _keep(self, lines: Lines, lo: int, hi: int) -> None:
+        """Copy the valid points (not ``0 0 0``) of lines ``lo:hi`` and their attributes."""
+        head, tail, _, _ = lines
+        assert self.points is not None and self.grid_index is not None
+        xyz = head[lo:hi, :3]
+        rel = np.flatnonzero((xyz != 0.0).any(axis=1))
+        a, b = self.kept, self.kept + len(rel)
+        self.points[a:b] = xyz[rel]
+        k = rel + self.seen  # line k of the cloud is row k % rows of column k // rows
+        self.grid_index[a:b, 0] = k % self.rows
+        self.grid_index[a:b, 1] = k // self.rows
+        if self.intensity is not None:
+            self.intensity[a:b] = head[lo:hi, 3][rel]
+        if self.colors is not None:
+            self.colors[a:b] = np.clip(tail[lo:hi][rel], 0, 255).astype(np.uint8)
+        self.kept = b
+
+    def truncated(self) -> InputError:
+        return InputError(
+            self.path,
+            f"cloud {self.index}: header announces {self.cols} x {self.rows} = {self.n} points "
+            f"but only {self.seen} lines follow (truncated file?)",
+        )
+
+    def finish(self, M: NDArray[np.float64]) -> Scan:
+        """The scan, once all its lines are seen (raises the first problem found)."""
+        path = self.path
+        if self.bad is not None:
+            k, err = self.bad
+            what = "more than 7 values" if err == _TOO_MANY else "not a valid number"
+            raise InputError(path, f"line {k + 1}: {what}")
+        if self.ncol not in (3, 4, 7):
+            raise InputError(
+                path, f"line {self.first + 1}: expected 3, 4 or 7 values, got {self.ncol}"
+            )
+        if self.wrong is not None:
+            k, cnt = self.wrong
+            raise InputError(
+                path,
+                f"line {k + 1}: expected {self.ncol} values like the cloud's first point, got "
+                f"{cnt} (header {self.cols} x {self.rows} does not match the data?)",
+            )
+        m = self.kept
+        for a in (self.points, self.grid_index, self.intensity, self.colors):
+            if a is not None:  # shrink in place: no second copy of the points
+                a.resize((m, *a.shape[1:]), refcheck=False)
+        if not is_rigid(M):
+            log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, self.index)
+        try:
+            return Scan(
+                points=self.points,  # type: ignore[arg-type]
+                intensity=self.intensity,
+                colors=self.colors,
+                grid_shape=(self.rows, self.cols),
+                grid_index=self.grid_index,
+                T_world_scanner=M,
+                path=path,
+                name=path.stem if self.index == 0 else f"{path.stem}#{self.index}",
+            )
+        except InputError as e:
+            raise InputError(path, f"cloud {self.index}: {e.problem}") from None
+
+
+def _header_cloud(
+    path: Path,
+    index: int,
+    line: int,
+    head: list[NDArray[np.float64]],
+    counts: list[int],
+    errors: list[int],
+    bytes_left: int,
+) -> tuple[_Cloud, NDArray[np.float64]]:
+    """The cloud a complete 10-line header (starting at file line ``line``) announces, and its
+    pose; ``bytes_left`` bounds how many point lines can follow."""
+    if any(errors) or counts != _HEADER_COUNTS:
+        raise InputError(
+            path,
+            f"cloud {index}: malformed header at lines {line + 1}-{line + _HEADER_LINES} "
+            "(expected COLS, ROWS, position, 3 axes, transposed 4x4 transform)",
+        )
+    cols_f, rows_f = head[0][0], head[1][0]
+    if cols_f != int(cols_f) or rows_f != int(rows_f) or cols_f <= 0 or rows_f <= 0:
+        raise InputError(path, f"cloud {index}: grid size {cols_f:g} x {rows_f:g} is not valid")
+    cols, rows = int(cols_f), int(rows_f)
+    M = _header_pose(np.stack(head[2:10])[:, :4])
+    cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
+    return _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap), M
 
 
 def read(path: Path, **_: object) -> list[Scan]:
     """Read every cloud of a PTX file.
+
+    The text is parsed :data:`_CHUNK_BYTES` at a time and each cloud's valid points go
+    straight into their final arrays: the memory taken beyond the scans themselves is a few
+    chunk-sized buffers, whatever the file's size.
 
     Returns
     -------
@@ -219,84 +407,44 @@ def read(path: Path, **_: object) -> list[Scan]:
         they are not.
     """
     size = path.stat().st_size
-    check_memory(size, "reading the whole file", source=path)
-    buf = np.fromfile(path, dtype=np.uint8)
-    step = 1 << 26  # count newlines 64 MiB at a time: no file-sized temporary
-    lines = 1 + sum(int(np.count_nonzero(buf[i : i + step] == 10)) for i in range(0, size, step))
-    check_memory(size + lines * _LINE_BYTES, f"parsing its {lines:,} lines", source=path)
-    n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
-    head, tail, counts, errors = _parse_all(buf, n_chunks, _POW10)
-    del buf
-    n_lines = len(counts)
+    check_memory(3 * min(size, _CHUNK_BYTES), "parsing it", source=path)
     scans: list[Scan] = []
-    line = 0
-    while line < n_lines:
-        if counts[line] == 0 and errors[line] == 0:  # blank line between clouds
-            line += 1
-            continue
-        cloud = len(scans)
-        if line + _HEADER_LINES > n_lines:
-            raise InputError(path, f"cloud {cloud}: truncated header at line {line + 1}")
-        hl = slice(line, line + _HEADER_LINES)
-        if errors[hl].any() or counts[hl].tolist() != _HEADER_COUNTS:
-            raise InputError(
-                path,
-                f"cloud {cloud}: malformed header at lines {line + 1}-{line + _HEADER_LINES} "
-                "(expected COLS, ROWS, position, 3 axes, transposed 4x4 transform)",
-            )
-        cols_f, rows_f = head[line, 0], head[line + 1, 0]
-        if cols_f != int(cols_f) or rows_f != int(rows_f) or cols_f <= 0 or rows_f <= 0:
-            raise InputError(path, f"cloud {cloud}: grid size {cols_f:g} x {rows_f:g} is not valid")
-        cols, rows = int(cols_f), int(rows_f)
-        M = _header_pose(head[line + 2 : line + 10, :4])
-        n = cols * rows
-        first = line + _HEADER_LINES
-        if first + n > n_lines:
-            raise InputError(
-                path,
-                f"cloud {cloud}: header announces {cols} x {rows} = {n} points but only "
-                f"{max(0, n_lines - first)} lines follow (truncated file?)",
-            )
-        block = slice(first, first + n)
-        bad = np.flatnonzero(errors[block])
-        if len(bad):
-            k = first + int(bad[0])
-            what = "more than 7 values" if errors[k] == _TOO_MANY else "not a valid number"
-            raise InputError(path, f"line {k + 1}: {what}")
-        ncol = int(counts[first])
-        if ncol not in (3, 4, 7):
-            raise InputError(path, f"line {first + 1}: expected 3, 4 or 7 values, got {ncol}")
-        wrong = np.flatnonzero(counts[block] != ncol)
-        if len(wrong):
-            k = first + int(wrong[0])
-            raise InputError(
-                path,
-                f"line {k + 1}: expected {ncol} values like the cloud's first point, got "
-                f"{int(counts[k])} (header {cols} x {rows} does not match the data?)",
-            )
-        xyz = head[block, :3]
-        valid = (xyz != 0.0).any(axis=1)
-        k_valid = np.flatnonzero(valid)
-        grid_index = np.empty((len(k_valid), 2), dtype=np.int32)
-        grid_index[:, 0] = k_valid % rows
-        grid_index[:, 1] = k_valid // rows
-        if not is_rigid(M):
-            log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, cloud)
-        try:
-            scan = Scan(
-                points=xyz[valid],
-                intensity=head[block, 3][valid] if ncol >= 4 else None,
-                colors=np.clip(tail[block][valid], 0, 255).astype(np.uint8) if ncol == 7 else None,
-                grid_shape=(rows, cols),
-                grid_index=grid_index,
-                T_world_scanner=M,
-                path=path,
-                name=path.stem if cloud == 0 else f"{path.stem}#{cloud}",
-            )
-        except InputError as e:
-            raise InputError(path, f"cloud {cloud}: {e.problem}") from None
-        scans.append(scan)
-        line = first + n
+    cloud: _Cloud | None = None
+    pose = np.eye(4)
+    hdr: tuple[list[NDArray[np.float64]], list[int], list[int]] = ([], [], [])
+    hdr_line = 0
+    base = 0  # file line number of the chunk's first line
+    for offset, lines in _chunks(path, size):
+        head, counts, errors = lines[0], lines[2], lines[3]
+        n_lines, i = len(counts), 0
+        while i < n_lines:
+            if cloud is not None:
+                j = min(n_lines, i + cloud.remaining)
+                cloud.add(lines, i, j, base + i)
+                i = j
+                if cloud.remaining == 0:
+                    scans.append(cloud.finish(pose))
+                    cloud = None
+                continue
+            if not hdr[1] and counts[i] == 0 and errors[i] == 0:  # blank line between clouds
+                i += 1
+                continue
+            if not hdr[1]:
+                hdr_line = base + i
+            hdr[0].append(head[i].copy())
+            hdr[1].append(int(counts[i]))
+            hdr[2].append(int(errors[i]))
+            i += 1
+            if len(hdr[1]) == _HEADER_LINES:
+                cloud, pose = _header_cloud(
+                    path, len(scans), hdr_line, *hdr, bytes_left=size - offset
+                )
+                hdr = ([], [], [])
+        base += n_lines
+    if cloud is not None:
+        raise cloud.truncated()
+    if hdr[1]:
+        raise InputError(path, f"cloud {len(scans)}: truncated header at line {hdr_line + 1}")
     if not scans:
         raise InputError(path, "no cloud in file")
     return scans

@@ -11,6 +11,7 @@ neighbours of the same surface for the projective refinement
 from __future__ import annotations
 
 import math
+import weakref
 
 import numba
 import numpy as np
@@ -18,6 +19,29 @@ from numpy.typing import NDArray
 
 from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import RangeImage
+
+#: each image's points with NaN where invalid, as the kernels read them (see masked_xyz)
+_MASKED: weakref.WeakKeyDictionary[RangeImage, tuple[object, object, NDArray[np.float64]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def masked_xyz(image: RangeImage) -> NDArray[np.float64]:
+    """``image.xyz`` with NaN at invalid pixels, (H, W, 3) C-contiguous float64, metres.
+
+    The image's own array when it already is (the usual case: every builder leaves invalid
+    pixels NaN), else a copy made once per image and shared by every later call (the normals
+    and each projective ICP run on the image: candidate polishing runs one per candidate);
+    recomputed if the image's arrays are replaced. Treat the result as read-only."""
+    hit = _MASKED.get(image)
+    if hit is not None and hit[0] is image.xyz and hit[1] is image.valid:
+        return hit[2]
+    xyz = image.xyz
+    usable = xyz.dtype == np.float64 and xyz.flags.c_contiguous
+    if not (usable and np.isnan(xyz[~image.valid]).all()):  # else: already NaN where invalid
+        xyz = np.ascontiguousarray(np.where(image.valid[..., None], xyz, np.nan))
+    _MASKED[image] = (image.xyz, image.valid, xyz)
+    return xyz
 
 
 def surface_normals(
@@ -122,12 +146,13 @@ def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
     (H, W, 3) float32
         Unit normals, oriented towards the scanner; NaN where unknown.
     """
-    xyz = np.where(image.valid[..., None], image.xyz, np.nan)
-    H, W = xyz.shape[:2]
+    H, W = image.valid.shape
     if H <= 2 * k or W <= 2 * k:
         return np.full((H, W, 3), np.nan, dtype=np.float32)
-    nrm, area = normals_area(np.ascontiguousarray(xyz, dtype=np.float64), int(k), image.wraps)
-    return _smooth_normals(np.where(area[..., None] > 0, nrm, np.nan), image.wraps)
+    nrm, area = normals_area(masked_xyz(image), int(k), image.wraps)
+    nrm[~(area > 0)] = np.nan  # in place: no third (H, W, 3) array
+    del area
+    return _smooth_normals(nrm, image.wraps)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -164,4 +189,4 @@ def _smooth_normals(raw, wrap):  # pragma: no cover - compiled
     return out
 
 
-__all__ = ["grid_normals", "normals_area", "surface_normals"]
+__all__ = ["grid_normals", "masked_xyz", "normals_area", "surface_normals"]

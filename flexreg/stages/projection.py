@@ -98,6 +98,8 @@ def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None
         return None
     r = np.linalg.norm(P, axis=1)
     th_all = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0))
+    if _polar_runs(th_all, math.radians(0.2)) < 4:
+        return None  # fewer than 4 bands: the sort below would find fewer than 4 rings
     order = np.argsort(th_all, kind="stable")
     th = th_all[order]
     gaps = np.diff(th)
@@ -117,6 +119,20 @@ def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None
     if pitch is None:
         return None
     return n, spacing, pitch
+
+
+def _polar_runs(theta: NDArray[np.float64], gap_rad: float) -> int:
+    """An upper bound of the number of bands of ``theta`` separated by more than ``gap_rad``
+    (what :func:`_lidar_rings` counts after sorting), in one pass: the runs of occupied bins
+    a third of ``gap_rad`` wide. Two sorted neighbours more than ``gap_rad`` apart are more
+    than two bins apart, so an empty bin lies between them and they fall into different
+    runs."""
+    w = gap_rad / 3.0
+    t = theta[np.isfinite(theta)]
+    if len(t) == 0:
+        return 0
+    occupied = np.bincount(((t - t.min()) / w).astype(np.int64)) > 0
+    return int(np.count_nonzero(occupied[1:] & ~occupied[:-1])) + 1
 
 
 def _ring_azimuth_pitch(P: NDArray[np.float64], ring: NDArray[np.int64]) -> float | None:

@@ -30,7 +30,7 @@ from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.stages.normals import grid_normals
+from flexreg.stages.normals import grid_normals, masked_xyz
 from flexreg.stages.refinement.result import IcpResult
 
 log = logging.getLogger(__name__)
@@ -40,6 +40,10 @@ _SPHERICAL, _PINHOLE = 0, 1
 
 #: points are paired in this many fixed chunks (in parallel), whose sums are added in order
 _CHUNKS = 16
+#: fewer points than this are paired on the calling thread (:func:`_associate_serial`, the same
+#: result): the candidate polishing (5 000 points) and the refinement (15 000 per direction)
+#: take well under a millisecond per pass, less than starting a parallel region costs
+PARALLEL_MIN_POINTS = 200_000
 #: convergence of the distance levels before the last (relative update, see projective_icp)
 _LEVEL_TOLERANCE = 1e-5
 
@@ -69,6 +73,97 @@ def angular_step(image: RangeImage) -> float:
 # ---------------------------------------------------------------------------- numba kernels
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _associate_chunk(
+    ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+):  # pragma: no cover
+    """Chunk ``ch`` of :func:`_associate` (its points' pairs summed into ``Ac[ch]``,
+    ``bc[ch]``, ``cc[ch]``)."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    wrap = kind == 0 and cam[4] > 0.5
+    n = pts.shape[0]
+    J = np.empty(6)
+    for i in range(ch * n // _CHUNKS, (ch + 1) * n // _CHUNKS):
+        px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+        out_r[i] = np.nan
+        # into the image's frame
+        qx = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
+        qy = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
+        qz = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
+        rq = math.sqrt(qx * qx + qy * qy + qz * qz)
+        if kind == 0:
+            if not rq > 0.0:
+                continue
+            u = (math.atan2(qy, qx) - cam[0]) / cam[1]
+            c = min(1.0, max(-1.0, qz / rq))
+            v = (math.acos(c) - cam[2]) / cam[3]
+            if wrap:
+                u = u % W
+            elif u < -0.5:
+                u += 2.0 * math.pi / cam[1]
+        else:
+            if not qz > 0.0:
+                continue
+            u = cam[0] * qx / qz + cam[4] * qy / qz + cam[2]
+            v = cam[1] * qy / qz + cam[3]
+        iu = math.floor(u + 0.5)
+        iv = math.floor(v + 0.5)
+        if wrap and iu >= W:
+            iu -= W
+        if iu < 0 or iu >= W or iv < 0 or iv >= H:
+            continue
+        nx = np.float64(nrm[iv, iu, 0])
+        ny = np.float64(nrm[iv, iu, 1])
+        nz = np.float64(nrm[iv, iu, 2])
+        if not math.isfinite(nx):
+            continue
+        x0, x1, x2 = xyz[iv, iu, 0], xyz[iv, iu, 1], xyz[iv, iu, 2]
+        if reverse:  # the pixel moves: its point and normal into the target frame
+            mx = T[0, 0] * x0 + T[0, 1] * x1 + T[0, 2] * x2 + T[0, 3]
+            my = T[1, 0] * x0 + T[1, 1] * x1 + T[1, 2] * x2 + T[1, 3]
+            mz = T[2, 0] * x0 + T[2, 1] * x1 + T[2, 2] * x2 + T[2, 3]
+            n0 = T[0, 0] * nx + T[0, 1] * ny + T[0, 2] * nz
+            n1 = T[1, 0] * nx + T[1, 1] * ny + T[1, 2] * nz
+            n2 = T[2, 0] * nx + T[2, 1] * ny + T[2, 2] * nz
+            nx, ny, nz = n0, n1, n2
+            dx, dy, dz = mx - px, my - py, mz - pz
+        else:
+            mx, my, mz = qx, qy, qz
+            dx, dy, dz = qx - x0, qy - x1, qz - x2
+        res = nx * dx + ny * dy + nz * dz
+        if not abs(res) < dist:
+            continue
+        # the pixel's point lies on the ray's surface within about a pixel footprint
+        reach = dist + lateral * rq
+        if dx * dx + dy * dy + dz * dz > reach * reach:
+            continue
+        out_q[i, 0], out_q[i, 1], out_q[i, 2] = mx, my, mz
+        out_r[i] = res
+        w = 1.0 - (res / dist) ** 2
+        w *= w
+        J[0] = my * nz - mz * ny  # (m x n): derivative for a small rotation about the origin
+        J[1] = mz * nx - mx * nz
+        J[2] = mx * ny - my * nx
+        J[3], J[4], J[5] = nx, ny, nz
+        for a in range(6):
+            bc[ch, a] += w * J[a] * res
+            for c2 in range(6):
+                Ac[ch, a, c2] += w * J[a] * J[c2]
+        cc[ch] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _sum_chunks(Ac, bc, cc, A, b):  # pragma: no cover
+    """Add the chunks' sums to ``A``, ``b`` in a fixed order: the same result with any number
+    of threads. Returns the number of pairs."""
+    count = 0
+    for ch in range(_CHUNKS):
+        A += Ac[ch]
+        b += bc[ch]
+        count += cc[ch]
+    return count
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _associate(
     pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
@@ -82,88 +177,31 @@ def _associate(
     mapped into the target frame by ``T``, move against the fixed target point.
     ``out_q`` receives the moving point of each pair (target frame), ``out_r`` its residual
     (NaN when unpaired). Returns the number of pairs."""
-    H, W = xyz.shape[0], xyz.shape[1]
-    wrap = kind == 0 and cam[4] > 0.5
-    n = pts.shape[0]
     Ac = np.zeros((_CHUNKS, 6, 6))
     bc = np.zeros((_CHUNKS, 6))
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in prange(_CHUNKS):
-        J = np.empty(6)
-        for i in range(ch * n // _CHUNKS, (ch + 1) * n // _CHUNKS):
-            px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
-            out_r[i] = np.nan
-            # into the image's frame
-            qx = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
-            qy = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
-            qz = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
-            rq = math.sqrt(qx * qx + qy * qy + qz * qz)
-            if kind == 0:
-                if not rq > 0.0:
-                    continue
-                u = (math.atan2(qy, qx) - cam[0]) / cam[1]
-                c = min(1.0, max(-1.0, qz / rq))
-                v = (math.acos(c) - cam[2]) / cam[3]
-                if wrap:
-                    u = u % W
-                elif u < -0.5:
-                    u += 2.0 * math.pi / cam[1]
-            else:
-                if not qz > 0.0:
-                    continue
-                u = cam[0] * qx / qz + cam[4] * qy / qz + cam[2]
-                v = cam[1] * qy / qz + cam[3]
-            iu = math.floor(u + 0.5)
-            iv = math.floor(v + 0.5)
-            if wrap and iu >= W:
-                iu -= W
-            if iu < 0 or iu >= W or iv < 0 or iv >= H:
-                continue
-            nx = np.float64(nrm[iv, iu, 0])
-            ny = np.float64(nrm[iv, iu, 1])
-            nz = np.float64(nrm[iv, iu, 2])
-            if not math.isfinite(nx):
-                continue
-            x0, x1, x2 = xyz[iv, iu, 0], xyz[iv, iu, 1], xyz[iv, iu, 2]
-            if reverse:  # the pixel moves: its point and normal into the target frame
-                mx = T[0, 0] * x0 + T[0, 1] * x1 + T[0, 2] * x2 + T[0, 3]
-                my = T[1, 0] * x0 + T[1, 1] * x1 + T[1, 2] * x2 + T[1, 3]
-                mz = T[2, 0] * x0 + T[2, 1] * x1 + T[2, 2] * x2 + T[2, 3]
-                n0 = T[0, 0] * nx + T[0, 1] * ny + T[0, 2] * nz
-                n1 = T[1, 0] * nx + T[1, 1] * ny + T[1, 2] * nz
-                n2 = T[2, 0] * nx + T[2, 1] * ny + T[2, 2] * nz
-                nx, ny, nz = n0, n1, n2
-                dx, dy, dz = mx - px, my - py, mz - pz
-            else:
-                mx, my, mz = qx, qy, qz
-                dx, dy, dz = qx - x0, qy - x1, qz - x2
-            res = nx * dx + ny * dy + nz * dz
-            if not abs(res) < dist:
-                continue
-            # the pixel's point lies on the ray's surface within about a pixel footprint
-            reach = dist + lateral * rq
-            if dx * dx + dy * dy + dz * dz > reach * reach:
-                continue
-            out_q[i, 0], out_q[i, 1], out_q[i, 2] = mx, my, mz
-            out_r[i] = res
-            w = 1.0 - (res / dist) ** 2
-            w *= w
-            J[0] = my * nz - mz * ny  # (m x n): derivative for a small rotation about the origin
-            J[1] = mz * nx - mx * nz
-            J[2] = mx * ny - my * nx
-            J[3], J[4], J[5] = nx, ny, nz
-            for a in range(6):
-                bc[ch, a] += w * J[a] * res
-                for c2 in range(6):
-                    Ac[ch, a, c2] += w * J[a] * J[c2]
-            cc[ch] += 1
-    # fixed chunks summed in a fixed order: the same result with any number of threads
-    count = 0
+        _associate_chunk(
+            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+        )
+    return _sum_chunks(Ac, bc, cc, A, b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _associate_serial(
+    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+):  # pragma: no cover
+    """:func:`_associate` on the calling thread alone: the same chunks summed in the same order, so
+    the same result, without a parallel region (whose start costs more than a few thousand
+    points take, and much more on a loaded machine)."""
+    Ac = np.zeros((_CHUNKS, 6, 6))
+    bc = np.zeros((_CHUNKS, 6))
+    cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in range(_CHUNKS):
-        A += Ac[ch]
-        b += bc[ch]
-        count += cc[ch]
-    return count
+        _associate_chunk(
+            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+        )
+    return _sum_chunks(Ac, bc, cc, A, b)
 
 
 # ---------------------------------------------------------------------------- Python API
@@ -214,7 +252,7 @@ class _Side:
     ) -> None:
         self.kind, self.cam = _camera_params(image)
         self.normals = grid_normals(image) if normals is None else normals
-        self.xyz = np.ascontiguousarray(np.where(image.valid[..., None], image.xyz, np.nan))
+        self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
         self.reverse = reverse
         self.lateral = 2.0 * angular_step(image)
@@ -225,8 +263,9 @@ class _Side:
         self, T: NDArray[np.float64], dist: float, A: NDArray[np.float64], b: NDArray[np.float64]
     ) -> int:
         M = np.ascontiguousarray(np.linalg.inv(T) if self.reverse else T)
+        kernel = _associate if len(self.pts) >= PARALLEL_MIN_POINTS else _associate_serial
         return int(
-            _associate(
+            kernel(
                 self.pts, M, T, self.reverse, self.xyz, self.normals, self.kind, self.cam,
                 dist, self.lateral, A, b, self.q, self.res,
             )

@@ -14,6 +14,7 @@ from flexreg.cli._common import (
     about_pair,
     console,
     exit_for,
+    pair_label,
     print_verdict,
     read_pair,
     scan_file,
@@ -358,7 +359,7 @@ def register_command(
     }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
-    _print_summary(result, config, errors, check)
+    _print_summary(result, config, target, source, errors, check)
     print_verdict(result.verdict, result.T_target_source)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -395,6 +396,7 @@ def _writers(
     meta = result.to_dict()
     meta.pop("T_target_source", None)
     meta = {"target": inputs["target"], "source": inputs["source"], **meta}
+    meta["inliers_of"] = "matched keypoint pairs (RANSAC of the coarse stage)"
     meta["flexreg_version"] = __version__
     if inputs["errors"] is not None:
         meta["error_vs_truth"] = {"truth": str(inputs["truth"]), **inputs["errors"]}
@@ -488,9 +490,17 @@ def _stored_check(result: RegistrationResult, stored: NDArray[np.float64]) -> di
     }
 
 
+def _mm(m: float) -> str:
+    import math
+
+    return f"{1000 * m:.2f} mm" if math.isfinite(m) else "n/a"
+
+
 def _print_summary(
     result: RegistrationResult,
     config: RegistrationConfig,
+    target: Path,
+    source: Path,
     errors: dict[str, float] | None = None,
     stored: dict[str, Any] | None = None,
 ) -> None:
@@ -505,14 +515,29 @@ def _print_summary(
 
     r = result
     final = "ICP " + config.icp if config.refine else "keypoint inliers, not refined"
-    t = Table(title="T_target_source", show_header=False, title_justify="left")
+    t = Table(
+        title=f"T_target_source: {pair_label(target, source)}",
+        show_header=False,
+        title_justify="left",
+    )
     t.add_column(style="bold")
     t.add_column()
+    if r.overlap is not None:
+        o = r.overlap
+        t.add_row("overlap", o.headline())
+        t.add_row(
+            "open3d",
+            f"fitness {o.open3d_fitness:.4f}, inlier_rmse {_mm(o.open3d_inlier_rmse_m)} "
+            f"(evaluate_registration at {_mm(o.distance_m)}, the same clouds)",
+        )
     share = 100 * r.inliers / r.matches if r.matches else 0.0
-    t.add_row("matches", f"{r.matches:,} 3D keypoint matches ({config.features} on {config.image})")
-    t.add_row("inliers", f"{r.inliers:,} ({share:.1f} %) within {1000 * r.threshold_m:.1f} mm")
-    t.add_row("inlier RMSE", f"{1000 * r.inlier_rmse_m:.2f} mm ({final})")
-    t.add_row("fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
+    t.add_row(
+        "keypoints",
+        f"{r.inliers:,} of {r.matches:,} matched keypoint pairs are inliers ({share:.1f} %) "
+        f"within {1000 * r.threshold_m:.1f} mm ({config.features} on {config.image})",
+    )
+    t.add_row("inlier RMSE", f"{_mm(r.inlier_rmse_m)} ({final})")
+    t.add_row("stage fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
     t.add_row("prior", r.prior)
     t.add_row("coarse", motion(r.T_coarse))
     t.add_row("final", motion(r.T_target_source))

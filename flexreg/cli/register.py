@@ -90,17 +90,28 @@ class _StageSpinners(AbstractContextManager["_StageSpinners"]):
         self._close(exc_type, exc, tb)
 
 
-def _match_png(target: Scan, source: Scan, result: RegistrationResult) -> NDArray[np.uint8]:
-    """Both feature images (target on top) with the RANSAC inliers drawn as lines."""
+def _match_figure(
+    target: Scan, source: Scan, result: RegistrationResult, names: tuple[str, str]
+) -> Any:
+    """Both feature images (target on top), every lifted match drawn, inliers and outliers
+    apart, file names and counts in the title (:func:`flexreg.viz.matches.match_figure`)."""
     from flexreg.registration.pipeline import feature_image
     from flexreg.stages.projection import range_image
-    from flexreg.viz.draw import match_image
+    from flexreg.viz.matches import match_figure
 
     ft, _ = feature_image(range_image(target), result.config)
     fs, _ = feature_image(range_image(source), result.config)
     kt, ks = result.keypoints
-    inl = result.inlier_mask
-    return match_image(ft, fs, kt[inl], ks[inl])
+    return match_figure(
+        ft,
+        fs,
+        kt,
+        ks,
+        result.inlier_mask,
+        target_name=names[0],
+        source_name=names[1],
+        threshold_m=result.threshold_m,
+    )
 
 
 def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
@@ -192,7 +203,11 @@ _ThresholdOption = Annotated[
 ]
 _MatchesOption = Annotated[
     Path | None,
-    typer.Option("--matches", help="Write a .png of both feature images with the inlier matches."),
+    typer.Option(
+        "--matches",
+        help="Write a .png of both feature images (target on top) with the matched keypoint "
+        "pairs: inliers and outliers in two colours, file names and counts in the title.",
+    ),
 ]
 _MergedOption = Annotated[
     Path | None,
@@ -388,9 +403,12 @@ def _writers(
             cloud = _merged_scan(tscan, sscan, T)
         writers.append((merged, lambda: write_scan(merged, cloud)))
     if matches is not None:
+        from flexreg.viz.matches import save_figure
+
         with stage("Drawing matches"):
-            png = _match_png(tscan, sscan, result)
-        writers.append((matches, lambda: atomic_write(matches, lambda tmp: _imwrite(tmp, png))))
+            names = (Path(inputs["target"]).name, Path(inputs["source"]).name)
+            fig = _match_figure(tscan, sscan, result, names)
+        writers.append((matches, lambda: atomic_write(matches, lambda tmp: save_figure(fig, tmp))))
     if txt is not None:
         writers.append((txt, lambda: write_transform_txt(txt, T)))
     meta = result.to_dict()
@@ -409,13 +427,6 @@ def _writers(
         meta["stored_pose_check"] = inputs["stored_pose_check"]
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     return writers
-
-
-def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:
-    import cv2
-
-    if not cv2.imwrite(str(path), image):
-        raise InputError(path, "cannot write the PNG file")
 
 
 def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:

@@ -100,6 +100,8 @@ def timed_register(
         "inlier_rmse_m": res.inlier_rmse_m,
         "fitness": res.fitness,
         "fitness_denominator": res.fitness_denominator,
+        # the one overlap figure (flexreg.stages.overlap) and Open3D's on the same clouds
+        "overlap_result": None if res.overlap is None else res.overlap.to_dict(),
         "threshold_m": res.threshold_m,
         "T_coarse": res.T_coarse.tolist(),
         "T_target_source": res.T_target_source.tolist(),

@@ -107,7 +107,9 @@ def match_figure(
         idx = _evenly(np.flatnonzero(mask), max_lines)
         segs = np.stack([pt[idx], ps[idx] + [0.0, h1]], axis=1)
         ax.add_collection(
-            LineCollection(segs, colors=colour, linestyles=style, linewidths=width_pt, alpha=0.8)
+            LineCollection(
+                list(segs), colors=colour, linestyles=style, linewidths=width_pt, alpha=0.8
+            )
         )
         count = int(mask.sum())
         drawn = f", {len(idx)} drawn" if len(idx) < count else ""

@@ -119,29 +119,50 @@ def test_synth_overwrite_leaves_no_stale_frames_for_odometry(tmp_path):
     assert len(read_sequence(out)) == 2
 
 
-def test_survey_overwrite_keeps_the_cache(tmp_path):
+def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
     """A survey folder's cache is not a result: a folder holding only it is not refused, and
-    --overwrite keeps it (the re-run registers only new links)."""
+    --overwrite keeps it (the re-run registers only new links); an input inside the folder is
+    never removed."""
     from flexreg.cli.options import check_out_folder, set_overwrite
     from flexreg.errors import ConfigError
-    from flexreg.io.files import all_or_nothing, atomic_write
+    from flexreg.io.files import all_or_nothing, atomic_write, protect
 
     (tmp_path / "cache").mkdir()
     (tmp_path / "cache" / "station.npz").write_text("prepared")
-    check_out_folder("--out", tmp_path, keep=("cache",))
+    check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
     (tmp_path / "stations").mkdir()
     (tmp_path / "stations" / "old.txt").write_text("old")
+    (tmp_path / "poses.json").write_text("old")
+    (tmp_path / "scan.ptx").write_text("an input kept in the result folder")
     set_overwrite(False)
     with pytest.raises(ConfigError, match="give --overwrite"):
-        check_out_folder("--out", tmp_path, keep=("cache",))
+        check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
     try:
         set_overwrite(True)
         with all_or_nothing():
-            check_out_folder("--out", tmp_path, keep=("cache",))
+            protect(tmp_path / "scan.ptx")
+            check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
             atomic_write(tmp_path / "poses.json", lambda tmp: tmp.write_text("{}"))
     finally:
         set_overwrite(False)
-    assert sorted(_snapshot(tmp_path)) == ["cache/station.npz", "poses.json"]
+    assert sorted(_snapshot(tmp_path)) == ["cache/station.npz", "poses.json", "scan.ptx"]
+
+
+def test_overwrite_into_a_folder_that_is_no_earlier_result_removes_nothing(inputs, tmp_path):
+    """--overwrite into a folder without the command's marker (here: a folder of the user's
+    own files, no gt.json) replaces same-named files only."""
+    from flexreg.cli.options import check_out_folder, set_overwrite
+    from flexreg.io.files import all_or_nothing, atomic_write
+
+    (tmp_path / "mine.txt").write_text("mine")
+    try:
+        set_overwrite(True)
+        with all_or_nothing():
+            check_out_folder("--out", tmp_path, marker="gt.json")
+            atomic_write(tmp_path / "gt.json", lambda tmp: tmp.write_text("{}"))
+    finally:
+        set_overwrite(False)
+    assert sorted(_snapshot(tmp_path)) == ["gt.json", "mine.txt"]
 
 
 def test_a_failed_overwrite_leaves_the_old_result(inputs, tmp_path):

@@ -202,11 +202,17 @@ def check_out_folder(
     inputs: Iterable[Path] = (),
     *,
     keep: tuple[str, ...] = (),
+    marker: str | None = None,
 ) -> None:
-    """Refuse an output folder that is a file, one of the inputs, or holds an earlier result
-    (any entry but those named in ``keep``) unless ``--overwrite`` was given; with it, the
-    folder's old files that the command does not write again are removed when its outputs
-    are committed (:func:`flexreg.io.files.replace_folder`), and not at all if it fails.
+    """Refuse an output folder that is a file, one of the inputs, or holds anything (but the
+    entries named in ``keep``) unless ``--overwrite`` was given.
+
+    With ``--overwrite``, files of the same names are replaced; and when the folder holds
+    ``marker`` (the file that shows it is an earlier result of the same command, e.g. synth's
+    ``gt.json``), the older run's other files are removed once the new ones are in place
+    (:func:`flexreg.io.files.replace_folder`; never an input of the command, never the
+    ``keep`` entries, nothing at all if the command fails). A folder without the marker is
+    written into, nothing in it removed.
 
     Parameters
     ----------
@@ -215,6 +221,8 @@ def check_out_folder(
     inputs : iterable of Path
     keep : tuple of str
         Top-level entries that are not results and stay (``survey``: its ``cache``).
+    marker : str, optional
+        File name that marks an earlier result of the command (None: never remove files).
     """
     from flexreg.io.files import replace_folder
 
@@ -227,4 +235,5 @@ def check_out_folder(
             raise ConfigError(f"{option}: {folder}: is also an input")
     if folder.is_dir() and any(e.name not in keep for e in folder.iterdir()):
         _refuse_existing(option, folder, "is a folder that is not empty")
-        replace_folder(folder, keep)
+        if marker is not None and (folder / marker).is_file():
+            replace_folder(folder, keep)

@@ -265,7 +265,7 @@ def survey_command(
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
-    check_out_folder("--out", out, scans, keep=("cache",))
+    check_out_folder("--out", out, scans, keep=("cache",), marker="poses.json")
     check_outputs(
         [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
         inputs=[p for p in scans if p.is_file()],

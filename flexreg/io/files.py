@@ -83,7 +83,8 @@ class Outputs:
 
     def own(self, folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -> None:
         """At :meth:`commit`, remove the files under ``folder`` that this block did not write
-        (except the top-level entries named in ``keep``), and then the emptied folders."""
+        (except the top-level entries named in ``keep`` and the command's inputs), and then
+        the emptied folders."""
         self._owned[Path(os.path.abspath(folder))] = tuple(keep)
 
     def _sweep(self, written: list[Path]) -> None:
@@ -103,10 +104,13 @@ class Outputs:
                         if p.is_dir() and not p.is_symlink():
                             if not any(p.iterdir()):
                                 p.rmdir()
-                        elif p not in keep_files:
+                        elif p not in keep_files and not self._is_input(p):
                             p.unlink()
                             log.info("removed %s (left by an earlier run)", p)
         self._owned.clear()
+
+    def _is_input(self, path: Path) -> bool:
+        return any(key in self._inputs for key in (_key(path), path.resolve()))
 
     def protect(self, path: str | os.PathLike[str]) -> None:
         """Refuse any output that is the file ``path`` (an input of the command)."""

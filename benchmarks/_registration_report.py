@@ -193,6 +193,33 @@ def _stage_medians(records: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _o3d_cells(r: dict[str, Any]) -> str:
+    """``| overlap | Open3D fitness | overlap RMSE mm | Open3D inlier RMSE mm |`` of a record
+    (``–`` for runs made before these figures were recorded)."""
+    o = r.get("overlap_result")
+    if not o:
+        return "| – | – | – | – "
+
+    def mm(x: Any) -> str:
+        return "–" if x is None else f"{1000 * x:.1f}"
+
+    return (
+        f"| {o['share']:.3f} | {o['open3d_fitness']:.3f} | {mm(o['rmse_m'])} "
+        f"| {mm(o['open3d_inlier_rmse_m'])} "
+    )
+
+
+#: what the four columns of :func:`_o3d_cells` are
+O3D_NOTE = (
+    "*overlap* = share of the voxelised source points within one scale voxel of a voxelised "
+    "target point after alignment (`flexreg.stages.overlap`, the figure `register` and "
+    "`compare` print); *o3d fitness* / *o3d RMSE* = Open3D's `evaluate_registration` fitness "
+    "and inlier RMSE on the same clouds at the same distance; *ours RMSE* = RMS distance of "
+    "our overlapping points. `–`: a run recorded before these columns existed."
+)
+O3D_HEAD = "| overlap | o3d fitness | ours RMSE mm | o3d RMSE mm "
+
+
 def _pair_rows(records: list[dict[str, Any]]) -> list[str]:
     """One row per synthetic pair, then the failures' messages.
 
@@ -209,22 +236,27 @@ def _pair_rows(records: list[dict[str, Any]]) -> list[str]:
     lines = [
         "",
         "Per pair (errors against the exact `T_target_source`; *prior* = which prior led to the "
-        "estimate; inliers / matches of the final guided matching):",
+        "estimate; inliers / matches of the final guided matching; *visible* = the pair's "
+        "mutual visibility overlap from the scene; " + O3D_NOTE + "):",
         "",
-        "| scene | seed | distance m | overlap | prior | inliers / matches | coarse ° "
-        "| coarse mm | success before refinement | refined ° | refined mm | time s |",
-        "|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|",
+        "| scene | seed | distance m | visible | prior | inliers / matches | coarse ° "
+        "| coarse mm | success before refinement | refined ° | refined mm "
+        + O3D_HEAD
+        + "| time s |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in records:
         head = f"| {r['scene']} | {r['seed']} | {r['distance_m']:.2f} | {r['overlap']:.2f} "
         if not r["ok"]:
-            lines.append(head + f"| **failed** | | | | no | | | {r['total_s']:.1f} |")
+            lines.append(head + f"| **failed** | | | | no | | | | | | | {r['total_s']:.1f} |")
             continue
         lines.append(
             head + f"| {r['prior']} | {r['inliers']} / {r['matches']} "
             f"| {r['rot_coarse_deg']:.3f} | {1000 * r['trans_coarse_m']:.1f} "
             f"| {'yes' if r['coarse_success'] else '**no**'} "
-            f"| {r['rot_deg']:.4f} | {1000 * r['trans_m']:.2f} | {r['total_s']:.1f} |"
+            f"| {r['rot_deg']:.4f} | {1000 * r['trans_m']:.2f} "
+            + _o3d_cells(r)
+            + f"| {r['total_s']:.1f} |"
         )
     failed = [r for r in records if not r["ok"]]
     if failed:
@@ -369,15 +401,17 @@ def render_real(records: list[dict[str, Any]]) -> list[str]:
         "Data in `../shared/data` (provenance and licences in each folder's README). Each pair is "
         "one `register` call with the same configuration; poses stored with the scans are never "
         "given to it. Errors are the rotation angle and translation distance between the result "
-        "and the reference `T_target_source`; *coarse* = before ICP.",
+        "and the reference `T_target_source`; *coarse* = before ICP; " + O3D_NOTE,
         "",
         "| pair (target <- source) | reference | points | range image (target) | prior "
-        "| inliers / matches | coarse ° | coarse m | refined ° | refined m | time s | verdict |",
-        "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|---|",
+        "| inliers / matches | coarse ° | coarse m | refined ° | refined m "
+        + O3D_HEAD
+        + "| time s | verdict |",
+        "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in records:
         if "skipped" in r:
-            lines.append(f"| {r['pair']} | | | | skipped: {r['skipped']} | | | | | | | |")
+            lines.append(f"| {r['pair']} | | | | skipped: {r['skipped']} | | | | | | | | | | | |")
             continue
         img = r["range_images"][0]
         head = (
@@ -385,12 +419,16 @@ def render_real(records: list[dict[str, Any]]) -> list[str]:
             f"| {img['width']}x{img['height']}, {img['valid']:.0%} valid "
         )
         if not r["ok"]:
-            lines.append(head + f"| **failed** | | | | | | {r['total_s']:.1f} | **failed** |")
+            lines.append(
+                head + f"| **failed** | | | | | | | | | | {r['total_s']:.1f} | **failed** |"
+            )
             continue
         lines.append(
             head + f"| {r['prior']} | {r['inliers']} / {r['matches']} "
             f"| {r['rot_coarse_deg']:.3f} | {r['trans_coarse_m']:.4f} "
-            f"| {r['rot_deg']:.3f} | {r['trans_m']:.4f} | {r['total_s']:.1f} | {real_verdict(r)} |"
+            f"| {r['rot_deg']:.3f} | {r['trans_m']:.4f} "
+            + _o3d_cells(r)
+            + f"| {r['total_s']:.1f} | {real_verdict(r)} |"
         )
     failed = [r for r in records if "skipped" not in r and not r["ok"]]
     if failed:

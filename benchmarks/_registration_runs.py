@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
-from flexreg.bench.compare import FitEvaluator
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.errors import RegistrationError
@@ -100,6 +100,8 @@ def timed_register(
         "inlier_rmse_m": res.inlier_rmse_m,
         "fitness": res.fitness,
         "fitness_denominator": res.fitness_denominator,
+        # the one overlap figure (flexreg.stages.overlap) and Open3D's on the same clouds
+        "overlap_result": None if res.overlap is None else res.overlap.to_dict(),
         "threshold_m": res.threshold_m,
         "T_coarse": res.T_coarse.tolist(),
         "T_target_source": res.T_target_source.tolist(),
@@ -330,12 +332,25 @@ def _range_image_note(scan: Scan) -> dict[str, Any]:
     return {"width": img.width, "height": img.height, "valid": float(img.valid.mean())}
 
 
-def _nn_fit(fit: FitEvaluator, T: NDArray[np.float64]) -> tuple[float, float]:
+class _Nearest:
+    """Nearest-neighbour distances from sampled source points to the target (every k-th point
+    of it, at most a million)."""
+
+    def __init__(self, target: NDArray[np.float64], source: NDArray[np.float64]) -> None:
+        self.source = source
+        self._tree = cKDTree(target[:: max(1, math.ceil(len(target) / 1_000_000))])
+
+    def distances(self, T: NDArray[np.float64]) -> NDArray[np.float64]:
+        d, _ = self._tree.query(self.source @ T[:3, :3].T + T[:3, 3])
+        return np.asarray(d, dtype=np.float64)
+
+
+def _nn_fit(fit: _Nearest, T: NDArray[np.float64]) -> tuple[float, float]:
     """How well ``T`` lays the fit's source points onto its target.
 
     Parameters
     ----------
-    fit : FitEvaluator
+    fit : _Nearest
         The target and the sampled source points.
     T : (4, 4) array
         A ``T_target_source``.
@@ -531,7 +546,7 @@ def _kurt_fits(
         The odometry prior ``T_target_source``.
     """
     # the source sampled evenly over its surfaces (the dense near field must not dominate)
-    tree = FitEvaluator(target.points, area_sample(source.points, 20000), NN_WITHIN_M)
+    tree = _Nearest(target.points, area_sample(source.points, 20000))
     rec["prior_distance_m"] = float(np.linalg.norm(T_prior[:3, 3]))
     rec["nn_prior"] = _nn_fit(tree, T_prior)
     if rec["ok"]:

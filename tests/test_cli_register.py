@@ -97,7 +97,13 @@ def registered(pair, tmp_path_factory):
         rc = run(argv)
     assert rc == 0, stderr.getvalue()
     (result,) = results
-    return {"out": out, "stdout": stdout.getvalue(), "stderr": stderr.getvalue(), "result": result}
+    return {
+        "out": out,
+        "stdout": stdout.getvalue(),
+        "stderr": stderr.getvalue(),
+        "result": result,
+        "result_files": (target, source),
+    }
 
 
 # ------------------------------------------------------------------------ a successful run
@@ -115,7 +121,14 @@ def test_json_holds_the_true_transform_and_the_run(registered, pair):
     assert doc["flexreg_version"] == __version__
     assert doc["inliers"] == result.inliers >= 50 and doc["matches"] >= doc["inliers"]
     assert 0 < doc["inlier_rmse_m"] < 0.05
-    assert "voxel" in doc["fitness_denominator"] and 0.5 < doc["fitness"] <= 1.0
+    assert "voxel" in doc["stage_fitness_denominator"] and 0.5 < doc["stage_fitness"] <= 1.0
+    ov = doc["overlap"]
+    assert 0.5 < ov["share"] <= 1.0 and ov["source_points"] > 1000
+    assert ov["distance_m"] == ov["voxel_m"] > 0 and "source points within" in ov["definition"]
+    # Open3D's own figures on the same clouds, under its names, agree with ours
+    assert doc["open3d_fitness"] == ov["open3d_fitness"] == pytest.approx(ov["share"], abs=2e-3)
+    assert doc["open3d_inlier_rmse_m"] == pytest.approx(ov["rmse_m"], rel=0.02)
+    assert doc["inliers_of"].startswith("matched keypoint pairs")
     assert {"features", "estimation", "refinement"} <= set(doc["timings_s"])
     assert doc["config"]["voxel_m"] == 0.08 and doc["config"]["features"] == "sift"
     assert doc["config"]["image"] == "flexion" and doc["config"]["n"] == 5
@@ -159,9 +172,12 @@ def test_txt_is_the_same_matrix(registered):
 
 def test_match_image_stacks_both_feature_images(registered, pair):
     png = cv2.imread(str(registered["out"] / "matches.png"), cv2.IMREAD_UNCHANGED)
-    # target 397 rows (the laser scan), source 397 rows (the simulated station), 1799 wide
-    assert png.dtype == np.uint8 and png.shape == (397 + 397, 1799, 3)
-    colourful = (png.max(axis=2).astype(int) - png.min(axis=2)) > 60
+    # target 397 rows (the laser scan), source 397 rows (the simulated station), 1799 wide,
+    # at one pixel per image pixel below a title band (the labels: tests/test_honest_numbers.py)
+    assert png.dtype == np.uint8 and png.shape[1] == 1799
+    assert 397 + 397 < png.shape[0] < 397 + 397 + 150
+    body = png[-(397 + 397) :]
+    colourful = (body.max(axis=2).astype(int) - body.min(axis=2)) > 60
     assert colourful[:397].any() and colourful[397:].any(), "lines reach both images"
 
 
@@ -180,6 +196,12 @@ def test_summary_and_stage_progress(registered):
     out, err = registered["stdout"], registered["stderr"]
     for word in ("matches", "inliers", "inlier RMSE", "mm", "fitness", "voxel", "coarse", "°"):
         assert word in out, word
+    target, source = registered["result_files"]
+    flat = " ".join(out.split())
+    assert f"target = {target}, source = {source}" in flat
+    # the headline is the overlap with its denominator; inliers say what they are of
+    assert "overlap" in flat and "% of" in flat and "source points within" in flat
+    assert "matched keypoint pairs are inliers" in flat and "inlier_rmse" in flat
     assert "T.json" in out and "merged.ply" in out
     assert "Reading target.npz" in err and "Reading source.ptx" in err
     for name in registered["result"].timings_s:  # a spinner and a done line per stage

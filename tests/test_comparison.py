@@ -15,13 +15,14 @@ import pytest
 import flexreg.bench.measure as measure
 import flexreg.bench.results as results
 from flexreg import ConfigError, InputError, RegistrationError, read_scans
-from flexreg.bench.compare import FitEvaluator, SuccessCriteria, compare
+from flexreg.bench.compare import SuccessCriteria, compare
 from flexreg.bench.measure import measure_call, preload_modules, run_isolated
 from flexreg.bench.methods import parse_methods
 from flexreg.bench.results import write_comparison
 from flexreg.bench.tables import to_markdown
 from flexreg.core.transforms import apply, invert, make_transform, rotation_about_axis
 from flexreg.io.transform_io import read_ground_truth
+from flexreg.stages.overlap import OverlapMeter
 
 
 @pytest.fixture(scope="module")
@@ -104,15 +105,19 @@ def test_fit_on_a_hand_computed_case():
     # 0.3 m from a target point and one 5 m away; distance limit 0.25 m
     target = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     source = np.array([[0.1, 0, 0], [1, 0.1, 0], [0, 1.3, 0], [5, 5, 5]])
-    fit = FitEvaluator(target, source, 0.25)
-    share, rmse = fit(np.eye(4))
-    assert share == 0.5
-    assert rmse == pytest.approx(0.1)
+    # (points farther apart than the voxel: voxelising keeps each as it is)
+    fit = OverlapMeter(target, source, voxel_m=0.25)
+    ov = fit(np.eye(4))
+    assert ov.share == 0.5 and ov.source_points == 4 and ov.distance_m == 0.25
+    assert ov.rmse_m == pytest.approx(0.1)
     # moving the source by -0.1 m in x puts the first point exactly on the target
-    share, rmse = fit(make_transform(np.eye(3), [-0.1, 0.0, 0.0]))
-    assert share == 0.5
-    assert rmse == pytest.approx(np.sqrt((0.0 + 0.02) / 2))
-    assert fit.denominator.startswith("4 evenly spaced source points")
+    ov = fit(make_transform(np.eye(3), [-0.1, 0.0, 0.0]))
+    assert ov.share == 0.5
+    assert ov.rmse_m == pytest.approx(np.sqrt((0.0 + 0.02) / 2))
+    # Open3D's figures on the same clouds agree
+    assert ov.open3d_fitness == pytest.approx(0.5)
+    assert ov.open3d_inlier_rmse_m == pytest.approx(ov.rmse_m)
+    assert ov.headline().startswith("50.0 % of 4 source points within 25 cm of a target point")
 
 
 def _raise_registration_error():

@@ -13,15 +13,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from flexreg.core.results import PairResult
 from flexreg.core.transforms import as_transform
-from flexreg.errors import ConfigError, RegistrationError
-from flexreg.stages.sampling import median_spacing, thin, to_open3d
+from flexreg.errors import ConfigError
+from flexreg.stages.overlap import SCALE_MAX_POINTS, scale_voxel
 
 #: default point budget of the scale parameter: the voxel is enlarged until the voxel-downsampled
 #: target keeps at most this many points (FPFH + RANSAC cost grows quickly with the count)
-DEFAULT_MAX_POINTS = 20_000
-
-#: default voxel in median point spacings of the target (before the point budget applies)
-SPACINGS_PER_VOXEL = 2.0
+DEFAULT_MAX_POINTS = SCALE_MAX_POINTS
 
 
 @dataclass(frozen=True)
@@ -73,12 +70,8 @@ def initial_transform(T_init: ArrayLike | None) -> tuple[NDArray[np.float64], st
 def default_voxel(
     target: NDArray[np.float64], *, max_points: int = DEFAULT_MAX_POINTS
 ) -> tuple[float, str]:
-    """The scale parameter from the scan resolution: ``(voxel_m, how)``.
-
-    ``SPACINGS_PER_VOXEL`` (2) times the target's median nearest-neighbour spacing
-    (:func:`flexreg.stages.sampling.median_spacing`), enlarged until the voxel-downsampled
-    target keeps at
-    most ``max_points`` points. Deterministic (fixed subsample seeds).
+    """The scale parameter from the scan resolution: ``(voxel_m, how)``; the same rule as the
+    overlap figure of every result (:func:`flexreg.stages.overlap.scale_voxel`).
 
     Parameters
     ----------
@@ -92,23 +85,7 @@ def default_voxel(
     how : str
         Which rule set the value (for the record).
     """
-    if max_points < 100:
-        raise ConfigError(f"max_points must be at least 100, got {max_points}")
-    spacing = median_spacing(target, tree_points=200_000)
-    if not spacing > 0:
-        raise RegistrationError("cannot derive a voxel size: the target's points coincide")
-    voxel = SPACINGS_PER_VOXEL * spacing
-    how = f"{SPACINGS_PER_VOXEL:g} x median spacing {spacing:.4g} m"
-    pts = thin(target, 2_000_000)
-    base = to_open3d(pts)
-    n = len(base.voxel_down_sample(voxel).points)
-    for _ in range(12):  # the count falls roughly with the square of the voxel (surfaces)
-        if n <= max_points:
-            break
-        voxel *= 1.05 * math.sqrt(n / max_points)
-        n = len(base.voxel_down_sample(voxel).points)
-        how = f"enlarged until at most {max_points:,} target points remain"
-    return float(voxel), how
+    return scale_voxel(target, max_points=max_points)
 
 
 def resolve_voxel(

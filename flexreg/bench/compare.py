@@ -12,10 +12,12 @@ scans and measures, per method:
 - **success**: the final transform within ``SuccessCriteria.rotation_deg`` (default 0.5°) *and*
   ``SuccessCriteria.translation_m`` (default 5 cm) of the truth; *coarse success* applies the
   same limits to the transform before refinement (global methods only);
-- **fit**, the same for every method: of at most 20,000 evenly spaced source points mapped by
-  the method's transform, the share with a target point within ``fit_distance_m`` (the scale
-  voxel, see :func:`flexreg.baselines.default_voxel`) -- *fitness*, denominator stated -- and
-  the RMS distance of those points (*inlier RMSE*);
+- **overlap**, the same for every method and the same figure ``flexreg register`` reports
+  (:mod:`flexreg.stages.overlap`): both clouds voxelised at the scale voxel
+  (:func:`flexreg.baselines.default_voxel`), the share of the source points mapped by the
+  method's transform with a target point within that voxel (denominator stated) and their RMS
+  distance; beside it Open3D's ``fitness`` and ``inlier_rmse`` of ``evaluate_registration`` on
+  the same clouds at the same distance;
 - **wall time** of the method's call alone and **peak memory** (:mod:`flexreg.bench.measure`).
 
 By default each method runs in its own process (``multiprocessing`` forkserver), so that a
@@ -40,7 +42,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from flexreg.baselines import default_voxel
 from flexreg.bench.measure import (
@@ -57,13 +58,11 @@ from flexreg.core.scan import as_points
 from flexreg.core.transforms import as_transform, rotation_error_deg, translation_error_m
 from flexreg.errors import ConfigError, InputError, RegistrationError
 from flexreg.registration.config import RegistrationConfig
+from flexreg.stages.overlap import OverlapMeter
 
 __all__ = [
-    "FIT_SOURCE_POINTS",
-    "FIT_TARGET_POINTS",
     "MIN_OVERLAP_FITNESS",
     "Comparison",
-    "FitEvaluator",
     "MethodRun",
     "SuccessCriteria",
     "compare",
@@ -72,10 +71,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: source points (evenly spaced) and target points (every k-th) the common fit uses
-FIT_SOURCE_POINTS = 20_000
-FIT_TARGET_POINTS = 1_000_000
-#: a pair whose source lies less than this share on the target (common fit) has no overlap
+#: a pair whose source lies less than this share on the target (the overlap) has no overlap
 MIN_OVERLAP_FITNESS = 0.01
 
 
@@ -121,50 +117,6 @@ def _length(m: float) -> str:
     return f"{1000 * m:g} mm"
 
 
-class FitEvaluator:
-    """The common fit measure of every method's transform on one pair.
-
-    Parameters
-    ----------
-    target, source : (N, 3) float64, metres
-    distance_m : float, metres
-        Inlier distance.
-    """
-
-    def __init__(
-        self, target: NDArray[np.float64], source: NDArray[np.float64], distance_m: float
-    ) -> None:
-        if not (math.isfinite(distance_m) and distance_m > 0):
-            raise ConfigError(f"fit distance must be positive, got {distance_m}")
-        t = target[:: max(1, math.ceil(len(target) / FIT_TARGET_POINTS))]
-        self.source = source[:: max(1, math.ceil(len(source) / FIT_SOURCE_POINTS))]
-        self.distance_m = float(distance_m)
-        self._tree = cKDTree(t)
-        thinned = (
-            f", target thinned to every {math.ceil(len(target) / len(t))}-th point"
-            if len(t) < len(target)
-            else ""
-        )
-        self.denominator = (
-            f"{len(self.source)} evenly spaced source points with a target point within "
-            f"{self.distance_m:.3g} m{thinned}"
-        )
-
-    def __call__(self, T: NDArray[np.float64]) -> tuple[float, float]:
-        """``(fitness, inlier RMSE in metres)`` of a transform."""
-        q = self.source @ T[:3, :3].T + T[:3, 3]
-        d, _ = self._tree.query(q, distance_upper_bound=self.distance_m)
-        ok = np.isfinite(d)
-        rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else math.nan
-        return float(ok.mean()), rmse
-
-    def distances(self, T: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance in metres from each (thinned) source point mapped by ``T`` to its nearest
-        target point, however far."""
-        d, _ = self._tree.query(self.source @ T[:3, :3].T + T[:3, 3])
-        return np.asarray(d, dtype=np.float64)
-
-
 @dataclass(eq=False)
 class MethodRun:
     """One row of a comparison.
@@ -184,7 +136,11 @@ class MethodRun:
     success, coarse_success : bool or None
         None without ground truth (and ``coarse_success`` for local methods).
     fitness, inlier_rmse_m : float or None
-        The common fit (:class:`FitEvaluator`).
+        The overlap of the final transform and its RMS distance in metres, the same figure
+        for every method and for ``flexreg register`` (:mod:`flexreg.stages.overlap`);
+        written as ``overlap`` and ``overlap_rmse_m``.
+    open3d_fitness, open3d_inlier_rmse_m : float or None
+        Open3D's ``evaluate_registration`` on the same clouds at the same distance.
     verdict : str or None
         The method's own verdict on its result: ``"confident"`` or ``"uncertain"`` (flexreg),
         ``"n/a"`` for methods that give none (the baselines); None without a result. The
@@ -209,6 +165,8 @@ class MethodRun:
     coarse_success: bool | None = None
     fitness: float | None = None
     inlier_rmse_m: float | None = None
+    open3d_fitness: float | None = None
+    open3d_inlier_rmse_m: float | None = None
     verdict: str | None = None
     details: dict[str, Any] = field(default_factory=dict)
 
@@ -234,8 +192,10 @@ class MethodRun:
             "coarse_translation_error_m": self.coarse_translation_error_m,
             "success": self.success,
             "coarse_success": self.coarse_success,
-            "fitness": self.fitness,
-            "inlier_rmse_m": self.inlier_rmse_m,
+            "overlap": self.fitness,
+            "overlap_rmse_m": self.inlier_rmse_m,
+            "open3d_fitness": self.open3d_fitness,
+            "open3d_inlier_rmse_m": self.open3d_inlier_rmse_m,
             "verdict": self.verdict,
             "details": self.details,
         }
@@ -247,9 +207,9 @@ def make_row(
     *,
     T_gt: NDArray[np.float64] | None,
     criteria: SuccessCriteria,
-    fit: FitEvaluator | None,
+    fit: OverlapMeter | None,
 ) -> MethodRun:
-    """Turn a :class:`Measured` call into a :class:`MethodRun` (errors, success, fit)."""
+    """Turn a :class:`Measured` call into a :class:`MethodRun` (errors, success, overlap)."""
     row = MethodRun(
         method=name,
         status=m.status,
@@ -280,15 +240,17 @@ def make_row(
                 row.coarse_rotation_error_deg, row.coarse_translation_error_m
             )
     if fit is not None:
-        row.fitness, row.inlier_rmse_m = fit(row.T_target_source)
+        ov = fit(row.T_target_source)
+        row.fitness, row.inlier_rmse_m = ov.share, ov.rmse_m
+        row.open3d_fitness, row.open3d_inlier_rmse_m = ov.open3d_fitness, ov.open3d_inlier_rmse_m
     verdict = getattr(r, "verdict", None)
     row.verdict = "n/a" if verdict is None else verdict.status
     cfg = r.config.to_dict() if hasattr(r.config, "to_dict") else {}
     row.details = {
         "matches": r.matches,
         "inliers": r.inliers,
-        "own_fitness": r.fitness,
-        "own_fitness_denominator": r.fitness_denominator,
+        "stage_fitness": r.fitness,
+        "stage_fitness_denominator": r.fitness_denominator,
         "own_inlier_rmse_m": r.inlier_rmse_m,
         "threshold_m": r.threshold_m,
         "start": r.prior,
@@ -318,10 +280,10 @@ class Comparison:
     T_init : (4, 4) float64 or None
         Start given to the local methods (None: identity).
     scale_m : float, metres
-        The scale voxel (given, or :func:`~flexreg.baselines.default_voxel` of the target);
-        also the common fit distance.
+        The scale voxel (given, or :func:`~flexreg.baselines.default_voxel` of the target).
     scale_source : str
     fit_denominator : str
+        What the overlap divides by, with its distance and voxel.
     peak_memory : str
         How peak memory was measured.
     isolation : str
@@ -410,7 +372,8 @@ def compare(
         Start of the local methods (ICP variants, KISS-ICP, small_gicp); identity when None.
     voxel_m : float, optional, metres
         Scale voxel given to every baseline (default: each derives it from the scan
-        resolution, the same value, inside its timed call); also the common fit distance.
+        resolution, the same value, inside its timed call). The overlap always uses the
+        default scale voxel, as ``flexreg register`` does.
     seed : int
         flexreg's and RANSAC's seed.
     criteria : SuccessCriteria
@@ -455,14 +418,21 @@ def compare(
         scale, scale_source = default_voxel(pt)
     else:
         scale, scale_source = float(voxel_m), "given"
-    fit = FitEvaluator(pt, ps, scale)
+    # the overlap's voxel is the scale voxel of the target whatever --voxel says, so that
+    # register and compare state the same overlap for the same transform
+    fit = OverlapMeter(pt, ps, voxel_m=scale if voxel_m is None else None)
+    d = fit.distance_m
+    denominator = (
+        f"{len(fit.source_points):,} source points within {d:.3g} m of a target point "
+        f"after alignment (both clouds voxelised at {fit.voxel_m:.3g} m; "
+        f"{len(fit.target_points):,} target points)"
+    )
     if require_overlap and Tg is not None:
-        share, _ = fit(Tg)
-        if share < MIN_OVERLAP_FITNESS:
+        at_truth = fit(Tg)
+        if at_truth.share < MIN_OVERLAP_FITNESS:
             raise InputError(
                 f"{names[0]} / {names[1]}",
-                f"the scans do not overlap at the ground-truth pose: {100 * share:.1f}% of "
-                f"{fit.denominator}",
+                f"the scans do not overlap at the ground-truth pose: overlap {at_truth.headline()}",
             )
     machine = machine_info()
     options: dict[str, Any] = {"T_init": Ti, "voxel_m": voxel_m, "seed": seed}
@@ -500,7 +470,7 @@ def compare(
         T_init=Ti,
         scale_m=scale,
         scale_source=scale_source,
-        fit_denominator=fit.denominator,
+        fit_denominator=denominator,
         peak_memory=peak_memory_note(),
         isolation=(
             isolation_note() if isolate else "all methods in one process, one after the other"
@@ -526,7 +496,7 @@ def _require_some_overlap(runs: list[MethodRun], names: tuple[str, str]) -> None
         return
     outcome = "; ".join(
         f"{r.method}: "
-        + (f"{r.status} ({r.message})" if not r.ok else f"fitness {r.fitness or 0.0:.3f}")
+        + (f"{r.status} ({r.message})" if not r.ok else f"overlap {r.fitness or 0.0:.3f}")
         for r in runs
     )
     raise RegistrationError(

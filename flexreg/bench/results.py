@@ -47,7 +47,7 @@ def write_comparison(
         {**cmp.to_dict(), **({"config": config.to_dict()} if config is not None else {})},
         indent=2,
     )
-    md = f"# {Path(cmp.target).name} ← {Path(cmp.source).name}\n\n" + to_markdown(
+    md = f"# target = {Path(cmp.target).name}, source = {Path(cmp.source).name}\n\n" + to_markdown(
         cmp, figure="comparison.png"
     )
     writers: list[tuple[Path, Callable[[Path], object]]] = [

@@ -314,6 +314,8 @@ def _records(case: Case, cmp: Comparison, index: int) -> list[dict[str, Any]]:
             "coarse_success": r.coarse_success,
             "inlier_rmse_m": r.inlier_rmse_m,
             "fitness": r.fitness,
+            "open3d_fitness": r.open3d_fitness,
+            "open3d_inlier_rmse_m": r.open3d_inlier_rmse_m,
             "time_s": r.time_s,
             "peak_memory_mb": r.peak_memory_mb,
         }
@@ -367,6 +369,8 @@ def _unloaded(
             "coarse_translation_error_m": None,
             "inlier_rmse_m": None,
             "fitness": None,
+            "open3d_fitness": None,
+            "open3d_inlier_rmse_m": None,
             "time_s": math.nan,
             "peak_memory_mb": None,
         }

@@ -124,6 +124,8 @@ CSV_FIELDS = (
     "success_translation_m",
     "inlier_rmse_m",
     "fitness",
+    "open3d_fitness",
+    "open3d_inlier_rmse_m",
     "time_s",
     "peak_memory_mb",
 )

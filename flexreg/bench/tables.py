@@ -17,8 +17,10 @@ COLUMNS: tuple[str, ...] = (
     "success",
     "verdict",
     "coarse error (° / m)",
-    "inlier RMSE (m)",
-    "fitness",
+    "overlap",
+    "overlap RMSE (m)",
+    "open3d fitness",
+    "open3d inlier_rmse (m)",
     "time (s)",
     "peak memory (MB)",
 )
@@ -54,8 +56,10 @@ def table_rows(cmp: Comparison) -> list[dict[str, str]]:
                 "success": _yes(r.success),
                 "verdict": r.verdict or "–",
                 "coarse error (° / m)": coarse,
-                "inlier RMSE (m)": _num(r.inlier_rmse_m, ".4f"),
-                "fitness": _num(r.fitness, ".3f"),
+                "overlap": _num(r.fitness, ".3f"),
+                "overlap RMSE (m)": _num(r.inlier_rmse_m, ".4f"),
+                "open3d fitness": _num(r.open3d_fitness, ".3f"),
+                "open3d inlier_rmse (m)": _num(r.open3d_inlier_rmse_m, ".4f"),
                 "time (s)": _num(r.time_s, ".2f"),
                 "peak memory (MB)": _num(r.peak_memory_mb, ".0f"),
             }
@@ -66,8 +70,8 @@ def table_rows(cmp: Comparison) -> list[dict[str, str]]:
 def notes(cmp: Comparison) -> list[str]:
     """What the columns mean, for the Markdown and the console."""
     out = [
-        f"Scans: target {cmp.target} ({cmp.points[0]:,} points), source {cmp.source} "
-        f"({cmp.points[1]:,} points).",
+        f"Scans: target = {cmp.target} ({cmp.points[0]:,} points), source = {cmp.source} "
+        f"({cmp.points[1]:,} points); T_target_source maps the source onto the target.",
         "Success: final transform "
         + cmp.criteria.label()
         + " of the ground truth; coarse error = the transform before refinement (global "
@@ -75,7 +79,9 @@ def notes(cmp: Comparison) -> list[str]:
         + ("" if cmp.T_gt is not None else " No ground truth given: no errors, no success."),
         "Verdict: the method's own judgement of its result, before any ground truth is seen "
         "(flexreg: confident or uncertain; n/a: the method gives none, as the baselines).",
-        f"Fitness: share of {cmp.fit_denominator}; inlier RMSE over those points.",
+        f"Overlap: share of {cmp.fit_denominator} (the figure flexreg register reports); "
+        "overlap RMSE over those points; open3d fitness / inlier_rmse: Open3D's "
+        "evaluate_registration on the same clouds at the same distance.",
         f"Scale voxel {cmp.scale_m:.4g} m ({cmp.scale_source}); local methods start from "
         + ("the given initial guess." if cmp.T_init is not None else "the identity."),
         "Time: wall time of each method's call alone (scans in memory); peak memory: "
@@ -90,7 +96,7 @@ def to_markdown(cmp: Comparison, *, figure: str | None = None) -> str:
     rows = table_rows(cmp)
     lines = [
         "| " + " | ".join(COLUMNS) + " |",
-        "|---|---|" + "---:|" * 2 + "---|" * 2 + "---:|" * 5,
+        "|---|---|" + "---:|" * 2 + "---|" * 2 + "---:|" * 7,
     ]
     for row in rows:
         cells = [row[c].replace("|", "\\|") for c in COLUMNS]

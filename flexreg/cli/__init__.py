@@ -22,4 +22,14 @@ from flexreg.cli import (  # noqa: F401  (each module registers its commands on 
 )
 from flexreg.cli.app import app, main, run
 
+#: said under every command's options (they are root options, accepted in either place)
+_ROOT_FLAGS = (
+    "An --out (or other output) that exists is refused unless --overwrite is given; "
+    "--overwrite and -v / --verbose may be given before or after the command "
+    "(flexreg --help)."
+)
+for _info in app.registered_commands:
+    if _info.epilog is None:
+        _info.epilog = _ROOT_FLAGS
+
 __all__ = ["app", "main", "run"]

@@ -210,6 +210,14 @@ def about_pair(first: Path, second: Path) -> Iterator[None]:
         raise again from e
 
 
+def pair_label(
+    target: object, source: object, first: str = "target", second: str = "source"
+) -> str:
+    """``"target = a.ptx, source = b.ptx"``: every table of a pair says which file is which
+    (Open3D and CloudCompare put the source first; flexreg puts the target first)."""
+    return f"{first} = {target}, {second} = {source}"
+
+
 #: exit status of a command that wrote its result but does not trust it (see ``flexreg --help``)
 EXIT_UNCERTAIN = 3
 

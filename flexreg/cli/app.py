@@ -47,6 +47,13 @@ def _root(
     verbose: int = typer.Option(
         0, "--verbose", "-v", count=True, help="More log output (-vv: debug)."
     ),
+    overwrite: bool = typer.Option(
+        False,
+        "--overwrite",
+        help="Replace outputs that exist already (a file, or a result folder whose older files "
+        "are then removed); without it such an --out is refused. Like -v, it may also be "
+        "given after the command.",
+    ),
     memory_budget: str | None = typer.Option(
         None,
         "--memory-budget",
@@ -60,9 +67,11 @@ def _root(
     """Register 3D scans through 2D Flexion images."""
     import logging
 
+    from flexreg.cli.options import set_overwrite
     from flexreg.core.budget import set_memory_budget
 
     set_memory_budget(memory_budget)
+    set_overwrite(overwrite)
 
     from rich.logging import RichHandler
 
@@ -87,6 +96,44 @@ def _click_classes(name: str) -> tuple[type[BaseException], ...]:
     return tuple(classes)
 
 
+#: root flags that may also be given after the command (they take no value)
+ANYWHERE = ("--verbose", "--overwrite")
+
+
+def _anywhere(token: str) -> bool:
+    return token in ANYWHERE or (
+        len(token) > 1 and token[0] == "-" and token[1] != "-" and set(token[1:]) == {"v"}
+    )
+
+
+def hoist_root_flags(argv: list[str]) -> list[str]:
+    """Move ``-v`` / ``-vv`` / ``--verbose`` / ``--overwrite`` given after the command in front
+    of it, so they work in either place (not after ``--``).
+
+    >>> hoist_root_flags(["register", "a", "b", "-v", "--overwrite", "--out", "T.json"])
+    ['-v', '--overwrite', 'register', 'a', 'b', '--out', 'T.json']
+    """
+    front: list[str] = []
+    rest: list[str] = []
+    seen_command = False
+    for i, token in enumerate(argv):
+        if token == "--":
+            rest += argv[i:]
+            break
+        if seen_command and _anywhere(token):
+            front.append(token)
+            continue
+        if not token.startswith("-") and not seen_command:
+            seen_command = not (rest and rest[-1] == "--memory-budget")
+        rest.append(token)
+    if not front:
+        return list(argv)
+    cut = next((i for i, t in enumerate(rest) if not t.startswith("-")), len(rest))
+    if cut > 0 and rest[cut - 1] == "--memory-budget":
+        cut = next((i for i, t in enumerate(rest) if i > cut and not t.startswith("-")), len(rest))
+    return rest[:cut] + front + rest[cut:]
+
+
 def run(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit status: 0 done (and confident), 1 known error (nothing
     written), 2 usage error, 3 written but uncertain (``register``, ``calibrate``).
@@ -96,6 +143,7 @@ def run(argv: list[str] | None = None) -> int:
     it fails or is interrupted."""
     from flexreg.io.files import all_or_nothing
 
+    argv = hoist_root_flags(sys.argv[1:] if argv is None else [str(a) for a in argv])
     try:
         with all_or_nothing():  # every output of the command is written at its end, or none
             rv = app(args=argv, standalone_mode=False)

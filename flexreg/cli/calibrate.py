@@ -15,6 +15,7 @@ from flexreg.cli._common import (
     console,
     err_console,
     exit_for,
+    pair_label,
     print_verdict,
     read_input,
     scan_file,
@@ -390,11 +391,12 @@ def calibrate_command(
             writers.append((overlay, _png_writer(overlay, picture)))
         writers.append((out, _result_writer(out, result, inputs_meta, truth, errors)))
     write_all(writers)
-    _report(result, errors, pairs, writers, out, overlay)
+    _report(result, (image, scan), errors, pairs, writers, out, overlay)
 
 
 def _report(
     result: CalibrationResult | None,
+    files: tuple[Path, Path],
     errors: Any,
     pairs: Path | None,
     writers: list[tuple[Path, Any]],
@@ -405,7 +407,7 @@ def _report(
     if result is not None and result.dropped:
         _print_dropped(result, pairs)
     if result is not None:
-        _print_summary(result, errors)
+        _print_summary(result, errors, files)
         print_verdict(result.verdict)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -479,12 +481,15 @@ def _print_dropped(result: CalibrationResult, pairs: Path | None) -> None:
     )
 
 
-def _print_summary(result: CalibrationResult, errors: dict[str, float] | None) -> None:
+def _print_summary(
+    result: CalibrationResult, errors: dict[str, float] | None, files: tuple[Path, Path]
+) -> None:
     import numpy as np
     from rich.table import Table
 
     r = result
-    t = Table(title="T_camera_lidar", show_header=False, title_justify="left")
+    label = pair_label(files[0], files[1], "camera", "lidar")
+    t = Table(title=f"T_camera_lidar: {label}", show_header=False, title_justify="left")
     t.add_column(style="bold")
     t.add_column()
     n = len(r.correspondences)

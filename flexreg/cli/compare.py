@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from flexreg.bench.config import DEFAULT_METHODS, CompareConfig
-from flexreg.cli._common import console, err_console, progress_bar, read_pair
+from flexreg.cli._common import console, err_console, pair_label, progress_bar, read_pair
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -195,8 +195,10 @@ _SHORT = {
     "success": "success",
     "verdict": "verdict",
     "coarse error (° / m)": "coarse ° / m",
-    "inlier RMSE (m)": "RMSE m",
-    "fitness": "fitness",
+    "overlap": "overlap",
+    "overlap RMSE (m)": "RMSE m",
+    "open3d fitness": "o3d fitness",
+    "open3d inlier_rmse (m)": "o3d rmse m",
     "time (s)": "time s",
     "peak memory (MB)": "peak MB",
 }
@@ -208,7 +210,10 @@ def _print_comparison(cmp: Comparison) -> None:
 
     from flexreg.bench.tables import COLUMNS, notes, table_rows
 
-    t = Table(title=f"{cmp.target} ← {cmp.source}", title_justify="left")
+    t = Table(
+        title=f"{pair_label(cmp.target, cmp.source)} (T_target_source: source onto target)",
+        title_justify="left",
+    )
     for c in COLUMNS:
         left = c in ("method", "status", "success", "verdict")
         t.add_column(_SHORT[c], justify="left" if left else "right", no_wrap=c != "status")
@@ -216,8 +221,8 @@ def _print_comparison(cmp: Comparison) -> None:
         cells = dict(row)
         cells["status"] = run.status  # the message follows the table
         t.add_row(*(cells[c] for c in COLUMNS))
-    # the table needs about 130 columns: as wide as that even when piped
-    wide = console if console.width >= 132 else Console(highlight=False, width=132)
+    # the table needs about 150 columns: as wide as that even when piped
+    wide = console if console.width >= 150 else Console(highlight=False, width=150)
     wide.print(t)
     for run in cmp.runs:
         if not run.ok:

@@ -10,7 +10,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from flexreg.cli._common import console, err_console, progress_bar, stage, write_all
+from flexreg.cli._common import (
+    EXIT_UNCERTAIN,
+    console,
+    err_console,
+    progress_bar,
+    stage,
+    write_all,
+)
 from flexreg.cli.app import app
 from flexreg.cli.options import (
     ConfigFileOption,
@@ -248,6 +255,14 @@ def odometry_command(
 
     A frame pair that cannot be solved is reported and bridged (matched against the last good
     frame, else constant velocity). Nothing is written unless the run succeeds.
+
+    \b
+    Exit status:
+      0  written; every motion measured, or at most 10 % of the frames bridged (a closing
+         warning names them)
+      3  written, but more than 10 % of the frames were bridged: the trajectory is
+         unreliable there (warning on screen, "run_status": "unreliable" in --json)
+      1  failed: one error line, nothing written
     """
     from flexreg.io.sequence import read_sequence
     from flexreg.odometry.track import odometry
@@ -292,11 +307,45 @@ def odometry_command(
         result = odometry(seq, config, progress=progress)
     seconds = time.perf_counter() - t0
     evaluation, note = _evaluate(seq, result, summary.delta, summary.delta_unit)
-    writers = _writers(seq, result, seconds, evaluation, out, json_out)
+    warning = bridged_warning(result.n_frames - 1, len(result.failures))
+    writers = _writers(seq, result, seconds, evaluation, out, json_out, warning)
     write_all(writers)
     _print_summary(seq, result, seconds, evaluation, note)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
+    if warning is not None:
+        err_console.print(f"warning: {warning[0]}", markup=False, highlight=False, soft_wrap=True)
+        if warning[1]:
+            raise typer.Exit(EXIT_UNCERTAIN)
+
+
+#: above this share of bridged frames the run exits 3 (written but unreliable)
+BRIDGED_EXIT_SHARE = 0.10
+
+
+def bridged_warning(motions: int, bridged: int) -> tuple[str, bool] | None:
+    """The closing warning of a run with bridged frames, and whether it exits 3.
+
+    Any bridged frame is warned about: its pose is extrapolated (constant velocity or the last
+    good frame), not measured. The run exits 3 when more than :data:`BRIDGED_EXIT_SHARE` of the
+    motions were bridged.
+
+    >>> text, exit_3 = bridged_warning(19, 17)
+    >>> text.split(":")[0], exit_3
+    ('17 of 19 frames bridged', True)
+    >>> bridged_warning(59, 0) is None, bridged_warning(59, 5)[1], bridged_warning(59, 6)[1]
+    (True, False, True)
+    """
+    if bridged <= 0:
+        return None
+    over = bridged > BRIDGED_EXIT_SHARE * motions
+    text = (
+        f"{bridged} of {motions} frames bridged: the trajectory is unreliable there (poses "
+        "extrapolated, not measured)"
+    )
+    if over:
+        text += f"; more than {100 * BRIDGED_EXIT_SHARE:g} % bridged: exit status 3"
+    return text, over
 
 
 def _writers(
@@ -306,6 +355,7 @@ def _writers(
     evaluation: EvaluationResult | None,
     out: Path,
     json_out: Path | None,
+    warning: tuple[str, bool] | None = None,
 ) -> list[tuple[Path, Any]]:
     """The trajectory and, with --json, the run's report (written all or none)."""
     from flexreg._version import __version__
@@ -322,6 +372,8 @@ def _writers(
             **result.to_dict(),
             "seconds": seconds,
             "evaluation": None if evaluation is None else evaluation.to_dict(),
+            "run_status": "unreliable" if warning is not None and warning[1] else "done",
+            "warning": None if warning is None else warning[0],
             "flexreg_version": __version__,
         }
         text = json.dumps(to_jsonable(doc), indent=2) + "\n"

@@ -21,6 +21,25 @@ from flexreg.errors import ConfigError
 
 C = TypeVar("C", bound=Config)
 
+#: whether ``--overwrite`` was given (set by the root options, read by the output checks)
+_OVERWRITE = [False]
+
+
+def set_overwrite(flag: bool) -> None:
+    """``--overwrite``: outputs that exist already are replaced instead of refused."""
+    _OVERWRITE[0] = bool(flag)
+
+
+def overwrite_allowed() -> bool:
+    return _OVERWRITE[0]
+
+
+def _refuse_existing(option: str, path: Path, what: str = "exists") -> None:
+    if not _OVERWRITE[0]:
+        raise ConfigError(
+            f"{option}: {path}: {what} (an earlier result); give --overwrite to replace it"
+        )
+
 
 #: ``--config FILE`` (declare as ``config_file: ConfigFileOption = None``)
 ConfigFileOption = Annotated[
@@ -172,10 +191,41 @@ def check_outputs(
         key = path.resolve()
         if path.exists() and any(f in key.parents for f in folders):
             raise ConfigError(f"{option}: {path}: would overwrite a file of the input")
+    for option, path in written:
+        if path.exists() or path.is_symlink():
+            _refuse_existing(option, path)
 
 
-def check_out_folder(option: str, folder: Path | None, inputs: Iterable[Path] = ()) -> None:
-    """Refuse an output folder that is a file or one of the inputs."""
+def check_out_folder(
+    option: str,
+    folder: Path | None,
+    inputs: Iterable[Path] = (),
+    *,
+    keep: tuple[str, ...] = (),
+    marker: str | None = None,
+) -> None:
+    """Refuse an output folder that is a file, one of the inputs, or holds anything (but the
+    entries named in ``keep``) unless ``--overwrite`` was given.
+
+    With ``--overwrite``, files of the same names are replaced; and when the folder holds
+    ``marker`` (the file that shows it is an earlier result of the same command, e.g. synth's
+    ``gt.json``), the older run's other files are removed once the new ones are in place
+    (:func:`flexreg.io.files.replace_folder`; never an input of the command, never the
+    ``keep`` entries, nothing at all if the command fails). A folder without the marker is
+    written into, nothing in it removed.
+
+    Parameters
+    ----------
+    option : str
+    folder : Path or None
+    inputs : iterable of Path
+    keep : tuple of str
+        Top-level entries that are not results and stay (``survey``: its ``cache``).
+    marker : str, optional
+        File name that marks an earlier result of the command (None: never remove files).
+    """
+    from flexreg.io.files import replace_folder
+
     if folder is None:
         return
     if folder.exists() and not folder.is_dir():
@@ -183,3 +233,7 @@ def check_out_folder(option: str, folder: Path | None, inputs: Iterable[Path] = 
     for p in inputs:
         if p.resolve() == folder.resolve():
             raise ConfigError(f"{option}: {folder}: is also an input")
+    if folder.is_dir() and any(e.name not in keep for e in folder.iterdir()):
+        _refuse_existing(option, folder, "is a folder that is not empty")
+        if marker is not None and (folder / marker).is_file():
+            replace_folder(folder, keep)

@@ -14,6 +14,7 @@ from flexreg.cli._common import (
     about_pair,
     console,
     exit_for,
+    pair_label,
     print_verdict,
     read_pair,
     scan_file,
@@ -89,17 +90,28 @@ class _StageSpinners(AbstractContextManager["_StageSpinners"]):
         self._close(exc_type, exc, tb)
 
 
-def _match_png(target: Scan, source: Scan, result: RegistrationResult) -> NDArray[np.uint8]:
-    """Both feature images (target on top) with the RANSAC inliers drawn as lines."""
+def _match_figure(
+    target: Scan, source: Scan, result: RegistrationResult, names: tuple[str, str]
+) -> Any:
+    """Both feature images (target on top), every lifted match drawn, inliers and outliers
+    apart, file names and counts in the title (:func:`flexreg.viz.matches.match_figure`)."""
     from flexreg.registration.pipeline import feature_image
     from flexreg.stages.projection import range_image
-    from flexreg.viz.draw import match_image
+    from flexreg.viz.matches import match_figure
 
     ft, _ = feature_image(range_image(target), result.config)
     fs, _ = feature_image(range_image(source), result.config)
     kt, ks = result.keypoints
-    inl = result.inlier_mask
-    return match_image(ft, fs, kt[inl], ks[inl])
+    return match_figure(
+        ft,
+        fs,
+        kt,
+        ks,
+        result.inlier_mask,
+        target_name=names[0],
+        source_name=names[1],
+        threshold_m=result.threshold_m,
+    )
 
 
 def _merged_scan(target: Scan, source: Scan, T: NDArray[np.float64]) -> Scan:
@@ -191,7 +203,11 @@ _ThresholdOption = Annotated[
 ]
 _MatchesOption = Annotated[
     Path | None,
-    typer.Option("--matches", help="Write a .png of both feature images with the inlier matches."),
+    typer.Option(
+        "--matches",
+        help="Write a .png of both feature images (target on top) with the matched keypoint "
+        "pairs: inliers and outliers in two colours, file names and counts in the title.",
+    ),
 ]
 _MergedOption = Annotated[
     Path | None,
@@ -358,7 +374,7 @@ def register_command(
     }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
-    _print_summary(result, config, errors, check)
+    _print_summary(result, config, target, source, errors, check)
     print_verdict(result.verdict, result.T_target_source)
     for path, _ in writers:
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
@@ -387,14 +403,18 @@ def _writers(
             cloud = _merged_scan(tscan, sscan, T)
         writers.append((merged, lambda: write_scan(merged, cloud)))
     if matches is not None:
+        from flexreg.viz.matches import save_figure
+
         with stage("Drawing matches"):
-            png = _match_png(tscan, sscan, result)
-        writers.append((matches, lambda: atomic_write(matches, lambda tmp: _imwrite(tmp, png))))
+            names = (Path(inputs["target"]).name, Path(inputs["source"]).name)
+            fig = _match_figure(tscan, sscan, result, names)
+        writers.append((matches, lambda: atomic_write(matches, lambda tmp: save_figure(fig, tmp))))
     if txt is not None:
         writers.append((txt, lambda: write_transform_txt(txt, T)))
     meta = result.to_dict()
     meta.pop("T_target_source", None)
     meta = {"target": inputs["target"], "source": inputs["source"], **meta}
+    meta["inliers_of"] = "matched keypoint pairs (RANSAC of the coarse stage)"
     meta["flexreg_version"] = __version__
     if inputs["errors"] is not None:
         meta["error_vs_truth"] = {"truth": str(inputs["truth"]), **inputs["errors"]}
@@ -407,13 +427,6 @@ def _writers(
         meta["stored_pose_check"] = inputs["stored_pose_check"]
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     return writers
-
-
-def _imwrite(path: Path, image: NDArray[np.uint8]) -> None:
-    import cv2
-
-    if not cv2.imwrite(str(path), image):
-        raise InputError(path, "cannot write the PNG file")
 
 
 def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
@@ -488,9 +501,17 @@ def _stored_check(result: RegistrationResult, stored: NDArray[np.float64]) -> di
     }
 
 
+def _mm(m: float) -> str:
+    import math
+
+    return f"{1000 * m:.2f} mm" if math.isfinite(m) else "n/a"
+
+
 def _print_summary(
     result: RegistrationResult,
     config: RegistrationConfig,
+    target: Path,
+    source: Path,
     errors: dict[str, float] | None = None,
     stored: dict[str, Any] | None = None,
 ) -> None:
@@ -505,14 +526,29 @@ def _print_summary(
 
     r = result
     final = "ICP " + config.icp if config.refine else "keypoint inliers, not refined"
-    t = Table(title="T_target_source", show_header=False, title_justify="left")
+    t = Table(
+        title=f"T_target_source: {pair_label(target, source)}",
+        show_header=False,
+        title_justify="left",
+    )
     t.add_column(style="bold")
     t.add_column()
+    if r.overlap is not None:
+        o = r.overlap
+        t.add_row("overlap", o.headline())
+        t.add_row(
+            "open3d",
+            f"fitness {o.open3d_fitness:.4f}, inlier_rmse {_mm(o.open3d_inlier_rmse_m)} "
+            f"(evaluate_registration at {_mm(o.distance_m)}, the same clouds)",
+        )
     share = 100 * r.inliers / r.matches if r.matches else 0.0
-    t.add_row("matches", f"{r.matches:,} 3D keypoint matches ({config.features} on {config.image})")
-    t.add_row("inliers", f"{r.inliers:,} ({share:.1f} %) within {1000 * r.threshold_m:.1f} mm")
-    t.add_row("inlier RMSE", f"{1000 * r.inlier_rmse_m:.2f} mm ({final})")
-    t.add_row("fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
+    t.add_row(
+        "keypoints",
+        f"{r.inliers:,} of {r.matches:,} matched keypoint pairs are inliers ({share:.1f} %) "
+        f"within {1000 * r.threshold_m:.1f} mm ({config.features} on {config.image})",
+    )
+    t.add_row("inlier RMSE", f"{_mm(r.inlier_rmse_m)} ({final})")
+    t.add_row("stage fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
     t.add_row("prior", r.prior)
     t.add_row("coarse", motion(r.T_coarse))
     t.add_row("final", motion(r.T_target_source))

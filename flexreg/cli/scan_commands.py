@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -135,17 +136,17 @@ def project(
         "map coordinates.",
     ),
 ) -> None:
-    """Make a range image of a scan: 16-bit PNG + float32 npz (+ camera sidecar JSON)."""
-    import math
+    """Make a range image of a scan: 16-bit PNG + float32 npz + camera sidecar JSON.
 
+    A scanner's native grid (PTX, E57, organised PCD) keeps its pixels when an equirectangular
+    or pinhole camera fits it; otherwise, and with --resample, the points are projected through
+    a fitted equirectangular camera. Either way the camera sidecar is written, so the PNG reads
+    back as a scan."""
     from flexreg.cli.options import check_outputs
-    from flexreg.core.budget import check_memory
-    from flexreg.core.scan import GRID_CELL_BYTES
     from flexreg.errors import InputError
     from flexreg.io.files import all_or_nothing
     from flexreg.io.info import write_range_image
     from flexreg.io.safety import written_files
-    from flexreg.stages.projection import range_image
 
     if out.suffix.lower() != ".png":
         raise InputError(out, "output must be a .png file")
@@ -167,27 +168,7 @@ def project(
             origin_option="--origin",
         )
     with stage("Building range image"):
-        if resample or not s.has_grid:
-            from flexreg.stages.projection import auto_spherical_camera
-            from flexreg.stages.projection import project as zproject
-
-            if len(s) == 0:
-                raise InputError(scan, "scan has no points")
-            res = None if resolution_deg is None else math.radians(resolution_deg)
-            cam = (
-                s.camera
-                if (s.camera is not None and res is None)
-                else auto_spherical_camera(s.points, angular_resolution_rad=res)
-            )
-            if resolution_deg is not None:
-                check_memory(
-                    cam.height * cam.width * GRID_CELL_BYTES,
-                    f"a {cam.height} x {cam.width} image at {resolution_deg}° per pixel",
-                    source="--resolution-deg",
-                )
-            img = zproject(s, cam)
-        else:
-            img = range_image(s)
+        img, note = _build_image(s, scan, resample, resolution_deg)
     with stage(f"Writing {out.name}"), all_or_nothing():
         written = write_range_image(out, img, png_scale_m=scale)
     console.print(
@@ -195,5 +176,54 @@ def project(
         f"({100 * img.n_valid / max(1, img.height * img.width):.1f} %), "
         f"{written['png_scale_m'] * 1000:g} mm per PNG unit"
     )
+    if note:
+        console.print(note, markup=False, soft_wrap=True)
     for p in written["files"]:
         console.print(f"wrote {p}", markup=False, soft_wrap=True)
+
+
+def _build_image(
+    s: Any, scan: Path, resample: bool, resolution_deg: float | None
+) -> tuple[Any, str]:
+    """The range image ``project`` writes, always with a camera model (so with a camera
+    sidecar), and a note on how its camera was found: a native grid keeps its pixels when an
+    equirectangular or pinhole camera fits it (:func:`flexreg.stages.grid_camera.grid_with_camera`),
+    else the points are projected through a fitted equirectangular camera (as ``--resample``)."""
+    import math
+
+    from flexreg.core.budget import check_memory
+    from flexreg.core.scan import GRID_CELL_BYTES
+    from flexreg.errors import InputError
+    from flexreg.stages.grid_camera import grid_with_camera
+    from flexreg.stages.projection import auto_spherical_camera, range_image
+    from flexreg.stages.projection import project as zproject
+
+    note = ""
+    if s.has_grid and not resample:
+        img, fit_px = grid_with_camera(range_image(s))
+        if img.camera is not None:
+            kind = "equirectangular" if hasattr(img.camera, "phi_min") else "pinhole"
+            return img, (
+                f"camera sidecar: {kind} camera fitted to the scanner's grid, 95 % of its "
+                f"points within {fit_px:.2g} px of their own pixel"
+            )
+        off = "none fits" if math.isinf(fit_px) else f"the best is {fit_px:.2f} px off"
+        note = (
+            f"the grid of {scan} is not a regular equirectangular or pinhole grid (camera "
+            f"models: {off}): resampled through a fitted equirectangular camera, as --resample"
+        )
+    if len(s) == 0:
+        raise InputError(scan, "scan has no points")
+    res = None if resolution_deg is None else math.radians(resolution_deg)
+    cam = (
+        s.camera
+        if (s.camera is not None and res is None)
+        else auto_spherical_camera(s.points, angular_resolution_rad=res)
+    )
+    if resolution_deg is not None:
+        check_memory(
+            cam.height * cam.width * GRID_CELL_BYTES,
+            f"a {cam.height} x {cam.width} image at {resolution_deg}° per pixel",
+            source="--resolution-deg",
+        )
+    return zproject(s, cam), note

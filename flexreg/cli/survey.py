@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from flexreg.cli._common import EXIT_UNCERTAIN, console, err_console
+from flexreg.cli._common import EXIT_UNCERTAIN, console, err_console, pair_label
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -199,7 +199,11 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
     from rich.table import Table
 
     s = doc["summary"]
-    t = Table(title=f"Survey: reference {doc['reference']}", title_justify="left")
+    t = Table(
+        title=f"Survey: reference {doc['reference']} (links in poses.json: target, source, "
+        "T_target_source maps the source onto the target)",
+        title_justify="left",
+    )
     for col in ("station", "placed", "group", "links", "confidence", "note"):
         t.add_column(col)
     for stem, st in doc["stations"].items():
@@ -230,7 +234,7 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
     for e in doc["links"]:
         if e["status"] == "rejected" and e["loop_error_deg"] is not None:
             console.print(
-                f"rejected {e['target']} - {e['source']}: {e['why']} (loop error "
+                f"rejected link {pair_label(e['target'], e['source'])}: {e['why']} (loop error "
                 f"{e['loop_error_deg']:.2f}°, {e['loop_error_m']:.3f} m)",
                 markup=False,
                 soft_wrap=True,
@@ -270,7 +274,7 @@ def survey_command(
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
-    check_out_folder("--out", out, scans)
+    check_out_folder("--out", out, scans, keep=("cache",), marker="poses.json")
     check_outputs(
         [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
         inputs=[p for p in scans if p.is_file()],

@@ -11,7 +11,13 @@ import typer
 
 from flexreg.cli._common import console, err_console, progress_bar
 from flexreg.cli.app import app
-from flexreg.cli.options import ConfigFileOption, SetOption, build_config, with_default
+from flexreg.cli.options import (
+    ConfigFileOption,
+    SetOption,
+    build_config,
+    check_out_folder,
+    with_default,
+)
 from flexreg.errors import ConfigError
 from flexreg.synth.config import SynthConfig
 
@@ -244,6 +250,7 @@ def synth(
     """
     from flexreg.synth.dataset import synthesize
 
+    check_out_folder("--out", out, marker="gt.json")
     converted = _option_values(resolution, noise_mm, fmt, distance_m, max_tilt_deg, size_m, mesh_up)
     cfg = build_config(
         SynthConfig,

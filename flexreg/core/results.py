@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -117,6 +118,74 @@ class Verdict:
         }
 
 
+def _length(m: float) -> str:
+    if m >= 1:
+        return f"{m:.3g} m"
+    if m >= 0.01:
+        return f"{100 * m:.3g} cm"
+    return f"{1000 * m:.3g} mm"
+
+
+@dataclass(frozen=True)
+class Overlap:
+    """The overlap of one transform (the one definition, :mod:`flexreg.stages.overlap`).
+
+    Attributes
+    ----------
+    share : float
+        Overlap, 0..1: voxelised source points with a target point within ``distance_m``.
+    rmse_m : float, metres
+        RMS distance of those points (NaN when none).
+    source_points, target_points : int
+        Voxelised point counts (``source_points`` is the denominator).
+    distance_m, voxel_m : float, metres
+    voxel_source : str
+        How ``voxel_m`` was chosen.
+    open3d_fitness, open3d_inlier_rmse_m : float
+        Open3D's ``evaluate_registration`` on the same clouds at ``distance_m``.
+    """
+
+    share: float
+    rmse_m: float
+    source_points: int
+    target_points: int
+    distance_m: float
+    voxel_m: float
+    voxel_source: str
+    open3d_fitness: float
+    open3d_inlier_rmse_m: float
+
+    @property
+    def definition(self) -> str:
+        """What ``share`` divides by, in words."""
+        return (
+            f"of {self.source_points:,} source points within {_length(self.distance_m)} of a "
+            f"target point after alignment (both clouds voxelised at {_length(self.voxel_m)}; "
+            f"{self.target_points:,} target points)"
+        )
+
+    def headline(self) -> str:
+        """``overlap 43.5 % of 12,043 source points within 5 cm ... (n = 12,043)``."""
+        return f"{100 * self.share:.1f} % {self.definition}"
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+
+        return {
+            "share": self.share,
+            "rmse_m": num(self.rmse_m),
+            "source_points": self.source_points,
+            "target_points": self.target_points,
+            "distance_m": self.distance_m,
+            "voxel_m": self.voxel_m,
+            "voxel_source": self.voxel_source,
+            "definition": "share " + self.definition,
+            "open3d_fitness": self.open3d_fitness,
+            "open3d_inlier_rmse_m": num(self.open3d_inlier_rmse_m),
+        }
+
+
 @dataclass(eq=False)
 class PairResult:
     """``T_target_source`` of one pair and the evidence for it.
@@ -138,7 +207,9 @@ class PairResult:
     inlier_rmse_m : float
         RMSE of the final stage's inliers (ICP when refined, else the coarse stage), metres.
     fitness : float
-        Final-stage overlap; ``fitness_denominator`` says what it divides by.
+        The final stage's own share (ICP fitness, RANSAC inliers / matches...; written as
+        ``stage_fitness``); ``fitness_denominator`` says what it divides by. Not comparable
+        between methods: ``overlap`` is.
     fitness_denominator : str
         What ``fitness`` divides by.
     information : (6, 6) float64
@@ -163,6 +234,9 @@ class PairResult:
     verdict : Verdict or None
         Whether the result can be trusted (None for methods that give no verdict, such as
         the ICP baselines: reported as "n/a").
+    overlap : Overlap or None
+        The one overlap figure of the final transform, with Open3D's fitness and inlier RMSE
+        (:mod:`flexreg.stages.overlap`); set by :func:`flexreg.registration.register`.
     """
 
     T_target_source: NDArray[np.float64]
@@ -182,17 +256,22 @@ class PairResult:
     prior: str = "descriptors"
     wall_s: float = float("nan")
     verdict: Verdict | None = None
+    overlap: Overlap | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no per-match arrays)."""
+        ov = self.overlap
         return {
             "T_target_source": self.T_target_source.tolist(),
             "T_coarse": self.T_coarse.tolist(),
             "matches": self.matches,
             "inliers": self.inliers,
             "inlier_rmse_m": self.inlier_rmse_m,
-            "fitness": self.fitness,
-            "fitness_denominator": self.fitness_denominator,
+            "overlap": None if ov is None else ov.to_dict(),
+            "open3d_fitness": None if ov is None else ov.open3d_fitness,
+            "open3d_inlier_rmse_m": None if ov is None else ov.to_dict()["open3d_inlier_rmse_m"],
+            "stage_fitness": self.fitness,
+            "stage_fitness_denominator": self.fitness_denominator,
             "information": self.information.tolist(),
             "threshold_m": self.threshold_m,
             "timings_s": self.timings_s,
@@ -204,4 +283,4 @@ class PairResult:
         }
 
 
-__all__ = ["Hypothesis", "PairResult", "Reason", "Settings", "Verdict"]
+__all__ = ["Hypothesis", "Overlap", "PairResult", "Reason", "Settings", "Verdict"]

@@ -5,6 +5,9 @@
   are renamed into place together when the block ends without an error; on an error (or
   Ctrl-C) they are removed, and the files already at the targets stay byte-identical. The
   command line runs every command inside one such block.
+- :func:`replace_folder` makes a folder of results the block's own: when the block commits,
+  the files in it that the block did not write (an older run's) are removed, after the new
+  ones are in place; on an error nothing is removed.
 - :func:`protect` marks a file as an input of the running command: an output that resolves to
   it (symbolic links, hard links) is refused, whatever the command.
 - :func:`atomic_write` writes one file through a temporary sibling renamed into place (at once
@@ -35,6 +38,7 @@ __all__ = [
     "atomic_write",
     "discard",
     "protect",
+    "replace_folder",
     "write_all",
     "write_png",
 ]
@@ -70,11 +74,43 @@ class Outputs:
         self._staged: dict[Path, Path] = {}  # target (absolute) -> temporary
         self._created: list[Path] = []  # folders made for the targets, outermost first
         self._inputs: dict[tuple[int, int] | Path, Path] = {}
+        self._owned: dict[Path, tuple[str, ...]] = {}  # folder -> top-level names to keep
 
     @property
     def targets(self) -> list[Path]:
         """The files staged so far, in order."""
         return list(self._staged)
+
+    def own(self, folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -> None:
+        """At :meth:`commit`, remove the files under ``folder`` that this block did not write
+        (except the top-level entries named in ``keep`` and the command's inputs), and then
+        the emptied folders."""
+        self._owned[Path(os.path.abspath(folder))] = tuple(keep)
+
+    def _sweep(self, written: list[Path]) -> None:
+        keep_files = set(written)
+        for folder, keep in self._owned.items():
+            if not folder.is_dir():
+                continue
+            for entry in folder.iterdir():
+                if entry.name in keep:
+                    continue
+                paths = [entry] if not entry.is_dir() or entry.is_symlink() else None
+                if paths is None:
+                    paths = sorted(entry.rglob("*"), key=lambda p: len(p.parts), reverse=True)
+                    paths.append(entry)
+                for p in paths:
+                    with contextlib.suppress(OSError):
+                        if p.is_dir() and not p.is_symlink():
+                            if not any(p.iterdir()):
+                                p.rmdir()
+                        elif p not in keep_files and not self._is_input(p):
+                            p.unlink()
+                            log.info("removed %s (left by an earlier run)", p)
+        self._owned.clear()
+
+    def _is_input(self, path: Path) -> bool:
+        return any(key in self._inputs for key in (_key(path), path.resolve()))
 
     def protect(self, path: str | os.PathLike[str]) -> None:
         """Refuse any output that is the file ``path`` (an input of the command)."""
@@ -176,6 +212,7 @@ class Outputs:
         written = list(self._staged)
         self._staged.clear()
         self._created.clear()
+        self._sweep(written)
         return written
 
     def abort(self) -> None:
@@ -188,6 +225,7 @@ class Outputs:
             with contextlib.suppress(OSError):
                 d.rmdir()
         self._created.clear()
+        self._owned.clear()
 
 
 def active_outputs() -> Outputs | None:
@@ -241,6 +279,27 @@ def protect(*paths: str | os.PathLike[str] | None) -> None:
     for p in paths:
         if p is not None:
             outputs.protect(p)
+
+
+def replace_folder(folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -> None:
+    """Make ``folder`` the running block's own (:meth:`Outputs.own`): when the block commits,
+    files an earlier run left in it (and did not get written again) are removed; top-level
+    entries named in ``keep`` (a cache) stay. Nothing happens outside a block.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> _ = (d / "frame_0009.png").write_text("old")
+    >>> with all_or_nothing():
+    ...     replace_folder(d)
+    ...     atomic_write(d / "frame_0000.png", lambda tmp: tmp.write_text("new"))
+    >>> sorted(p.name for p in d.iterdir())
+    ['frame_0000.png']
+    """
+    outputs = _ACTIVE.get()
+    if outputs is not None:
+        outputs.own(folder, keep)
 
 
 def discard(*paths: str | os.PathLike[str]) -> None:

@@ -61,6 +61,7 @@ from flexreg.stages.correspondences import derive_threshold, lift
 from flexreg.stages.keypoints import detect_and_describe
 from flexreg.stages.matching import match
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.overlap import measure_overlap
 from flexreg.stages.priors import PlanView, plan_overlays, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, refine, uses_projective
@@ -532,6 +533,9 @@ def _finish(
         stage = (rmse, fitness, kind)
         verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config)
     log.info("verdict: %s", verdict.summary())
+    with run.stage("overlap"):
+        overlap = measure_overlap(as_points(scans[0]), as_points(scans[1]), T)
+    log.info("overlap %s", overlap.headline())
     return RegistrationResult(
         T_target_source=T,
         T_coarse=T_coarse,
@@ -550,6 +554,7 @@ def _finish(
         prior=c.origin,
         wall_s=time.perf_counter() - run.start,
         verdict=verdict,
+        overlap=overlap,
     )
 
 

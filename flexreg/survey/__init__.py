@@ -77,10 +77,13 @@ value does not exist (failed link, unplaced station)::
           "T_target_source": [[...]],        # the pairwise result (null: failed)
           "verdict": "confident",            # confident | uncertain | null (failed)
           "reasons": [{"code": "low_overlap", "message": "..."}],
-          "overlap": 0.57,                   # min of both directions
-          "overlap_target": 0.58, "overlap_source": 0.57,
-          "matches": 211, "inliers": 52,
-          "rmse_m": 0.0117, "fitness": 0.255,
+          "overlap": 0.61,                   # as register and compare state it:
+          "overlap_of": "of 18,204 source points within 9.1 cm of a target point ...",
+          "open3d_fitness": 0.61,            # Open3D's evaluate_registration, same clouds
+          "open3d_inlier_rmse_m": 0.041,
+          "overlap_target": 0.58, "overlap_source": 0.57,  # view-consistency (verdict)
+          "matches": 211, "inliers": 52,     # inliers of the matched keypoint pairs
+          "rmse_m": 0.0117, "fitness": 0.255,  # the final stage's own (ICP) figures
           "strength": {"roll": 0.24, "pitch": 0.31, "yaw": 0.18,
                        "x": 0.20, "y": 0.20, "z": 0.59},
           "information": [[...]],            # 6x6, (rx, ry, rz, tx, ty, tz), Open3D order

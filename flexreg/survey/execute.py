@@ -233,6 +233,7 @@ def align_link(
     v = r.verdict
     ev = v.evidence if v is not None else {}
     ov = ev.get("overlap") or {}
+    one = r.overlap
     link = Link(
         cand.target,
         cand.source,
@@ -246,6 +247,10 @@ def align_link(
         inliers=int(r.inliers),
         rmse_m=float(r.inlier_rmse_m),
         fitness=float(r.fitness),
+        overlap_share=None if one is None else one.share,
+        overlap_of=None if one is None else one.definition,
+        open3d_fitness=None if one is None else one.open3d_fitness,
+        open3d_inlier_rmse_m=None if one is None else one.to_dict()["open3d_inlier_rmse_m"],
         strength=_strength(ev),
         seconds=time.perf_counter() - t0,
         origin=cand.origin,

@@ -58,6 +58,11 @@ class Link:
         None when the registration failed.
     information : (6, 6) float64 or None
         Information matrix, (rx, ry, rz, tx, ty, tz) as Open3D orders it.
+    overlap_share, open3d_fitness, open3d_inlier_rmse_m : float or None
+        The overlap of ``register`` and ``compare`` (:mod:`flexreg.stages.overlap`; written
+        as ``overlap`` with ``overlap_of``, its denominator) and Open3D's figures beside it.
+        ``overlap_target`` / ``overlap_source`` are the verdict's view-consistency shares,
+        which order the links.
     verdict : {"confident", "uncertain"} or None
     status : {"pending", "accepted", "rejected", "failed"}
     """
@@ -85,6 +90,10 @@ class Link:
     loop_error_deg: float | None = None
     loop_error_m: float | None = None
     cached: bool = False
+    overlap_share: float | None = None
+    overlap_of: str | None = None
+    open3d_fitness: float | None = None
+    open3d_inlier_rmse_m: float | None = None
 
     @property
     def overlap(self) -> float:
@@ -110,7 +119,10 @@ class Link:
             "T_target_source": m(self.T_target_source),
             "verdict": self.verdict,
             "reasons": list(self.reasons),
-            "overlap": self.overlap if self.T_target_source is not None else None,
+            "overlap": self.overlap_share if self.T_target_source is not None else None,
+            "overlap_of": self.overlap_of,
+            "open3d_fitness": self.open3d_fitness,
+            "open3d_inlier_rmse_m": self.open3d_inlier_rmse_m,
             "overlap_target": self.overlap_target,
             "overlap_source": self.overlap_source,
             "matches": self.matches,

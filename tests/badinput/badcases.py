@@ -156,7 +156,7 @@ def _partial(c: Corpus) -> None:
     c.case(
         "project-third-output-fails",
         "partial",
-        ["project", "{d}/depth.png", "--out", "{d}/prev.png"],
+        ["project", "{d}/depth.png", "--out", "{d}/prev.png", "--overwrite"],
         ["prev.camera.json"],
         good=("depth.png", "depth.camera.json"),
         setup=blocked_sidecar,
@@ -180,6 +180,7 @@ def _partial(c: Corpus) -> None:
             "{d}/prev.png",
             "--json",
             "{d}/blocker/run.json",
+            "--overwrite",
         ],
         ["blocker"],
         good=("gt.txt", "est.txt"),

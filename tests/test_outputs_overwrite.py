@@ -1,0 +1,293 @@
+"""Files and outputs: an existing result is refused without --overwrite (one line, exit 1,
+nothing touched) by every command that writes results, replaced with it (a result folder
+without the older run's files); -v and --overwrite work before or after the command;
+``project`` writes the camera sidecar of native grids."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import REPO, one_error_line, run_cli
+
+from flexreg import Scan, read_scan, write_scan
+from flexreg.cli.app import hoist_root_flags
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import to_scan
+from flexreg.stages.grid_camera import fit_grid_camera, grid_with_camera
+from flexreg.stages.projection import project, range_image
+
+LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
+REFUSED = "(an earlier result); give --overwrite to replace it"
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    """Small readable inputs of every kind the commands take."""
+    d = tmp_path_factory.mktemp("inputs")
+    scan = read_scan(LASERSCAN)
+    write_scan(d / "a.npz", scan)
+    write_scan(d / "b.npz", scan)
+    traj = "\n".join(f"{t:.1f} {t:.2f} 0 0 0 0 0 1" for t in range(5)) + "\n"
+    (d / "gt.txt").write_text(traj)
+    (d / "est.txt").write_text(traj)
+    (d / "pairs.csv").write_text("u,v,x,y,z\n")
+    return d
+
+
+def _commands(d: Path, old: Path) -> dict[str, list]:
+    """argv of each command with its result at ``old`` (a file, or a folder for folders)."""
+    png = old.with_suffix(".png")
+    return {
+        "register": ["register", d / "a.npz", d / "b.npz", "--out", old.with_suffix(".json")],
+        "compare": ["compare", d / "a.npz", d / "b.npz", "--out", old],
+        "survey": ["survey", d / "a.npz", d / "b.npz", "--out", old],
+        "calibrate": ["calibrate", "--image", LASERSCAN, "--scan", d / "a.npz", "--pinhole",
+                      "100", "100", "50", "50", "--pairs", d / "pairs.csv", "--out",
+                      old.with_suffix(".json")],
+        "project": ["project", d / "a.npz", "--out", png],
+        "convert": ["convert", d / "a.npz", "--kind", "flexion", "--out", png],
+        "odometry": ["odometry", d, "--out", old.with_suffix(".txt")],
+        "evaluate": ["evaluate", "--gt", d / "gt.txt", "--est", d / "est.txt", "--json",
+                     old.with_suffix(".json")],
+        "synth": ["synth", "--scene", "room", "--stations", "1", "--out", old],
+        "pick": ["pick", "--image", LASERSCAN, "--scan", d / "a.npz", "--pinhole", "100",
+                 "100", "50", "50", "--out", old.with_suffix(".csv")],
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("command", sorted(_commands(Path("i"), Path("o"))))
+def test_an_existing_result_is_refused_without_overwrite(command, inputs, tmp_path):
+    argv = _commands(inputs, tmp_path / "old")[command]
+    out = Path(argv[argv.index("--out") + 1] if "--out" in argv else argv[-1])
+    if out.suffix:
+        out.write_bytes(b"an earlier result")
+    else:
+        out.mkdir()
+        (out / "poses.json").write_text("{}")
+    before = _snapshot(tmp_path)
+    rc, _, err = run_cli(argv)
+    assert rc == 1, err
+    line = one_error_line(err)
+    assert REFUSED in line and str(out) in line, line
+    assert _snapshot(tmp_path) == before
+
+
+def test_overwrite_replaces_a_file_and_its_companions(inputs, tmp_path):
+    out = tmp_path / "r.png"
+    assert run_cli(["project", inputs / "a.npz", "--out", out])[0] == 0
+    sidecar = tmp_path / "r.camera.json"
+    # a companion file alone (the sidecar of an earlier run) is an earlier result too
+    out.unlink()
+    out.with_suffix(".npz").unlink()
+    rc, _, err = run_cli(["project", inputs / "a.npz", "--out", out])
+    assert rc == 1 and f"{sidecar}: exists {REFUSED}" in one_error_line(err)
+    # --overwrite after the command, or before it
+    assert run_cli(["project", inputs / "a.npz", "--out", out, "--overwrite"])[0] == 0
+    assert run_cli(["--overwrite", "project", inputs / "a.npz", "--out", out])[0] == 0
+    assert out.is_file() and sidecar.is_file()
+
+
+def test_synth_overwrite_leaves_no_stale_frames_for_odometry(tmp_path):
+    out = tmp_path / "sim"
+    base = ["synth", "--scene", "room", "--stations", "1", "--resolution", "64x32", "--seed",
+            "1", "--out", out]  # fmt: skip
+    assert run_cli([*base, "--rgbd-frames", "4"])[0] == 0
+    assert len(list((out / "rgbd" / "depth").iterdir())) == 4
+    (out / "notes.txt").write_text("mine")
+    rc, _, err = run_cli([*base, "--rgbd-frames", "2"])
+    assert rc == 1 and f"{out}: is a folder that is not empty {REFUSED}" in one_error_line(err)
+    assert len(list((out / "rgbd" / "depth").iterdir())) == 4  # untouched
+    assert run_cli([*base, "--rgbd-frames", "2", "--overwrite"])[0] == 0
+    assert sorted(p.name for p in (out / "rgbd" / "depth").iterdir()) == [
+        "0.000000.png",
+        "0.033333.png",
+    ]
+    assert sorted(p.name for p in (out / "rgbd" / "rgb").iterdir()) == [
+        "0.000000.png",
+        "0.033333.png",
+    ]
+    assert not (out / "notes.txt").exists()  # the folder is the result: nothing else stays
+    from flexreg.io.sequence import read_sequence
+
+    assert len(read_sequence(out)) == 2
+
+
+def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
+    """A survey folder's cache is not a result: a folder holding only it is not refused, and
+    --overwrite keeps it (the re-run registers only new links); an input inside the folder is
+    never removed."""
+    from flexreg.cli.options import check_out_folder, set_overwrite
+    from flexreg.errors import ConfigError
+    from flexreg.io.files import all_or_nothing, atomic_write, protect
+
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "station.npz").write_text("prepared")
+    check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+    (tmp_path / "stations").mkdir()
+    (tmp_path / "stations" / "old.txt").write_text("old")
+    (tmp_path / "poses.json").write_text("old")
+    (tmp_path / "scan.ptx").write_text("an input kept in the result folder")
+    set_overwrite(False)
+    with pytest.raises(ConfigError, match="give --overwrite"):
+        check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+    try:
+        set_overwrite(True)
+        with all_or_nothing():
+            protect(tmp_path / "scan.ptx")
+            check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+            atomic_write(tmp_path / "poses.json", lambda tmp: tmp.write_text("{}"))
+    finally:
+        set_overwrite(False)
+    assert sorted(_snapshot(tmp_path)) == ["cache/station.npz", "poses.json", "scan.ptx"]
+
+
+def test_overwrite_into_a_folder_that_is_no_earlier_result_removes_nothing(inputs, tmp_path):
+    """--overwrite into a folder without the command's marker (here: a folder of the user's
+    own files, no gt.json) replaces same-named files only."""
+    from flexreg.cli.options import check_out_folder, set_overwrite
+    from flexreg.io.files import all_or_nothing, atomic_write
+
+    (tmp_path / "mine.txt").write_text("mine")
+    try:
+        set_overwrite(True)
+        with all_or_nothing():
+            check_out_folder("--out", tmp_path, marker="gt.json")
+            atomic_write(tmp_path / "gt.json", lambda tmp: tmp.write_text("{}"))
+    finally:
+        set_overwrite(False)
+    assert sorted(_snapshot(tmp_path)) == ["gt.json", "mine.txt"]
+
+
+def test_a_failed_overwrite_leaves_the_old_result(inputs, tmp_path):
+    out = tmp_path / "cmp"
+    out.mkdir()
+    (out / "comparison.json").write_text("old")
+    rc, _, _ = run_cli(
+        ["compare", inputs / "a.npz", inputs / "b.npz", "--methods", "nope", "--out", out,
+         "--overwrite"]
+    )  # fmt: skip
+    assert rc == 1
+    assert _snapshot(out) == {"comparison.json": b"old"}
+
+
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["-v", "info", "{f}"],
+        ["info", "{f}", "-v"],
+        ["info", "-vv", "{f}"],
+        ["info", "{f}", "--verbose"],
+    ],
+)
+def test_verbose_before_or_after_the_command(flags):
+    """In a fresh process (logging is set up once per process): -v in either place sets the
+    log level to INFO (-vv: DEBUG); without it, WARNING."""
+    import subprocess
+    import sys
+
+    def level(argv: list[str]) -> list[str]:
+        code = (
+            "import logging, sys; from flexreg.cli import run; rc = run(sys.argv[1:]); "
+            "print('LEVEL', logging.getLogger().level, rc)"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=120
+        )
+        return done.stdout.split("LEVEL")[-1].split()
+
+    assert level(["info", str(LASERSCAN)]) == ["30", "0"]
+    expected = "10" if "-vv" in flags else "20"
+    assert level([a.format(f=LASERSCAN) for a in flags]) == [expected, "0"]
+
+
+def test_hoisting_keeps_values_and_the_double_dash():
+    assert hoist_root_flags(["--memory-budget", "8G", "register", "a", "-vv"]) == [
+        "--memory-budget",
+        "8G",
+        "-vv",
+        "register",
+        "a",
+    ]
+    assert hoist_root_flags(["info", "--", "-v"]) == ["info", "--", "-v"]
+    assert hoist_root_flags(["register", "--help"]) == ["register", "--help"]
+
+
+# ------------------------------------------------------------------ camera sidecars
+
+
+def test_grid_cameras_are_recovered_exactly():
+    sph = SphericalCamera(180, 60, -np.pi, np.pi, 0.4, 2.6)
+    pts = sph.rays().reshape(-1, 3) * np.linspace(2, 9, 180 * 60)[:, None]
+    img = project(Scan(points=pts), sph)
+    # stored bottom-up, as some E57 files do: the rows are reversed back
+    flipped = to_scan(img)
+    grid = range_image(flipped)
+    upside = type(grid)(grid.xyz[::-1].copy(), grid.valid[::-1].copy(), grid.index[::-1].copy())
+    fixed, err = grid_with_camera(upside)
+    assert err < 1e-6 and isinstance(fixed.camera, SphericalCamera)
+    np.testing.assert_allclose(fixed.xyz, img.xyz)
+    v, u = np.mgrid[0:120, 0:160].astype(float)
+    P = np.stack([(u - 79.5) / 300.0, (v - 59.5) / 310.0, np.ones_like(u)], -1) * 3.0
+    grid = type(img)(P, np.ones((120, 160), bool), np.arange(160 * 120).reshape(120, 160))
+    cam, err = fit_grid_camera(grid)
+    assert isinstance(cam, PinholeCamera) and err < 1e-6
+    assert cam.fx == pytest.approx(300.0) and cam.cy == pytest.approx(59.5)
+    # noise of a few pixels fits no model: no camera
+    noisy = type(img)(P + np.random.default_rng(0).normal(0, 0.05, P.shape), grid.valid, grid.index)
+    assert fit_grid_camera(noisy)[0] is None
+
+
+def _organised_pcd(path: Path, points: np.ndarray, shape: tuple[int, int]) -> None:
+    """An ASCII organised PCD (HEIGHT x WIDTH, row-major), as a depth camera's driver writes."""
+    h, w = shape
+    head = (
+        "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+        f"WIDTH {w}\nHEIGHT {h}\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {w * h}\nDATA ascii\n"
+    )
+    path.write_text(head + "\n".join(f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in points) + "\n")
+
+
+@pytest.mark.parametrize("fmt", ["ptx", "e57", "pcd"])
+def test_project_writes_the_camera_sidecar_of_gridded_files(fmt, tmp_path):
+    """PTX, E57 (both by the project's own writers) and an organised PCD keep their grid and
+    get the camera sidecar the README promises; the PNG reads back as a scan."""
+    cam = (
+        SphericalCamera(120, 40, -np.pi, np.pi, 0.6, 2.4)
+        if fmt != "pcd"
+        else PinholeCamera(100.0, 100.0, 39.5, 29.5, 80, 60)
+    )
+    rays = cam.rays().reshape(-1, 3)
+    pts = rays * (3.0 + np.arange(len(rays)) % 7 * 0.1)[:, None]
+    src = tmp_path / f"scan.{fmt}"
+    if fmt == "pcd":
+        _organised_pcd(src, rays / rays[:, 2:3] * 2.0, cam.shape)
+    else:
+        write_scan(src, to_scan(project(Scan(points=pts), cam)))
+    out = tmp_path / "range.png"
+    rc, stdout, err = run_cli(["project", src, "--out", out])
+    assert rc == 0, err
+    side = tmp_path / "range.camera.json"
+    assert side.is_file(), stdout
+    doc = json.loads(side.read_text())
+    assert (doc["camera"]["width"], doc["camera"]["height"]) == (cam.width, cam.height)
+    assert "camera sidecar" in " ".join(stdout.split())
+    assert len(read_scan(out)) == cam.width * cam.height
+
+
+def test_project_resamples_an_irregular_grid_with_a_sidecar(shared_data, tmp_path):
+    """The 3DTK Kurt3D scan (a pitching line scanner: no camera fits its grid) is resampled
+    through a fitted equirectangular camera, and says so."""
+    out = tmp_path / "k.png"
+    rc, stdout, err = run_cli(
+        ["project", shared_data / "tls_3dtk_kurt3d" / "scan000.3d", "--out", out]
+    )
+    assert rc == 0, err
+    assert (tmp_path / "k.camera.json").is_file()
+    assert "resampled through a fitted equirectangular camera" in " ".join(stdout.split())

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from flexreg.cli._common import console, read_input, scan_file, stage
+from flexreg.cli._common import about_file, console, read_input, scan_file, stage
 from flexreg.cli.app import app
 
 PinholeOpt = typer.Option(
@@ -166,7 +166,7 @@ def project(
             origin=origin,
             origin_option="--origin",
         )
-    with stage("Building range image"):
+    with stage("Building range image"), about_file(scan):
         if resample or not s.has_grid:
             from flexreg.stages.projection import auto_spherical_camera
             from flexreg.stages.projection import project as zproject

@@ -424,7 +424,7 @@ def parse_sets(items: Iterable[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         key, sep, value = item.partition("=")
-        if not sep or not key.strip():
+        if not sep or not key.strip() or not key.strip().isprintable() or " " in key.strip():
             raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
         out[key.strip()] = _parse_value(value.strip())
     return out

@@ -101,3 +101,15 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     if text is not None:
         terminalreporter.write_sep("-", "bad-input corpus")
         terminalreporter.write_line(text)
+
+
+# property-based fuzzing (tests/test_fuzz_parsers.py): a bounded default run; the long profile
+# behind `--hypothesis-profile=long` or HYPOTHESIS_PROFILE=long
+try:
+    from hypothesis import settings as _hsettings
+except ImportError:  # pragma: no cover - hypothesis is in the dev extra
+    pass
+else:
+    _hsettings.register_profile("default", max_examples=50, deadline=None, print_blob=True)
+    _hsettings.register_profile("long", max_examples=2000, deadline=None, print_blob=True)
+    _hsettings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))

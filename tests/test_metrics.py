@@ -142,11 +142,41 @@ def test_tum_repeated_and_unordered_timestamps_follow_the_tum_tools(tmp_path, ca
     path = tmp_path / "dup.txt"
     path.write_text("2.0 2 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n2.0 3 0 0 0 0 0 1\n0.5 0 0 0 0 0 0 1\n")
     with caplog.at_level(logging.WARNING, logger="flexreg.io.trajectory"):
-        traj = read_trajectory(path)
+        traj = read_trajectory(path, strict=False)
     np.testing.assert_array_equal(traj.timestamps, [0.5, 1.0, 2.0])
     assert traj.positions[2, 0] == 3.0  # the later line of the repeated timestamp wins
     assert "not in order" in caplog.text and "repeated timestamp" in caplog.text
     assert "line 1" in caplog.text
+
+
+@pytest.mark.parametrize(
+    ("text", "what"),
+    [
+        (
+            "1.0 1 0 0 0 0 0 1\n2.0 2 0 0 0 0 0 1\n2.0 3 0 0 0 0 0 1\n",
+            "line 3: timestamp 2 repeats",
+        ),
+        ("1.0 1 0 0 0 0 0 1\n0.5 2 0 0 0 0 0 1\n", "line 2: timestamp 0.5 is earlier than"),
+        ("1.0 1 0 0 0 0 0 1\n1.0 1 0 0 0 0 0.1 0.995\n", "line 2: timestamp 1 repeats"),
+    ],
+)
+def test_tum_repeated_or_unordered_timestamps_are_refused_by_default(tmp_path, text, what):
+    path = tmp_path / "t.txt"
+    path.write_text(text)
+    with pytest.raises(InputError, match=what):
+        read_trajectory(path)
+
+
+def test_tum_repeated_timestamp_with_the_same_pose_is_a_rounding_collision(tmp_path, caplog):
+    path = tmp_path / "t.txt"
+    path.write_text(
+        "1.0 1 0 0 0 0 0 1\n2.0 2 0 0 0 0 0 1\n2.0 2.001 0 0 0 0 0 1\n3.0 3 0 0 0 0 0 1\n"
+    )
+    with caplog.at_level(logging.WARNING, logger="flexreg.io.trajectory"):
+        traj = read_trajectory(path)
+    np.testing.assert_array_equal(traj.timestamps, [1.0, 2.0, 3.0])
+    assert traj.positions[1, 0] == 2.001  # the later line wins, as in the TUM tools
+    assert "repeated timestamp" in caplog.text
 
 
 def _bad_file(tmp_path: Path, lines: list[str]) -> Path:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -105,6 +106,11 @@ def read_input(
                 raise InputError("--depth-kind", f"must be z or range, got {depth_kind!r}")
             opts["depth_kind"] = depth_kind
         if depth_scale is not None:
+            if not (math.isfinite(depth_scale) and depth_scale > 0):
+                raise InputError(
+                    "--depth-scale",
+                    f"must be a positive number of metres per unit, got {depth_scale}",
+                )
             opts["depth_scale"] = depth_scale
     elif pinhole or equirect or depth_kind or depth_scale is not None:
         raise InputError(
@@ -186,6 +192,22 @@ def _several(file: Path, names: list[str], counts: list[int]) -> Exception:
         f"holds {len(names)} setups; name one as FILE#N or FILE#NAME: "
         f"{setup_choices(file, names, counts)}",
     )
+
+
+@contextmanager
+def about_file(path: Path) -> Iterator[None]:
+    """Name ``path`` in an error of a call that uses that one file (``"a.bin: the points lie on
+    one ray ..."``); an error that already names a file passes unchanged."""
+    from flexreg.errors import FlexregError, InputError
+
+    try:
+        yield
+    except InputError as e:
+        if e.source is not None and e.source not in ("points", "scan"):
+            raise
+        raise InputError(path, e.problem) from e
+    except FlexregError as e:
+        raise InputError(path, str(e)) from e
 
 
 @contextmanager

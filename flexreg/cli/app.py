@@ -147,23 +147,43 @@ def run(argv: list[str] | None = None) -> int:
     try:
         with all_or_nothing():  # every output of the command is written at its end, or none
             rv = app(args=argv, standalone_mode=False)
+            if rv == 130:  # typer turns Ctrl-C into this status: discard the outputs
+                raise KeyboardInterrupt
     except FlexregError as e:
         err_console.print(f"error: {e}", markup=False, highlight=False, soft_wrap=True)
         return 1
-    except _click_classes("Abort"):
-        err_console.print("aborted", markup=False)
+    except KeyboardInterrupt:
+        _interrupted("interrupted (Ctrl-C)")
         return 130
+    except _click_classes("Abort"):
+        _interrupted("interrupted (Ctrl-C)")
+        return 130
+    except Terminated:
+        _interrupted("terminated (SIGTERM)")
+        return 143
     except _click_classes("ClickException") as e:
         e.show()  # type: ignore[attr-defined]
         return int(e.exit_code)  # type: ignore[attr-defined]
-    except KeyboardInterrupt:
-        return 130
     return rv if isinstance(rv, int) else 0
+
+
+def _interrupted(what: str) -> None:
+    err_console.print(
+        f"error: {what}: nothing written, earlier results untouched",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwinds the command like Ctrl-C (a BaseException, so no ``except
+    Exception`` of the library swallows it)."""
 
 
 def _terminated(signum: int, frame: object) -> None:
     """SIGTERM: unwind like Ctrl-C, so the command's temporary outputs are removed."""
-    raise SystemExit(128 + signum)
+    raise Terminated(signum)
 
 
 def main() -> None:

@@ -16,7 +16,14 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from flexreg.cli._common import console, err_console, progress_bar, read_input, scan_file
+from flexreg.cli._common import (
+    about_file,
+    console,
+    err_console,
+    progress_bar,
+    read_input,
+    scan_file,
+)
 from flexreg.cli.app import app
 from flexreg.cli.config_cmd import add_config
 from flexreg.cli.options import (
@@ -146,7 +153,8 @@ def load_range_image(
         origin=origin,
         origin_option="--origin",
     )
-    return range_image(scan)
+    with about_file(path):
+        return range_image(scan)
 
 
 def _convert_one(

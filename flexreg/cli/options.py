@@ -169,6 +169,11 @@ def check_outputs(
             raise ConfigError(f"{option}: {path}: must be a {suffix} file")
         if path.is_dir():
             raise ConfigError(f"{option}: {path}: is a folder, not a file")
+        blocked = next((q for q in path.parents if q.exists() and not q.is_dir()), None)
+        if blocked is not None:
+            raise ConfigError(
+                f"{option}: {path}: cannot be made: {blocked} is a file, not a folder"
+            )
     read: list[tuple[str, Path]] = []
     for p in inputs:
         if p is not None:

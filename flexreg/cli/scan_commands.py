@@ -7,7 +7,7 @@ from typing import Any
 
 import typer
 
-from flexreg.cli._common import console, read_input, scan_file, stage
+from flexreg.cli._common import about_file, console, read_input, scan_file, stage
 from flexreg.cli.app import app
 
 PinholeOpt = typer.Option(
@@ -167,7 +167,7 @@ def project(
             origin=origin,
             origin_option="--origin",
         )
-    with stage("Building range image"):
+    with stage("Building range image"), about_file(scan):
         img, note = _build_image(s, scan, resample, resolution_deg)
     with stage(f"Writing {out.name}"), all_or_nothing():
         written = write_range_image(out, img, png_scale_m=scale)

@@ -21,6 +21,9 @@ if TYPE_CHECKING:
 GRID_CELL_BYTES = 64
 #: memory per point while a scan is read and used (float64 xyz, attributes, working copies)
 POINT_BYTES = 64
+#: farthest coordinate a measured point may have, metres: beyond any geodetic frame (ECEF,
+#: UTM northing), so a larger one is a corrupt file or a unit error (1e30 from a broken export)
+MAX_COORDINATE_M = 1e8
 
 
 @dataclass(eq=False)
@@ -70,6 +73,14 @@ class Scan:
         if not np.all(np.isfinite(pts)):
             bad = int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))
             raise InputError(src, f"{bad} point(s) have NaN or Inf coordinates")
+        if pts.size and max(-float(pts.min()), float(pts.max())) > MAX_COORDINATE_M:
+            far = int(np.count_nonzero((np.abs(pts) > MAX_COORDINATE_M).any(axis=1)))
+            raise InputError(
+                src,
+                f"{far} point(s) lie beyond {MAX_COORDINATE_M:g} m of the origin (largest "
+                f"|coordinate| {max(-float(pts.min()), float(pts.max())):.3g} m): not measured "
+                "points (a corrupt file, or a unit error?)",
+            )
         self.points = pts
         n = len(pts)
         if self.intensity is not None:

@@ -24,7 +24,7 @@ MM_DEPTH_SCALE = 1.0e-3
 def read_depth_png(
     path: str | PathLike[str], *, depth_scale: float = 1.0, invalid_values: tuple[int, ...] = (0,)
 ) -> NDArray[np.float64]:
-    """Read a single-channel 8/16-bit depth PNG into metres.
+    """Read a single-channel 16-bit depth PNG into metres (an 8-bit image is refused).
 
     Parameters
     ----------
@@ -53,8 +53,14 @@ def read_depth_png(
         raise InputError(p, "not a readable PNG image")
     if raw.ndim != 2:
         raise InputError(p, f"depth image must have one channel, got {raw.shape[2]}")
-    if raw.dtype not in (np.uint16, np.uint8):
-        raise InputError(p, f"depth image must be 8 or 16 bit, got {raw.dtype}")
+    if raw.dtype == np.uint8:  # 255 levels: a picture (or a Flexion image), not depths
+        raise InputError(
+            p,
+            "an 8-bit image, not a depth image: depth PNGs hold 16-bit values (an image "
+            "written by 'flexreg convert' or a photo?)",
+        )
+    if raw.dtype != np.uint16:
+        raise InputError(p, f"depth image must be 16 bit, got {raw.dtype}")
     d = raw.astype(np.float64) * depth_scale
     bad = np.isin(raw, np.asarray((*invalid_values, 0), dtype=raw.dtype))
     d[bad] = np.nan

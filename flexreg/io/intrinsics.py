@@ -378,6 +378,8 @@ def _read_opencv(p: Path) -> CameraIntrinsics:
             if s.size != 2:
                 raise InputError(p, "image size must be [width, height]")
             w, h = float(s[0]), float(s[1])
+    except cv2.error:  # a node of another shape than the keys imply (a list as the root...)
+        raise InputError(p, "not an OpenCV calibration (unexpected structure)") from None
     finally:
         fs.release()
     return CameraIntrinsics(

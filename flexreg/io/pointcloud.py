@@ -403,8 +403,14 @@ def _viewpoint_pose(path: Path, vp: list[float]) -> NDArray[np.float64]:
 
 def _o3d_read(path: Path, fmt: str) -> dict[str, NDArray[Any]]:
     """All point attributes open3d decodes, as numpy arrays keyed by open3d's names."""
-    import open3d as o3d
-
+    try:
+        import open3d as o3d
+    except ImportError as exc:  # its 400 MB library does not map under a small ulimit -v
+        raise InputError(
+            path,
+            f"cannot read {fmt.upper()}: Open3D does not load ({exc}); too small a memory "
+            "limit (ulimit -v)?",
+        ) from None
     try:
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
             pc = o3d.t.io.read_point_cloud(

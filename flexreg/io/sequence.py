@@ -447,7 +447,7 @@ def _read_tum(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        gt = read_trajectory(gt_file, "tum")
+        gt = read_trajectory(gt_file, "tum", strict=False)
     return Sequence(
         root=root,
         kind="tum",
@@ -602,7 +602,7 @@ def _read_depth_folder(
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        gt = read_trajectory(gt_file, "tum")
+        gt = read_trajectory(gt_file, "tum", strict=False)
     return Sequence(
         root=root,
         kind="depth-folder",
@@ -640,7 +640,7 @@ def _read_scans(root: Path, rate_hz: float, max_frames: int | None) -> Sequence:
     gt = None
     gt_file = root / "groundtruth.txt"
     if gt_file.is_file():
-        gt = read_trajectory(gt_file, "tum")
+        gt = read_trajectory(gt_file, "tum", strict=False)
     else:
         gt = _synth_lidar_truth(root, frames)
     return Sequence(root=root, kind="scans", frames=frames, camera=None, groundtruth=gt)

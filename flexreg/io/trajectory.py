@@ -104,7 +104,41 @@ def _is_float(token: str) -> bool:
     return True
 
 
-def _from_tum(path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp]) -> Trajectory:
+#: a repeated TUM timestamp is a rounding collision (kept, later line wins, as in the TUM
+#: tools) when its two poses agree this well; two farther poses at one time are refused
+REPEAT_TOL_M, REPEAT_TOL_DEG = 0.05, 5.0
+
+
+def _check_increasing(path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp]) -> None:
+    """Refuse a decreasing timestamp, and a repeated one whose two poses disagree (more than
+    :data:`REPEAT_TOL_M` / :data:`REPEAT_TOL_DEG`), naming both lines. Official TUM ground
+    truth repeats a timestamp now and then (4 decimals of a 100+ Hz mocap) with poses 1 mm
+    apart: that is kept."""
+    t = rows[:, 0]
+    step = np.diff(t)
+    if (step > 0).all():
+        return
+    for k in np.flatnonzero(step <= 0) + 1:
+        if step[k - 1] < 0:
+            how = "is earlier than"
+        else:
+            q0, q1 = rows[k - 1, 4:8], rows[k, 4:8]
+            cos = abs(float(q0 @ q1)) / max(float(np.linalg.norm(q0) * np.linalg.norm(q1)), 1e-12)
+            angle = math.degrees(2 * math.acos(min(1.0, cos)))
+            gap = float(np.linalg.norm(rows[k, 1:4] - rows[k - 1, 1:4]))
+            if gap <= REPEAT_TOL_M and angle <= REPEAT_TOL_DEG:
+                continue
+            how = f"repeats, with a pose {gap:.3g} m / {angle:.3g}° away from the one on"
+        raise InputError(
+            path,
+            f"line {linenos[k]}: timestamp {t[k]:.17g} {how} line {linenos[k - 1]}; timestamps "
+            "must increase (two poses at one time, or files joined out of order?)",
+        )
+
+
+def _from_tum(
+    path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp], *, strict: bool = True
+) -> Trajectory:
     q = rows[:, 4:8]
     norm = np.linalg.norm(q, axis=1)
     bad = np.abs(norm - 1.0) > QUAT_NORM_TOL
@@ -116,6 +150,8 @@ def _from_tum(path: Path, rows: NDArray[np.float64], linenos: NDArray[np.intp]) 
             f"{norm[k]:.6g}, not a rotation (expected a unit quaternion)",
         )
     t = rows[:, 0]
+    if strict:
+        _check_increasing(path, rows, linenos)
     # the TUM tools keep poses in a dict keyed by timestamp: sorted, the last line of a
     # repeated timestamp wins; do the same, and say so
     order = np.lexsort((np.arange(len(t)), t))
@@ -188,7 +224,10 @@ def detect_format(path: str | PathLike[str]) -> str:
 
 
 def read_trajectory(
-    path: str | PathLike[str], fmt: Literal["auto", "tum", "kitti"] | str = "auto"
+    path: str | PathLike[str],
+    fmt: Literal["auto", "tum", "kitti"] | str = "auto",
+    *,
+    strict: bool = True,
 ) -> Trajectory:
     """Read a TUM or KITTI trajectory file.
 
@@ -198,16 +237,20 @@ def read_trajectory(
         The text file.
     fmt : {"auto", "tum", "kitti"}
         ``auto`` decides by the number of values on the first data line (8: TUM, 12: KITTI).
+    strict : bool
+        True: TUM timestamps must increase line by line: a decreasing one is an error, and so is
+        a repeated one unless its two poses agree within 5 cm and 5° (a rounding collision, as
+        in the official TUM ground truth). False: do as the TUM benchmark tools do (below).
 
     Returns
     -------
     Trajectory
         Poses ``T_world_frame`` (camera-to-world). TUM quaternions are normalised (the files
         carry 4 to 9 decimals) and the KITTI 3x3 blocks projected onto the nearest rotation
-        (``U V^T`` of their SVD), so every pose is exactly rigid to rounding. TUM lines are
-        sorted by time and, for a repeated timestamp, the later line wins (as in the TUM
-        benchmark tools); both cases are logged as warnings. KITTI timestamps are the frame
-        indices 0, 1, 2, ...
+        (``U V^T`` of their SVD), so every pose is exactly rigid to rounding. With
+        ``strict=False``, TUM lines are sorted by time and, for a repeated timestamp, the
+        later line wins (as in the TUM benchmark tools); both cases are logged as warnings.
+        KITTI timestamps are the frame indices 0, 1, 2, ...
 
     Raises
     ------
@@ -228,7 +271,10 @@ def read_trajectory(
     except OSError as e:
         raise InputError(p, f"cannot read: {e.strerror or e}") from None
     rows, linenos = _parse_lines(p, text, fmt)
-    traj = _from_tum(p, rows, linenos) if rows.shape[1] == 8 else _from_kitti(p, rows, linenos)
+    if rows.shape[1] == 8:
+        traj = _from_tum(p, rows, linenos, strict=strict)
+    else:
+        traj = _from_kitti(p, rows, linenos)
     log.debug("read %r", traj)
     return traj
 

@@ -23,7 +23,7 @@ from flexreg.core.range_image import (
     from_index,
 )
 from flexreg.core.scan import GRID_CELL_BYTES, Scan
-from flexreg.errors import InputError
+from flexreg.errors import DegenerateGeometryError, InputError
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +170,12 @@ def auto_spherical_camera(
     or overdraw.
     """
     phi_min, phi_max, th_min, th_max, full = azimuth_polar_extent(points)
-    span_phi, span_th = phi_max - phi_min, max(th_max - th_min, 1e-6)
+    if not full and phi_max - phi_min < 1e-6 and th_max - th_min < 1e-6:
+        raise DegenerateGeometryError(
+            "the points lie on one ray from the scanner (they cover no angle): no image can "
+            "be made of them"
+        )
+    span_phi, span_th = max(phi_max - phi_min, 1e-6), max(th_max - th_min, 1e-6)
     rings = _lidar_rings(points) if angular_resolution_rad is None else None
     if rings is not None:  # spinning lidar: one row per beam, azimuth at the ring density
         _, spacing, dphi = rings

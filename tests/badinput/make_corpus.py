@@ -43,6 +43,38 @@ class Case:
     memory_limit: bool = False
     note: str = ""
     env: dict[str, str] = field(default_factory=dict)
+    #: what the case exercises, for the coverage table: the reader or kind of file at fault
+    #: ("PTX", "pairs CSV", "option", ...); inferred from ``names`` when not given
+    covers: list[str] = field(default_factory=list)
+
+
+#: file suffix -> reader / kind of file, for cases that do not say what they cover
+SUFFIX_COVERS = {
+    ".ptx": "PTX", ".e57": "E57", ".ply": "PLY", ".pcd": "PCD", ".las": "LAS/LAZ",
+    ".laz": "LAS/LAZ", ".bin": "KITTI .bin", ".3d": "3DTK", ".pose": "3DTK", ".npz": "npz",
+    ".npy": "npz", ".png": "depth PNG", ".csv": "pairs CSV", ".toml": "config TOML",
+}  # fmt: skip
+
+
+def infer_covers(case: Case) -> list[str]:
+    """What a case exercises: its own ``covers``, else the kind of the file it names."""
+    if case.covers:
+        return case.covers
+    if case.kind in ("overwrite", "partial"):
+        return ["output path"]
+    if case.kind == "pair":
+        return ["scan pair"]
+    first = case.names[0]
+    if first.startswith("-") or first.isupper():
+        return ["option"]
+    if first.endswith(".camera.json"):
+        return ["camera sidecar"]
+    if case.argv and "--truth" in case.argv and first.endswith((".json", ".txt")):
+        return ["4x4 transform (--truth)"]
+    if case.argv and case.argv[0] == "evaluate":
+        return ["TUM trajectory"]
+    suffix = Path(first).suffix.lower()
+    return [SUFFIX_COVERS.get(suffix, suffix or first)]
 
 
 # ---------------------------------------------------------------------------- good inputs
@@ -202,6 +234,7 @@ class Corpus:
         note: str = "",
         env: dict[str, str] | None = None,
         setup: Callable[[Path], None] | None = None,
+        covers: list[str] | None = None,
     ) -> None:
         """Add a case: ``good`` copies named good inputs, ``files`` adds (broken) ones."""
         assert all(c.id != id for c in self.cases), id
@@ -213,7 +246,9 @@ class Corpus:
             (d / name).write_bytes(content.encode() if isinstance(content, str) else content)
         if setup is not None:
             setup(d)
-        self.cases.append(Case(id, kind, argv, names, memory_limit, note, env or {}))
+        self.cases.append(
+            Case(id, kind, argv, names, memory_limit, note, env or {}, list(covers or ()))
+        )
 
     def make_good(self, tmp: Path) -> None:
         """Good inputs: a gridded room scan in every format, a depth PNG with its sidecar,
@@ -268,9 +303,16 @@ def build(root: Path) -> list[Case]:
         shutil.rmtree(root)
     c = Corpus(root / "cases")
     c.make_good(root / "good")
-    from badcases import add_cases  # the case list lives beside this script
+    # the case lists live beside this script
+    from badcases import add_cases
+    from badcases_files import add_file_cases
+    from badcases_readers import add_reader_cases
 
     add_cases(c)
+    add_reader_cases(c)
+    add_file_cases(c)
+    for case in c.cases:
+        case.covers = infer_covers(case)
     (root / "cases.json").write_text(json.dumps([asdict(k) for k in c.cases], indent=1))
     return c.cases
 

@@ -1,26 +1,28 @@
-"""The bad-input corpus, run through the command line, one subprocess per case.
+"""The bad-input corpus, run through the command line, one process per case.
 
-``make_corpus.py`` writes the cases (``badcases.py`` lists them); this module runs them all in
-parallel subprocesses once per session, then checks each: exit status 1, one ``error:`` line
+``make_corpus.py`` writes the cases (``badcases.py``, ``badcases_readers.py`` and
+``badcases_files.py`` list them); this module runs them all in parallel once per session, each
+in a process of its own forked from a server that has imported the command line
+(``forkserver.py``), then checks each: exit status 1, one ``error:`` line
 naming the file or option at fault, no traceback, the case folder byte-identical afterwards
 (nothing written, nothing replaced, no temporary left), no hang (:data:`TIMEOUT_S`), and for
 the cases marked ``memory_limit`` an address-space limit of 1 GB in the child (RLIMIT_AS), so
 a header that makes flexreg allocate gigabytes fails the case instead of the machine. The run
-ends with a summary line: cases, clean errors, tracebacks, partial outputs, hangs.
+ends with a summary line (cases, clean errors, tracebacks, partial outputs, hangs) and a
+coverage table: each reader or kind of file, its cases and the commands they run.
 """
 
 from __future__ import annotations
 
 import atexit
 import hashlib
+import json
 import os
-import resource
+import queue
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -33,7 +35,6 @@ from make_corpus import MEMORY_LIMIT_BYTES, Case, build
 #: a case that takes longer hangs (a whole corpus runs in well under a minute on 2 cores)
 TIMEOUT_S = 120.0
 WORKERS = max(2, min(4, (os.cpu_count() or 2)))
-CLI = [sys.executable, "-c", "from flexreg.cli import main; main()"]
 
 
 @dataclass
@@ -90,8 +91,36 @@ def snapshot(folder: Path) -> dict[str, str]:
     return found
 
 
-def _limit_memory() -> None:  # runs in the child before exec
-    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
+class ForkServer:
+    """One ``forkserver.py`` process: the command line imported once, each case in a forked
+    child of it (see that module)."""
+
+    def __init__(self) -> None:
+        env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
+        self.proc = subprocess.Popen(
+            [sys.executable, str(Path(__file__).with_name("forkserver.py"))],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=env,
+            text=True,
+        )
+
+    def run(self, request: dict) -> dict:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError("the corpus fork server died")
+        return json.loads(line)
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        self.proc.wait(timeout=30)
+
+
+_SERVERS: queue.Queue[ForkServer] = queue.Queue()
 
 
 def run_case(case: Case, folder: Path) -> Outcome:
@@ -99,46 +128,40 @@ def run_case(case: Case, folder: Path) -> Outcome:
     env = {k: v for k, v in os.environ.items() if k != "FLEXREG_MEMORY_BUDGET"}
     env.update({**case.env, "COLUMNS": "200", "NO_COLOR": "1"})
     before = snapshot(folder)
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(
-            [*CLI, *argv],
-            stdout=out,
-            stderr=err,
-            env=env,
-            cwd=folder,
-            preexec_fn=_limit_memory if case.memory_limit else None,
-            start_new_session=True,
-        )
-        killed = threading.Event()
-
-        def kill() -> None:
-            killed.set()
-            os.killpg(proc.pid, signal.SIGKILL)
-
-        timer = threading.Timer(TIMEOUT_S, kill)
-        timer.start()
-        _, status, usage = os.wait4(proc.pid, 0)
-        timer.cancel()
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        seconds = time.perf_counter() - t0
-        out.seek(0)
-        err.seek(0)
-        stdout = out.read().decode(errors="replace")
-        stderr = err.read().decode(errors="replace")
+    with tempfile.TemporaryDirectory(prefix="flexreg-case-") as logs:
+        out, err = Path(logs) / "stdout", Path(logs) / "stderr"
+        server = _SERVERS.get()
+        try:
+            reply = server.run(
+                {
+                    "argv": argv,
+                    "cwd": str(folder),
+                    "env": env,
+                    "stdout": str(out),
+                    "stderr": str(err),
+                    "memory_limit": MEMORY_LIMIT_BYTES if case.memory_limit else 0,
+                    "timeout_s": TIMEOUT_S,
+                }
+            )
+        finally:
+            _SERVERS.put(server)
+        stdout = out.read_text(errors="replace") if out.exists() else ""
+        stderr = err.read_text(errors="replace") if err.exists() else ""
     return Outcome(
         case,
-        None if killed.is_set() else proc.returncode,
+        reply["rc"],
         stdout,
         stderr,
-        seconds,
-        usage.ru_maxrss / 1024,
+        reply["seconds"],
+        reply["peak_rss_mb"],
         before,
         snapshot(folder),
     )
 
 
 def summary(outcomes: list[Outcome]) -> str:
+    """The summary line (cases, clean errors, tracebacks, partial outputs, hangs), then the
+    coverage table."""
     n = len(outcomes)
     clean = sum(o.clean for o in outcomes)
     tracebacks = sum(o.traceback for o in outcomes)
@@ -147,12 +170,45 @@ def summary(outcomes: list[Outcome]) -> str:
     other = n - clean - sum(o.traceback or bool(o.changed) or o.rc is None for o in outcomes)
     slowest = max(outcomes, key=lambda o: o.seconds)
     heaviest = max((o for o in outcomes if o.case.memory_limit), key=lambda o: o.peak_rss_mb)
-    return (
+    line = (
         f"bad-input corpus: {n} cases, {clean} clean errors, {tracebacks} tracebacks, "
         f"{partial} partial outputs, {hangs} hangs, {other} other failures (wrong status or "
-        f"message); slowest {slowest.case.id} {slowest.seconds:.1f} s; largest peak under the "
-        f"1 GB limit {heaviest.case.id} {heaviest.peak_rss_mb:.0f} MB"
+        f"message); slowest {slowest.case.id} {slowest.seconds:.1f} s; largest peak under "
+        f"the 1 GB limit {heaviest.case.id} {heaviest.peak_rss_mb:.0f} MB"
     )
+    return "\n".join([line, *coverage_table(outcomes)])
+
+
+def coverage_table(outcomes: list[Outcome]) -> list[str]:
+    """Lines of a table: reader or kind of file -> cases, clean, and the commands they run."""
+    rows: dict[str, list[Outcome]] = {}
+    for o in outcomes:
+        for what in o.case.covers:
+            rows.setdefault(what, []).append(o)
+    width = max(len(k) for k in rows)
+    lines = [f"  {'covers':<{width}}  cases  clean  commands"]
+    for what in sorted(rows, key=str.lower):
+        os_ = rows[what]
+        commands = sorted({_command(o.case) for o in os_})
+        lines.append(
+            f"  {what:<{width}}  {len(os_):>5}  {sum(o.clean for o in os_):>5}  "
+            f"{', '.join(commands)}"
+        )
+    by_command: dict[str, int] = {}
+    for o in outcomes:
+        by_command[_command(o.case)] = by_command.get(_command(o.case), 0) + 1
+    lines.append(
+        "  cases per command: " + ", ".join(f"{k} {v}" for k, v in sorted(by_command.items()))
+    )
+    return lines
+
+
+def _command(case: Case) -> str:
+    """The flexreg command a case runs (root options skipped)."""
+    argv = list(case.argv)
+    while argv and argv[0].startswith("--"):
+        argv = argv[2:]
+    return argv[0] if argv else "?"
 
 
 _BUILT: list[tuple[Path, list[Case]]] = []
@@ -170,9 +226,22 @@ def corpus() -> tuple[Path, list[Case]]:
 @pytest.fixture(scope="session")
 def outcomes(pytestconfig) -> dict[str, Outcome]:
     root, cases = corpus()
-    with ThreadPoolExecutor(WORKERS) as pool:
-        done = list(pool.map(lambda c: run_case(c, root / "cases" / c.id), cases))
-    pytestconfig.stash[BADINPUT_SUMMARY] = summary(done)
+    servers = [ForkServer() for _ in range(WORKERS)]
+    for server in servers:
+        _SERVERS.put(server)
+    t0 = time.perf_counter()
+    try:
+        # the slow cases (full pipelines) first, so no worker is left with them at the end
+        order = sorted(cases, key=lambda c: c.argv[0] not in ("register", "compare", "survey"))
+        with ThreadPoolExecutor(WORKERS) as pool:
+            done = list(pool.map(lambda c: run_case(c, root / "cases" / c.id), order))
+    finally:
+        while not _SERVERS.empty():
+            _SERVERS.get().close()
+    wall = time.perf_counter() - t0
+    pytestconfig.stash[BADINPUT_SUMMARY] = summary(done) + (
+        f"\n  {len(done)} cases in {wall:.0f} s on {WORKERS} fork servers"
+    )
     return {o.case.id: o for o in done}
 
 
@@ -193,3 +262,27 @@ def test_corpus_is_large_and_covers_every_class(outcomes):
     assert len(outcomes) >= 60
     assert kinds >= {"overwrite", "partial", "header", "halfread", "option", "broken", "pair"}
     assert sum(o.case.memory_limit for o in outcomes.values()) >= 30
+
+
+#: every reader and every kind of file the command line reads (issue: hardening, point 1)
+MUST_COVER = {
+    "PTX", "E57", "PLY", "PCD", "LAS/LAZ", "KITTI .bin", "3DTK", "npz", "depth PNG",
+    "camera sidecar", "pairs CSV", "survey pairs CSV", "survey folder", "TUM trajectory",
+    "KITTI trajectory", "intrinsics", "config TOML", "--set", "4x4 transform (--init)",
+    "4x4 transform (--truth)", "output path", "setup selector", "degenerate cloud", "option",
+}  # fmt: skip
+#: every command that reads a user's files or options
+COMMANDS = {
+    "info", "project", "convert", "register", "compare", "bench", "evaluate", "odometry",
+    "calibrate", "survey", "synth",
+}  # fmt: skip
+
+
+def test_corpus_covers_every_reader_file_and_command(outcomes):
+    covered = {what for o in outcomes.values() for what in o.case.covers}
+    assert MUST_COVER <= covered, f"not covered: {sorted(MUST_COVER - covered)}"
+    commands = {_command(o.case) for o in outcomes.values()}
+    assert COMMANDS <= commands, f"no case runs: {sorted(COMMANDS - commands)}"
+    for what in MUST_COVER:
+        n = sum(what in o.case.covers for o in outcomes.values())
+        assert n >= 2, f"{what}: only {n} case"

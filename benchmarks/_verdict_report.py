@@ -136,6 +136,16 @@ def acceptance(state: Record) -> list[str]:
     if s.get("real"):
         ok, what = _real_ok(_real_main(s["real"]))
         rows.append(("3DTK scan000 ← scan002", "correct, or uncertain + runner-up near", what, ok))
+    if s.get("alias"):
+        a = summarise(s["alias"])
+        rows.append(
+            (
+                "project alias pairs (identical rooms / bays): every confident answer correct",
+                "0 misses",
+                f"{a['misses']} wrong of {a['confident']} confident",
+                a["misses"] == 0,
+            )
+        )
     lines = ["| goal | target | measured | |", "|---|---|---|---|"]
     lines += [f"| {g} | {t} | {m} | {_met(ok)} |" for g, t, m, ok in rows]
     return lines
@@ -172,7 +182,7 @@ def counts(state: Record) -> list[str]:
 def _groups(name: str, records: Sequence[Record]) -> list[tuple[str, list[Record]]]:
     """The rows under a set: by scene (and resolution when there are several), by resolution
     combination for unrelated pairs, none for the real pairs."""
-    if name == "real":
+    if name in ("real", "alias"):
         return []
     if name == "unrelated":
         key: Callable[[Record], str] = lambda r: (  # noqa: E731
@@ -259,6 +269,24 @@ def real_table(records: Sequence[Record]) -> list[str]:
         lines.append(
             f"| {r['pair']} | {lim} | {r['status']} | {', '.join(r['reasons']) or '–'} | "
             f"{r['rot_deg']:.2f}° / {100 * r['trans_m']:.1f} cm | {ups or '–'} |"
+        )
+    return lines
+
+
+def alias_table(records: Sequence[Record]) -> list[str]:
+    """The project alias pairs: true overlap, verdict, reasons, error, runner-ups."""
+    lines = [
+        "| pair | true overlap | verdict | reasons | error | best runner-up |",
+        "|---|---:|---|---|---|---|",
+    ]
+    for r in records:
+        head = f"| {r['pair']} | {r['true_overlap']:.3f} |"
+        if r["status"] == "failed":
+            lines.append(f"{head} failed | {r['error']} | – | – |")
+            continue
+        lines.append(
+            f"{head} {r['status']} | {', '.join(r['reasons']) or '–'} | "
+            f"{r['rot_deg']:.2f}° / {r['trans_m']:.3f} m | {_runner_up_cell(r)} |"
         )
     return lines
 
@@ -488,7 +516,8 @@ def _sets_text(state: Record) -> list[str]:
         "at target ← source resolutions "
         + ", ".join(f"{_res(a)} ← {_res(b)}" for a, b in p["unrelated_resolutions"])
         + ";",
-        "* **real**: " + ", ".join(r["pair"] for r in state["sets"].get("real", [])) + ".",
+        "* **real**: " + ", ".join(r["pair"] for r in state["sets"].get("real", [])) + ";",
+        "* **alias**: " + ", ".join(r["pair"] for r in state["sets"].get("alias", [])) + ".",
         "",
     ]
 
@@ -521,6 +550,19 @@ def markdown(state: Record, figure: str | None) -> str:
         ]
     if s.get("real"):
         lines += ["### Real pairs", "", *real_table(s["real"]), ""]
+    if s.get("alias"):
+        lines += [
+            "### Project alias pairs",
+            "",
+            "Pairs of `flexreg synth --scene building|warehouse --stations 10 --resolution "
+            "1024x512 --seed 0` that a survey once linked confidently and wrongly (the true "
+            "pose barely overlaps: a wrong pose overlays two identical rooms or bays), and two "
+            "pairs that do overlap. True overlap: the smaller share of either station the "
+            "other sees (gt.json).",
+            "",
+            *alias_table(s["alias"]),
+            "",
+        ]
     lines += [
         "### Evidence per group (min / median / max)",
         "",

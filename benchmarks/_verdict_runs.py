@@ -22,11 +22,13 @@ Sets (each a list of JSON-ready records, see :func:`judge`):
 
 from __future__ import annotations
 
+import json
 import math
 import time
 import traceback
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,6 +54,7 @@ from flexreg.registration.pipeline import PreparedScan, Registration
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.verdict import TwoWay
 from flexreg.synth import AMBIGUOUS_SCENE_KINDS, CUE_SCENE_KINDS, SCENE_KINDS, station_pair
+from flexreg.synth.dataset import make_project
 
 #: the normal synthetic scenes: the registration benchmark's, and the hall
 NORMAL_SCENES = tuple(SCENES) + tuple(s for s in ("hall",) if s not in SCENES)
@@ -65,7 +68,21 @@ TARGET_FALSE_ALARM = 0.05  # correct normal answers flagged uncertain
 NEAR_ROT_DEG, NEAR_TRANS_M = KURT_GROSS_ROT_DEG, KURT_GROSS_TRANS_M
 VELODYNE_ROT_DEG, VELODYNE_TRANS_M = SOLVED_ROT_DEG, SOLVED_TRANS_M
 
-SET_NAMES = ("ambiguous", "cue", "normal", "unrelated", "real")
+SET_NAMES = ("ambiguous", "cue", "normal", "unrelated", "real", "alias")
+
+#: pairs of the synthetic projects (``flexreg synth --scene KIND --stations 10 --resolution
+#: 1024x512 --seed 0``) that the survey once linked confidently and wrongly through an
+#: identical room, corridor module or rack bay (the truth barely overlaps), and two pairs of
+#: the same projects that do overlap (they must stay confident and correct)
+ALIAS_PAIRS: tuple[tuple[str, str, str], ...] = (
+    ("building", "station_00", "station_03"),
+    ("building", "station_01", "station_07"),
+    ("building", "station_04", "station_05"),
+    ("building", "station_02", "station_07"),
+    ("warehouse", "station_00", "station_09"),
+    ("warehouse", "station_00", "station_02"),
+)
+ALIAS_STATIONS, ALIAS_SEED, ALIAS_RESOLUTION = 10, 0, (1024, 512)
 
 Resolution = tuple[int, int]
 
@@ -486,6 +503,57 @@ def real_set(
         out.append(rec)
         save()
         print(f"real {progress(rec)}", flush=True)
+
+
+def alias_set(
+    config: RegistrationConfig, folder: Path, out: list[dict[str, Any]], save: Callable[[], None]
+) -> None:
+    """Register the :data:`ALIAS_PAIRS` of the synthetic projects, saving after each.
+
+    Parameters
+    ----------
+    config : RegistrationConfig
+        The configuration of every call.
+    folder : Path
+        Where the projects are written (``<folder>/<kind>/``, as ``flexreg synth --format
+        npz`` writes them; kept when there).
+    out : list of dict
+        Gets one record per pair: :func:`judge`'s with the pair, its true overlap (the
+        smaller share of either station seen by the other, from gt.json) and the limits of a
+        correct answer.
+    save : callable
+        Called after each pair.
+    """
+    for kind in dict.fromkeys(k for k, _, _ in ALIAS_PAIRS):
+        proj = folder / kind
+        if not (proj / "gt.json").is_file():
+            make_project(
+                kind,
+                stations=ALIAS_STATIONS,
+                out=proj,
+                resolution=ALIAS_RESOLUTION,
+                seed=ALIAS_SEED,
+                format="npz",
+            )
+        gt = json.loads((proj / "gt.json").read_text())
+        poses = {st["name"]: np.asarray(st["T_world_scanner"]) for st in gt["stations"]}
+        overlap = {(o["target"], o["source"]): o["overlap"] for o in gt["project"]["overlaps"]}
+        for k, t, src in ALIAS_PAIRS:
+            if k != kind:
+                continue
+            rec: dict[str, Any] = {
+                "pair": f"{kind} {t} <- {src}",
+                "reference": "gt.json",
+                "solved": [SOLVED_ROT_DEG, SOLVED_TRANS_M],
+                "true_overlap": overlap.get((t, src), 0.0),
+            }
+            T_ref = invert(poses[t]) @ poses[src]
+            rec |= judge(
+                read_scan(proj / f"{t}.npz"), read_scan(proj / f"{src}.npz"), config, T_ref=T_ref
+            )
+            out.append(rec)
+            save()
+            print(f"alias {progress(rec)}", flush=True)
 
 
 # ------------------------------------------------------------------ sums

@@ -10,6 +10,10 @@ Sets (one default ``register`` call per pair, ICP refinement on, seed 0):
   * unrelated: a station of one scene against a station of another (no overlap at all), every
     combination of scene kinds at 1024 x 512 and at 2048 x 1024 (``--mixed``: also a
     1024 x 512 target against a 2048 x 1024 source) -- never confident;
+  * alias: pairs of the synthetic building and warehouse projects that a survey once linked
+    confidently and wrongly through an identical room, corridor module or rack bay (the true
+    pose barely overlaps), and overlapping pairs of the same projects -- never confident and
+    wrong;
   * real: 3DTK Kurt3D scan000 <- scan002 (correct within the registration benchmark's limits
     against the odometry, or uncertain with a runner-up near it), and the other real pairs of
     the registration benchmark as further normal pairs.
@@ -53,6 +57,7 @@ from _verdict_runs import (  # noqa: E402
     NORMAL_SCENES,
     SCENE_KINDS,
     SET_NAMES,
+    alias_set,
     real_set,
     summarise,
     synthetic_set,
@@ -220,6 +225,8 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
         unrelated_set(p["unrelated_kinds"], combos, config, sets["unrelated"], save)
     if "real" in sets:
         real_set(config, args.quick, sets["real"], save)
+    if "alias" in sets:
+        alias_set(config, folder / "projects", sets["alias"], save)
     state["total_s"] = time.perf_counter() - t0
     state["load_average"]["end"] = list(os.getloadavg())
     state["summary"] = {name: summarise(records) for name, records in sets.items()}

@@ -21,9 +21,16 @@ from flexreg.core.transforms import (
 )
 from flexreg.errors import ConfigError
 from flexreg.registration import RegistrationConfig, register
-from flexreg.registration.candidates import Check, Judged
+from flexreg.registration.candidates import (
+    Aliases,
+    Check,
+    Judged,
+    alias_candidates,
+    self_symmetries,
+)
 from flexreg.registration.verdict import TwoWay, decide, gather, runner_ups
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.priors import plan_view
 from flexreg.stages.sampling import area_sample
 from flexreg.stages.verification import (
     axis_strength,
@@ -398,3 +405,92 @@ def test_refinement_guard_keeps_the_coarse_transform_when_icp_is_worse(monkeypat
     assert [n.code for n in r.verdict.notes] == ["refinement_rejected"]
     off = register(pair.target, pair.source, RegistrationConfig(refine_guard=False))
     assert not np.array_equal(off.T_target_source, off.T_coarse)
+
+
+# ---------------------------------------------------------------------------- aliases and rivals
+
+
+@pytest.mark.parametrize(
+    ("refuting", "refuted", "refutes"),
+    [(0.012, 0.0003, True), (0.006, 0.0, True), (0.004, 0.0, False), (0.02, 0.01, False)],
+)
+def test_a_rival_that_wins_its_duel_refutes_the_answer(refuting, refuted, refutes):
+    """A rival of any score that explains at least 0.5 % of the samples where the answer puts
+    surfaces in open space, 3 times more than the reverse, makes the answer uncertain."""
+    ev = _with()
+    ev["rivals"] = [
+        {
+            "score_ratio": -2.0,  # far below the answer overall: it overlaps much less
+            "rotation_deg": 90.0,
+            "translation_m": 9.3,
+            "origin": "alias",
+            "refuted_share": refuted,
+            "refuting_share": refuting,
+        }
+    ]
+    v = decide(ev)
+    assert v.confident != refutes
+    if refutes:
+        (r,) = v.reasons
+        assert r.code == "ambiguous" and "contradicted" in r.message and "9.3 m" in r.message
+
+
+def test_turned_box_with_cue_is_refuted_by_a_weaker_rival():
+    """The answer is the box turned by 180° (the corner block lands in open space), the true
+    pose is only a rival whose score is ignored: the duel alone makes the answer uncertain."""
+    lo, hi = np.array(BOX[0]), np.array(BOX[1])
+    T_wt, T_ws = _station(0.6, 0.4), _station(-1.0, 0.5, 30)
+    (vt, _), two = _views(lo, hi, CUE, T_wt, T_ws)
+    truth = invert(T_wt) @ T_ws
+    wrong = invert(T_wt) @ _turn_about_centre(180) @ T_ws
+    thr = 0.02
+    rival = Hypothesis(truth, 0.1, rotation_error_deg(truth, wrong), 1.0, "alias")
+    common = dict(
+        target_normals=grid_normals(vt),
+        inlier_points=np.zeros((0, 3)),
+        matches=0,
+        fit_to_matches=False,
+        runner_up=(),
+        candidates=2,
+        inlier_rmse_m=0.003,
+        fitness=0.9,
+        threshold_m=thr,
+        refinement=None,
+    )
+    ev = gather(two, two.score(wrong, thr / 2), rivals=[rival], **common)
+    (u,) = ev["rivals"]
+    assert u["refuting_share"] > 3 * u["refuted_share"] + 0.005
+    v = decide(ev)
+    assert "ambiguous" in [r.code for r in v.reasons] and "contradicted" in v.summary()
+    # the true pose against the turned one as its rival: the answer wins, nothing refutes it
+    rival = Hypothesis(wrong, 0.1, rival.rotation_deg, 1.0, "alias")
+    ev = gather(two, two.score(truth, thr / 2), rivals=[rival], **common)
+    assert not any("contradicted" in r.message for r in decide(ev).reasons)
+
+
+def test_self_symmetries_of_a_box_include_the_turn_about_its_centre():
+    """A scanner off the centre of an empty box: the box turned by 180° about its centre
+    overlays its plan view onto itself."""
+    T_wt = _station(0.6, 0.4)
+    view = _cast(np.array(BOX[0]), np.array(BOX[1]), [], T_wt)
+    syms = self_symmetries(plan_view(view))
+    turn = invert(T_wt) @ _turn_about_centre(180) @ T_wt  # in the scanner's frame
+    assert syms and all(not np.allclose(S, np.eye(4), atol=0.1) for S in syms)
+    best = min(syms, key=lambda S: rotation_error_deg(S, turn) + translation_error_m(S, turn))
+    assert rotation_error_deg(best, turn) < 3.0 and translation_error_m(best, turn) < 0.3
+    assert self_symmetries("not levelled") == []
+
+
+def test_alias_candidates_are_the_winner_moved_by_symmetries_and_offsets():
+    W = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.0])
+    D = make_transform(np.eye(3), [3.4, 0.0, 0.0])  # one bay along x
+    J = Judged("plan", D @ W, 0.9, 0.5, 0.0)
+    near = Judged("plan", make_transform(np.eye(3), [0.1, 0, 0]) @ W, 0.95, 0.5, 0.0)
+    S_t = make_transform(rotation_about_axis([0, 0, 1], np.pi), [2.0, 0.0, 0.0])
+    S_s = make_transform(np.eye(3), [0.0, 5.0, 0.0])
+    out = alias_candidates(W, [near, J], Aliases([S_t], [S_s]), distinct_deg=3.0, distinct_m=0.5)
+    assert [o for o, _ in out] == ["alias"] * 3
+    expected = [S_t @ W, W @ S_s, invert(D) @ W]  # the bay on the other side
+    for (_, T), E in zip(out, expected, strict=True):
+        np.testing.assert_allclose(T, E, atol=1e-12)
+    assert alias_candidates(W, [near], None, distinct_deg=3.0, distinct_m=0.5) == []

@@ -13,6 +13,7 @@ member at a fine tolerance.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -20,12 +21,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.range_image import RangeImage
-from flexreg.core.transforms import rotation_error_deg, translation_error_m
+from flexreg.core.transforms import (
+    invert,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
 from flexreg.errors import RegistrationError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.stages.alignment import guided_fit, squared_residuals
 from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import match_guided
+from flexreg.stages.priors import PlanView, match_top_views
 from flexreg.stages.refinement.projective import projective_icp
 from flexreg.stages.verification import classify_points
 
@@ -36,8 +43,15 @@ log = logging.getLogger(__name__)
 Candidate = tuple[str, NDArray[np.float64]]
 
 #: priors that stay candidates themselves (judged by the dense check alone, not needing
-#: keypoint inliers): plan-view overlays and a given initial transform
-DENSE_PRIORS = ("plan", "init")
+#: keypoint inliers): plan-view overlays, a given initial transform and the aliases of the
+#: best prior (:func:`alias_candidates`)
+DENSE_PRIORS = ("plan", "init", "alias")
+
+#: self-overlays of a plan view kept as its symmetries (:func:`self_symmetries`)
+SYMMETRIES = 4
+
+#: distinct judged candidates whose offset from the winner is tried the other way round
+ALIAS_OFFSETS = 2
 
 
 def dense_prior(origin: str) -> bool:
@@ -249,6 +263,111 @@ def _best_family(
     return best, (ok, bad), Tj if polish is not None else None, seen, top
 
 
+def self_symmetries(
+    plan: PlanView | str | None, *, count: int = SYMMETRIES
+) -> list[NDArray[np.float64]]:
+    """Poses other than the identity that overlay a levelled scan's plan view onto itself
+    (identical rooms, repeating bays, a symmetric hall), best first, in the scan's frame.
+
+    A pose ``T`` that puts the source into one of two identical parts of the target's view
+    has a twin ``S @ T`` for each such symmetry ``S`` of the target (and ``T @ S'`` for a
+    symmetry ``S'`` of the source): :func:`alias_candidates` tries them.
+
+    Parameters
+    ----------
+    plan : PlanView, str or None
+        :func:`~flexreg.stages.priors.plan_view` of the scan (a str or None: no plan view,
+        no symmetries).
+    count : int
+        Most symmetries returned.
+
+    Returns
+    -------
+    list of (4, 4) float64
+        ``T_scan_scan`` transforms (rotation about the vertical and a horizontal shift in the
+        levelled frame, expressed in the scanner frame).
+    """
+    if not isinstance(plan, PlanView):
+        return []
+    matches = match_top_views(
+        plan.coarse,
+        plan.coarse,
+        yaw_step_rad=math.radians(2.0),
+        top_k=count + 1,
+        coarse_candidates=6,
+    )
+    L = np.eye(4)
+    L[:3, :3] = plan.levelling.R_level
+    out = []
+    for m in matches:
+        if abs(m.yaw_rad) < math.radians(5.0) and math.hypot(*m.t_xy) < 1.0:
+            continue  # the identity
+        M = np.eye(4)
+        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
+        M[:3, 3] = (m.t_xy[0], m.t_xy[1], 0.0)
+        out.append(invert(L) @ M @ L)
+    return out[:count]
+
+
+@dataclass(frozen=True)
+class Aliases:
+    """Symmetries of both scans' plan views (:func:`self_symmetries`).
+
+    Attributes
+    ----------
+    target, source : list of (4, 4) float64
+        ``T_target_target`` and ``T_source_source`` self-overlays.
+    """
+
+    target: list[NDArray[np.float64]] = field(default_factory=list)
+    source: list[NDArray[np.float64]] = field(default_factory=list)
+
+
+def alias_candidates(
+    W: NDArray[np.float64],
+    judged: list[Judged],
+    aliases: Aliases | None,
+    *,
+    distinct_deg: float,
+    distinct_m: float,
+) -> list[Candidate]:
+    """The twins of the winning pose ``W`` in repeating structure: ``W`` moved by each
+    symmetry of the target's view (``S @ W``) and of the source's (``W @ S'``), and by the
+    offset from ``W`` to each of the :data:`ALIAS_OFFSETS` best clearly different candidates,
+    the other way round (``inv(D) @ W`` with ``D = J @ inv(W)``): when the best prior fell one
+    bay or module beside the truth and another one bay beyond it, the truth is among them.
+
+    Parameters
+    ----------
+    W : (4, 4) float64
+        The winning ``T_target_source``.
+    judged : list of Judged
+        Every candidate as judged.
+    aliases : Aliases or None
+    distinct_deg, distinct_m : float
+        How far a candidate must be from ``W`` to count as different.
+
+    Returns
+    -------
+    list of Candidate
+        Origin ``"alias"``.
+    """
+    out: list[Candidate] = []
+    if aliases is not None:
+        out += [("alias", S @ W) for S in aliases.target]
+        out += [("alias", W @ S) for S in aliases.source]
+    far = [
+        j
+        for j in sorted(judged, key=lambda j: -j.score)
+        if rotation_error_deg(j.T_target_source, W) > distinct_deg
+        or translation_error_m(j.T_target_source, W) > distinct_m
+    ]
+    for j in far[:ALIAS_OFFSETS]:
+        D = j.T_target_source @ invert(W)
+        out.append(("alias", invert(D) @ W))
+    return out
+
+
 def choose(
     priors: list[Candidate],
     kt: Keypoints3D,
@@ -259,12 +378,15 @@ def choose(
     config: RegistrationConfig,
     counts: str,
     notes: list[str],
+    aliases: Aliases | None = None,
 ) -> Coarse:
     """The coarse transform: the best prior family at a coarse tolerance, then its most
     precise member (with the keypoint estimate around the polished winner) at ``thr / 2``.
 
     ``counts`` (keypoints and descriptor matches) and ``notes`` (why a route gave no prior)
-    end the error messages.
+    end the error messages. The twins of the best prior in repeating structure
+    (:func:`alias_candidates` of ``aliases``) then compete too: one that scores better takes
+    its place, and all are judged (the verdict duels the answer against them).
 
     Raises
     ------
@@ -279,6 +401,21 @@ def choose(
             f"no transform found: {counts}, {len(priors)} priors"
             + (f"; {'; '.join(notes)}" if notes else "")
         )
+    if config.aliases and not config.icp_only:
+        W = polished if polished is not None else fams[best][0][1]
+        twins = alias_candidates(
+            W,
+            judged,
+            aliases,
+            distinct_deg=config.verdict_distinct_deg,
+            distinct_m=config.verdict_distinct_m,
+        )
+        b2, okbad2, pol2, judged2, top2 = _best_family([[c] for c in twins], check, polish, thr)
+        judged = judged + judged2
+        if b2 >= 0 and top2 > top + 0.01:
+            log.info("an alias of the best prior scores better: %.3f > %.3f", top2, top)
+            fams.append([twins[b2]])
+            best, (ok, bad), polished, top = len(fams) - 1, okbad2, pol2, top2
     if ok < config.min_overlap or bad > 0.5 * ok:
         raise RegistrationError(
             f"no overlap: the best transform explains {100 * ok:.1f}% of the source's sampled "
@@ -302,13 +439,18 @@ def choose(
 
 
 __all__ = [
+    "ALIAS_OFFSETS",
+    "SYMMETRIES",
+    "Aliases",
     "Candidate",
     "Check",
     "Coarse",
     "Judged",
     "Keypoints3D",
+    "alias_candidates",
     "choose",
     "dense_prior",
     "families",
     "polisher",
+    "self_symmetries",
 ]

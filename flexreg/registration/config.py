@@ -91,6 +91,12 @@ class RegistrationConfig(Config):
         stages; ICP still uses every point.
     polish : bool
         Judge each candidate after a quick local ICP on small subsets of the scans.
+    aliases : bool
+        Also try the twins of the best prior in repeating structure (the pose moved by each
+        symmetry of either scan's plan view, and by the offsets to the best other candidates
+        the other way round; :func:`~flexreg.registration.candidates.alias_candidates`): the
+        truth one bay or module beside a wrong answer competes, and the verdict duels the
+        answer against every such twin.
     refine_guard : bool
         Keep the ICP refinement only when it scores at least as well as the coarse transform
         in the two-way dense check (:func:`~flexreg.stages.verification.soft_score`), less
@@ -159,6 +165,7 @@ class RegistrationConfig(Config):
     min_overlap: float = Field(0.1, ge=0, le=1)
     max_image_pixels: int = Field(2_500_000, ge=1)
     polish: bool = True
+    aliases: bool = True
     refine_guard: bool = True
     refine_guard_margin: float = Field(0.01, ge=0, le=1)
     verdict_min_overlap: float = Field(0.2, ge=0, le=1)

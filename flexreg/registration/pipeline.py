@@ -39,6 +39,7 @@ from flexreg.core.scan import Scan, as_points
 from flexreg.core.transforms import as_transform
 from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationError
 from flexreg.registration.candidates import (
+    Aliases,
     Candidate,
     Check,
     Coarse,
@@ -46,10 +47,18 @@ from flexreg.registration.candidates import (
     choose,
     dense_prior,
     polisher,
+    self_symmetries,
 )
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.result import RegistrationResult
-from flexreg.registration.verdict import Scored, TwoWay, decide, gather, runner_ups
+from flexreg.registration.verdict import (
+    MAX_RIVALS,
+    Scored,
+    TwoWay,
+    decide,
+    gather,
+    runner_ups,
+)
 from flexreg.stages import feature_images
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
@@ -224,23 +233,28 @@ def _plan_view(image: RangeImage, config: RegistrationConfig) -> PlanView | str:
         return str(e)
 
 
+PlanPriors = tuple[list[NDArray[np.float64]], Aliases]
+
+
 def _plan_priors(
     target: PlanView | str | None, source: PlanView | str | None, config: RegistrationConfig
-) -> list[NDArray[np.float64]]:
-    """The plan overlays of two plan views (raises the reason a scan has none)."""
+) -> PlanPriors:
+    """The plan overlays of two plan views (raises the reason a scan has none), and the
+    symmetries of each (when ``config.aliases``)."""
     for p in (target, source):
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
-    return plan_overlays(target, source, hypotheses=config.plan_hypotheses)  # type: ignore[arg-type]
+    overlays = plan_overlays(target, source, hypotheses=config.plan_hypotheses)  # type: ignore[arg-type]
+    if not config.aliases:
+        return overlays, Aliases()
+    return overlays, Aliases(self_symmetries(target), self_symmetries(source))
 
 
 def _plans_of(images: list[RangeImage], config: RegistrationConfig) -> list[PlanView | str]:
     return [_plan_view(img, config) for img in images]
 
 
-def _pair_plan_priors(
-    images: list[RangeImage], config: RegistrationConfig
-) -> list[NDArray[np.float64]]:
+def _pair_plan_priors(images: list[RangeImage], config: RegistrationConfig) -> PlanPriors:
     t, s = _plans_of(images, config)
     return _plan_priors(t, s, config)
 
@@ -360,23 +374,25 @@ def _match(
 
 
 def _plan_candidates(
-    job: Future[list[NDArray[np.float64]]] | None,
+    job: Future[PlanPriors] | None,
     config: RegistrationConfig,
     run: _Run,
     notes: list[str],
-) -> list[Candidate]:
-    """The plan overlays of the background job, or none (the reason noted)."""
+) -> tuple[list[Candidate], Aliases | None]:
+    """The plan overlays of the background job and the scans' symmetries, or none (the
+    reason noted)."""
     if job is None:
-        return []
+        return [], None
     run.wait("plan views")
     try:
-        return [("plan", T) for T in job.result()]
+        overlays, aliases = job.result()
     except DegenerateGeometryError as e:
         if config.upright == "on":
             raise RegistrationError(f"upright prior impossible: {e}") from None
         notes.append(f"no plan prior ({e})")
         log.info("no plan prior: %s", e)
-        return []
+        return [], None
+    return [("plan", T) for T in overlays], aliases
 
 
 def _icp_denominator(icp: Any) -> str:
@@ -442,6 +458,15 @@ def _verdict(
         distinct_m=config.verdict_distinct_m,
         ratio=config.verdict_ambiguity_ratio,
     )
+    rivals = runner_ups(
+        c.judged,
+        scored.T,
+        c.score,
+        distinct_deg=config.verdict_distinct_deg,
+        distinct_m=config.verdict_distinct_m,
+        ratio=-np.inf,
+        limit=MAX_RIVALS,
+    )
     ev = gather(
         two,
         scored,
@@ -456,6 +481,7 @@ def _verdict(
         residual_kind=stage[2],
         threshold_m=thr,
         refinement=refinement,
+        rivals=rivals,
     )
     return decide(ev, ups, config)
 
@@ -469,6 +495,7 @@ def _finish(
     config: RegistrationConfig,
     run: _Run,
     init: NDArray[np.float64] | None = None,
+    aliases: Aliases | None = None,
 ) -> RegistrationResult:
     """Candidates, the coarse transform and its checks, the refinement (kept when it scores
     better), the verdict, the result.
@@ -486,7 +513,7 @@ def _finish(
     given: list[Candidate] = [] if init is None else [("init", init)]
     priors = given if config.icp_only else given + plan_priors + m.priors
     with run.stage("estimation"):
-        c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes)
+        c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases=aliases)
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
     if not dense_prior(c.origin):
@@ -653,10 +680,10 @@ def register(
         view_job = pool.submit(run.background("preparation", _views, scans, images, config, roles))
         kps = _keypoints(images, config, run)
         matched = _match(images, kps, config, run)
-        plans = _plan_candidates(plan_job, config, run, matched.notes)
+        plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
         views = view_job.result()
-    return _finish(scans, kps, views, matched, plans, config, run, init)
+    return _finish(scans, kps, views, matched, plans, config, run, init, aliases)
 
 
 class Registration:
@@ -727,9 +754,9 @@ class Registration:
                 else None
             )
             matched = _match(images, kps, config, run)
-            plans = _plan_candidates(plan_job, config, run, matched.notes)
+            plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         scans, views = [target.scan, source.scan], [target.view, source.view]
-        return _finish(scans, kps, views, matched, plans, config, run, init)
+        return _finish(scans, kps, views, matched, plans, config, run, init, aliases)
 
 
 __all__ = [

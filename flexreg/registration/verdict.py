@@ -37,6 +37,9 @@ from flexreg.stages.verification import AXES, axis_strength, plane_information, 
 #: most runner-up poses listed
 MAX_RUNNER_UPS = 3
 
+#: most other candidate poses the answer duels (:func:`rivals`)
+MAX_RIVALS = 8
+
 #: relative range tolerance of the fine checks (fraction of the range)
 FINE_REL = 0.002
 
@@ -100,11 +103,11 @@ def runner_ups(
     distinct_deg: float,
     distinct_m: float,
     ratio: float,
+    limit: int = MAX_RUNNER_UPS,
 ) -> list[Hypothesis]:
     """The best candidates clearly different from ``T`` (more than ``distinct_deg`` or
     ``distinct_m`` away, and from each other), best first: always the best one, then any
-    others whose score is at least ``ratio`` of the winner's ``top`` (at most
-    :data:`MAX_RUNNER_UPS`)."""
+    others whose score is at least ``ratio`` of the winner's ``top`` (at most ``limit``)."""
 
     def far(A: NDArray[np.float64], B: NDArray[np.float64]) -> bool:
         return rotation_error_deg(A, B) > distinct_deg or translation_error_m(A, B) > distinct_m
@@ -127,7 +130,7 @@ def runner_ups(
                 j.origin,
             )
         )
-        if len(out) >= MAX_RUNNER_UPS:
+        if len(out) >= limit:
             break
     return out
 
@@ -174,6 +177,7 @@ def gather(
     threshold_m: float,
     residual_kind: str = "point-to-plane",
     refinement: dict[str, Any] | None,
+    rivals: Sequence[Hypothesis] = (),
 ) -> dict[str, Any]:
     """The evidence of a registration (JSON-ready, units in the keys).
 
@@ -205,6 +209,13 @@ def gather(
         so the residual test skips them).
     refinement : dict or None
         Whether the refinement was kept and the scores (None: not refined).
+    rivals : sequence of Hypothesis
+        Every other clearly different candidate worth a duel (:func:`runner_ups` without a
+        score limit, at most :data:`MAX_RIVALS`): under ``"rivals"`` the answer's
+        :func:`duel` against each, whatever its overall score. A rival that explains what
+        the answer puts in open space refutes it, even when it overlaps less (the true pose
+        of two stations that barely see each other, against a wrong pose that overlays two
+        identical rooms).
     """
     _, qf, okf, _ = final.forward
     _, _, okb, _ = final.backward
@@ -274,7 +285,20 @@ def gather(
     if ups:
         ev["runner_up"] = ups[0]
         ev["runner_ups"] = ups
+    ev["rivals"] = [_rival(two, answer, h, threshold_m) for h in rivals]
     return ev
+
+
+def _rival(two: TwoWay, answer: Masks, h: Hypothesis, threshold_m: float) -> dict[str, Any]:
+    won, lost = duel(answer, duel_masks(two, h.T_target_source, threshold_m))
+    return {
+        "score_ratio": h.score_ratio,
+        "rotation_deg": h.rotation_deg,
+        "translation_m": h.translation_m,
+        "origin": h.origin,
+        "refuted_share": _r(won),
+        "refuting_share": _r(lost),
+    }
 
 
 Masks = tuple[tuple[NDArray[np.bool_], NDArray[np.bool_]], ...]
@@ -456,6 +480,23 @@ def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | N
     )
 
 
+def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    """A rival pose beats the answer :func:`decisive`-ly in their duel, whatever the scores."""
+    beaten = [
+        u for u in ev.get("rivals") or () if decisive(u["refuting_share"], u["refuted_share"], cfg)
+    ]
+    if not beaten:
+        return None
+    r = max(beaten, key=lambda u: u["refuting_share"] - u["refuted_share"])
+    return Reason(
+        "ambiguous",
+        f"another pose {r['rotation_deg']:.0f}° / {r['translation_m']:.1f} m away explains "
+        f"{100 * r['refuting_share']:.1f}% of the scans where this one puts surfaces in open "
+        f"space (the reverse: {100 * r['refuted_share']:.1f}%): this pose is contradicted, "
+        "perhaps an identical room or bay beside the right one",
+    )
+
+
 def _residual_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     r = ev.get("residual")
     if not r or r.get("rmse_over_threshold") is None or r.get("kind") == "open3d":
@@ -485,7 +526,8 @@ def decide(
     second principal spread below ``verdict_min_inlier_spread`` of the overlap's),
     ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
     ``ambiguous`` (a clearly different pose scores at least ``verdict_ambiguity_ratio`` of
-    the winner and the answer does not beat it :func:`decisive`-ly), ``high_residual``
+    the winner and the answer does not beat it :func:`decisive`-ly, or any rival pose beats
+    the answer :func:`decisive`-ly in their duel), ``high_residual``
     (inlier RMSE above ``verdict_max_rmse_ratio`` inlier thresholds). A rejected refinement
     is a note, not a reason.
 
@@ -513,6 +555,10 @@ def decide(
         r = test(evidence, config)
         if r is not None:
             reasons.append(r)
+    if not any(x.code == "ambiguous" for x in reasons):
+        r = _refuted_reason(evidence, config)
+        if r is not None:
+            reasons.append(r)
     reasons += _inlier_reasons(evidence, config)
     r = _residual_reason(evidence, config)
     if r is not None:
@@ -535,6 +581,7 @@ __all__ = [
     "FINE_REL",
     "FREE_SPACE_REL",
     "FREE_SPACE_TOLERANCE",
+    "MAX_RIVALS",
     "MAX_RUNNER_UPS",
     "Scored",
     "TwoWay",

@@ -19,13 +19,14 @@ $(STAMP): pyproject.toml scripts/ensure-system-libs.sh
 demo: $(STAMP)
 	@bash scripts/ensure-system-libs.sh
 	$(BIN)/flexreg info data/laserscan/laserscan-depth.png
-	$(BIN)/flexreg project data/laserscan/laserscan-depth.png --out $(DEMO)/laserscan-range.png
-	$(BIN)/flexreg convert data/laserscan/laserscan-depth.png --kind flexion --n 5 --bits 8 --out $(DEMO)/laserscan-flexion5.png
-	$(BIN)/flexreg synth --scene room --stations 2 --resolution 1024x512 --seed 0 --out $(DEMO)/synth-room
+	$(BIN)/flexreg project data/laserscan/laserscan-depth.png --out $(DEMO)/laserscan-range.png --overwrite
+	$(BIN)/flexreg convert data/laserscan/laserscan-depth.png --kind flexion --n 5 --bits 8 --out $(DEMO)/laserscan-flexion5.png --overwrite
+	$(BIN)/flexreg synth --scene room --stations 2 --resolution 1024x512 --seed 0 --out $(DEMO)/synth-room --overwrite
 	$(BIN)/flexreg info $(DEMO)/synth-room/station_00.ptx
 	$(BIN)/flexreg register $(DEMO)/synth-room/station_00.ptx $(DEMO)/synth-room/station_01.ptx \
 		--truth $(DEMO)/synth-room/gt.json --out $(DEMO)/synth-room/T_station_00_station_01.json \
-		--txt $(DEMO)/synth-room/T_station_00_station_01.txt --matches $(DEMO)/synth-room/matches.png
+		--txt $(DEMO)/synth-room/T_station_00_station_01.txt --matches $(DEMO)/synth-room/matches.png \
+		--overwrite
 	@echo "demo results written to $(DEMO)/"
 
 test: $(STAMP)

@@ -427,7 +427,7 @@ def test_failed_write_leaves_an_earlier_result_byte_identical(
     (tmp_path / "blocker").write_text("a file where a folder is needed")
     argv = [
         "register", str(target), str(source), "--out", str(tmp_path / "blocker" / "T.json"),
-        "--txt", str(out / "T.txt"), "--matches", str(out / "m.png"),
+        "--txt", str(out / "T.txt"), "--matches", str(out / "m.png"), "--overwrite",
     ]  # fmt: skip
     assert run(argv) == 1
     assert str(tmp_path / "blocker" / "T.json") in one_error_line(capsys.readouterr().err)

@@ -170,8 +170,9 @@ def markdown(state: dict[str, Any], *, figure: str) -> str:
         "",
         "Synthetic room pairs (`flexreg synth --scene room --seed 0`), run as a user runs them "
         "(`flexreg register A.ptx B.ptx --truth gt.json --out T.json`). Peak RSS is the whole "
-        "process's (`ru_maxrss`: interpreter, libraries, both scans, every stage); medians over "
-        "the runs.",
+        "process's high-water mark (`VmHWM` read by the process itself at exit: interpreter, "
+        "libraries, both scans, every stage); CPU seconds are user + system of the process; "
+        "medians over the runs.",
         "",
         *_whole_table(state),
         "",

@@ -57,7 +57,8 @@ bench-compare: $(STAMP)
 	$(BIN)/flexreg bench --suite all --out bench-results
 
 # memory and speed: whole-process peak RSS and time of `flexreg register` up to 8192x4096, one
-# station's preparation, the call against Open3D FPFH + RANSAC + ICP (about 30 min, 8 GB disk)
+# station's preparation, the call against Open3D FPFH + RANSAC + ICP (10-20 min, 3.5 GB of PTX
+# pairs kept in benchmarks/results/perf-data)
 bench-perf: $(STAMP)
 	$(BIN)/python benchmarks/perf.py --write-docs
 

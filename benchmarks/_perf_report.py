@@ -54,7 +54,7 @@ def _goals(state: dict[str, Any]) -> list[str]:
     ):
         peak = None if r is None else r["median_peak_gb"]
         ok = None if peak is None else peak <= target
-        miss = "" if peak is None else f"{peak / target:.1f}× the target"
+        miss = "" if peak is None else f"{peak / target:.2f}× the target"
         lines.append(
             f"| whole-process peak RSS, {name} pair ≤ {target:g} GB | {_f(peak)} GB | "
             f"{_verdict(ok, miss)} |"
@@ -109,6 +109,31 @@ def _whole_table(state: dict[str, Any]) -> list[str]:
             f"{_f(r['median_call_s'])} | {last.get('verdict', 'failed')} | {e} |"
         )
     return lines
+
+
+def _before_table(state: dict[str, Any]) -> list[str]:
+    """Peak RSS and CPU seconds of the same runs on the code before this benchmark's changes
+    (``state["before"]``: pair name -> :func:`_perf_runs.whole_register` summary)."""
+    before = state.get("before") or {}
+    lines = [
+        f"Before the memory and speed changes ({state.get('before_note', 'main')}), the same "
+        "harness on the same pairs in a separate run a few minutes earlier (so under a "
+        "different load):",
+        "",
+        "| pair | peak RSS GB before → after | CPU s before → after | wall s before → after |",
+        "|---|---:|---:|---:|",
+    ]
+    for r in state.get("whole", []):
+        b = before.get(r["pair"])
+        if b is None:
+            continue
+        lines.append(
+            f"| {r['width']} × {r['height']} | {_f(b['median_peak_gb'])} → "
+            f"{_f(r['median_peak_gb'])} | {_f(b['median_cpu_s'], '.1f')} → "
+            f"{_f(r['median_cpu_s'], '.1f')} | {_f(b['median_wall_s'], '.1f')} → "
+            f"{_f(r['median_wall_s'], '.1f')} |"
+        )
+    return lines + [""] if before else []
 
 
 def _stage_table(state: dict[str, Any]) -> list[str]:
@@ -170,11 +195,13 @@ def markdown(state: dict[str, Any], *, figure: str) -> str:
         "",
         "Synthetic room pairs (`flexreg synth --scene room --seed 0`), run as a user runs them "
         "(`flexreg register A.ptx B.ptx --truth gt.json --out T.json`). Peak RSS is the whole "
-        "process's (`ru_maxrss`: interpreter, libraries, both scans, every stage); medians over "
-        "the runs.",
+        "process's high-water mark (`VmHWM` read by the process itself at exit: interpreter, "
+        "libraries, both scans, every stage); CPU seconds are user + system of the process; "
+        "medians over the runs.",
         "",
         *_whole_table(state),
         "",
+        *_before_table(state),
         f"![peak RSS against points]({figure})",
         "",
         "### Where the time goes (2048 × 1024 pair)",
@@ -209,6 +236,7 @@ def plot(state: dict[str, Any], path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     rows = [r for r in state.get("whole", []) if r.get("median_peak_gb") is not None]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -225,8 +253,16 @@ def plot(state: dict[str, Any], path: Path) -> Path:
         if r is not None:
             ax.plot([sum(r.get("points") or [0]) / 1e6], [t], "r_", markersize=20, mew=2)
     ax.plot([], [], "r_", label="target")
+    before = state.get("before") or {}
+    bx = [sum(b.get("points") or [0]) / 1e6 for b in before.values() if b.get("median_peak_gb")]
+    by = [b["median_peak_gb"] for b in before.values() if b.get("median_peak_gb")]
+    if bx:
+        ax.plot(bx, by, "s--", color="0.5", label=f"before ({state.get('before_note', 'main')})")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_yticks([0.25, 0.5, 1, 2, 3, 4])
     ax.set_xlabel("points of the pair (millions)")
     ax.set_ylabel("peak RSS (GB)")
     ax.grid(True, which="both", alpha=0.3)

@@ -27,9 +27,12 @@ Conventions: see :mod:`flexreg.calibration.calibrate`.
 import importlib
 import sys
 import types
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flexreg.exports import lazy
+
+if TYPE_CHECKING:  # what the property below gives
+    from flexreg.calibration.calibrate import calibrate as calibrate
 
 
 class _Face(types.ModuleType):

@@ -203,7 +203,7 @@ def _parse_all(
 
 _HEADER_COUNTS = [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]
 #: bytes of text parsed at a time: the parser's buffers are bounded by this, not by the file
-_CHUNK_BYTES = 1 << 24
+_CHUNK_BYTES = 1 << 26
 #: shortest possible point line (``0 0 0`` and its newline), bytes: bounds a cloud's lines
 _MIN_LINE_BYTES = 6
 
@@ -250,6 +250,39 @@ def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
             buf[:rest] = buf[cut:filled].copy()
             offset += cut
             filled = rest
+
+
+_NO_INTENSITY = np.empty(0, dtype=np.float32)
+_NO_COLORS = np.empty((0, 3), dtype=np.uint8)
+
+
+@numba.njit(cache=True, nogil=True)
+def _keep_valid(
+    head, tail, lo, hi, seen, rows, kept, points, grid_index, intensity, colors
+):  # pragma: no cover - compiled
+    """Append the valid points (not ``0 0 0``) of parsed lines ``lo:hi`` to the cloud's arrays
+    from row ``kept`` on: point, grid cell (line ``k`` of the cloud, ``k = seen + i - lo``, is
+    row ``k % rows`` of column ``k // rows``), intensity and colour (clipped to 0..255) when
+    those arrays are not empty. Returns the new number of kept points."""
+    has_i = intensity.shape[0] > 0
+    has_c = colors.shape[0] > 0
+    for i in range(lo, hi):
+        x, y, z = head[i, 0], head[i, 1], head[i, 2]
+        if x == 0.0 and y == 0.0 and z == 0.0:
+            continue
+        points[kept, 0] = x
+        points[kept, 1] = y
+        points[kept, 2] = z
+        k = seen + i - lo
+        grid_index[kept, 0] = k % rows
+        grid_index[kept, 1] = k // rows
+        if has_i:
+            intensity[kept] = head[i, 3]
+        if has_c:
+            for j in range(3):
+                colors[kept, j] = np.uint8(min(max(tail[i, j], np.float32(0)), np.float32(255)))
+        kept += 1
+    return kept
 
 
 class _Cloud:
@@ -304,18 +337,19 @@ class _Cloud:
         """Copy the valid points (not ``0 0 0``) of lines ``lo:hi`` and their attributes."""
         head, tail, _, _ = lines
         assert self.points is not None and self.grid_index is not None
-        xyz = head[lo:hi, :3]
-        rel = np.flatnonzero((xyz != 0.0).any(axis=1))
-        a, b = self.kept, self.kept + len(rel)
-        self.points[a:b] = xyz[rel]
-        k = rel + self.seen  # line k of the cloud is row k % rows of column k // rows
-        self.grid_index[a:b, 0] = k % self.rows
-        self.grid_index[a:b, 1] = k // self.rows
-        if self.intensity is not None:
-            self.intensity[a:b] = head[lo:hi, 3][rel]
-        if self.colors is not None:
-            self.colors[a:b] = np.clip(tail[lo:hi][rel], 0, 255).astype(np.uint8)
-        self.kept = b
+        self.kept = _keep_valid(
+            head,
+            tail,
+            lo,
+            hi,
+            self.seen,
+            self.rows,
+            self.kept,
+            self.points,
+            self.grid_index,
+            _NO_INTENSITY if self.intensity is None else self.intensity,
+            _NO_COLORS if self.colors is None else self.colors,
+        )
 
     def truncated(self) -> InputError:
         return InputError(

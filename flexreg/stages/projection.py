@@ -72,16 +72,35 @@ def project(scan: Scan, camera: Camera) -> RangeImage:
         f"a {H} x {W} range image",
         source=scan.path if scan.path is not None else (scan.name or "scan"),
     )
-    u, v, d = camera.project(scan.points)
+    n = len(scan.points)
+    lin = np.empty(n, dtype=np.int64)
+    d = np.empty(n, dtype=np.float64)
+    for a in range(0, n, _PROJECT_CHUNK):  # elementwise: chunks bound the temporaries
+        b = min(n, a + _PROJECT_CHUNK)
+        lin[a:b], d[a:b] = _pixels(scan.points[a:b], camera)
+    index = _zbuffer(lin, d, H * W).reshape(H, W)
+    del lin, d
+    return from_index(scan, index, camera)
+
+
+#: points projected at a time by :func:`project` (a multiple of every SIMD width, so each
+#: element is computed exactly as in one pass over all points)
+_PROJECT_CHUNK = 1 << 18
+
+
+def _pixels(
+    points: NDArray[np.float64], camera: Camera
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Linear pixel index (-1 outside the image or behind the camera) and depth of points."""
+    H, W = camera.shape
+    u, v, d = camera.project(points)
     with np.errstate(invalid="ignore"):
         iu = np.floor(u + 0.5)
         iv = np.floor(v + 0.5)
     if isinstance(camera, SphericalCamera) and camera.wraps:
         iu = np.where(iu >= W, iu - W, iu)
     ok = np.isfinite(iu) & np.isfinite(iv) & (iu >= 0) & (iu < W) & (iv >= 0) & (iv < H) & (d > 0)
-    lin = np.where(ok, iv * W + iu, -1).astype(np.int64)
-    index = _zbuffer(lin, d, H * W).reshape(H, W)
-    return from_index(scan, index, camera)
+    return np.where(ok, iv * W + iu, -1).astype(np.int64), d
 
 
 def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None:

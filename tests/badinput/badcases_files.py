@@ -35,6 +35,7 @@ def add_file_cases(c: Corpus) -> None:
     _transforms(c)
     _outputs(c)
     _command_options(c)
+    _pick_and_config(c)
 
 
 def _camera_png() -> bytes:
@@ -174,6 +175,48 @@ def _survey(c: Corpus) -> None:
         ["none.ptx"],
         good=("room.ptx",),
         covers=["survey folder"],
+    )
+
+
+def _pick_and_config(c: Corpus) -> None:
+    """``pick`` refuses its inputs before starting a server; ``config show`` an unknown name."""
+    pick = [
+        "pick", "--image", "{d}/camera.png", "--scan", "{d}/room.ptx", "--out", "{d}/p.csv",
+        "--no-browser", "--pinhole", "100", "100", "80", "60",
+    ]  # fmt: skip
+    for label, files, names in (
+        ("image-garbage", {"camera.png": b"not an image"}, ["camera.png"]),
+        (
+            "pairs-non-numeric",
+            {"camera.png": _camera_png(), "old.csv": "u,v,X,Y,Z\n1,2,a,4,5\n"},
+            ["old.csv"],
+        ),
+    ):
+        extra = ["--pairs", "{d}/old.csv"] if "old.csv" in files else []
+        c.case(
+            f"pick-{label}",
+            "broken",
+            [*pick, *extra],
+            names,
+            good=("room.ptx",),
+            files=files,
+            covers=["pairs CSV" if extra else "option"],
+        )
+    c.case(
+        "pick-out-is-the-scan",
+        "overwrite",
+        [*pick[:6], "{d}/room.ptx", *pick[7:]],
+        ["room.ptx"],
+        good=("room.ptx",),
+        files={"camera.png": _camera_png()},
+        covers=["output path"],
+    )
+    c.case(
+        "config-show-unknown-name",
+        "option",
+        ["config", "show", "nosuch"],
+        ["nosuch"],
+        covers=["option"],
     )
 
 

@@ -274,7 +274,7 @@ MUST_COVER = {
 #: every command that reads a user's files or options
 COMMANDS = {
     "info", "project", "convert", "register", "compare", "bench", "evaluate", "odometry",
-    "calibrate", "survey", "synth",
+    "calibrate", "survey", "synth", "pick", "config",
 }  # fmt: skip
 
 

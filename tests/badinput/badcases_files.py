@@ -36,6 +36,7 @@ def add_file_cases(c: Corpus) -> None:
     _outputs(c)
     _command_options(c)
     _pick_and_config(c)
+    _odometry_sequences(c)
 
 
 def _camera_png() -> bytes:
@@ -218,6 +219,38 @@ def _pick_and_config(c: Corpus) -> None:
         ["nosuch"],
         covers=["option"],
     )
+
+
+def _odometry_sequences(c: Corpus) -> None:
+    """A TUM RGB-D sequence whose list files or depth images are broken."""
+
+    def missing_frame(d) -> None:
+        _tum_sequence(d)
+        (d / "seq" / "depth.txt").write_text("0.0 depth/0.png\n0.1 depth/9.png\n")
+
+    def word_timestamp(d) -> None:
+        _tum_sequence(d)
+        (d / "seq" / "depth.txt").write_text("zero depth/0.png\n0.1 depth/1.png\n")
+
+    def eight_bit(d) -> None:
+        import cv2
+
+        _tum_sequence(d)
+        cv2.imwrite(str(d / "seq" / "depth" / "1.png"), np.full((48, 64), 50, np.uint8))
+
+    for label, setup, names in (
+        ("missing-frame", missing_frame, ["depth.txt"]),
+        ("non-numeric-timestamp", word_timestamp, ["depth.txt"]),
+        ("8-bit-depth-frame", eight_bit, ["1.png"]),
+    ):
+        c.case(
+            f"odometry-{label}",
+            "broken",
+            ["odometry", "{d}/seq", "--out", "{d}/t.txt"],
+            names,
+            setup=setup,
+            covers=["odometry sequence"],
+        )
 
 
 def _garbage_scans(d) -> None:

@@ -123,7 +123,10 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
             threads_per_worker=1,
             processes=True,
             dashboard_address=":0",
-            silence_logs=logging.ERROR,
+            # the workers' own logs: a heartbeat that loses the scheduler while the cluster
+            # closes (Ctrl-C) is logged as an error with a traceback; task failures reach the
+            # survey through their futures, so only critical worker logs are shown
+            silence_logs=logging.CRITICAL,
         )
     finally:
         if main:

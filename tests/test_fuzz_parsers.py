@@ -396,3 +396,13 @@ def test_config_set(cls):
         _valid(cls)(config)
 
     run()
+
+
+@FUZZ
+@given(text=st.text(alphabet=st.characters(blacklist_categories=["Cs"])))
+def test_toml_strings_round_trip(text):
+    """Every configuration string written to TOML reads back unchanged (non-BMP characters
+    and control characters included)."""
+    from flexreg.config import _toml_string, tomllib
+
+    assert tomllib.loads(f"v = {_toml_string(text)}")["v"] == text

@@ -242,3 +242,19 @@ def test_bench_interrupted_writes_no_results(tmp_path):
     rc, _, err = interrupt(proc, signal.SIGINT)
     check_one_line(rc, err, signal.SIGINT)
     assert sorted(p.name for p in out.iterdir()) == ["earlier-run.txt"]
+
+
+def test_survey_on_dask_workers_interrupted_is_one_line(tmp_path):
+    """Ctrl-C reaches the whole process group, Dask's worker processes too: they must not
+    print their own tracebacks; the survey stops with one line and leaves only its cache."""
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for i, o in enumerate([(0, 0, 0), (1.0, 0.3, 0), (2.0, -0.2, 0), (-1.0, 0.5, 0)]):
+        write_station(scans / f"st{i}.npz", 256, 512, o, i)
+    out = tmp_path / "out"
+    proc = start(["survey", str(scans), "--out", str(out), "--workers", "2"], tmp_path)
+    wait_until(proc, lambda: any((out / "cache").glob("*.pkl")), "caching a station")
+    rc, _, err = interrupt(proc, signal.SIGINT)
+    check_one_line(rc, err, signal.SIGINT)
+    left = [p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()]
+    assert all(p.startswith("cache/") and ".partial" not in p for p in left), left

@@ -136,6 +136,9 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     from flexreg.errors import InputError
     from flexreg.io.origin import centring_problem, recentre
 
+    if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
+        what = "a single point" if len(scan) == 1 else f"{len(scan)} copies of one point"
+        raise InputError(file, f"holds {what}: nothing to make an image of")
     if origin is not None:
         try:
             return recentre(scan, origin)

@@ -16,6 +16,8 @@ from __future__ import annotations
 import logging
 import os
 import pickle
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -112,20 +114,29 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     quiet = logging.getLogger("distributed")
     level = quiet.level
     quiet.setLevel(logging.ERROR)  # the nannies' shutdown chatter is not the user's business
-    with (
-        LocalCluster(
+    # the worker processes inherit SIGINT ignored: Ctrl-C (sent to the whole process group)
+    # stops this process, which closes the cluster, instead of printing each worker's traceback
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
             processes=True,
             dashboard_address=":0",
-            silence_logs=logging.ERROR,
-        ) as cluster,
-        Client(cluster) as client,
-    ):
-        try:
+            # the workers' own logs: a heartbeat that loses the scheduler while the cluster
+            # closes (Ctrl-C) is logged as an error with a traceback; task failures reach the
+            # survey through their futures, so only critical worker logs are shown
+            silence_logs=logging.CRITICAL,
+        )
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, handler)
+    try:
+        with cluster, Client(cluster) as client:
             yield client
-        finally:
-            quiet.setLevel(level)
+    finally:
+        quiet.setLevel(level)
 
 
 def run_tasks(

@@ -35,6 +35,8 @@ def add_file_cases(c: Corpus) -> None:
     _transforms(c)
     _outputs(c)
     _command_options(c)
+    _pick_and_config(c)
+    _odometry_sequences(c)
 
 
 def _camera_png() -> bytes:
@@ -175,6 +177,80 @@ def _survey(c: Corpus) -> None:
         good=("room.ptx",),
         covers=["survey folder"],
     )
+
+
+def _pick_and_config(c: Corpus) -> None:
+    """``pick`` refuses its inputs before starting a server; ``config show`` an unknown name."""
+    pick = [
+        "pick", "--image", "{d}/camera.png", "--scan", "{d}/room.ptx", "--out", "{d}/p.csv",
+        "--no-browser", "--pinhole", "100", "100", "80", "60",
+    ]  # fmt: skip
+    for label, files, names in (
+        ("image-garbage", {"camera.png": b"not an image"}, ["camera.png"]),
+        (
+            "pairs-non-numeric",
+            {"camera.png": _camera_png(), "old.csv": "u,v,X,Y,Z\n1,2,a,4,5\n"},
+            ["old.csv"],
+        ),
+    ):
+        extra = ["--pairs", "{d}/old.csv"] if "old.csv" in files else []
+        c.case(
+            f"pick-{label}",
+            "broken",
+            [*pick, *extra],
+            names,
+            good=("room.ptx",),
+            files=files,
+            covers=["pairs CSV" if extra else "option"],
+        )
+    c.case(
+        "pick-out-is-the-scan",
+        "overwrite",
+        [*pick[:6], "{d}/room.ptx", *pick[7:]],
+        ["room.ptx"],
+        good=("room.ptx",),
+        files={"camera.png": _camera_png()},
+        covers=["output path"],
+    )
+    c.case(
+        "config-show-unknown-name",
+        "option",
+        ["config", "show", "nosuch"],
+        ["nosuch"],
+        covers=["option"],
+    )
+
+
+def _odometry_sequences(c: Corpus) -> None:
+    """A TUM RGB-D sequence whose list files or depth images are broken."""
+
+    def missing_frame(d) -> None:
+        _tum_sequence(d)
+        (d / "seq" / "depth.txt").write_text("0.0 depth/0.png\n0.1 depth/9.png\n")
+
+    def word_timestamp(d) -> None:
+        _tum_sequence(d)
+        (d / "seq" / "depth.txt").write_text("zero depth/0.png\n0.1 depth/1.png\n")
+
+    def eight_bit(d) -> None:
+        import cv2
+
+        _tum_sequence(d)
+        cv2.imwrite(str(d / "seq" / "depth" / "1.png"), np.full((48, 64), 50, np.uint8))
+
+    for label, setup, names in (
+        ("missing-frame", missing_frame, ["depth.txt"]),
+        ("non-numeric-timestamp", word_timestamp, ["depth.txt"]),
+        ("8-bit-depth-frame", eight_bit, ["1.png"]),
+    ):
+        c.case(
+            f"odometry-{label}",
+            "broken",
+            ["odometry", "{d}/seq", "--out", "{d}/t.txt"],
+            names,
+            setup=setup,
+            covers=["odometry sequence"],
+        )
 
 
 def _garbage_scans(d) -> None:

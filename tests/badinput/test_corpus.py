@@ -270,11 +270,12 @@ MUST_COVER = {
     "camera sidecar", "pairs CSV", "survey pairs CSV", "survey folder", "TUM trajectory",
     "KITTI trajectory", "intrinsics", "config TOML", "--set", "4x4 transform (--init)",
     "4x4 transform (--truth)", "output path", "setup selector", "degenerate cloud", "option",
+    "odometry sequence",
 }  # fmt: skip
 #: every command that reads a user's files or options
 COMMANDS = {
     "info", "project", "convert", "register", "compare", "bench", "evaluate", "odometry",
-    "calibrate", "survey", "synth",
+    "calibrate", "survey", "synth", "pick", "config",
 }  # fmt: skip
 
 

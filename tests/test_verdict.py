@@ -494,3 +494,19 @@ def test_alias_candidates_are_the_winner_moved_by_symmetries_and_offsets():
     for (_, T), E in zip(out, expected, strict=True):
         np.testing.assert_allclose(T, E, atol=1e-12)
     assert alias_candidates(W, [near], None, distinct_deg=3.0, distinct_m=0.5) == []
+
+
+def test_self_symmetries_of_a_corridor_with_pillars_include_one_bay():
+    """Pillars every 3 m along a corridor: the plan view shifted by one bay overlays itself;
+    a box room (with a corner block) overlays itself shifted nowhere."""
+    lo, hi = np.array([-12.0, -2.0, -1.5]), np.array([12.0, 2.0, 1.5])
+    pillars = [
+        (np.array([x - 0.2, y - 0.2, -1.5]), np.array([x + 0.2, y + 0.2, 1.5]))
+        for x in np.arange(-10.5, 11.0, 3.0)
+        for y in (-1.5, 1.5)
+    ]
+    syms = self_symmetries(plan_view(_cast(lo, hi, pillars, _station(0.3, 0.2))))
+    shifts = [S[:3, 3] for S in syms if rotation_error_deg(S, np.eye(4)) < 1.0]
+    assert any(abs(abs(t[0]) - 3.0) < 0.3 and abs(t[1]) < 0.3 for t in shifts), syms
+    room = _cast(np.array(BOX[0]), np.array(BOX[1]), CUE, _station(0.6, 0.4))
+    assert all(rotation_error_deg(S, np.eye(4)) > 90 for S in self_symmetries(plan_view(room)))

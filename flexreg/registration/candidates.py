@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import fft, ndimage
 
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import (
@@ -32,7 +33,7 @@ from flexreg.registration.config import RegistrationConfig
 from flexreg.stages.alignment import guided_fit, squared_residuals
 from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import match_guided
-from flexreg.stages.priors import PlanView, match_top_views
+from flexreg.stages.priors import PlanView, TopView, match_top_views
 from flexreg.stages.refinement.projective import projective_icp
 from flexreg.stages.verification import classify_points
 
@@ -47,11 +48,16 @@ Candidate = tuple[str, NDArray[np.float64]]
 #: best prior (:func:`alias_candidates`)
 DENSE_PRIORS = ("plan", "init", "alias")
 
-#: self-overlays of a plan view kept as its symmetries (:func:`self_symmetries`)
-SYMMETRIES = 4
+#: most turns and most shifts of a plan view kept as its symmetries (:func:`self_symmetries`),
+#: and the smallest share of the identity's overlay score they must reach
+SYMMETRIES, SYMMETRY_SHARE = 3, 0.5
+
+#: ... and of a pure shift (a corridor or a row of bays overlays itself shifted along its
+#: length wherever it is seen, so a shift's share decays with the distance)
+SHIFT_SHARE = 0.3
 
 #: distinct judged candidates whose offset from the winner is tried the other way round
-ALIAS_OFFSETS = 2
+ALIAS_OFFSETS = 1
 
 
 def dense_prior(origin: str) -> bool:
@@ -263,15 +269,51 @@ def _best_family(
     return best, (ok, bad), Tj if polish is not None else None, seen, top
 
 
+def _shifts(
+    plan: TopView, count: int, min_share: float, min_shift_m: float
+) -> list[tuple[float, float]]:
+    """The best horizontal shifts (metres) that overlay a plan onto itself: peaks of its
+    autocorrelation at least ``min_share`` of the centre's and ``min_shift_m`` away from it."""
+    c = plan.cells - plan.cells.min(axis=0)
+    h, w = int(c[:, 1].max()) + 1, int(c[:, 0].max()) + 1
+    shape = (fft.next_fast_len(2 * h, real=True), fft.next_fast_len(2 * w, real=True))
+    grid = np.zeros(shape)
+    np.add.at(grid, (c[:, 1], c[:, 0]), plan.values)
+    f = fft.rfft2(grid)
+    auto = fft.fftshift(fft.irfft2(f * np.conj(f), s=shape))
+    centre = np.array(shape) // 2
+    top = float(auto[tuple(centre)])
+    if top <= 0:
+        return []
+    iy, ix = np.mgrid[0 : shape[0], 0 : shape[1]]
+    dist = np.hypot(iy - centre[0], ix - centre[1]) * plan.cell_m
+    peak = (auto == ndimage.maximum_filter(auto, size=5)) & (auto >= min_share * top)
+    peak &= dist >= min_shift_m
+    ys, xs = np.nonzero(peak)
+    order = np.argsort(-auto[ys, xs], kind="stable")[:count]
+    return [
+        (float(xs[k] - centre[1]) * plan.cell_m, float(ys[k] - centre[0]) * plan.cell_m)
+        for k in order
+    ]
+
+
 def self_symmetries(
-    plan: PlanView | str | None, *, count: int = SYMMETRIES
+    plan: PlanView | str | None,
+    *,
+    count: int = SYMMETRIES,
+    min_share: float = SYMMETRY_SHARE,
+    min_shift_share: float = SHIFT_SHARE,
 ) -> list[NDArray[np.float64]]:
     """Poses other than the identity that overlay a levelled scan's plan view onto itself
-    (identical rooms, repeating bays, a symmetric hall), best first, in the scan's frame.
+    (identical rooms, repeating bays, a symmetric hall), in the scan's frame.
 
     A pose ``T`` that puts the source into one of two identical parts of the target's view
     has a twin ``S @ T`` for each such symmetry ``S`` of the target (and ``T @ S'`` for a
-    symmetry ``S'`` of the source): :func:`alias_candidates` tries them.
+    symmetry ``S'`` of the source): :func:`alias_candidates` tries them. Turns come from
+    overlaying the plan onto itself over yaw (:func:`~flexreg.stages.priors.match_top_views`),
+    shifts from the peaks of its autocorrelation; only those overlaying at least
+    ``min_share`` (shifts: ``min_shift_share``) of what the identity overlays count (an
+    ordinary room has none).
 
     Parameters
     ----------
@@ -279,13 +321,16 @@ def self_symmetries(
         :func:`~flexreg.stages.priors.plan_view` of the scan (a str or None: no plan view,
         no symmetries).
     count : int
-        Most symmetries returned.
+        Most turns and most shifts returned (each).
+    min_share, min_shift_share : float
+        Smallest overlay score of a turn and of a pure shift, as a fraction of the
+        identity's.
 
     Returns
     -------
     list of (4, 4) float64
         ``T_scan_scan`` transforms (rotation about the vertical and a horizontal shift in the
-        levelled frame, expressed in the scanner frame).
+        levelled frame, expressed in the scanner frame): the turns, then the shifts.
     """
     if not isinstance(plan, PlanView):
         return []
@@ -296,17 +341,23 @@ def self_symmetries(
         top_k=count + 1,
         coarse_candidates=6,
     )
+    top = max((m.score for m in matches), default=0.0)
+    moves = [
+        (m.yaw_rad, m.t_xy)
+        for m in matches
+        if m.score >= min_share * top
+        and not (abs(m.yaw_rad) < math.radians(5.0) and math.hypot(*m.t_xy) < 1.0)
+    ][:count]
+    moves += [(0.0, t) for t in _shifts(plan.coarse, count, min_shift_share, 1.0)]
     L = np.eye(4)
     L[:3, :3] = plan.levelling.R_level
     out = []
-    for m in matches:
-        if abs(m.yaw_rad) < math.radians(5.0) and math.hypot(*m.t_xy) < 1.0:
-            continue  # the identity
+    for yaw, (tx, ty) in moves:
         M = np.eye(4)
-        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
-        M[:3, 3] = (m.t_xy[0], m.t_xy[1], 0.0)
+        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], yaw)
+        M[:3, 3] = (tx, ty, 0.0)
         out.append(invert(L) @ M @ L)
-    return out[:count]
+    return out
 
 
 @dataclass(frozen=True)
@@ -440,7 +491,9 @@ def choose(
 
 __all__ = [
     "ALIAS_OFFSETS",
+    "SHIFT_SHARE",
     "SYMMETRIES",
+    "SYMMETRY_SHARE",
     "Aliases",
     "Candidate",
     "Check",

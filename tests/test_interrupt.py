@@ -234,7 +234,7 @@ def test_bench_interrupted_writes_no_results(tmp_path):
     (out / "earlier-run.txt").write_text("kept")
     argv = [
         "bench", "--quick", "--suite", "synthetic", "--methods", "flexreg,icp-point",
-        "--out", str(out),
+        "--out", str(out), "--overwrite",
     ]  # fmt: skip
     proc = start(argv, tmp_path)
     t0 = time.monotonic()

@@ -132,7 +132,7 @@ def prepare(name: str, spec: dict[str, Any], work: Path) -> Sequence:
     """
     if "synth" in spec:
         folder = work / name
-        argv = [*spec["synth"], "--out", str(folder)]
+        argv = [*spec["synth"], "--out", str(folder), "--overwrite"]
         stamp = folder / "flexreg-synth-argv.json"
         if not (stamp.is_file() and json.loads(stamp.read_text()) == argv):
             t0 = time.perf_counter()

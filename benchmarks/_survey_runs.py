@@ -207,7 +207,8 @@ def command(
     """The command line of one run."""
     scans = project / "scans"
     if method == "survey":
-        argv = [str(FLEXREG), "survey", str(scans), "--out", str(out)]
+        # the run's folder already holds its log: --overwrite writes into it
+        argv = [str(FLEXREG), "survey", str(scans), "--out", str(out), "--overwrite"]
         if pairs:
             argv += ["--pairs", pairs]
         if workers:

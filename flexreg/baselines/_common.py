@@ -70,21 +70,8 @@ def initial_transform(T_init: ArrayLike | None) -> tuple[NDArray[np.float64], st
 def default_voxel(
     target: NDArray[np.float64], *, max_points: int = DEFAULT_MAX_POINTS
 ) -> tuple[float, str]:
-    """The scale parameter from the scan resolution: ``(voxel_m, how)``; the same rule as the
-    overlap figure of every result (:func:`flexreg.stages.overlap.scale_voxel`).
-
-    Parameters
-    ----------
-    target : (N, 3) float64, metres
-    max_points : int
-        Point budget after downsampling.
-
-    Returns
-    -------
-    voxel_m : float, metres
-    how : str
-        Which rule set the value (for the record).
-    """
+    """The baselines' scale parameter ``(voxel_m, how)``: the rule of the overlap figure of
+    every result, :func:`flexreg.stages.overlap.scale_voxel` (parameters and returns there)."""
     return scale_voxel(target, max_points=max_points)
 
 

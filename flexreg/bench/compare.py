@@ -54,6 +54,7 @@ from flexreg.bench.measure import (
     save_pair,
 )
 from flexreg.bench.methods import DEFAULT_METHODS, GLOBAL_METHODS, parse_methods, run_method
+from flexreg.core.results import format_length
 from flexreg.core.scan import as_points
 from flexreg.core.transforms import as_transform, rotation_error_deg, translation_error_m
 from flexreg.errors import ConfigError, InputError, RegistrationError
@@ -103,18 +104,10 @@ class SuccessCriteria:
         return bool(rotation_deg <= self.rotation_deg and translation_m <= self.translation_m)
 
     def label(self) -> str:
-        return f"≤ {self.rotation_deg:g}° and ≤ {_length(self.translation_m)}"
+        return f"≤ {self.rotation_deg:g}° and ≤ {format_length(self.translation_m, 'g')}"
 
     def to_dict(self) -> dict[str, float]:
         return {"rotation_deg": self.rotation_deg, "translation_m": self.translation_m}
-
-
-def _length(m: float) -> str:
-    if m >= 1:
-        return f"{m:g} m"
-    if m >= 0.01:
-        return f"{100 * m:g} cm"
-    return f"{1000 * m:g} mm"
 
 
 @dataclass(eq=False)

@@ -118,12 +118,13 @@ class Verdict:
         }
 
 
-def _length(m: float) -> str:
+def format_length(m: float, spec: str = ".3g") -> str:
+    """A distance in metres in the unit that reads best (m, cm or mm), numbers as ``spec``."""
     if m >= 1:
-        return f"{m:.3g} m"
+        return f"{m:{spec}} m"
     if m >= 0.01:
-        return f"{100 * m:.3g} cm"
-    return f"{1000 * m:.3g} mm"
+        return f"{100 * m:{spec}} cm"
+    return f"{1000 * m:{spec}} mm"
 
 
 @dataclass(frozen=True)
@@ -158,10 +159,10 @@ class Overlap:
     @property
     def definition(self) -> str:
         """What ``share`` divides by, in words."""
+        d, v = format_length(self.distance_m), format_length(self.voxel_m)
         return (
-            f"of {self.source_points:,} source points within {_length(self.distance_m)} of a "
-            f"target point after alignment (both clouds voxelised at {_length(self.voxel_m)}; "
-            f"{self.target_points:,} target points)"
+            f"of {self.source_points:,} source points within {d} of a target point after "
+            f"alignment (both clouds voxelised at {v}; {self.target_points:,} target points)"
         )
 
     def headline(self) -> str:
@@ -283,4 +284,12 @@ class PairResult:
         }
 
 
-__all__ = ["Hypothesis", "Overlap", "PairResult", "Reason", "Settings", "Verdict"]
+__all__ = [
+    "Hypothesis",
+    "Overlap",
+    "PairResult",
+    "Reason",
+    "Settings",
+    "Verdict",
+    "format_length",
+]

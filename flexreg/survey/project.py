@@ -139,8 +139,9 @@ class SurveyResult:
         sol = self.solution
         placed = set(self.placed)
         stations: dict[str, Any] = {}
+        checks = self.stored_checks()
         for st in self.stations:
-            stations[st.stem] = self._station(st, placed)
+            stations[st.stem] = self._station(st, placed, checks.get(st.stem))
         links = [self._link(e) for e in self.links]
         count = {k: sum(e.status == k for e in self.links) for k in ("accepted", "rejected")}
         summary = {
@@ -202,12 +203,14 @@ class SurveyResult:
                 )
         return out
 
-    def _station(self, st: Station, placed: set[str]) -> dict[str, Any]:
+    def _station(
+        self, st: Station, placed: set[str], check: dict[str, Any] | None
+    ) -> dict[str, Any]:
         setup = {"setup": st.setup, "setup_name": st.setup_name}
         T_stored = self.stored.get(st.stem)
         stored = {
             "T_world_station_stored": None if T_stored is None else np.asarray(T_stored).tolist(),
-            "stored_pose_check": self.stored_checks().get(st.stem),
+            "stored_pose_check": check,
         }
         return {**self._station_core(st, placed), **setup, **stored}
 

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import HealthCheck, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from flexreg.errors import FlexregError  # noqa: E402
@@ -145,6 +145,7 @@ def test_ptx(folder, text):
 
 @FUZZ
 @given(data=st.binary(max_size=300) | any_text(GOOD_PTX).map(lambda t: t.encode()))
+@example(data=b"1\n1e20\n0 0 0\n0 0 0\n0 0 0\n0 0 0\n0 0 0 0\n0 0 0 0\n0 0 0 0\n0 0 0 0\n0 0 0")
 def test_ptx_bytes(folder, data):
     from flexreg.io import read_scan
 

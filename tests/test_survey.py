@@ -67,6 +67,10 @@ def test_every_station_placed_confidently_exit_0(first, project):
     s = doc["summary"]
     assert s["placed"] == 3 and s["exit_status"] == 0 and s["problems"] == []
     assert s["links_accepted"] >= 2 and s["links_attempted"] <= 6 * 3
+    # every pair of placed stations was checked against each other; none contradicts
+    m = doc["map_check"]
+    assert m["enabled"] is True and m["pairs_checked"] == 3
+    assert m["conflicting_now"] == [] and m["conflicts_found"] == []
     for link in doc["links"]:
         assert link["status"] in ("accepted", "rejected", "failed")
         if link["status"] == "accepted":

@@ -31,7 +31,12 @@ if TYPE_CHECKING:
 OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine"}
 add_config("survey", SurveyConfig)
 
-PHASES = {"prepare": "Preparing stations", "links": "Registering links", "refine": "Refining"}
+PHASES = {
+    "prepare": "Preparing stations",
+    "links": "Registering links",
+    "map check": "Checking the map",
+    "refine": "Refining",
+}
 
 _ScansArgument = Annotated[
     list[Path],

@@ -418,6 +418,10 @@ def _header_cloud(
     if cols_f != int(cols_f) or rows_f != int(rows_f) or cols_f <= 0 or rows_f <= 0:
         raise InputError(path, f"cloud {index}: grid size {cols_f:g} x {rows_f:g} is not valid")
     cols, rows = int(cols_f), int(rows_f)
+    if rows * cols >= 2**62:  # no file holds that many lines; the counters are 64-bit
+        raise InputError(
+            path, f"cloud {index}: grid size {cols_f:g} x {rows_f:g} is not valid (too large)"
+        )
     M = _header_pose(np.stack(head[2:10])[:, :4])
     cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
     return _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap), M

@@ -43,6 +43,14 @@ class SurveyConfig(Config):
         The same, in translation (plus ``loop_per_link_m`` per link of the cycle).
     loop_per_link_m : float, metres
         Loop tolerance added per link of the closed cycle (errors add up along a path).
+    loop_doubt_min : float
+        A disagreeing loop blames only its most doubtful link (doubt: the link's own
+        free-space conflict ratio) when that doubt is at least this ...
+    loop_doubt_ratio : float
+        ... and at least this many times the doubt of every other link of the loop.
+    lone_ambiguous_places : bool
+        Let a confident link that no loop confirms place stations whose scans other links
+        found ambiguous (off: such a link is rejected; the stations stay unplaced).
     prune_threshold : float
         Open3D's line-process weight under which an uncertain edge is pruned (0..1).
     uncertain_joins : bool
@@ -73,6 +81,23 @@ class SurveyConfig(Config):
         this (after the stored frame is aligned on the stations that agree) is flagged.
     stored_max_m : float, metres
         The same, in translation.
+    map_check : bool
+        After the graph, score every pair of placed stations of a group (linked or not) on the
+        dense check and cut the most doubtful link between two that contradict each other
+        (:mod:`flexreg.survey.mapcheck`).
+    map_radius_m : float, metres
+        Pairs of placed stations farther apart than this are not checked.
+    map_min_conflict : float
+        A pair conflicts when, in either direction, at least this share of one station's
+        sample lies in the other's free space ...
+    map_conflict_ratio : float
+        ... and that share is at least this many times the share the other explains.
+    map_rounds : int
+        Map checks (each after the graph was solved again without the cut links).
+    map_doubt_margin : float
+        A conflict cuts the most doubtful link between its two stations (the highest
+        free-space conflict ratio of its own check) and every link on that path whose doubt
+        is within this factor of it (several when none stands out).
     """
 
     registration: RegistrationConfig = RegistrationConfig()
@@ -85,6 +110,9 @@ class SurveyConfig(Config):
     loop_max_deg: float = Field(0.3, gt=0, le=30)
     loop_max_m: float = Field(0.03, gt=0)
     loop_per_link_m: float = Field(0.01, ge=0)
+    loop_doubt_min: float = Field(0.15, ge=0)
+    loop_doubt_ratio: float = Field(2.0, ge=1)
+    lone_ambiguous_places: bool = False
     prune_threshold: float = Field(0.25, gt=0, lt=1)
     uncertain_joins: bool = False
     residual_factor: float = Field(10.0, gt=1)
@@ -96,6 +124,12 @@ class SurveyConfig(Config):
     stored_poses: StoredPoses = "prior"
     stored_max_deg: float = Field(1.0, gt=0)
     stored_max_m: float = Field(0.10, gt=0)
+    map_check: bool = True
+    map_radius_m: float = Field(60.0, gt=0)
+    map_min_conflict: float = Field(0.03, gt=0, le=1)
+    map_conflict_ratio: float = Field(1.0, gt=0)
+    map_rounds: int = Field(4, ge=1, le=20)
+    map_doubt_margin: float = Field(1.5, ge=1)
 
 
 __all__ = ["PairsMode", "StoredPoses", "SurveyConfig"]

@@ -173,6 +173,18 @@ def _strength(evidence: dict[str, Any]) -> dict[str, float]:
     return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
 
 
+def _doubt(evidence: dict[str, Any]) -> float | None:
+    """The larger free-space conflict ratio of the verdict's evidence (conflicting share over
+    explained share, either direction), or None when unknown."""
+    fs = evidence.get("free_space") or {}
+    vals = [
+        float(fs[k])
+        for k in ("source_conflict_ratio", "target_conflict_ratio")
+        if fs.get(k) is not None
+    ]
+    return max(vals) if vals else None
+
+
 def link_cache_path(target_file: str, source_file: str, *, prior: bool = False) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
     stations' cache keys (file content, setup and configuration) and whether the stored
@@ -191,6 +203,8 @@ def _cached_link(path: Path, cand: Candidate) -> Link | None:
         return None
     if not isinstance(link, Link):
         return None
+    if link.T_target_source is not None and link.doubt is None:
+        return None  # cached before links kept their free-space doubt: register again
     return replace(link, origin=cand.origin, place_score=cand.place_score, cached=True)
 
 
@@ -263,6 +277,7 @@ def align_link(
         open3d_fitness=None if one is None else one.open3d_fitness,
         open3d_inlier_rmse_m=None if one is None else one.to_dict()["open3d_inlier_rmse_m"],
         strength=_strength(ev),
+        doubt=_doubt(ev),
         seconds=time.perf_counter() - t0,
         origin=cand.origin,
         place_score=cand.place_score,

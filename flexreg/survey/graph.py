@@ -3,14 +3,18 @@
 Each registered link carries its transform, its verdict and its information matrix. A wrong
 link must not place a station, so the graph is built in steps that each trust less:
 
-1. **Spanning tree of the confident links**, strongest first (Kruskal; strength = overlap).
+1. **Spanning tree of the confident links**, most trusted first (Kruskal; trust = overlap,
+   lowered by the link's doubt: the share of one scan its own check put in the other's free
+   space, relative to what it explains).
 2. **Loop closure**: every other confident link closes a cycle with the tree; it agrees with
    the cycle when the composed transforms meet within ``loop_max_deg`` and ``loop_max_m``
    (+ ``loop_per_link_m`` per link of the cycle). A disagreeing cycle blames the tree links
-   on it, an agreeing one supports them. A tree link blamed more than supported is dropped
-   and the tree rebuilt without it; when the blame is tied (one triangle, nobody can tell
-   which link is wrong) every link of that cycle is dropped. What is left disagreeing is
-   rejected, with its loop error.
+   on it, an agreeing one supports them; when one link of the disagreeing cycle is far more
+   doubtful than the others (``loop_doubt_ratio``, at least ``loop_doubt_min``), only that
+   one is blamed (or rejected, when it is the closing link). A tree link blamed more than
+   supported is dropped and the tree rebuilt without it; when the blame is tied (one
+   triangle, nobody can tell which link is wrong) every link of that cycle is dropped. What
+   is left disagreeing is rejected, with its loop error.
 3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
    with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
    two or more that agree on the same relative pose (a loop through both) join the groups.
@@ -25,12 +29,17 @@ link must not place a station, so the graph is built in steps that each trust le
    optimised poses worst is dropped when it is beyond ``residual_factor`` times the median
    residual of the accepted links (at least ``residual_floor_m`` / ``residual_floor_deg``),
    and everything is solved again without it, until every link fits.
+7. **Vetoes** from the map check (:mod:`flexreg.survey.mapcheck`): two placed stations
+   whose scans contradict each other at their solved relative pose (linked or not) mean a
+   wrong link between them; the most doubtful one on a path between them (the highest
+   free-space conflict ratio of its own check) is cut and everything solved again.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -64,6 +73,10 @@ class Link:
         ``overlap_target`` / ``overlap_source`` are the verdict's view-consistency shares,
         which order the links.
     verdict : {"confident", "uncertain"} or None
+    doubt : float or None
+        The verdict's larger free-space conflict ratio (share of a scan's sample in the other's
+        free space over the share the other explains): which link of a conflicting pair's
+        path the map check cuts first.
     status : {"pending", "accepted", "rejected", "failed"}
     """
 
@@ -94,6 +107,7 @@ class Link:
     overlap_of: str | None = None
     open3d_fitness: float | None = None
     open3d_inlier_rmse_m: float | None = None
+    doubt: float | None = None
 
     @property
     def overlap(self) -> float:
@@ -130,6 +144,7 @@ class Link:
             "rmse_m": self.rmse_m,
             "fitness": self.fitness,
             "strength": dict(self.strength),
+            "free_space_conflict_ratio": self.doubt,
             "information": m(self.information),
             "in_tree": self.in_tree,
             "confirmed_by_loop": self.confirmed_by_loop,
@@ -138,6 +153,26 @@ class Link:
             "seconds": self.seconds,
             "cached": self.cached,
         }
+
+
+@dataclass(eq=False)
+class Veto:
+    """Two stations that must not stay in one configuration (the map check found them
+    contradicting each other there; :mod:`flexreg.survey.mapcheck`).
+
+    Attributes
+    ----------
+    a, b : str
+    T_a_b : (4, 4) float64
+        The refuted relative pose (maps ``b``'s points into ``a``'s frame).
+    why : str
+        What contradicts what, in words.
+    """
+
+    a: str
+    b: str
+    T_a_b: Matrix
+    why: str
 
 
 @dataclass(eq=False)
@@ -240,8 +275,25 @@ class _Forest:
         return out
 
 
+def _trust(e: Link) -> float:
+    """How much a link is trusted to place a station: its overlap, less for a link whose own
+    check put much of one scan in the other's free space (its doubt)."""
+    return e.overlap * max(0.05, 1.0 - 2.0 * float(e.doubt or 0.0))
+
+
+def _standout(loop: list[Link], config: SurveyConfig) -> Link | None:
+    """The link of a disagreeing loop whose doubt stands out: at least ``loop_doubt_min``
+    and ``loop_doubt_ratio`` times every other link's doubt of the loop; else None."""
+    ranked = sorted(loop, key=lambda e: -float(e.doubt or 0.0))
+    top = float(ranked[0].doubt or 0.0)
+    second = float(ranked[1].doubt or 0.0) if len(ranked) > 1 else 0.0
+    if top >= config.loop_doubt_min and top >= config.loop_doubt_ratio * second:
+        return ranked[0]
+    return None
+
+
 def _kruskal(stems: list[str], links: list[Link]) -> tuple[list[Link], list[Link]]:
-    """Tree links (strongest first, joining separate trees) and the rest."""
+    """Tree links (most trusted first, joining separate trees) and the rest."""
     up = {s: s for s in stems}
 
     def find(x: str) -> str:
@@ -251,7 +303,7 @@ def _kruskal(stems: list[str], links: list[Link]) -> tuple[list[Link], list[Link
         return x
 
     tree, rest = [], []
-    for e in sorted(links, key=lambda e: -e.overlap):
+    for e in sorted(links, key=lambda e: -_trust(e)):
         a, b = find(e.target), find(e.source)
         if a != b:
             up[a] = b
@@ -277,7 +329,7 @@ def _reject(e: Link, why: str, err: tuple[float, float] | None = None) -> None:
 
 def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -> _Forest:
     """Steps 1 and 2: the tree of confident links after the loop checks."""
-    active = [e for e in links if e.verdict == "confident"]
+    active = [e for e in links if e.verdict == "confident" and e.status == "pending"]
     while True:
         tree, rest = _kruskal(stems, active)
         forest = _Forest(stems, tree)
@@ -296,11 +348,27 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
                     support[id(t)] = support.get(id(t), 0) + 1
                     t.confirmed_by_loop = True
             else:
+                suspect = _standout([e, *p], config)
+                if suspect is e:  # the closer alone is far more doubtful than the loop
+                    _reject(
+                        e, "disagrees with the loop it closes, and is its most doubtful link", err
+                    )
+                    continue
                 bad.append((e, p, err))
-                for t in p:
+                for t in [suspect] if suspect is not None else p:
                     blame[id(t)] = blame.get(id(t), 0) + 1
+        if any(e.status == "rejected" for e in rest):
+            active = [e for e in active if e.status != "rejected"]
+            if not bad:
+                continue
         if not bad:
-            break
+            lone = _lone_aliased(forest, tree, support, links, config)
+            if not lone:
+                break
+            for t, why in lone:
+                _reject(t, why)
+            active = [e for e in active if e.status != "rejected"]
+            continue
         net = {id(t): blame.get(id(t), 0) - support.get(id(t), 0) for t in tree}
         worst = max(net.values(), default=0)
         if worst <= 0:  # every blamed tree link is better supported: the closers are wrong
@@ -318,6 +386,78 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
     for e in tree:
         e.in_tree = True
     return forest
+
+
+def _beyond(adj: dict[str, list[tuple[str, Link]]], cut: Link, start: str) -> set[str]:
+    """Stations reachable from ``start`` over the tree without the link ``cut``."""
+    seen, queue = {start}, deque([start])
+    while queue:
+        for y, e in adj[queue.popleft()]:
+            if e is not cut and y not in seen:
+                seen.add(y)
+                queue.append(y)
+    return seen
+
+
+def _lone_aliased(
+    forest: _Forest,
+    tree: list[Link],
+    support: dict[int, int],
+    links: list[Link],
+    config: SurveyConfig,
+) -> list[tuple[Link, str]]:
+    """Tree links that alone place stations in a configuration an ambiguous link shares.
+
+    A tree link that no loop confirms is the only evidence for where the stations beyond it
+    are (the smaller side of the tree it splits). When a link across the same cut, whose
+    verdict is ``ambiguous`` (it fits a clearly different pose about as well: a symmetric room,
+    repeating bays), agrees with that configuration, the configuration is one of twins and
+    the lone confident answer may be the wrong one, with nothing to check it: better unplaced
+    than wrong. An ambiguous link that disagrees with it says nothing about it. Off with
+    ``lone_ambiguous_places``."""
+    if config.lone_ambiguous_places:
+        return []
+    ambiguous = [
+        e
+        for e in links
+        if e.T_target_source is not None
+        and e.status != "failed"
+        and any(r.get("code") == "ambiguous" for r in e.reasons)
+    ]
+    if not ambiguous:
+        return []
+    adj: dict[str, list[tuple[str, Link]]] = {s: [] for s in forest.adj}
+    for e in tree:
+        adj[e.target].append((e.source, e))
+        adj[e.source].append((e.target, e))
+    out: list[tuple[float, int, Link, str]] = []
+    for t in tree:
+        if support.get(id(t), 0) > 0:
+            continue
+        a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
+        side = a if len(a) <= len(b) else b
+        rest = b if side is a else a
+        for e in ambiguous:
+            if not (
+                (e.target in side and e.source in rest) or (e.source in side and e.target in rest)
+            ):
+                continue
+            T = np.asarray(e.T_target_source)
+            err = loop_error(T, forest.pose[e.target], forest.pose[e.source])
+            if err[0] <= 1.0 and err[1] <= 0.1:
+                why = (
+                    f"the only link placing {', '.join(sorted(side))}, confirmed by no "
+                    f"loop; link {e.target} <- {e.source} agrees with it but finds the pose "
+                    "ambiguous (a clearly different pose fits about as well)"
+                )
+                out.append((float(t.doubt or 0.0), -len(side), t, why))
+                break
+    if not out:
+        return []
+    # one at a time, the most doubtful first: a wrongly placed station's own ambiguous links
+    # agree with whatever placed it, and would make its neighbours' tree links look alike
+    _, _, t, why = max(out, key=lambda x: (x[0], x[1]))
+    return [(t, why)]
 
 
 def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: SurveyConfig) -> None:
@@ -519,6 +659,7 @@ def solve_graph(
     config: SurveyConfig | None = None,
     *,
     reference: str | None = None,
+    vetoes: Sequence[Veto] = (),
 ) -> GraphSolution:
     """Steps 1-6 of this module: statuses of ``links`` (set in place), poses and groups.
 
@@ -534,6 +675,10 @@ def solve_graph(
     reference : str, optional
         The station whose frame group 0 is solved in (default: the best-connected station of
         the largest group).
+    vetoes : sequence of Veto
+        Pairs of stations the map check found contradicting each other: while a solution
+        keeps one in its refuted configuration, the most doubtful link between them is cut
+        (step 7) and the graph solved again.
 
     Returns
     -------
@@ -549,11 +694,72 @@ def solve_graph(
     sol = _solve_once(stations, links, config, reference, dropped)
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
-        if worst is None:
+        cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
+        if not cuts:
             break
-        dropped[id(worst[0])] = worst[1]
+        for e, why in cuts:
+            dropped[id(e)] = why
         sol = _solve_once(stations, links, config, reference, dropped)
     return sol
+
+
+def _accepted_path(links: list[Link], a: str, b: str) -> list[Link]:
+    """The accepted links of a shortest path from ``a`` to ``b`` (fewest links; ties in link
+    order), or [] when there is none."""
+    adj: dict[str, list[tuple[str, Link]]] = {}
+    for e in links:
+        if e.status == "accepted":
+            adj.setdefault(e.target, []).append((e.source, e))
+            adj.setdefault(e.source, []).append((e.target, e))
+    back: dict[str, tuple[str, Link] | None] = {a: None}
+    queue = deque([a])
+    while queue and b not in back:
+        x = queue.popleft()
+        for y, e in adj.get(x, []):
+            if y not in back:
+                back[y] = (x, e)
+                queue.append(y)
+    if b not in back:
+        return []
+    path, x = [], b
+    while (step := back[x]) is not None:
+        x, e = step
+        path.append(e)
+    return path
+
+
+def _veto_cuts(
+    sol: GraphSolution, links: list[Link], vetoes: Sequence[Veto], config: SurveyConfig
+) -> list[tuple[Link, str]]:
+    """The links to cut for the first veto the solution still violates: both stations in one
+    group at (about) the refuted relative pose. The most doubtful accepted link of a path
+    between them is cut, with every link of the path whose doubt is within
+    ``map_doubt_margin`` of it; [] when no veto is violated."""
+    for v in vetoes:
+        if v.a not in sol.poses or v.b not in sol.poses:
+            continue
+        if sol.group_of(v.a) != sol.group_of(v.b):
+            continue
+        rel = invert(sol.poses[v.a]) @ sol.poses[v.b]
+        if rotation_error_deg(rel, v.T_a_b) > 1.0 or translation_error_m(rel, v.T_a_b) > 0.1:
+            continue  # the configuration changed: the next map check looks at it again
+        path = _accepted_path(links, v.a, v.b)
+        if not path:
+            continue
+        doubt = [max(float(e.doubt or 0.0), 1e-6) for e in path]
+        top = max(doubt)
+        cut = [e for e, d in zip(path, doubt, strict=True) if d * config.map_doubt_margin >= top]
+        return [
+            (
+                e,
+                f"cut by the map check: {v.a} and {v.b} contradict each other where the "
+                f"graph places them ({v.why}); of the {len(path)} link(s) between them this one "
+                f"is the most doubtful (free-space conflict ratio {d:.2f})",
+            )
+            for e, d in zip(path, doubt, strict=True)
+            if e in cut
+        ]
+    return []
 
 
 def _worst_residual(links: list[Link], config: SurveyConfig) -> tuple[Link, str] | None:
@@ -591,8 +797,10 @@ def _solve_once(
         if e.T_target_source is None:
             e.status = "failed"
             e.why = e.why or "registration failed"
-        elif id(e) in dropped:
-            e.status, e.why = "rejected", dropped[id(e)]
+        else:  # a reason from an earlier solve would stay on a link accepted now
+            e.why = dropped.get(id(e))
+            if e.why is not None:
+                e.status = "rejected"
     forest = _confident_tree(stations, links, config)
     _bridge(stations, forest, links, config)
     comp = forest.root
@@ -657,4 +865,4 @@ def _solve_once(
     return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
 
 
-__all__ = ["GraphSolution", "Link", "loop_error", "solve_graph"]
+__all__ = ["GraphSolution", "Link", "Veto", "loop_error", "solve_graph"]

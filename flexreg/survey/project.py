@@ -27,7 +27,15 @@ from flexreg.survey.execute import (
     default_workers,
     run_tasks,
 )
-from flexreg.survey.graph import GraphSolution, Link, solve_graph
+from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
+from flexreg.survey.mapcheck import (
+    PairLook,
+    assemble,
+    look_from,
+    pairs_to_check,
+    plan_looks,
+    write_glance,
+)
 from flexreg.survey.multiview import refine_links
 from flexreg.survey.pairs import (
     Candidate,
@@ -68,6 +76,13 @@ class SurveyResult:
     wall_s : float
     timings_s : dict
     refined : bool
+    stored : dict
+        Stored poses per station (``T_world_scanner``).
+    map_looks : list of PairLook
+        The last map check: every pair of placed stations scored at its solved pose.
+    vetoes : list of Veto
+        Every conflict the map checks found (each cut the most doubtful link between its
+        two stations).
     """
 
     stations: list[Station]
@@ -80,6 +95,8 @@ class SurveyResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     refined: bool = False
     stored: dict[str, Any] = field(default_factory=dict)
+    map_looks: list[PairLook] = field(default_factory=list)
+    vetoes: list[Veto] = field(default_factory=list)
 
     def stored_checks(self) -> dict[str, dict[str, Any]]:
         """Every placed station against the pose its file stores
@@ -116,6 +133,12 @@ class SurveyResult:
                     f"{stem}: the pose stored in its file disagrees with the registration by "
                     f"{chk['rotation_deg']:.2f}° / {chk['translation_m']:.3f} m; check which is "
                     "right"
+                )
+        for look in self.map_looks:
+            if look.conflicts(self.config):
+                out.append(
+                    f"stations {look.a} and {look.b} contradict each other where they are "
+                    f"placed ({look.describe()}); one of them is placed wrongly"
                 )
         for e in self.links:
             if e.status == "accepted" and e.verdict == "uncertain":
@@ -172,8 +195,24 @@ class SurveyResult:
             "stations": stations,
             "groups": self._groups(),
             "links": links,
+            "map_check": self._map_check(),
             "summary": summary,
             "config": self.config.to_dict(),
+        }
+
+    def _map_check(self) -> dict[str, Any]:
+        c = self.config
+        return {
+            "enabled": c.map_check,
+            "pairs_checked": len(self.map_looks),
+            "conflicting_now": [p.to_dict() for p in self.map_looks if p.conflicts(c)],
+            "conflicts_found": [
+                {"a": v.a, "b": v.b, "T_a_b": np.asarray(v.T_a_b).tolist(), "why": v.why}
+                for v in self.vetoes
+            ],
+            "min_conflict": c.map_min_conflict,
+            "conflict_ratio": c.map_conflict_ratio,
+            "radius_m": c.map_radius_m,
         }
 
     def _link(self, e: Link) -> dict[str, Any]:
@@ -487,11 +526,19 @@ def run_survey(
             links += _register(client, more, files, config, progress, stored)
             sol = solve_graph(stems, links, config, reference=reference)
         timings["links"] = time.perf_counter() - t
+        vetoes: list[Veto] = []
+        looks: list[PairLook] = []
+        if config.map_check:
+            t = time.perf_counter()
+            sol, looks = _map_check(
+                client, stems, links, sol, files, config, reference, vetoes, progress
+            )
+            timings["map_check"] = time.perf_counter() - t
         if config.joint_refine:
             t = time.perf_counter()
             for _ in range(config.refine_iterations):
                 refine_links(client, sol, links, files, config, progress)
-                sol = solve_graph(stems, links, config, reference=reference)
+                sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes)
             timings["refine"] = time.perf_counter() - t
     sol = _with_unreadable(sol, stations, prepared)
     log.info("survey: %d of %d stations placed", len(sol.groups[0]), len(stations))
@@ -506,7 +553,54 @@ def run_survey(
         timings,
         config.joint_refine,
         stored,
+        looks,
+        vetoes,
     )
+
+
+def _map_check(
+    client: Any,
+    stems: list[str],
+    links: list[Link],
+    sol: GraphSolution,
+    files: dict[str, str],
+    config: SurveyConfig,
+    reference: str | None,
+    vetoes: list[Veto],
+    progress: Progress,
+) -> tuple[GraphSolution, list[PairLook]]:
+    """Check every pair of placed stations (:mod:`flexreg.survey.mapcheck`), veto the
+    conflicting ones and solve again, until no pair conflicts or ``map_rounds`` are used.
+    Returns the solution and the last round's pair scores (``vetoes`` grows in place)."""
+    stems_with = [s for s in stems if s in files]
+    made = run_tasks(
+        client,
+        write_glance,
+        [(files[s],) for s in stems_with],
+        on_result=_Counter("map check", len(stems_with), progress),
+    )
+    glances = {s: g for s, g in zip(stems_with, made, strict=True) if g is not None}
+    looks: list[PairLook] = []
+    for i in range(config.map_rounds + 1):
+        pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
+        todo = plan_looks(pairs, sol.poses, glances)
+        order = sorted(todo)
+        results = run_tasks(
+            client,
+            look_from,
+            [(files[a], glances[a], todo[a]) for a in order],
+            on_result=_Counter("map check", len(order), progress),
+        )
+        seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
+        looks = assemble(pairs, sol.poses, seen)
+        bad = [p for p in looks if p.conflicts(config)]
+        if not bad or i == config.map_rounds:
+            break
+        bad.sort(key=lambda p: -max(p.conflicting))
+        vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe()) for p in bad)
+        log.info("map check: %d pair(s) of placed stations contradict each other", len(bad))
+        sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes)
+    return sol, looks
 
 
 def _with_unreadable(

@@ -503,11 +503,22 @@ def _attention_section(doc: Mapping[str, Any], f: ReportFigures) -> str:
         for i, lk in enumerate(links)
         if link_kind(lk) == "rejected"
     ]
+    mc = doc.get("map_check") or {}
+    conflicts = [
+        f"<li>{_e(c['a'])} and {_e(c['b'])}: {_e(c['why'])}</li>"
+        for c in mc.get("conflicts_found", [])
+    ] + [
+        f"<li><b>still contradicting</b>: {_e(c['a'])} and {_e(c['b'])} "
+        f"({100 * max(c['conflicting']):.1f}% of one station's points in the other's free "
+        "space)</li>"
+        for c in mc.get("conflicting_now", [])
+    ]
     out = ['<section id="attention"><h2>What needs a look</h2>']
     for hid, title, items in (
         ("unplaced", "Unplaced stations and why", unplaced),
         ("uncertain", "Kept links that are uncertain", uncertain),
         ("rejected", "Rejected links", rejected),
+        ("map-conflicts", "Placed stations that contradicted each other (map check)", conflicts),
     ):
         body = f"<ul>{''.join(items)}</ul>" if items else "<p>none</p>"
         out.append(f'<div id="{hid}"><h3>{_e(title)} ({len(items)})</h3>{body}</div>')
@@ -559,6 +570,11 @@ link error): the rotation angle and the displacement of the source's origin.</dd
 over the same links.</dd>
 <dt>group</dt><dd>Stations joined by accepted links. A group no link joins to the reference's
 keeps its own frame and is not placed.</dd>
+<dt>map check</dt><dd>Every pair of placed stations of a group, linked or not, scored at
+its solved relative pose: when more of one station's points lie in the other's free space (in
+front of what that scanner measured) than on its surfaces, one of them is placed wrongly (a wrong
+link through repeating structure); the most doubtful link between them is cut and the graph
+solved again.</dd>
 <dt>verdict</dt><dd>The pairwise registration's own judgement: confident, or uncertain with
 reasons (low overlap, weak axis, ambiguous pose, few or clustered inliers, free-space conflict,
 high residual).</dd>

@@ -1,0 +1,246 @@
+"""The map check: every pair of placed stations must agree on free space, linked or not.
+
+A link is judged on its own two scans. Repeating structure (identical rooms, rack bays) lets
+a wrong link overlay two copies of the same geometry so well that its own check cannot tell
+it from the truth; several such links even agree with each other, so loops confirm them. The
+rest of the project can tell: a station placed one room off sits where another station
+*saw through* — that station's rays crossed the space where the misplaced station puts its
+walls. So once the graph has placed the stations, every pair of placed stations of a group
+within :attr:`~flexreg.survey.config.SurveyConfig.map_radius_m` is scored in both directions
+on the registration's dense check (each station's even sample in the other's view):
+
+* **explained**: the share of the sample that lies on the other station's surfaces (half an
+  inlier threshold plus 0.2 % of the range, as the verdict's fine check);
+* **conflicting**: the share that lies clearly in front of what the other scanner measured,
+  in its free space (2.5 inlier thresholds plus 1 % of the range, as the verdict's free-space
+  test).
+
+A pair **conflicts** when, in either direction, at least ``map_min_conflict`` of the sample is
+in the other's free space and that is at least ``map_conflict_ratio`` times what the other
+explains there: more of what one station sees contradicts the other than agrees with it. Two
+correctly placed stations that barely see each other explain little and contradict less
+(moving objects and grazing rays stay a few percent); a station placed into the twin of its
+room contradicts every station that looked into that room.
+
+A conflict is handed to the graph as a *veto* (:func:`flexreg.survey.graph.solve_graph`):
+while the solution keeps the two stations in the vetoed configuration, the most doubtful
+accepted link between them is cut (doubt = the link's own free-space conflict ratio), and the
+graph solved again; the map is checked again until no pair conflicts.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.transforms import invert
+from flexreg.errors import InputError
+from flexreg.registration.candidates import Check
+from flexreg.registration.verdict import FINE_REL, FREE_SPACE_REL, FREE_SPACE_TOLERANCE
+from flexreg.stages.correspondences import derive_threshold
+from flexreg.survey.config import SurveyConfig
+from flexreg.survey.stations import load_prepared
+
+log = logging.getLogger(__name__)
+
+Matrix = NDArray[np.float64]
+
+
+@dataclass(eq=False)
+class PairLook:
+    """Two placed stations scored at their solved relative pose.
+
+    Attributes
+    ----------
+    a, b : str
+        Station stems (``a`` first in file order).
+    T_a_b : (4, 4) float64
+        Their relative pose in the solution (maps ``b``'s points into ``a``'s frame).
+    explained : (float, float)
+        Share of ``b``'s sample on ``a``'s surfaces, and of ``a``'s on ``b``'s.
+    conflicting : (float, float)
+        Share of ``b``'s sample in ``a``'s free space, and of ``a``'s in ``b``'s.
+    samples : (int, int)
+        Sizes of the two samples.
+    """
+
+    a: str
+    b: str
+    T_a_b: Matrix
+    explained: tuple[float, float]
+    conflicting: tuple[float, float]
+    samples: tuple[int, int]
+
+    def conflicts(self, config: SurveyConfig) -> bool:
+        """Whether either direction contradicts more than it explains (see the module)."""
+        return any(
+            c >= config.map_min_conflict and c >= config.map_conflict_ratio * x
+            for x, c in zip(self.explained, self.conflicting, strict=True)
+        )
+
+    def describe(self) -> str:
+        i = int(np.argmax(self.conflicting))
+        seen, seer = (self.b, self.a) if i == 0 else (self.a, self.b)
+        return (
+            f"{100 * self.conflicting[i]:.1f}% of {seen}'s points lie in {seer}'s free space "
+            f"and {100 * self.explained[i]:.1f}% on its surfaces"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "a": self.a,
+            "b": self.b,
+            "T_a_b": np.asarray(self.T_a_b, dtype=np.float64).tolist(),
+            "explained": [round(float(v), 4) for v in self.explained],
+            "conflicting": [round(float(v), 4) for v in self.conflicting],
+            "samples": [int(v) for v in self.samples],
+        }
+
+
+def glance_path(cache_file: str) -> Path:
+    """Where a station's sample and inlier threshold are kept beside its prepared file."""
+    p = Path(cache_file)
+    return p.with_name(p.name.removesuffix(".prepared.pkl") + ".glance.npz")
+
+
+def write_glance(cache_file: str) -> str | None:
+    """Write (once) what other stations need to score this one: its even sample, (N, 3)
+    float64 metres, and its inlier threshold (metres, as the registration derives it from
+    the keypoints' pixel footprints). Runs on a worker; returns the file, or None when the
+    station has no sample."""
+    path = glance_path(cache_file)
+    if path.exists():
+        return str(path)
+    p = load_prepared(cache_file)
+    sample = p.view.sample
+    if sample is None or len(sample) == 0:
+        return None
+    cfg = p.config
+    if cfg.threshold_m is not None:
+        thr = float(cfg.threshold_m)
+    else:
+        kp = p.keypoints
+        xy = kp.features.xy[kp.lifted]
+        thr = derive_threshold(p.image, p.image, xy, xy[:0], threshold_px=cfg.threshold_px)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial.npz")
+    try:
+        np.savez(tmp, sample=np.asarray(sample, dtype=np.float64), threshold_m=thr)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return str(path)
+
+
+def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
+    try:
+        with np.load(path) as z:
+            return np.asarray(z["sample"], dtype=np.float64), float(z["threshold_m"])
+    except (OSError, KeyError, ValueError) as e:
+        raise InputError(path, f"unreadable station sample ({e})") from e
+
+
+def look_from(
+    cache_file: str, glance: str, others: list[tuple[str, str, Matrix]]
+) -> list[tuple[str, float, float, int]]:
+    """Score other stations' samples in one station's view (runs on a worker).
+
+    Parameters
+    ----------
+    cache_file, glance : str
+        The viewing station's prepared file and glance (:func:`write_glance`).
+    others : list of (stem, glance file, T_this_other)
+        The stations to score and their poses in the viewing station's frame.
+
+    Returns
+    -------
+    list of (stem, explained share, conflicting share, sample size)
+    """
+    p = load_prepared(cache_file)
+    v = p.view
+    _, thr_a = _read_glance(glance)
+    out: list[tuple[str, float, float, int]] = []
+    if v.measured is None or v.slack is None:
+        return out
+    for stem, g, T in others:
+        sample, thr_b = _read_glance(g)
+        thr = max(thr_a, thr_b)
+        check = Check(v.image, v.measured, v.slack, sample)
+        T = np.asarray(T, dtype=np.float64)
+        ok = check.classify(T, thr / 2, FINE_REL)[1]
+        bad = check.classify(T, FREE_SPACE_TOLERANCE * thr, FREE_SPACE_REL)[2]
+        n = len(ok)
+        out.append((stem, float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n))
+    return out
+
+
+def pairs_to_check(
+    groups: list[list[str]], poses: dict[str, Matrix], radius_m: float
+) -> list[tuple[str, str]]:
+    """Every pair of placed stations of one group whose positions lie within ``radius_m``,
+    in group and file order."""
+    out = []
+    for g in groups:
+        placed = [s for s in g if s in poses]
+        for i, a in enumerate(placed):
+            for b in placed[i + 1 :]:
+                d = float(np.linalg.norm(poses[a][:3, 3] - poses[b][:3, 3]))
+                if d <= radius_m:
+                    out.append((a, b))
+    return out
+
+
+def assemble(
+    pairs: list[tuple[str, str]],
+    poses: dict[str, Matrix],
+    seen: dict[str, dict[str, tuple[float, float, int]]],
+) -> list[PairLook]:
+    """Both directions of every pair from the per-station results of :func:`look_from`
+    (``seen[a][b]``: ``b``'s sample in ``a``'s view)."""
+    out = []
+    for a, b in pairs:
+        ab, ba = seen.get(a, {}).get(b), seen.get(b, {}).get(a)
+        if ab is None or ba is None:
+            continue
+        out.append(
+            PairLook(
+                a,
+                b,
+                invert(poses[a]) @ poses[b],
+                (ab[0], ba[0]),
+                (ab[1], ba[1]),
+                (ab[2], ba[2]),
+            )
+        )
+    return out
+
+
+def plan_looks(
+    pairs: list[tuple[str, str]], poses: dict[str, Matrix], glances: dict[str, str]
+) -> dict[str, list[tuple[str, str, Matrix]]]:
+    """Per viewing station, the stations to score in its view and their relative poses."""
+    todo: dict[str, list[tuple[str, str, Matrix]]] = {}
+    for a, b in pairs:
+        if a not in glances or b not in glances:
+            continue
+        T = invert(poses[a]) @ poses[b]
+        todo.setdefault(a, []).append((b, glances[b], T))
+        todo.setdefault(b, []).append((a, glances[a], invert(T)))
+    return todo
+
+
+__all__ = [
+    "PairLook",
+    "assemble",
+    "glance_path",
+    "look_from",
+    "pairs_to_check",
+    "plan_looks",
+    "write_glance",
+]

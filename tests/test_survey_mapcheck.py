@@ -1,0 +1,212 @@
+"""The map check: placed stations that contradict each other cut the most doubtful link."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexreg.core.transforms import invert, make_transform, rotation_about_axis
+from flexreg.survey.config import SurveyConfig
+from flexreg.survey.graph import Link, Veto, solve_graph
+from flexreg.survey.mapcheck import PairLook, assemble, pairs_to_check, plan_looks
+
+INFO = np.diag([2e5, 2e5, 2e5, 1e4, 1e4, 1e4])
+
+
+def _poses() -> dict[str, np.ndarray]:
+    """Five stations 5 m apart along x, each turned a little about z."""
+    return {
+        f"s{i}": make_transform(rotation_about_axis([0, 0, 1], 0.3 * i), [5.0 * i, 0.0, 0.0])
+        for i in range(5)
+    }
+
+
+def _link(P, a, b, *, doubt, T=None, verdict="confident"):
+    T = invert(P[a]) @ P[b] if T is None else T
+    return Link(a, b, T, INFO, verdict, overlap_target=0.5, overlap_source=0.5, doubt=doubt)
+
+
+def _chain_with_an_aliased_station():
+    """s0-s1-s2-s3 correct (and s0-s2, s1-s3 closing loops); s4 linked to s3 and s2 by two
+    links that agree with each other but put it 10 m off (an identical room elsewhere)."""
+    P = _poses()
+    wrong = make_transform(np.eye(3), [10.0, 0, 0]) @ P["s4"]  # where the aliases put s4
+    links = [
+        _link(P, "s0", "s1", doubt=0.05),
+        _link(P, "s1", "s2", doubt=0.04),
+        _link(P, "s2", "s3", doubt=0.06),
+        _link(P, "s0", "s2", doubt=0.05),
+        _link(P, "s1", "s3", doubt=0.03),
+        _link(P, "s3", "s4", doubt=0.35, T=invert(P["s3"]) @ wrong),
+        _link(P, "s2", "s4", doubt=0.30, T=invert(P["s2"]) @ wrong),
+    ]
+    return P, wrong, links
+
+
+def test_without_a_veto_agreeing_aliased_links_place_a_station_wrongly():
+    P, wrong, links = _chain_with_an_aliased_station()
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    assert "s4" in sol.groups[0]
+    np.testing.assert_allclose(sol.poses["s4"][:3, 3], (invert(P["s0"]) @ wrong)[:3, 3], atol=1e-6)
+
+
+def test_a_veto_cuts_the_most_doubtful_links_until_the_station_is_unplaced():
+    P, _wrong, links = _chain_with_an_aliased_station()
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    veto = Veto("s1", "s4", invert(sol.poses["s1"]) @ sol.poses["s4"], "s4 in s1's free space")
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", vetoes=[veto])
+    assert "s4" not in sol.groups[0]
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2", "s3"]
+    cut = [e for e in links if e.why and "cut by the map check" in e.why]
+    assert {(e.target, e.source) for e in cut} == {("s3", "s4"), ("s2", "s4")}
+    assert all(e.status == "rejected" for e in cut)
+    assert "s4 in s1's free space" in cut[0].why
+    for e in links[:5]:  # the correct links all stay
+        assert e.status == "accepted"
+
+
+def test_a_veto_no_longer_matching_the_solution_cuts_nothing():
+    P, _, links = _chain_with_an_aliased_station()
+    elsewhere = make_transform(np.eye(3), [0, 30.0, 0])  # a configuration the graph never had
+    veto = Veto("s1", "s4", elsewhere, "an older configuration")
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", vetoes=[veto])
+    assert "s4" in sol.groups[0]
+    assert not any(e.why and "map check" in e.why for e in links)
+
+
+def test_when_no_link_stands_out_every_similarly_doubtful_one_on_the_path_is_cut():
+    P = _poses()
+    links = [_link(P, "s0", "s1", doubt=0.10), _link(P, "s1", "s2", doubt=0.08)]
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0")
+    veto = Veto("s0", "s2", invert(sol.poses["s0"]) @ sol.poses["s2"], "contradiction")
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0", vetoes=[veto])
+    assert all(e.status == "rejected" for e in links)  # 0.08 * 1.5 >= 0.10: both cut
+    assert sol.poses == {}
+
+
+def test_a_pair_conflicts_when_contradiction_outweighs_explanation_in_one_direction():
+    cfg = SurveyConfig()  # map_min_conflict 0.03, map_conflict_ratio 1.0
+    T = np.eye(4)
+    assert PairLook("a", "b", T, (0.04, 0.02), (0.08, 0.05), (100, 100)).conflicts(cfg)
+    assert PairLook("a", "b", T, (0.50, 0.02), (0.08, 0.03), (100, 100)).conflicts(cfg)
+    # correct but barely overlapping: little explained, less contradicted
+    assert not PairLook("a", "b", T, (0.05, 0.04), (0.02, 0.01), (100, 100)).conflicts(cfg)
+    # moving objects on a well-overlapping pair: more explained than contradicted
+    assert not PairLook("a", "b", T, (0.30, 0.25), (0.09, 0.08), (100, 100)).conflicts(cfg)
+    # tiny shares are not evidence
+    assert not PairLook("a", "b", T, (0.0, 0.0), (0.02, 0.0), (100, 100)).conflicts(cfg)
+    look = PairLook("a", "b", T, (0.04, 0.02), (0.08, 0.05), (100, 100))
+    assert look.describe() == "8.0% of b's points lie in a's free space and 4.0% on its surfaces"
+
+
+def test_pairs_within_the_radius_of_one_group_are_checked_both_ways():
+    P = _poses()
+    pairs = pairs_to_check([["s0", "s1", "s2"], ["s3", "s4"]], P, radius_m=7.0)
+    assert pairs == [("s0", "s1"), ("s1", "s2"), ("s3", "s4")]
+    glances = {s: f"{s}.glance.npz" for s in P}
+    todo = plan_looks(pairs, P, glances)
+    assert [b for b, _, _ in todo["s1"]] == ["s0", "s2"]
+    _b, g, T = todo["s1"][1]
+    assert g == "s2.glance.npz"
+    np.testing.assert_allclose(T, invert(P["s1"]) @ P["s2"])
+    seen = {
+        "s0": {"s1": (0.5, 0.01, 10)},
+        "s1": {"s0": (0.4, 0.02, 12), "s2": (0.3, 0.0, 10)},
+        "s2": {"s1": (0.2, 0.06, 11)},
+    }
+    looks = assemble(pairs, P, seen)  # s3-s4 had no results: left out
+    assert [(x.a, x.b) for x in looks] == [("s0", "s1"), ("s1", "s2")]
+    assert looks[1].explained == (0.3, 0.2) and looks[1].conflicting == (0.0, 0.06)
+    assert looks[1].samples == (10, 11)
+
+
+def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
+    """Real prepared stations of a synthetic room: at the true relative pose one station's
+    sample lies on the other's surfaces; turned 40° and moved 3 m, much of it lies in the
+    other's free space (floor and ceiling still explain some)."""
+    import json
+    import pickle
+
+    from conftest import run_cli
+
+    from flexreg.io import read_scan
+    from flexreg.registration.pipeline import Registration
+    from flexreg.survey.mapcheck import look_from, write_glance
+
+    rc, _, err = run_cli(
+        ["synth", "--scene", "room", "--stations", "2", "--resolution", "512x256", "--seed", "1",
+         "--format", "npz", "--out", tmp_path / "p"]
+    )  # fmt: skip
+    assert rc == 0, err
+    gt = json.loads((tmp_path / "p" / "gt.json").read_text())
+    W = {s["name"]: np.asarray(s["T_world_scanner"]) for s in gt["stations"]}
+    reg = Registration()
+    files = {}
+    for name in ("station_00", "station_01"):
+        f = tmp_path / f"{name}.prepared.pkl"
+        with f.open("wb") as fh:
+            pickle.dump(reg.prepare(read_scan(tmp_path / "p" / f"{name}.npz")), fh)
+        files[name] = str(f)
+    glances = {n: write_glance(f) for n, f in files.items()}
+    assert all(g is not None and g.endswith(".glance.npz") for g in glances.values())
+    assert write_glance(files["station_00"]) == glances["station_00"]  # written once
+    T = invert(W["station_00"]) @ W["station_01"]
+    moved = make_transform(rotation_about_axis([0, 0, 1], 0.7), [2.5, 1.5, 0.0]) @ T
+    res = look_from(
+        files["station_00"],
+        glances["station_00"],
+        [("station_01", glances["station_01"], T), ("station_01", glances["station_01"], moved)],
+    )
+    (_, ok_true, bad_true, n), (_, ok_moved, bad_moved, _) = res
+    assert n > 1000
+    assert ok_true > 0.5 and bad_true < 0.03
+    assert bad_moved > 0.1 and bad_moved > 5 * bad_true and ok_moved < ok_true
+
+
+def test_in_a_disagreeing_triangle_a_link_far_more_doubtful_than_the_others_is_the_one_dropped():
+    P = _poses()
+    off = make_transform(rotation_about_axis([0, 0, 1], np.pi / 2), [4.0, 1.0, 0.0])
+    links = [
+        _link(P, "s0", "s1", doubt=0.01),
+        _link(P, "s0", "s2", doubt=0.08),
+        _link(P, "s1", "s2", doubt=0.28, T=off @ invert(P["s1"]) @ P["s2"]),  # wrong
+    ]
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert [e.status for e in links] == ["accepted", "accepted", "rejected"]
+    # without the doubts nobody can tell which link of the lone triangle is wrong
+    for e in links:
+        e.doubt = None
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) < 3
+
+
+def _ambiguous(link: Link) -> Link:
+    link.verdict = "uncertain"
+    link.reasons = [{"code": "ambiguous", "message": "a clearly different pose fits as well"}]
+    return link
+
+
+def test_a_lone_link_is_not_trusted_where_an_ambiguous_link_agrees_with_it():
+    """s3 hangs on one confident link (no loop confirms it); an ambiguous link from s1 puts
+    it in the same place: the configuration is one of twins, so s3 stays unplaced."""
+    P = _poses()
+    twin = make_transform(rotation_about_axis([0, 0, 1], np.pi), [6.0, 0, 0]) @ P["s3"]
+    links = [
+        _link(P, "s0", "s1", doubt=0.02),
+        _link(P, "s1", "s2", doubt=0.03),
+        _link(P, "s0", "s2", doubt=0.02),
+        _link(P, "s2", "s3", doubt=0.05, T=invert(P["s2"]) @ twin),
+        _ambiguous(_link(P, "s1", "s3", doubt=0.04, T=invert(P["s1"]) @ twin)),
+    ]
+    names = ["s0", "s1", "s2", "s3"]
+    sol = solve_graph(names, links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert links[3].status == "rejected" and "ambiguous" in links[3].why
+    # an ambiguous link that disagrees with the lone link says nothing about it
+    links[4].T_target_source = invert(P["s1"]) @ P["s3"]
+    sol = solve_graph(names, links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == names
+    # and the rule can be switched off
+    links[4].T_target_source = invert(P["s1"]) @ twin
+    sol = solve_graph(names, links, SurveyConfig(lone_ambiguous_places=True), reference="s0")
+    assert sorted(sol.groups[0]) == names

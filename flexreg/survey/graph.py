@@ -40,186 +40,18 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.errors import InputError
 from flexreg.survey.config import SurveyConfig
+from flexreg.survey.links import GraphSolution, Link, Matrix, Veto, loop_error
 
 log = logging.getLogger(__name__)
 
-Matrix = NDArray[np.float64]
-
-
-@dataclass(eq=False)
-class Link:
-    """One attempted link and what the graph made of it (see poses.json in
-    :mod:`flexreg.survey`).
-
-    Attributes
-    ----------
-    target, source : str
-    T_target_source : (4, 4) float64 or None
-        None when the registration failed.
-    information : (6, 6) float64 or None
-        Information matrix, (rx, ry, rz, tx, ty, tz) as Open3D orders it.
-    overlap_share, open3d_fitness, open3d_inlier_rmse_m : float or None
-        The overlap of ``register`` and ``compare`` (:mod:`flexreg.stages.overlap`; written
-        as ``overlap`` with ``overlap_of``, its denominator) and Open3D's figures beside it.
-        ``overlap_target`` / ``overlap_source`` are the verdict's view-consistency shares,
-        which order the links.
-    verdict : {"confident", "uncertain"} or None
-    doubt : float or None
-        The verdict's larger free-space conflict ratio (share of a scan's sample in the other's
-        free space over the share the other explains): which link of a conflicting pair's
-        path the map check cuts first.
-    status : {"pending", "accepted", "rejected", "failed"}
-    """
-
-    target: str
-    source: str
-    T_target_source: Matrix | None = None
-    information: Matrix | None = None
-    verdict: str | None = None
-    reasons: list[dict[str, str]] = field(default_factory=list)
-    overlap_target: float | None = None
-    overlap_source: float | None = None
-    matches: int | None = None
-    inliers: int | None = None
-    rmse_m: float | None = None
-    fitness: float | None = None
-    strength: dict[str, float] = field(default_factory=dict)
-    origin: str = ""
-    place_score: float | None = None
-    seconds: float | None = None
-    status: str = "pending"
-    why: str | None = None
-    in_tree: bool = False
-    confirmed_by_loop: bool = False
-    loop_error_deg: float | None = None
-    loop_error_m: float | None = None
-    cached: bool = False
-    overlap_share: float | None = None
-    overlap_of: str | None = None
-    open3d_fitness: float | None = None
-    open3d_inlier_rmse_m: float | None = None
-    doubt: float | None = None
-
-    @property
-    def overlap(self) -> float:
-        """The smaller overlap of both directions (0 when unknown)."""
-        vals = [v for v in (self.overlap_target, self.overlap_source) if v is not None]
-        return float(min(vals)) if vals else 0.0
-
-    @property
-    def usable(self) -> bool:
-        return self.T_target_source is not None and self.status != "failed"
-
-    def to_dict(self) -> dict[str, Any]:
-        def m(a: Matrix | None) -> Any:
-            return None if a is None else np.asarray(a, dtype=np.float64).tolist()
-
-        return {
-            "target": self.target,
-            "source": self.source,
-            "origin": self.origin,
-            "place_score": self.place_score,
-            "status": self.status,
-            "why": self.why,
-            "T_target_source": m(self.T_target_source),
-            "verdict": self.verdict,
-            "reasons": list(self.reasons),
-            "overlap": self.overlap_share if self.T_target_source is not None else None,
-            "overlap_of": self.overlap_of,
-            "open3d_fitness": self.open3d_fitness,
-            "open3d_inlier_rmse_m": self.open3d_inlier_rmse_m,
-            "overlap_target": self.overlap_target,
-            "overlap_source": self.overlap_source,
-            "matches": self.matches,
-            "inliers": self.inliers,
-            "rmse_m": self.rmse_m,
-            "fitness": self.fitness,
-            "strength": dict(self.strength),
-            "free_space_conflict_ratio": self.doubt,
-            "information": m(self.information),
-            "in_tree": self.in_tree,
-            "confirmed_by_loop": self.confirmed_by_loop,
-            "loop_error_deg": self.loop_error_deg,
-            "loop_error_m": self.loop_error_m,
-            "seconds": self.seconds,
-            "cached": self.cached,
-        }
-
-
-@dataclass(eq=False)
-class Veto:
-    """Two stations that must not stay in one configuration (the map check found them
-    contradicting each other there; :mod:`flexreg.survey.mapcheck`).
-
-    Attributes
-    ----------
-    a, b : str
-    T_a_b : (4, 4) float64
-        The refuted relative pose (maps ``b``'s points into ``a``'s frame).
-    why : str
-        What contradicts what, in words.
-    """
-
-    a: str
-    b: str
-    T_a_b: Matrix
-    why: str
-
-
-@dataclass(eq=False)
-class GraphSolution:
-    """Where each station is and which groups exist.
-
-    Attributes
-    ----------
-    reference : str
-        The station of group 0 whose frame the poses are given in.
-    poses : dict of str -> (4, 4) float64
-        ``T_groupref_station`` of every station in a group of two or more, in its group's
-        frame (group 0: the reference frame).
-    groups : list of list of str
-        Stations per group, group 0 first (the reference's), then by size; single stations
-        form their own groups.
-    group_reference : list of str
-    confidence : dict of str -> str
-        ``confident`` or ``uncertain`` (placed only through loop-confirmed uncertain links).
-    reasons : dict of str -> str
-        Why a station is not in the reference's group.
-    stats : dict
-        Bundle error (RMS), mean and max link residuals, degrees and metres.
-    """
-
-    reference: str
-    poses: dict[str, Matrix]
-    groups: list[list[str]]
-    group_reference: list[str]
-    confidence: dict[str, str]
-    reasons: dict[str, str]
-    stats: dict[str, float | None]
-
-    def group_of(self, stem: str) -> int:
-        for i, g in enumerate(self.groups):
-            if stem in g:
-                return i
-        raise KeyError(stem)
-
 
 # ------------------------------------------------------------------------------ helpers
-
-
-def loop_error(T_link: Matrix, P_target: Matrix, P_source: Matrix) -> tuple[float, float]:
-    """How far a link is from the relative pose of two solved stations: degrees, metres."""
-    rel = invert(P_target) @ P_source
-    return rotation_error_deg(T_link, rel), translation_error_m(T_link, rel)
 
 
 class _Forest:

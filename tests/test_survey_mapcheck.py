@@ -57,9 +57,10 @@ def test_a_veto_cuts_the_most_doubtful_links_until_the_station_is_unplaced():
     assert "s4" not in sol.groups[0]
     assert sorted(sol.groups[0]) == ["s0", "s1", "s2", "s3"]
     cut = [e for e in links if e.why and "cut by the map check" in e.why]
-    assert {(e.target, e.source) for e in cut} == {("s3", "s4"), ("s2", "s4")}
-    assert all(e.status == "rejected" for e in cut)
+    assert [(e.target, e.source) for e in cut] == [("s2", "s4")]
     assert "s4 in s1's free space" in cut[0].why
+    # then s3 -> s4 alone places s4, unconfirmed and far more doubtful than the confirmed
+    assert links[5].status == "rejected" and "more doubtful" in links[5].why
     for e in links[:5]:  # the correct links all stay
         assert e.status == "accepted"
 
@@ -208,5 +209,30 @@ def test_a_lone_link_is_not_trusted_where_an_ambiguous_link_agrees_with_it():
     assert sorted(sol.groups[0]) == names
     # and the rule can be switched off
     links[4].T_target_source = invert(P["s1"]) @ twin
-    sol = solve_graph(names, links, SurveyConfig(lone_ambiguous_places=True), reference="s0")
+    sol = solve_graph(names, links, SurveyConfig(trust_lone_links=True), reference="s0")
+    assert sorted(sol.groups[0]) == names
+
+
+def test_a_lone_link_more_doubtful_than_every_confirmed_link_places_nothing():
+    P = _poses()
+    names = ["s0", "s1", "s2", "s3"]
+
+    def links(lone_doubt):
+        return [
+            _link(P, "s0", "s1", doubt=0.05),
+            _link(P, "s1", "s2", doubt=0.12),
+            _link(P, "s0", "s2", doubt=0.04),
+            _link(P, "s2", "s3", doubt=lone_doubt),  # no loop confirms it
+        ]
+
+    ls = links(0.40)
+    sol = solve_graph(names, ls, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert ls[3].status == "rejected"
+    assert "more doubtful (free-space conflict ratio 0.40)" in ls[3].why
+    assert "(at most 0.15)" in ls[3].why  # the confirmed links' 0.12, floored at loop_doubt_min
+    for d in (0.14, None):  # under the floor, or unknown: trusted like the confirmed links
+        sol = solve_graph(names, links(d), SurveyConfig(), reference="s0")
+        assert sorted(sol.groups[0]) == names
+    sol = solve_graph(names, links(0.40), SurveyConfig(trust_lone_links=True), reference="s0")
     assert sorted(sol.groups[0]) == names

@@ -48,9 +48,10 @@ class SurveyConfig(Config):
         free-space conflict ratio) when that doubt is at least this ...
     loop_doubt_ratio : float
         ... and at least this many times the doubt of every other link of the loop.
-    lone_ambiguous_places : bool
-        Let a confident link that no loop confirms place stations whose scans other links
-        found ambiguous (off: such a link is rejected; the stations stay unplaced).
+    trust_lone_links : bool
+        Let a confident link that no loop confirms place stations even when an ambiguous
+        link agrees with it, or when it is more doubtful than every link a loop confirmed
+        (off: such a link is rejected and the stations it alone placed stay unplaced).
     prune_threshold : float
         Open3D's line-process weight under which an uncertain edge is pruned (0..1).
     uncertain_joins : bool
@@ -112,7 +113,7 @@ class SurveyConfig(Config):
     loop_per_link_m: float = Field(0.01, ge=0)
     loop_doubt_min: float = Field(0.15, ge=0)
     loop_doubt_ratio: float = Field(2.0, ge=1)
-    lone_ambiguous_places: bool = False
+    trust_lone_links: bool = False
     prune_threshold: float = Field(0.25, gt=0, lt=1)
     uncertain_joins: bool = False
     residual_factor: float = Field(10.0, gt=1)

@@ -168,6 +168,7 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
         blame: dict[int, int] = {}
         support: dict[int, int] = {}
         bad: list[tuple[Link, list[Link], tuple[float, float]]] = []
+        agreeing: list[Link] = []
         for e in rest:
             p = forest.path(e.target, e.source)
             err = loop_error(
@@ -176,6 +177,7 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
             if _consistent(err, len(p) + 1, config):
                 e.confirmed_by_loop = True
                 e.loop_error_deg, e.loop_error_m = err
+                agreeing.append(e)
                 for t in p:
                     support[id(t)] = support.get(id(t), 0) + 1
                     t.confirmed_by_loop = True
@@ -194,7 +196,8 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
             if not bad:
                 continue
         if not bad:
-            lone = _lone_aliased(forest, tree, support, links, config)
+            confirmed = agreeing + [t for t in tree if support.get(id(t), 0) > 0]
+            lone = _lone_suspect(forest, tree, support, confirmed, links, config)
             if not lone:
                 break
             for t, why in lone:
@@ -231,23 +234,32 @@ def _beyond(adj: dict[str, list[tuple[str, Link]]], cut: Link, start: str) -> se
     return seen
 
 
-def _lone_aliased(
+def _lone_suspect(
     forest: _Forest,
     tree: list[Link],
     support: dict[int, int],
+    confirmed: list[Link],
     links: list[Link],
     config: SurveyConfig,
 ) -> list[tuple[Link, str]]:
-    """Tree links that alone place stations in a configuration an ambiguous link shares.
+    """A tree link that alone places stations and that nothing vouches for, or [].
 
     A tree link that no loop confirms is the only evidence for where the stations beyond it
-    are (the smaller side of the tree it splits). When a link across the same cut, whose
-    verdict is ``ambiguous`` (it fits a clearly different pose about as well: a symmetric room,
-    repeating bays), agrees with that configuration, the configuration is one of twins and
-    the lone confident answer may be the wrong one, with nothing to check it: better unplaced
-    than wrong. An ambiguous link that disagrees with it says nothing about it. Off with
-    ``lone_ambiguous_places``."""
-    if config.lone_ambiguous_places:
+    are (the smaller side of the tree it splits). It is rejected (better unplaced than wrong)
+    when
+
+    * an *ambiguous* link across the same cut (its verdict found a clearly different pose
+      that fits about as well: a symmetric room, repeating bays) agrees with that placement:
+      the placement is one of twins and nothing checks which (an ambiguous link that
+      disagrees says nothing about it); or
+    * it is more doubtful (free-space conflict ratio) than every link a loop confirmed, and
+      than ``loop_doubt_min``: the loops show how much conflict this project's right links
+      carry, and this one carries more, unchecked.
+
+    One at a time, the most doubtful first: a wrongly placed station's own ambiguous links
+    agree with whatever placed it, and would make its neighbours' tree links look alike. Off
+    with ``trust_lone_links``."""
+    if config.trust_lone_links:
         return []
     ambiguous = [
         e
@@ -256,8 +268,8 @@ def _lone_aliased(
         and e.status != "failed"
         and any(r.get("code") == "ambiguous" for r in e.reasons)
     ]
-    if not ambiguous:
-        return []
+    vouched = [float(e.doubt) for e in confirmed if e.doubt is not None]
+    ceiling = max([config.loop_doubt_min, *vouched]) if vouched else None
     adj: dict[str, list[tuple[str, Link]]] = {s: [] for s in forest.adj}
     for e in tree:
         adj[e.target].append((e.source, e))
@@ -269,25 +281,32 @@ def _lone_aliased(
         a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
         side = a if len(a) <= len(b) else b
         rest = b if side is a else a
+        placing = f"the only link placing {', '.join(sorted(side))}, confirmed by no loop"
+        doubt = float(t.doubt or 0.0)
+        if ceiling is not None and doubt > ceiling:
+            why = (
+                f"{placing}, and more doubtful (free-space conflict ratio {doubt:.2f}) than "
+                f"every link a loop confirmed (at most {ceiling:.2f})"
+            )
+            out.append((doubt, -len(side), t, why))
+            continue
         for e in ambiguous:
             if not (
                 (e.target in side and e.source in rest) or (e.source in side and e.target in rest)
             ):
                 continue
-            T = np.asarray(e.T_target_source)
-            err = loop_error(T, forest.pose[e.target], forest.pose[e.source])
+            err = loop_error(
+                np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
+            )
             if err[0] <= 1.0 and err[1] <= 0.1:
                 why = (
-                    f"the only link placing {', '.join(sorted(side))}, confirmed by no "
-                    f"loop; link {e.target} <- {e.source} agrees with it but finds the pose "
-                    "ambiguous (a clearly different pose fits about as well)"
+                    f"{placing}; link {e.target} <- {e.source} agrees with it but finds the "
+                    "pose ambiguous (a clearly different pose fits about as well)"
                 )
-                out.append((float(t.doubt or 0.0), -len(side), t, why))
+                out.append((doubt, -len(side), t, why))
                 break
     if not out:
         return []
-    # one at a time, the most doubtful first: a wrongly placed station's own ambiguous links
-    # agree with whatever placed it, and would make its neighbours' tree links look alike
     _, _, t, why = max(out, key=lambda x: (x[0], x[1]))
     return [(t, why)]
 

@@ -363,3 +363,33 @@ def test_report_in_headless_chromium(tmp_path: Path) -> None:
         page.screenshot(path=str(shot), full_page=True)
     assert problems == []
     assert shot.stat().st_size > 20_000
+
+
+def test_map_check_conflicts_are_listed() -> None:
+    doc = small_project()
+    doc["map_check"] = {
+        "enabled": True,
+        "pairs_checked": 3,
+        "conflicts_found": [
+            {
+                "a": "hall_01",
+                "b": "hall_03",
+                "T_a_b": np.eye(4).tolist(),
+                "why": "8.1% of hall_03's points lie in hall_01's free space and 3.9% on its "
+                "surfaces",
+            }
+        ],
+        "conflicting_now": [
+            {"a": "hall_02", "b": "hall_03", "explained": [0.02, 0.05], "conflicting": [0.07, 0.01]}
+        ],
+    }
+    text = _text(render_report(doc))
+    assert "Placed stations that contradicted each other (map check) (2)" in text
+    assert (
+        "hall_01 and hall_03: 8.1% of hall_03's points lie in hall_01's free space and 3.9% on "
+        "its surfaces"
+    ) in text
+    assert "still contradicting : hall_02 and hall_03 (7.0% of one station's points" in text
+    assert "Placed stations that contradicted each other (map check) (0) none" in _text(
+        render_report(small_project())
+    )

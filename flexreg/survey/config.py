@@ -106,7 +106,7 @@ class SurveyConfig(Config):
     neighbours: int = Field(1, ge=0, le=5)
     place_candidates: int = Field(3, ge=0, le=20)
     max_links_per_station: float = Field(6.0, gt=0, le=100)
-    proximity_rounds: int = Field(1, ge=0, le=5)
+    proximity_rounds: int = Field(2, ge=0, le=5)
     proximity_m: float = Field(12.0, gt=0)
     loop_max_deg: float = Field(0.3, gt=0, le=30)
     loop_max_m: float = Field(0.03, gt=0)

@@ -161,6 +161,70 @@ def median_spacing(
     return float(np.median(d[:, 1]))
 
 
+@numba.njit(cache=True, nogil=True)
+def _voxel_keys(p, origin, voxel, dims):  # pragma: no cover - compiled
+    """One int64 key per point: its voxel's index, row-major in a grid of ``dims``."""
+    keys = np.empty(len(p), dtype=np.int64)
+    for i in range(len(p)):
+        ix = np.int64(np.floor((p[i, 0] - origin[0]) / voxel))
+        iy = np.int64(np.floor((p[i, 1] - origin[1]) / voxel))
+        iz = np.int64(np.floor((p[i, 2] - origin[2]) / voxel))
+        keys[i] = (ix * dims[1] + iy) * dims[2] + iz
+    return keys
+
+
+def _voxel_inverse(p: NDArray[np.float64], voxel_m: float) -> tuple[int, NDArray[np.int64]]:
+    """The number of occupied voxels and each point's voxel among them (0..M-1, in key
+    order). Voxels as Open3D's ``voxel_down_sample`` bins them: from the cloud's minimum less
+    half a voxel, ``floor((p - origin) / voxel_m)``."""
+    origin = p.min(axis=0) - voxel_m / 2
+    dims = np.floor((p.max(axis=0) - origin) / voxel_m).astype(np.int64) + 1
+    if float(np.prod(dims.astype(np.float64))) < 2.0**62:
+        keys = _voxel_keys(p, origin, float(voxel_m), dims)
+        uniq, inverse = np.unique(keys, return_inverse=True)
+    else:  # a grid too large for one int64 key: the rows of indices
+        idx = np.floor((p - origin) / voxel_m).astype(np.int64)
+        uniq, inverse = np.unique(idx, axis=0, return_inverse=True)
+    return len(uniq), inverse.reshape(-1)
+
+
+def voxel_count(points: NDArray[np.float64], voxel_m: float) -> int:
+    """Occupied voxels of a cloud (as :func:`voxel_centroids` bins it)."""
+    p = np.asarray(points, dtype=np.float64)
+    return 0 if len(p) == 0 else _voxel_inverse(p, voxel_m)[0]
+
+
+def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
+    """One point per occupied voxel, the centroid of its points: what Open3D's
+    ``voxel_down_sample`` gives (the same voxels and centroids, in another order) without
+    copying the cloud into Open3D or loading it.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, metres
+    voxel_m : float, metres
+
+    Returns
+    -------
+    (M, 3) float64, metres
+        In the order of the voxels' indices (x, then y, then z).
+
+    Examples
+    --------
+    >>> voxel_centroids(np.array([[0.0, 0, 0], [0.2, 0, 0], [1.0, 0, 0]]), 0.5)
+    array([[0.1, 0. , 0. ],
+           [1. , 0. , 0. ]])
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) == 0:
+        return np.zeros((0, 3))
+    m, inverse = _voxel_inverse(p, voxel_m)
+    counts = np.bincount(inverse, minlength=m).astype(np.float64)
+    return np.stack(
+        [np.bincount(inverse, weights=p[:, k], minlength=m) / counts for k in range(3)], axis=1
+    )
+
+
 def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
     """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
     the sizes the baselines use hold many points of a large scan, so the voxel grid of the
@@ -198,4 +262,6 @@ __all__ = [
     "thin",
     "thin_random",
     "to_open3d",
+    "voxel_centroids",
+    "voxel_count",
 ]

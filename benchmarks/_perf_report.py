@@ -63,11 +63,17 @@ def _goals(state: dict[str, Any]) -> list[str]:
         ratio = p.get("ratio")
         ok = None if ratio is None else ratio <= TARGET_PREPARE_RATIO
         miss = f"{_f(ratio, '.1f')}× instead of {TARGET_PREPARE_RATIO:g}×"
+        cold = ""
+        if p.get("cold_ratio") is not None:
+            cold = (
+                f"; first station of a process {_f(p.get('peak_above_imports_gb'), '.3f')} GB = "
+                f"{_f(p['cold_ratio'], '.1f')}×"
+            )
         lines.append(
             f"| survey preparation of one station ({p.get('cols')} × {p.get('rows')}) ≤ "
             f"{TARGET_PREPARE_RATIO:g}× its float32 xyz ({_f(p.get('grid_f32_gb'), '.3f')} GB) | "
-            f"{_f(p.get('peak_above_imports_gb'), '.3f')} GB = {_f(ratio, '.1f')}× | "
-            f"{_verdict(ok, miss)} |"
+            f"{_f(p.get('peak_above_base_gb', p.get('peak_above_imports_gb')), '.3f')} GB = "
+            f"{_f(ratio, '.1f')}×{cold} | {_verdict(ok, miss)} |"
         )
     wall = None if r2 is None else r2["median_wall_s"]
     cpu = None if r2 is None else r2["median_cpu_s"]

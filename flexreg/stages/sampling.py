@@ -162,42 +162,71 @@ def median_spacing(
 
 
 @numba.njit(cache=True, nogil=True)
-def _voxel_keys(p, origin, voxel, dims):  # pragma: no cover - compiled
-    """One int64 key per point: its voxel's index, row-major in a grid of ``dims``."""
-    keys = np.empty(len(p), dtype=np.int64)
-    for i in range(len(p)):
-        ix = np.int64(np.floor((p[i, 0] - origin[0]) / voxel))
-        iy = np.int64(np.floor((p[i, 1] - origin[1]) / voxel))
-        iz = np.int64(np.floor((p[i, 2] - origin[2]) / voxel))
-        keys[i] = (ix * dims[1] + iy) * dims[2] + iz
-    return keys
+def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
+    """Per occupied cell of side ``cell`` anchored at ``lo`` (in the order of their first
+    points): the sum of its points and their number. An open-addressing hash set of the integer
+    cell coordinates as in :func:`_first_in_cells`; ``table`` is scratch space of a
+    power-of-two size at least twice the number of points."""
+    mask = table.shape[0] - 1
+    table[:] = -1
+    first = np.empty(1024, dtype=np.int64)
+    sums = np.zeros((1024, 3), dtype=np.float64)
+    counts = np.zeros(1024, dtype=np.int64)
+    m = 0
+    for i in range(q.shape[0]):
+        kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
+        ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
+        kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
+        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+        while True:
+            v = table[slot]
+            if v < 0:
+                if m == first.shape[0]:  # grow the per-cell arrays
+                    first = np.concatenate((first, np.empty(m, dtype=np.int64)))
+                    sums = np.concatenate((sums, np.zeros((m, 3), dtype=np.float64)))
+                    counts = np.concatenate((counts, np.zeros(m, dtype=np.int64)))
+                v = m
+                table[slot] = v
+                first[v] = i
+                m += 1
+                break
+            j = first[v]
+            if (
+                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
+                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
+                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
+            ):
+                break
+            slot = (slot + 1) & mask
+        for c in range(3):
+            sums[v, c] += q[i, c]
+        counts[v] += 1
+    return sums[:m], counts[:m]
 
 
-def _voxel_inverse(p: NDArray[np.float64], voxel_m: float) -> tuple[int, NDArray[np.int64]]:
-    """The number of occupied voxels and each point's voxel among them (0..M-1, in key
-    order). Voxels as Open3D's ``voxel_down_sample`` bins them: from the cloud's minimum less
-    half a voxel, ``floor((p - origin) / voxel_m)``."""
-    origin = p.min(axis=0) - voxel_m / 2
-    dims = np.floor((p.max(axis=0) - origin) / voxel_m).astype(np.int64) + 1
-    if float(np.prod(dims.astype(np.float64))) < 2.0**62:
-        keys = _voxel_keys(p, origin, float(voxel_m), dims)
-        uniq, inverse = np.unique(keys, return_inverse=True)
-    else:  # a grid too large for one int64 key: the rows of indices
-        idx = np.floor((p - origin) / voxel_m).astype(np.int64)
-        uniq, inverse = np.unique(idx, axis=0, return_inverse=True)
-    return len(uniq), inverse.reshape(-1)
+def _voxels(
+    points: NDArray[np.float64], voxel_m: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Sums and counts of the points per occupied voxel, the voxels as Open3D's
+    ``voxel_down_sample`` bins them: ``floor((p - origin) / voxel_m)`` from the cloud's
+    minimum less half a voxel."""
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    lo, _ = _bounds(p)
+    table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
+    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
 
 
 def voxel_count(points: NDArray[np.float64], voxel_m: float) -> int:
     """Occupied voxels of a cloud (as :func:`voxel_centroids` bins it)."""
-    p = np.asarray(points, dtype=np.float64)
-    return 0 if len(p) == 0 else _voxel_inverse(p, voxel_m)[0]
+    return len(_voxels(points, voxel_m)[1])
 
 
 def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
     """One point per occupied voxel, the centroid of its points: what Open3D's
     ``voxel_down_sample`` gives (the same voxels and centroids, in another order) without
-    copying the cloud into Open3D or loading it.
+    copying the cloud into Open3D or loading it. Compiled, one pass over the points.
 
     Parameters
     ----------
@@ -207,22 +236,16 @@ def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.f
     Returns
     -------
     (M, 3) float64, metres
-        In the order of the voxels' indices (x, then y, then z).
+        In the order of each voxel's first point.
 
     Examples
     --------
-    >>> voxel_centroids(np.array([[0.0, 0, 0], [0.2, 0, 0], [1.0, 0, 0]]), 0.5)
-    array([[0.1, 0. , 0. ],
-           [1. , 0. , 0. ]])
+    >>> voxel_centroids(np.array([[1.0, 0, 0], [0.0, 0, 0], [0.2, 0, 0]]), 0.5)
+    array([[1. , 0. , 0. ],
+           [0.1, 0. , 0. ]])
     """
-    p = np.asarray(points, dtype=np.float64)
-    if len(p) == 0:
-        return np.zeros((0, 3))
-    m, inverse = _voxel_inverse(p, voxel_m)
-    counts = np.bincount(inverse, minlength=m).astype(np.float64)
-    return np.stack(
-        [np.bincount(inverse, weights=p[:, k], minlength=m) / counts for k in range(3)], axis=1
-    )
+    sums, counts = _voxels(points, voxel_m)
+    return sums / np.maximum(counts, 1)[:, None]
 
 
 def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:

@@ -24,6 +24,7 @@ STAGES = (
     "estimation",
     "refinement",
     "verdict",
+    "overlap",
 )
 
 

@@ -24,6 +24,7 @@ STAGES = (
     "estimation",
     "refinement",
     "verdict",
+    "overlap",
 )
 
 
@@ -63,11 +64,17 @@ def _goals(state: dict[str, Any]) -> list[str]:
         ratio = p.get("ratio")
         ok = None if ratio is None else ratio <= TARGET_PREPARE_RATIO
         miss = f"{_f(ratio, '.1f')}× instead of {TARGET_PREPARE_RATIO:g}×"
+        cold = ""
+        if p.get("cold_ratio") is not None:
+            cold = (
+                f"; first station of a process {_f(p.get('peak_above_imports_gb'), '.3f')} GB = "
+                f"{_f(p['cold_ratio'], '.1f')}×"
+            )
         lines.append(
             f"| survey preparation of one station ({p.get('cols')} × {p.get('rows')}) ≤ "
             f"{TARGET_PREPARE_RATIO:g}× its float32 xyz ({_f(p.get('grid_f32_gb'), '.3f')} GB) | "
-            f"{_f(p.get('peak_above_imports_gb'), '.3f')} GB = {_f(ratio, '.1f')}× | "
-            f"{_verdict(ok, miss)} |"
+            f"{_f(p.get('peak_above_base_gb', p.get('peak_above_imports_gb')), '.3f')} GB = "
+            f"{_f(ratio, '.1f')}×{cold} | {_verdict(ok, miss)} |"
         )
     wall = None if r2 is None else r2["median_wall_s"]
     cpu = None if r2 is None else r2["median_cpu_s"]
@@ -156,15 +163,24 @@ def _stage_table(state: dict[str, Any]) -> list[str]:
 
 def _compare_table(cmp: dict[str, Any]) -> list[str]:
     lines = [
-        "| pair | flexreg s | FPFH + RANSAC + ICP s | ratio | flexreg ok | FPFH ok |",
-        "|---|---:|---:|---:|---|---|",
+        "| pair | flexreg s | FPFH + RANSAC + ICP s | ratio | flexreg peak MB | FPFH peak MB | "
+        "flexreg ok | FPFH ok |",
+        "|---|---:|---:|---:|---:|---:|---|---|",
     ]
     for r in cmp.get("pairs", []):
         lines.append(
             f"| {r['name']} | {r['flexreg_s']:.2f} | {r['fpfh_s']:.2f} | {r['ratio']:.1f}× | "
+            f"{_f(r.get('flexreg_peak_mb'), '.0f')} | {_f(r.get('fpfh_peak_mb'), '.0f')} | "
             f"{'yes' if r['flexreg_success'] else 'no'} | {'yes' if r['fpfh_success'] else 'no'} |"
         )
     return lines
+
+
+def _median(values: list[Any]) -> float | None:
+    v = sorted(float(x) for x in values if x is not None)
+    if not v:
+        return None
+    return v[len(v) // 2] if len(v) % 2 else (v[len(v) // 2 - 1] + v[len(v) // 2]) / 2
 
 
 def _load(x: Any) -> str:
@@ -222,7 +238,12 @@ def markdown(state: dict[str, Any], *, figure: str) -> str:
             f"pair in the same run, each call timed alone in its own process (scans in memory). "
             f"Median {cmp.get('median_flexreg_s', 0):.2f} s against "
             f"{cmp.get('median_fpfh_s', 0):.2f} s; success {cmp.get('flexreg_success')} / "
-            f"{cmp.get('fpfh_success')} of {len(cmp.get('pairs', []))}.",
+            f"{cmp.get('fpfh_success')} of {len(cmp.get('pairs', []))}. Peak memory is the "
+            "increase of the process's resident set during the call (scans already loaded; "
+            "median "
+            f"{_f(_median([r.get('flexreg_peak_mb') for r in cmp.get('pairs', [])]), '.0f')} MB "
+            "against "
+            f"{_f(_median([r.get('fpfh_peak_mb') for r in cmp.get('pairs', [])]), '.0f')} MB).",
             "",
             *_compare_table(cmp),
             "",

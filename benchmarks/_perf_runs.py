@@ -44,9 +44,14 @@ TARGET_PREPARE_RATIO = 1.5
 TARGET_SPEED_RATIO = 10.0
 TARGET_WHOLE_S = 2.0
 
-#: a child that reads one station and prepares it as a survey does, printing its figures
+#: a child that reads one station and prepares it as a survey does, twice: first in a process
+#: fresh from its imports ("cold": numba's compiler and OpenCV initialise then, about 0.1 GB
+#: once per process), then again once the first is freed ("warm": what each further station
+#: costs a survey worker); the peak RSS above the process's size before each, with glibc
+#: returning large freed blocks as the command line sets it (``mallopt``)
 _PREPARE_CHILD = """
-import json, sys, time
+import ctypes, gc, json, sys, time
+ctypes.CDLL(None).mallopt(-3, 4 << 20)  # M_MMAP_THRESHOLD, as flexreg.cli.app sets it
 from flexreg.bench.measure import reset_high_water_mark
 from flexreg.io import read_scan
 from flexreg.registration import Registration, RegistrationConfig
@@ -57,17 +62,22 @@ def kib(key):
             return int(line.split()[1])
 
 reg = Registration(RegistrationConfig())
-base = kib("VmRSS")
-reset_high_water_mark()
-t = time.perf_counter()
-scan = read_scan(sys.argv[1])
-read_s = time.perf_counter() - t
-rows, cols = scan.grid_shape
-prepared = reg.prepare(scan)
-del scan
-print(json.dumps({"base_kib": base, "peak_kib": kib("VmHWM"), "after_kib": kib("VmRSS"),
-    "read_s": read_s, "total_s": time.perf_counter() - t, "rows": rows, "cols": cols,
-    "timings_s": prepared.timings_s}))
+runs = []
+for _ in range(2):
+    gc.collect()
+    base = kib("VmRSS")
+    reset_high_water_mark()
+    t = time.perf_counter()
+    scan = read_scan(sys.argv[1])
+    read_s = time.perf_counter() - t
+    rows, cols = scan.grid_shape
+    prepared = reg.prepare(scan)
+    del scan
+    runs.append({"base_kib": base, "peak_kib": kib("VmHWM"), "after_kib": kib("VmRSS"),
+        "read_s": read_s, "total_s": time.perf_counter() - t, "rows": rows, "cols": cols,
+        "timings_s": prepared.timings_s})
+    del prepared
+print(json.dumps(runs))
 """
 
 
@@ -177,25 +187,29 @@ def import_time(repeats: int) -> dict[str, Any]:
 
 def prepare_station(path: Path) -> dict[str, Any]:
     """One station read and prepared (``Registration.prepare``, what a survey caches) in a
-    fresh process: the peak RSS above the process's size after its imports, against the
-    station's float32 xyz grid (rows x cols x 3 x 4 bytes)."""
+    fresh process, twice (see :data:`_PREPARE_CHILD`): the peak RSS above the process's size
+    before each preparation, against the station's float32 xyz grid (rows x cols x 3 x 4
+    bytes). ``ratio`` is the warm one (each further station of a worker), ``cold_ratio`` the
+    first of a process (one-off library initialisation included)."""
     r = run_measured([sys.executable, "-c", _HWM + _PREPARE_CHILD, str(path)])
     if r["exit"] != 0:
         return {"station": path.name, "failure": r["output"]}
-    d = json.loads(r["output"].strip().splitlines()[-1])
-    grid_f32 = d["rows"] * d["cols"] * 12
-    extra = (d["peak_kib"] - d["base_kib"]) * 1024
+    cold, warm = json.loads(r["output"].strip().splitlines()[-1])
+    grid_f32 = warm["rows"] * warm["cols"] * 12
+    extra = [(d["peak_kib"] - d["base_kib"]) * 1024 for d in (cold, warm)]
     return {
         "station": f"{path.parent.name}/{path.name}",
-        "rows": d["rows"],
-        "cols": d["cols"],
+        "rows": warm["rows"],
+        "cols": warm["cols"],
         "grid_f32_gb": grid_f32 / 1e9,
-        "peak_above_imports_gb": extra / 1e9,
-        "ratio": extra / grid_f32,
+        "peak_above_imports_gb": extra[0] / 1e9,
+        "cold_ratio": extra[0] / grid_f32,
+        "peak_above_base_gb": extra[1] / 1e9,
+        "ratio": extra[1] / grid_f32,
         "process_peak_gb": r["peak_gb"],
-        "read_s": d["read_s"],
-        "total_s": d["total_s"],
-        "timings_s": d["timings_s"],
+        "read_s": warm["read_s"],
+        "total_s": warm["total_s"],
+        "timings_s": warm["timings_s"],
     }
 
 

@@ -193,6 +193,10 @@ def _stage_medians(records: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _share(x: Any) -> str:
+    return "–" if x is None else f"{x:.3f}"
+
+
 def _o3d_cells(r: dict[str, Any]) -> str:
     """``| overlap | Open3D fitness | overlap RMSE mm | Open3D inlier RMSE mm |`` of a record
     (``–`` for runs made before these figures were recorded)."""
@@ -204,7 +208,7 @@ def _o3d_cells(r: dict[str, Any]) -> str:
         return "–" if x is None else f"{1000 * x:.1f}"
 
     return (
-        f"| {o['share']:.3f} | {o['open3d_fitness']:.3f} | {mm(o['rmse_m'])} "
+        f"| {o['share']:.3f} | {_share(o.get('open3d_fitness'))} | {mm(o['rmse_m'])} "
         f"| {mm(o['open3d_inlier_rmse_m'])} "
     )
 

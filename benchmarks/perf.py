@@ -24,6 +24,12 @@ Usage::
     .venv/bin/python benchmarks/perf.py --write-docs     # also rewrite "## Memory and speed"
     .venv/bin/python benchmarks/perf.py --quick          # 1024x512 + 2048x1024, 4 pairs
     .venv/bin/python benchmarks/perf.py --write-docs --from-json RESULTS_JSON
+    .venv/bin/python benchmarks/perf.py --before BEFORE_JSON --before-note "main at abc123"
+
+``--before`` shows an earlier code's whole-process figures beside these (the "before -> after"
+table and the grey line of the figure): run ``benchmarks/_perf_runs.whole_register`` with that
+code first (for instance from an exported tree on ``PYTHONPATH``) and save its summaries by pair
+folder name.
 """
 
 from __future__ import annotations
@@ -67,6 +73,14 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--write-docs", action="store_true", help=f'rewrite "{SECTION}"')
     ap.add_argument("--results", type=Path, default=RESULTS)
     ap.add_argument("--from-json", type=Path, metavar="RESULTS_JSON")
+    ap.add_argument(
+        "--before",
+        type=Path,
+        metavar="JSON",
+        help="whole-process figures of earlier code to show beside these: a JSON object of "
+        "pair folder name -> that pair's entry of another run's results.json 'whole'",
+    )
+    ap.add_argument("--before-note", default="main", help="what the --before code was")
     return ap
 
 
@@ -109,6 +123,10 @@ def main(argv: list[str] | None = None) -> int:
         folder = results_folder(args.results, "perf")
         os.environ.setdefault("PYTHONHASHSEED", "0")
         state = _run(args, folder)
+    if args.before is not None:
+        state["before"] = json.loads(args.before.read_text())
+        state["before_note"] = args.before_note
+        write_json(folder / "results.json", state)
     fig = folder / "perf-memory.png"
     plot(state, fig)
     text = markdown(state, figure="figures/perf-memory.png")

@@ -78,6 +78,8 @@ def registered(pair, tmp_path_factory):
         "0.08",
         "--truth",
         str(target.parent / "truth.txt"),
+        "--set",
+        "open3d_overlap_check=true",
     ]
     np.savetxt(target.parent / "truth.txt", pair[2])
     results = []

@@ -110,3 +110,33 @@ def test_lift_bilinear_and_discontinuity():
     # at the seam the neighbours of column 39 are 39 and 0 (full turn)
     np.testing.assert_allclose(pts[3], 0.5 * img.xyz[10, 39] + 0.5 * img.xyz[10, 0], atol=1e-12)
     assert np.isnan(pts[1]).all()
+
+
+def test_sift_in_strips_finds_the_keypoints_of_the_whole_image(rng):
+    """SIFT strip by strip (one strip's scale space at a time): the same keypoints and
+    descriptors as on the whole image except a few large ones near the strips' edges, and no
+    keypoint twice."""
+    img = _texture(rng, 600, 400)
+    mask = np.ones(img.shape, bool)
+    mask[250:300, 100:200] = False
+    whole = detect_and_describe(img, "sift", mask)
+    strips = detect_and_describe(img, "sift", mask, strip_rows=128)
+    assert len(whole) > 200
+
+    def keys(f):
+        return list(zip(*np.round(f.xy, 3).T, np.round(f.angle, 2), strict=True))
+
+    kw, ks = set(keys(whole)), set(keys(strips))
+    assert len(ks) == len(strips)  # no keypoint found by two strips
+    assert len(kw & ks) >= 0.97 * len(kw) and len(ks - kw) <= 0.03 * len(kw)
+    # the shared ones carry the same descriptors
+    at = {k: i for i, k in enumerate(keys(strips))}
+    same = [
+        np.abs(whole.descriptors[i] - strips.descriptors[at[k]]).max() <= 1
+        for i, k in enumerate(keys(whole))
+        if k in at
+    ]
+    assert np.mean(same) > 0.97
+    # other methods normalise over the whole image: strips are ignored
+    orb = detect_and_describe(img, "orb", mask, strip_rows=128)
+    np.testing.assert_array_equal(orb.xy, detect_and_describe(img, "orb", mask).xy)

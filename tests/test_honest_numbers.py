@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 from conftest import REPO, run_cli
+from scipy.spatial import cKDTree
 
 from flexreg import Scan, read_scan, write_scan
 from flexreg.core.camera import SphericalCamera
@@ -15,6 +16,7 @@ from flexreg.core.range_image import to_scan
 from flexreg.core.transforms import apply, make_transform, rotation_about_axis
 from flexreg.stages.overlap import measure_overlap
 from flexreg.stages.projection import project
+from flexreg.stages.sampling import to_open3d, voxel_centroids, voxel_count
 from flexreg.viz.matches import INLIER_COLOUR, OUTLIER_COLOUR, match_figure
 
 LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
@@ -68,6 +70,10 @@ def test_overlap_is_open3d_fitness_on_the_same_clouds(rng):
     assert ov.open3d_fitness == pytest.approx(ov.share, abs=1e-3)
     assert ov.open3d_inlier_rmse_m == pytest.approx(ov.rmse_m, rel=1e-3)
     assert "source points within 10 cm of a target point after alignment" in ov.headline()
+    # without Open3D's check: the same figures of ours, Open3D's left out (None, JSON null)
+    bare = measure_overlap(target, source, np.eye(4), voxel_m=0.1, open3d_check=False)
+    assert (bare.share, bare.rmse_m) == (ov.share, ov.rmse_m)
+    assert bare.open3d_fitness is None and bare.to_dict()["open3d_inlier_rmse_m"] is None
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +93,10 @@ def pair(tmp_path_factory):
 
 def test_register_and_compare_report_the_same_overlap(pair, tmp_path):
     target, source = pair
-    rc, out, err = run_cli(["register", target, source, "--out", tmp_path / "T.json"])
+    rc, out, err = run_cli(
+        ["register", target, source, "--out", tmp_path / "T.json"]
+        + ["--set", "open3d_overlap_check=true"]
+    )
     assert rc in (0, 3), err
     reg = json.loads((tmp_path / "T.json").read_text())
     rc, out, err = run_cli(
@@ -108,3 +117,18 @@ def test_register_and_compare_report_the_same_overlap(pair, tmp_path):
     flat = " ".join(out.split())
     assert f"target = {target}, source = {source}" in flat
     assert "overlap" in flat and "o3d fitness" in flat
+
+
+def test_voxel_centroids_are_open3ds_voxel_down_sample(rng):
+    """The overlap's voxelisation without Open3D: the same voxels and centroids as Open3D's
+    voxel_down_sample (in another order), far from the origin too; a hand-made case exactly."""
+    cloud = rng.normal(size=(50_000, 3)) * [4.0, 2.0, 0.5] + [3.5e5, 5.6e6, 120.0]
+    for voxel in (0.05, 0.3):
+        ours = voxel_centroids(cloud, voxel)
+        theirs = np.asarray(to_open3d(cloud).voxel_down_sample(voxel).points)
+        assert len(ours) == len(theirs) == voxel_count(cloud, voxel)
+        d, _ = cKDTree(theirs).query(ours)
+        assert d.max() < 1e-6
+    pts = np.array([[0.0, 0, 0], [0.2, 0, 0], [0.4, 0, 0], [1.0, 1, 0]])
+    np.testing.assert_allclose(voxel_centroids(pts, 0.5), [[0.1, 0, 0], [0.4, 0, 0], [1, 1, 0]])
+    assert voxel_centroids(np.zeros((0, 3)), 1.0).shape == (0, 3)

@@ -7,9 +7,9 @@ import pytest
 
 from flexreg import Scan
 from flexreg.core.camera import PinholeCamera, SphericalCamera
-from flexreg.core.range_image import from_depth, from_grid, to_scan
+from flexreg.core.range_image import RangeImage, from_depth, from_grid, to_scan
 from flexreg.errors import InputError
-from flexreg.stages.projection import auto_spherical_camera, project, range_image
+from flexreg.stages.projection import auto_spherical_camera, project, range_image, with_camera
 
 
 def _plane_points(distance: float, n: int, rng) -> np.ndarray:
@@ -153,3 +153,30 @@ def test_lidar_camera_keeps_firing_pitch_when_returns_are_lost(lost):
     # exact geometry: 0.4 deg firings, 40/31 deg rings (to float64 rounding of the directions)
     assert np.degrees(cam.dphi) == pytest.approx(0.4, rel=1e-9)
     assert np.degrees(cam.dtheta) == pytest.approx(40 / 31, rel=1e-9)
+
+
+def test_regular_native_grid_keeps_its_pixels_with_a_fitted_camera(rng):
+    """A grid written by an equirectangular scanner is its own camera image: with_camera fits
+    the camera and keeps every pixel (no re-projection); an irregular grid is re-projected."""
+    cam = SphericalCamera.from_reference(360, 120, 0.5, 2.6)
+    depth = rng.uniform(2, 20, cam.shape)
+    depth[rng.random(cam.shape) < 0.1] = 0.0
+
+    def native(rows):  # the grid a scanner file stores (rows in this order): no camera model
+        img = from_depth(depth, cam)
+        return from_grid(to_scan(RangeImage(img.xyz[rows], img.valid[rows], img.index)))
+
+    grid = native(np.arange(120))
+    assert grid.camera is None
+    fitted = with_camera(grid)
+    assert isinstance(fitted.camera, SphericalCamera) and fitted.camera.wraps
+    assert fitted.xyz is grid.xyz and fitted.index is grid.index  # the same pixels
+    u, v, _ = fitted.camera.project(grid.xyz[grid.valid])
+    rows, cols = np.nonzero(grid.valid)
+    np.testing.assert_array_equal(np.rint(v), rows)
+    np.testing.assert_array_equal(np.mod(np.rint(u), 360), cols)
+    # the rows shuffled: no camera fits, the points are re-projected through a fitted one
+    shuffled = native(rng.permutation(120))
+    again = with_camera(shuffled)
+    assert again.camera is not None and again.xyz is not shuffled.xyz
+    assert again.n_valid > 0.9 * shuffled.n_valid

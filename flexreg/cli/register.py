@@ -536,11 +536,12 @@ def _print_summary(
     if r.overlap is not None:
         o = r.overlap
         t.add_row("overlap", o.headline())
-        t.add_row(
-            "open3d",
-            f"fitness {o.open3d_fitness:.4f}, inlier_rmse {_mm(o.open3d_inlier_rmse_m)} "
-            f"(evaluate_registration at {_mm(o.distance_m)}, the same clouds)",
-        )
+        if o.open3d_fitness is not None and o.open3d_inlier_rmse_m is not None:
+            t.add_row(
+                "open3d",
+                f"fitness {o.open3d_fitness:.4f}, inlier_rmse {_mm(o.open3d_inlier_rmse_m)} "
+                f"(evaluate_registration at {_mm(o.distance_m)}, the same clouds)",
+            )
     share = 100 * r.inliers / r.matches if r.matches else 0.0
     t.add_row(
         "keypoints",

@@ -142,8 +142,9 @@ class Overlap:
     distance_m, voxel_m : float, metres
     voxel_source : str
         How ``voxel_m`` was chosen.
-    open3d_fitness, open3d_inlier_rmse_m : float
-        Open3D's ``evaluate_registration`` on the same clouds at ``distance_m``.
+    open3d_fitness, open3d_inlier_rmse_m : float or None
+        Open3D's ``evaluate_registration`` on the same clouds at ``distance_m`` (None when not
+        computed: ``open3d_check=False``).
     """
 
     share: float
@@ -153,8 +154,8 @@ class Overlap:
     distance_m: float
     voxel_m: float
     voxel_source: str
-    open3d_fitness: float
-    open3d_inlier_rmse_m: float
+    open3d_fitness: float | None
+    open3d_inlier_rmse_m: float | None
 
     @property
     def definition(self) -> str:
@@ -170,8 +171,8 @@ class Overlap:
         return f"{100 * self.share:.1f} % {self.definition}"
 
     def to_dict(self) -> dict[str, Any]:
-        def num(x: float) -> float | None:
-            return float(x) if math.isfinite(x) else None
+        def num(x: float | None) -> float | None:
+            return float(x) if x is not None and math.isfinite(x) else None
 
         return {
             "share": self.share,

@@ -206,6 +206,17 @@ _HEADER_COUNTS = [1, 1, 3, 3, 3, 3, 4, 4, 4, 4]
 _CHUNK_BYTES = 1 << 26
 #: shortest possible point line (``0 0 0`` and its newline), bytes: bounds a cloud's lines
 _MIN_LINE_BYTES = 6
+#: smaller files are parsed in chunks of an eighth of their size, down to this: the parsed
+#: values of a chunk take 1.3 times its text, so a chunk as large as the whole file would add
+#: 2.3 times its size to the scan being read
+_MIN_CHUNK_BYTES = 1 << 24
+
+
+def _chunk_bytes(size: int) -> int:
+    """Bytes of text parsed at a time in a file of ``size`` bytes: an eighth of the file
+    between :data:`_MIN_CHUNK_BYTES` and :data:`_CHUNK_BYTES` (larger chunks are fewer
+    parallel regions, which a loaded machine starts slowly)."""
+    return min(_CHUNK_BYTES, max(_MIN_CHUNK_BYTES, size // 8))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -229,7 +240,7 @@ def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
     """The file's lines parsed about :data:`_CHUNK_BYTES` at a time (whole lines only):
     ``(offset of the chunk's first byte, (head, tail, counts, errors))`` of
     :func:`_parse_all`. One buffer is reused; it grows only for a line longer than a chunk."""
-    buf = np.empty(min(_CHUNK_BYTES, max(size, 1)), dtype=np.uint8)
+    buf = np.empty(min(_chunk_bytes(size), max(size, 1)), dtype=np.uint8)
     filled, offset = 0, 0
     with open(path, "rb") as f:
         while True:
@@ -430,9 +441,9 @@ def _header_cloud(
 def read(path: Path, **_: object) -> list[Scan]:
     """Read every cloud of a PTX file.
 
-    The text is parsed :data:`_CHUNK_BYTES` at a time and each cloud's valid points go
-    straight into their final arrays: the memory taken beyond the scans themselves is a few
-    chunk-sized buffers, whatever the file's size.
+    The text is parsed 16 to 64 MiB at a time (:func:`_chunk_bytes`) and each cloud's valid
+    points go straight into their final arrays: the memory taken beyond the scans themselves
+    is a few chunk-sized buffers, whatever the file's size.
 
     Returns
     -------
@@ -445,7 +456,7 @@ def read(path: Path, **_: object) -> list[Scan]:
         they are not.
     """
     size = path.stat().st_size
-    check_memory(3 * min(size, _CHUNK_BYTES), "parsing it", source=path)
+    check_memory(3 * min(size, _chunk_bytes(size)), "parsing it", source=path)
     scans: list[Scan] = []
     cloud: _Cloud | None = None
     pose = np.eye(4)

@@ -38,6 +38,11 @@ class RegistrationConfig(Config):
         Detector/descriptor: sift, orb, akaze, kaze, brisk (surf on nonfree OpenCV).
     max_features : int
         Strongest keypoints kept per image (>= 8).
+    feature_strip_pixels : int
+        SIFT on a larger image runs in horizontal strips of about this many pixels each (plus
+        margins; :func:`flexreg.stages.keypoints.detect_and_describe` ``strip_rows``), so only
+        one strip's scale space is in memory: 0.18 GB instead of 0.47 GB for a 2048 x 1024
+        image, for about 40 % more detection time. 0: always the whole image.
     ratio : float
         Lowe's ratio-test threshold, in (0, 1].
     mutual : bool
@@ -89,6 +94,11 @@ class RegistrationConfig(Config):
     max_image_pixels : int
         Larger range images are subsampled (every k-th row and column) before the image
         stages; ICP still uses every point.
+    open3d_overlap_check : bool
+        Also state Open3D's ``evaluate_registration`` fitness and inlier RMSE beside the
+        overlap (:mod:`flexreg.stages.overlap`; the same figures computed independently).
+        Off by default: it loads Open3D (0.2 GB and 0.6 s) into a call that has no other use
+        for it; ``open3d_fitness`` and ``open3d_inlier_rmse_m`` are then null.
     polish : bool
         Judge each candidate after a quick local ICP on small subsets of the scans.
     aliases : bool
@@ -142,6 +152,7 @@ class RegistrationConfig(Config):
     stretch: Annotated[str, one_of(STRETCHES)] | None = "clahe"
     features: Annotated[str, one_of(METHODS, "method")] = "sift"
     max_features: int = Field(8000, ge=8)
+    feature_strip_pixels: int = Field(524_288, ge=0)
     ratio: float = Field(0.85, gt=0, le=1)
     mutual: bool = True
     threshold_m: ThresholdM | None = None
@@ -164,6 +175,7 @@ class RegistrationConfig(Config):
     guided_radius_per_m: float = Field(0.02, ge=0, allow_inf_nan=False)
     min_overlap: float = Field(0.1, ge=0, le=1)
     max_image_pixels: int = Field(2_500_000, ge=1)
+    open3d_overlap_check: bool = False
     polish: bool = True
     aliases: bool = True
     refine_guard: bool = True

@@ -208,6 +208,15 @@ def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) ->
     return [fill_holes(i) for i in images] if config.fill_holes else images
 
 
+def _strip_rows(shape: tuple[int, ...], pixels: int) -> int | None:
+    """Rows per strip of the feature detection on an image of ``shape`` (None: whole image):
+    ``config.feature_strip_pixels`` pixels per strip, at least 64 rows."""
+    H, W = shape[:2]
+    if pixels <= 0 or H * W <= pixels:
+        return None
+    return max(64, pixels // max(W, 1))
+
+
 def _keypoints(
     images: list[RangeImage], config: RegistrationConfig, run: _Run
 ) -> list[Keypoints3D]:
@@ -217,7 +226,12 @@ def _keypoints(
     with run.stage("features"):
         feats = [
             detect_and_describe(
-                f, config.features, m, max_features=config.max_features, wrap=img.wraps
+                f,
+                config.features,
+                m,
+                max_features=config.max_features,
+                wrap=img.wraps,
+                strip_rows=_strip_rows(f.shape, config.feature_strip_pixels),
             )
             for (f, m), img in zip(converted, images, strict=True)
         ]
@@ -561,7 +575,12 @@ def _finish(
         verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config)
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
-        overlap = measure_overlap(as_points(scans[0]), as_points(scans[1]), T)
+        overlap = measure_overlap(
+            as_points(scans[0]),
+            as_points(scans[1]),
+            T,
+            open3d_check=config.open3d_overlap_check,
+        )
     log.info("overlap %s", overlap.headline())
     return RegistrationResult(
         T_target_source=T,

@@ -31,6 +31,10 @@ _FACTORIES = {
 }
 #: descriptor norm per method: binary descriptors use Hamming distance
 BINARY = {"orb", "akaze", "brisk"}
+#: rows of image above and below each strip's own rows when SIFT runs in strips
+#: (:func:`detect_and_describe` ``strip_rows``): the blur and the descriptor window of every
+#: keypoint up to about 12 px in diameter lie inside them
+STRIP_MARGIN_PX = 64
 
 
 @dataclass(eq=False)
@@ -128,6 +132,7 @@ def detect_and_describe(
     support: float = 0.5,
     wrap: bool = False,
     detector: Any = None,
+    strip_rows: int | None = None,
 ) -> Features:
     """Detect keypoints and compute descriptors on a feature image.
 
@@ -152,6 +157,16 @@ def detect_and_describe(
         drop the duplicates found twice.
     detector : cv2.Feature2D, optional
         A pre-built detector (overrides ``method``'s default parameters).
+    strip_rows : int, optional
+        SIFT only: detect in horizontal strips of this many rows, each seen with
+        :data:`STRIP_MARGIN_PX` rows of image above and below and keeping the keypoints whose
+        centre lies in its own rows. OpenCV builds SIFT's scale space on the image upsampled
+        2x (about 0.45 MB per row of a 2048-pixel-wide image), so only one strip's exists at a
+        time. SIFT's thresholds are absolute, so the keypoints are those of the whole image
+        except a few, mostly large ones (diameter above about 12 px) whose blur or descriptor
+        window crosses a strip's margin: on a 2048 x 1024 Flexion image 99.5 % of keypoints
+        and descriptors are identical with 256-row strips. Other methods normalise over the whole
+        image and always see it whole.
 
     Returns
     -------
@@ -176,14 +191,14 @@ def detect_and_describe(
     if border_px > 0:
         k = 2 * border_px + 1
         keep = cv2.erode(valid.astype(np.uint8), np.ones((k, k), np.uint8), borderValue=0) > 0
-    kps, desc = det.detectAndCompute(img, (keep * 255).astype(np.uint8))
-    if desc is None or not kps:
+    mask8 = (keep * 255).astype(np.uint8)
+    if strip_rows is not None and method.lower() == "sift" and img.shape[0] > strip_rows:
+        found = _detect_strips(det, img, mask8, int(strip_rows))
+    else:
+        found = _detect(det, img, mask8)
+    if found is None:
         return _empty(method, det)
-    xy = np.array([kp.pt for kp in kps], dtype=np.float64)
-    resp = np.array([kp.response for kp in kps], dtype=np.float32)
-    size = np.array([kp.size for kp in kps], dtype=np.float32)
-    angle = np.array([kp.angle for kp in kps], dtype=np.float32)
-    # OpenCV may drop keypoints in compute(); kps and desc stay aligned
+    xy, resp, size, angle, desc = found
     sel = np.ones(len(xy), dtype=bool)
     if support > 0 and not valid.all():
         dist = cv2.distanceTransform(valid.astype(np.uint8), cv2.DIST_L2, 5)
@@ -205,6 +220,52 @@ def detect_and_describe(
         angle=angle[order],
         method=method.lower(),
     )
+
+
+_Found = tuple[
+    NDArray[np.float64], NDArray[np.float32], NDArray[np.float32], NDArray[np.float32], NDArray[Any]
+]
+
+
+def _detect(det: Any, img: NDArray[np.uint8], mask: NDArray[np.uint8]) -> _Found | None:
+    """``detectAndCompute`` as arrays: positions, responses, sizes, angles, descriptors (OpenCV
+    may drop keypoints in compute(); the arrays stay aligned), or None when none is found."""
+    kps, desc = det.detectAndCompute(img, mask)
+    if desc is None or not kps:
+        return None
+    return (
+        np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
+        np.array([kp.response for kp in kps], dtype=np.float32),
+        np.array([kp.size for kp in kps], dtype=np.float32),
+        np.array([kp.angle for kp in kps], dtype=np.float32),
+        desc,
+    )
+
+
+def _detect_strips(
+    det: Any, img: NDArray[np.uint8], mask: NDArray[np.uint8], rows: int
+) -> _Found | None:
+    """:func:`_detect` strip by strip (``rows`` rows each, seen with :data:`STRIP_MARGIN_PX`
+    rows of margin): a keypoint belongs to the strip that holds its rounded centre, as OpenCV's
+    mask test reads it, so no keypoint is found twice."""
+    H = img.shape[0]
+    rows = max(1, rows)
+    parts: list[_Found] = []
+    for r0 in range(0, H, rows):
+        r1 = min(H, r0 + rows)
+        a0, a1 = max(0, r0 - STRIP_MARGIN_PX), min(H, r1 + STRIP_MARGIN_PX)
+        m = np.zeros((a1 - a0, img.shape[1]), dtype=np.uint8)
+        m[r0 - a0 : r1 - a0] = mask[r0:r1]
+        if not m.any():
+            continue
+        found = _detect(det, img[a0:a1], m)
+        if found is not None:
+            found[0][:, 1] += a0
+            parts.append(found)
+    if not parts:
+        return None
+    xy, resp, size, angle, desc = (np.concatenate([p[i] for p in parts]) for i in range(5))
+    return xy, resp, size, angle, desc
 
 
 def _empty(method: str, det: Any) -> Features:

@@ -8,13 +8,17 @@
     voxelised source points. ``rmse_m`` is the RMS distance of those points to their nearest
     target point.
 
+The voxelisation is :func:`~flexreg.stages.sampling.voxel_centroids` (Open3D's voxels and
+centroids, computed without copying the clouds into Open3D).
 ``v`` is the scale voxel (:func:`scale_voxel`: twice the target's median point spacing,
 enlarged until the voxelised target keeps at most 20,000 points), the same voxel the baselines
 and ``compare`` use, so the figure depends only on the two clouds and the transform. This is
 what Open3D's ``evaluate_registration`` calls ``fitness`` and ``inlier_rmse`` on the same clouds
 at the same distance; both are computed -- ours with SciPy's exact k-d tree, Open3D's by its own
 call -- and reported side by side under Open3D's names (``open3d_fitness``,
-``open3d_inlier_rmse_m``), so that a reader can check one against the other.
+``open3d_inlier_rmse_m``), so that a reader can check one against the other. Open3D's call
+needs Open3D loaded (0.2 GB and 0.6 s of a process that had no other use for it): with
+``open3d_check=False`` its two figures are None.
 
 Keypoint *inliers* are another thing: the share of matched keypoint pairs that RANSAC kept,
 reported as such and never as an overlap.
@@ -30,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from flexreg.core.results import Overlap
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.stages.sampling import median_spacing, thin, to_open3d
+from flexreg.stages.sampling import median_spacing, thin, to_open3d, voxel_centroids, voxel_count
 
 __all__ = [
     "MAX_INPUT_POINTS",
@@ -87,13 +91,13 @@ def scale_voxel(
         raise RegistrationError("cannot derive a voxel size: the target's points coincide")
     voxel = SPACINGS_PER_VOXEL * spacing
     how = f"{SPACINGS_PER_VOXEL:g} x median spacing {spacing:.4g} m"
-    base = to_open3d(thin(target, 2_000_000))
-    n = len(base.voxel_down_sample(voxel).points)
+    base = thin(target, 2_000_000)
+    n = voxel_count(base, voxel)
     for _ in range(12):  # the count falls roughly with the square of the voxel (surfaces)
         if n <= max_points:
             break
         voxel *= 1.05 * math.sqrt(n / max_points)
-        n = len(base.voxel_down_sample(voxel).points)
+        n = voxel_count(base, voxel)
         how = f"enlarged until at most {max_points:,} target points remain"
     return float(voxel), how
 
@@ -109,6 +113,9 @@ class OverlapMeter:
         The voxel (default :func:`scale_voxel` of the target).
     distance_m : float, optional, metres
         Inlier distance (default ``voxel_m``).
+    open3d_check : bool
+        Also compute Open3D's ``evaluate_registration`` on the same clouds (loads Open3D);
+        else ``open3d_fitness`` and ``open3d_inlier_rmse_m`` are None.
 
     Examples
     --------
@@ -126,6 +133,7 @@ class OverlapMeter:
         *,
         voxel_m: float | None = None,
         distance_m: float | None = None,
+        open3d_check: bool = True,
     ) -> None:
         if voxel_m is None:
             voxel_m, how = scale_voxel(target)
@@ -136,11 +144,12 @@ class OverlapMeter:
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a positive number of metres, got {value}")
         self.voxel_m, self.voxel_source, self.distance_m = float(voxel_m), how, float(distance_m)
-        self._target = to_open3d(thin(target, MAX_INPUT_POINTS)).voxel_down_sample(voxel_m)
-        self._source = to_open3d(thin(source, MAX_INPUT_POINTS)).voxel_down_sample(voxel_m)
-        self.target_points = np.asarray(self._target.points)
-        self.source_points = np.asarray(self._source.points)
+        self.target_points = voxel_centroids(thin(target, MAX_INPUT_POINTS), voxel_m)
+        self.source_points = voxel_centroids(thin(source, MAX_INPUT_POINTS), voxel_m)
         self._tree = cKDTree(self.target_points)
+        self._open3d = (
+            (to_open3d(self.source_points), to_open3d(self.target_points)) if open3d_check else None
+        )
 
     def distances(self, T: NDArray[np.float64]) -> NDArray[np.float64]:
         """(M,) float64, metres: each voxelised source point mapped by ``T`` to its nearest
@@ -151,16 +160,18 @@ class OverlapMeter:
 
     def __call__(self, T: NDArray[np.float64]) -> Overlap:
         """The :class:`Overlap` of ``T_target_source``."""
-        import open3d as o3d  # heavy: loaded by the voxelisation already
-
         T = np.asarray(T, dtype=np.float64)
         q = self.source_points @ T[:3, :3].T + T[:3, 3]
         d, _ = self._tree.query(q, distance_upper_bound=self.distance_m)
         ok = np.isfinite(d)
         n = len(q)
-        ev = o3d.pipelines.registration.evaluate_registration(
-            self._source, self._target, self.distance_m, T
-        )
+        fitness = rmse = None
+        if self._open3d is not None:
+            import open3d as o3d  # heavy: loaded by to_open3d already
+
+            ev = o3d.pipelines.registration.evaluate_registration(*self._open3d, self.distance_m, T)
+            fitness = float(ev.fitness)
+            rmse = float(ev.inlier_rmse) if ok.any() else math.nan
         return Overlap(
             share=float(ok.sum() / n) if n else 0.0,
             rmse_m=float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else math.nan,
@@ -169,8 +180,8 @@ class OverlapMeter:
             distance_m=self.distance_m,
             voxel_m=self.voxel_m,
             voxel_source=self.voxel_source,
-            open3d_fitness=float(ev.fitness),
-            open3d_inlier_rmse_m=float(ev.inlier_rmse) if ok.any() else math.nan,
+            open3d_fitness=fitness,
+            open3d_inlier_rmse_m=rmse,
         )
 
 
@@ -181,6 +192,7 @@ def measure_overlap(
     *,
     voxel_m: float | None = None,
     distance_m: float | None = None,
+    open3d_check: bool = True,
 ) -> Overlap:
     """The :class:`Overlap` of one transform (:class:`OverlapMeter` for several).
 
@@ -189,7 +201,10 @@ def measure_overlap(
     target, source : (N, 3) float64, metres
     T_target_source : (4, 4) float64
     voxel_m, distance_m : float, optional, metres
+    open3d_check : bool
         See :class:`OverlapMeter`.
     """
-    meter = OverlapMeter(target, source, voxel_m=voxel_m, distance_m=distance_m)
+    meter = OverlapMeter(
+        target, source, voxel_m=voxel_m, distance_m=distance_m, open3d_check=open3d_check
+    )
     return meter(T_target_source)

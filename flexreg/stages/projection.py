@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -24,6 +25,7 @@ from flexreg.core.range_image import (
 )
 from flexreg.core.scan import GRID_CELL_BYTES, Scan
 from flexreg.errors import DegenerateGeometryError, InputError
+from flexreg.stages.grid_camera import fit_grid_camera
 
 log = logging.getLogger(__name__)
 
@@ -331,12 +333,25 @@ def working_image(x: Scan | RangeImage, *, max_pixels: int = MAX_IMAGE_PIXELS) -
     return downsample_image(img, factor(img.height, img.width))
 
 
+#: a native grid is its own camera image when a fitted camera puts 95 % of its points within
+#: this many pixels of their own pixel (:func:`with_camera`): they round to it
+GRID_CAMERA_MAX_ERROR_PX = 0.5
+
+
 def with_camera(image: RangeImage) -> RangeImage:
-    """The image itself when it has a camera model; otherwise its points re-projected through
-    an equirectangular camera fitted to them (:func:`auto_spherical_camera`), so that checks
-    can look pixels up."""
+    """The image with a camera model, so that checks can look pixels up.
+
+    The image itself when it has one; a native grid that is regular (a terrestrial scanner's
+    equirectangular grid, an organised depth camera's pinhole image) gets the camera fitted to
+    it (:func:`flexreg.stages.grid_camera.fit_grid_camera`, 95 % of its points within
+    :data:`GRID_CAMERA_MAX_ERROR_PX` of their own pixel) and keeps its pixels; otherwise its
+    points are re-projected through an equirectangular camera fitted to them
+    (:func:`auto_spherical_camera`)."""
     if image.camera is not None:
         return image
+    camera, _ = fit_grid_camera(image, max_error_px=GRID_CAMERA_MAX_ERROR_PX)
+    if camera is not None:
+        return replace(image, camera=camera)
     pts = image.xyz[image.valid]
     return project(Scan(points=pts), auto_spherical_camera(pts))
 

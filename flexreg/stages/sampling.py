@@ -161,6 +161,93 @@ def median_spacing(
     return float(np.median(d[:, 1]))
 
 
+@numba.njit(cache=True, nogil=True)
+def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
+    """Per occupied cell of side ``cell`` anchored at ``lo`` (in the order of their first
+    points): the sum of its points and their number. An open-addressing hash set of the integer
+    cell coordinates as in :func:`_first_in_cells`; ``table`` is scratch space of a
+    power-of-two size at least twice the number of points."""
+    mask = table.shape[0] - 1
+    table[:] = -1
+    first = np.empty(1024, dtype=np.int64)
+    sums = np.zeros((1024, 3), dtype=np.float64)
+    counts = np.zeros(1024, dtype=np.int64)
+    m = 0
+    for i in range(q.shape[0]):
+        kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
+        ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
+        kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
+        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+        while True:
+            v = table[slot]
+            if v < 0:
+                if m == first.shape[0]:  # grow the per-cell arrays
+                    first = np.concatenate((first, np.empty(m, dtype=np.int64)))
+                    sums = np.concatenate((sums, np.zeros((m, 3), dtype=np.float64)))
+                    counts = np.concatenate((counts, np.zeros(m, dtype=np.int64)))
+                v = m
+                table[slot] = v
+                first[v] = i
+                m += 1
+                break
+            j = first[v]
+            if (
+                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
+                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
+                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
+            ):
+                break
+            slot = (slot + 1) & mask
+        for c in range(3):
+            sums[v, c] += q[i, c]
+        counts[v] += 1
+    return sums[:m], counts[:m]
+
+
+def _voxels(
+    points: NDArray[np.float64], voxel_m: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Sums and counts of the points per occupied voxel, the voxels as Open3D's
+    ``voxel_down_sample`` bins them: ``floor((p - origin) / voxel_m)`` from the cloud's
+    minimum less half a voxel."""
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    lo, _ = _bounds(p)
+    table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
+    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
+
+
+def voxel_count(points: NDArray[np.float64], voxel_m: float) -> int:
+    """Occupied voxels of a cloud (as :func:`voxel_centroids` bins it)."""
+    return len(_voxels(points, voxel_m)[1])
+
+
+def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
+    """One point per occupied voxel, the centroid of its points: what Open3D's
+    ``voxel_down_sample`` gives (the same voxels and centroids, in another order) without
+    copying the cloud into Open3D or loading it. Compiled, one pass over the points.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, metres
+    voxel_m : float, metres
+
+    Returns
+    -------
+    (M, 3) float64, metres
+        In the order of each voxel's first point.
+
+    Examples
+    --------
+    >>> voxel_centroids(np.array([[1.0, 0, 0], [0.0, 0, 0], [0.2, 0, 0]]), 0.5)
+    array([[1. , 0. , 0. ],
+           [0.1, 0. , 0. ]])
+    """
+    sums, counts = _voxels(points, voxel_m)
+    return sums / np.maximum(counts, 1)[:, None]
+
+
 def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
     """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
     the sizes the baselines use hold many points of a large scan, so the voxel grid of the
@@ -198,4 +285,6 @@ __all__ = [
     "thin",
     "thin_random",
     "to_open3d",
+    "voxel_centroids",
+    "voxel_count",
 ]

@@ -183,6 +183,16 @@ class Overlap:
             "voxel_m": self.voxel_m,
             "voxel_source": self.voxel_source,
             "definition": "share " + self.definition,
+            "open3d_definition": (
+                "share and rmse_m are what Open3D's evaluate_registration calls fitness and "
+                "inlier_rmse on these clouds at distance_m; open3d_fitness and "
+                "open3d_inlier_rmse_m are Open3D's own call"
+                + (
+                    ""
+                    if self.open3d_fitness is not None
+                    else " (not made: set open3d_overlap_check=true)"
+                )
+            ),
             "open3d_fitness": self.open3d_fitness,
             "open3d_inlier_rmse_m": num(self.open3d_inlier_rmse_m),
         }

@@ -202,7 +202,7 @@ class RegistrationConfig(Config):
     verdict_decisive_share: float = Field(0.005, ge=0, le=1)
     verdict_decisive_ratio: Positive = 3.0
     verdict_full_decisive_share: float = Field(1e-4, ge=0, le=1)
-    verdict_full_max_conflict: float = Field(3e-4, ge=0, le=1)
+    verdict_full_max_conflict: float = Field(1e-4, ge=0, le=1)
     verdict_distinct_deg: Positive = 3.0
     verdict_distinct_m: Positive = 0.5
     verdict_max_rmse_ratio: Positive = 1.0

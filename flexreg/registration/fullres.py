@@ -10,7 +10,7 @@ tests are built so that nothing but a real disagreement counts:
 * a point *explains* a pose when the other scanner measured its range along its ray (half an
   inlier threshold plus 0.2 % of the range plus the pixel's range slack);
 * a point lies in *open space* only when the other scanner saw farther than it along the whole
-  3 x 3 neighbourhood of its pixel, by more than the free-space tolerance (2.5 inlier
+  5 x 5 neighbourhood of its pixel, by more than the free-space tolerance (2.5 inlier
   thresholds plus 1 % of the range) plus the point's own range slack: thin bars, hangers and
   silhouettes seen from two viewpoints do not count;
 * points on their own scan's silhouettes (range slack above :data:`MAX_SLACK_PER_M` of their
@@ -38,6 +38,12 @@ from flexreg.stages.normals import grid_normals
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
 MAX_SLACK_PER_M = 0.05
 
+#: the open-space test looks at the smallest range over this many pixels square around a
+#: point's pixel: a thin bar, a cabinet's edge or a sill seen edge-on covers less than a pixel
+#: of a distant scanner while the near one resolves it (3 x 3 left 30-200 such points on
+#: right poses of the synthetic tunnels and arcades, 5 x 5 none to two)
+NEIGHBOURHOOD = 5
+
 #: relative range tolerances (of the range) of the explained and the open-space tests
 FINE_REL, FREE_REL = 0.002, 0.01
 
@@ -60,7 +66,7 @@ class FullView:
         What it measured per pixel and the pixel's range slack
         (:func:`~flexreg.stages.verification.range_slack`).
     nearest : (H, W) float64, metres
-        The smallest measured range over each pixel's 3 x 3 neighbourhood; ``-inf`` where a
+        The smallest measured range over each pixel's :data:`NEIGHBOURHOOD` square; ``-inf`` where a
         neighbour has no return (nothing is known to be open there).
     points : (N, 3) float64, metres
         Its valid points off its own silhouettes (see :data:`MAX_SLACK_PER_M`).
@@ -108,7 +114,7 @@ def full_view(
     m = np.asarray(measured, dtype=np.float64)
     m = np.where(np.isfinite(m), m, -np.inf)
     modes = ["nearest", "wrap" if image.wraps else "nearest"]
-    nearest = ndimage.minimum_filter(m, size=3, mode=modes)
+    nearest = ndimage.minimum_filter(m, size=NEIGHBOURHOOD, mode=modes)
     pts = image.xyz[image.valid]
     own = np.asarray(slack, dtype=np.float64)[image.valid]
     keep = own <= max_slack_per_m * np.linalg.norm(pts, axis=1)
@@ -260,6 +266,7 @@ __all__ = [
     "FREE_REL",
     "FREE_THRESHOLDS",
     "MAX_SLACK_PER_M",
+    "NEIGHBOURHOOD",
     "FullPair",
     "FullView",
     "Masks",

@@ -28,7 +28,23 @@ from flexreg.registration.candidates import (
     alias_candidates,
     self_symmetries,
 )
-from flexreg.registration.verdict import TwoWay, decide, gather, runner_ups
+from flexreg.registration.fullres import FullPair, full_view, pose_masks
+from flexreg.registration.settle import (
+    half_turn,
+    open_share,
+    place_along,
+    sweep_candidates,
+    tournament,
+    weak_direction,
+)
+from flexreg.registration.verdict import (
+    TwoWay,
+    decide,
+    decisive_full,
+    duel,
+    gather,
+    runner_ups,
+)
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.priors import plan_view
 from flexreg.stages.sampling import area_sample
@@ -510,3 +526,135 @@ def test_self_symmetries_of_a_corridor_with_pillars_include_one_bay():
     assert any(abs(abs(t[0]) - 3.0) < 0.3 and abs(t[1]) < 0.3 for t in shifts), syms
     room = _cast(np.array(BOX[0]), np.array(BOX[1]), CUE, _station(0.6, 0.4))
     assert all(rotation_error_deg(S, np.eye(4)) > 90 for S in self_symmetries(plan_view(room)))
+
+
+# ---------------------------------------------------------------------------- full resolution
+
+
+def _full_pair(lo, hi, blocks, T_wt, T_ws):
+    """Both stations at full resolution, and the true ``T_target_source``."""
+    views = [_cast(np.array(lo), np.array(hi), blocks, T) for T in (T_wt, T_ws)]
+    pair = FullPair(*(full_view(v, measured_image(v), range_slack(v)) for v in views))
+    return pair, invert(T_wt) @ T_ws
+
+
+def _judged(T, score=0.9):
+    return Judged("hand-made", T, score, score, 0.0)
+
+
+@pytest.mark.parametrize("blocks, settles", [(CUPBOARD, True), ([], False)])
+def test_full_resolution_duel_settles_a_small_cue_only(blocks, settles):
+    """At full resolution the cupboard decides between the answer and the turned pose; in the
+    empty box neither pose wins, in either direction."""
+    T_wt, T_ws = _station(0.6, 0.4), _station(-1.0, 0.5, 30)
+    pair, T = _full_pair(*BOX, blocks, T_wt, T_ws)
+    turned = invert(T_wt) @ _turn_about_centre(180) @ T_ws
+    won, lost = duel(pose_masks(pair, T, 0.02), pose_masks(pair, turned, 0.02))
+    cfg = RegistrationConfig()
+    assert decisive_full(won, lost, cfg) is settles
+    assert not decisive_full(lost, won, cfg)
+    if not settles:
+        assert max(won, lost) < cfg.verdict_full_decisive_share
+
+
+def test_full_resolution_open_space_of_the_right_pose_is_nil():
+    """The exact pose puts nothing in open space, a pose 0.5 m off puts the cupboard there."""
+    pair, T = _full_pair(*BOX, CUPBOARD, _station(0.6, 0.4), _station(-1.0, 0.5, 30))
+    assert open_share(pose_masks(pair, T, 0.02)) == 0.0
+    off = make_transform(np.eye(3), [0.5, 0.0, 0.0]) @ T
+    assert open_share(pose_masks(pair, off, 0.02)) > RegistrationConfig().verdict_full_max_conflict
+
+
+@pytest.mark.parametrize("blocks, wins", [(CUPBOARD, True), ([], False)])
+def test_tournament_crowns_the_pose_that_fits_the_cue(blocks, wins):
+    """The turned pose scoring best on the samples loses the tournament to the true pose when
+    a cupboard stands in the room; without it nobody wins."""
+    T_wt, T_ws = _station(0.6, 0.4), _station(-1.0, 0.5, 30)
+    pair, T = _full_pair(*BOX, blocks, T_wt, T_ws)
+    turned = invert(T_wt) @ _turn_about_centre(180) @ T_ws
+    players = [_judged(turned, 0.95), _judged(T, 0.9)]
+    winner = tournament(players, pair, 0.02, RegistrationConfig())
+    assert (winner is players[1]) if wins else (winner is None)
+
+
+CORRIDOR = ([-100.0, -1.5, -1.5], [100.0, 1.5, 1.5])
+NICHE = [(np.array([2.0, 0.9, -1.5]), np.array([3.0, 1.5, 1.5]))]
+
+
+def test_weak_direction_is_the_corridor_axis_and_none_in_a_box():
+    for (lo, hi), axis in ((CORRIDOR, True), (BOX, False)):
+        (vt, _), two = _views(lo, hi, [], _station(0, 0), _station(1.5, 0.3))
+        T = invert(_station(0, 0)) @ _station(1.5, 0.3)
+        u = weak_direction(two.forward, grid_normals(vt), T, 0.02, 0.03)
+        assert (u is not None and abs(u[0]) > 0.99) if axis else u is None
+
+
+def test_place_along_puts_the_pose_on_the_niche():
+    """A pose 0.3 m off along the corridor is placed back on the niche within 2 cm."""
+    pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
+    off = make_transform(np.eye(3), [0.3, 0.0, 0.0]) @ T
+    placed = place_along(off, np.array([1.0, 0.0, 0.0]), pair, 0.02, span_m=0.5)
+    assert translation_error_m(placed, T) < 0.02
+
+
+def test_sweep_along_a_corridor_reaches_the_truth_6_m_away():
+    """Slid along the corridor and half-turned about the vertical through the overlap, the
+    answer turned and 6 m off has the true pose among the candidates."""
+    pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
+    W = make_transform(rotation_about_axis([0, 0, 1], np.pi), [6.0, 0.0, 0.0]) @ T
+    poses = sweep_candidates(
+        W,
+        np.array([1.0, 0.0, 0.0]),
+        Aliases(up=np.array([0.0, 0.0, 1.0])),
+        pair,
+        0.02,
+        None,
+        pivot=np.array([3.0, 0.0, 0.0]),
+        range_m=10.0,
+        step_m=0.5,
+    )
+    assert min(translation_error_m(P, T) + rotation_error_deg(P, T) / 100 for P in poses) < 0.03
+
+
+def test_half_turn_about_a_pivot():
+    T = half_turn(np.eye(4), np.array([0.0, 0.0, 1.0]), np.array([1.0, 2.0, 5.0]))
+    assert np.allclose(T[:3, 3], [2.0, 4.0, 0.0]) and rotation_error_deg(T, np.eye(4)) > 179.9
+
+
+@pytest.mark.parametrize("open_space, ambiguous", [(0.0, False), (0.01, True)])
+def test_full_resolution_duel_dismisses_a_rival_only_for_an_uncontradicted_answer(
+    open_space, ambiguous
+):
+    """A tie on the samples settled at full resolution is no ambiguity, unless the answer
+    itself puts the scans in open space there."""
+    ev = _with()
+    ev["runner_up"] = {
+        "score_ratio": 0.98,
+        "rotation_deg": 180.0,
+        "translation_m": 4.0,
+        "refuted_share": 0.002,
+        "refuting_share": 0.002,
+        "full_refuted_share": 0.002,
+        "full_refuting_share": 0.0,
+    }
+    ev["runner_ups"] = [ev["runner_up"]]
+    ev["full_resolution"] = {"points": 800_000, "open_space_share": open_space}
+    v = decide(ev)
+    assert ("ambiguous" in [r.code for r in v.reasons]) is ambiguous
+
+
+def test_weak_axis_settled_by_the_sweep_is_a_note():
+    ev = _with(axis_strength__x=0.004)
+    ev["axis_strength"]["weakest"] = {"kind": "translation", "direction_target": [1, 0, 0]}
+    assert [r.code for r in decide(ev).reasons] == ["weak_axis"]
+    ev["sweep"] = {
+        "kind": "weak_axis",
+        "direction_target": [1.0, 0.0, 0.0],
+        "range_m": 20.0,
+        "step_m": 0.5,
+        "poses": 6,
+        "settled": True,
+    }
+    v = decide(ev)
+    assert v.confident and [n.code for n in v.notes] == ["weak_axis_settled"]
+    assert "along x" in v.notes[0].message

@@ -45,8 +45,9 @@ Candidate = tuple[str, NDArray[np.float64]]
 
 #: priors that stay candidates themselves (judged by the dense check alone, not needing
 #: keypoint inliers): plan-view overlays, a given initial transform and the aliases of the
-#: best prior (:func:`alias_candidates`)
-DENSE_PRIORS = ("plan", "init", "alias")
+#: best prior (:func:`alias_candidates`), and the poses slid along a weak axis or a repeat
+#: (:mod:`flexreg.registration.settle`)
+DENSE_PRIORS = ("plan", "init", "alias", "sweep")
 
 #: most turns and most shifts of a plan view kept as its symmetries (:func:`self_symmetries`),
 #: and the smallest share of the identity's overlay score they must reach
@@ -368,10 +369,13 @@ class Aliases:
     ----------
     target, source : list of (4, 4) float64
         ``T_target_target`` and ``T_source_source`` self-overlays.
+    up : (3,) float64 or None
+        The target's vertical (unit, target frame) from its plan view's levelling.
     """
 
     target: list[NDArray[np.float64]] = field(default_factory=list)
     source: list[NDArray[np.float64]] = field(default_factory=list)
+    up: NDArray[np.float64] | None = None
 
 
 def alias_candidates(
@@ -481,12 +485,26 @@ def choose(
         if est is not None and est[1] >= 3:
             finalists.append((f"{finalists[0][0].split('+')[0]}+keypoints", est[0]))
     origin, T = max(finalists, key=lambda c: check.judge(c[1], thr / 2, 0.002)[0])
+    return at_pose(origin, T, kt, ks, thr, judged, top)
+
+
+def at_pose(
+    origin: str,
+    T: NDArray[np.float64],
+    kt: Keypoints3D,
+    ks: Keypoints3D,
+    thr: float,
+    judged: list[Judged],
+    score: float,
+) -> Coarse:
+    """The :class:`Coarse` result at pose ``T``: its final guided matches (within twice the
+    inlier threshold plus 0.2 % of range), their residuals and inliers."""
     fin = match_guided(
         kt.features, ks.features, kt.points, ks.points, T, radius_m=2 * thr, radius_per_m=0.002
     )
     pt, ps = kt.points[fin[:, 0]], ks.points[fin[:, 1]]
     d2 = squared_residuals(T, pt, ps)
-    return Coarse(origin, T, fin, pt, ps, d2, d2 < thr * thr, judged, top)
+    return Coarse(origin, T, fin, pt, ps, d2, d2 < thr * thr, judged, score)
 
 
 __all__ = [
@@ -501,6 +519,7 @@ __all__ = [
     "Judged",
     "Keypoints3D",
     "alias_candidates",
+    "at_pose",
     "choose",
     "dense_prior",
     "families",

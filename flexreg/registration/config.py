@@ -107,6 +107,17 @@ class RegistrationConfig(Config):
         the other way round; :func:`~flexreg.registration.candidates.alias_candidates`): the
         truth one bay or module beside a wrong answer competes, and the verdict duels the
         answer against every such twin.
+    settle : bool
+        Settle near-ties at full resolution (:mod:`flexreg.registration.settle`): when the
+        winning pose has a weak translation axis or the target's plan repeats, candidates slid
+        along that axis (and turned by the plan's self-overlays) join; clearly different
+        candidates scoring close to the best then duel on every pixel of both scans, and one
+        that beats all others decisively is the answer. Costs nothing on pairs without a weak
+        axis, a repeat or a close rival.
+    sweep_axis_strength : float
+        A translation direction weaker than this (per point, 0-1) is swept.
+    sweep_range_m, sweep_step_m : float, metres
+        How far either way and in which steps the sweep slides the pose.
     refine_guard : bool
         Keep the ICP refinement only when it scores at least as well as the coarse transform
         in the two-way dense check (:func:`~flexreg.stages.verification.soft_score`), less
@@ -140,6 +151,15 @@ class RegistrationConfig(Config):
         puts in free space outnumber the reverse by at least ``verdict_decisive_share`` of both
         scans' samples and by a factor of at least ``verdict_decisive_ratio``: one unique
         object (a cue) settles what the symmetric rest leaves open.
+    verdict_full_decisive_share : float
+        The same at full resolution (:mod:`flexreg.registration.fullres`): the winner's lead
+        as a share of all points of both scans checked (the ratio is
+        ``verdict_decisive_ratio``). A runner-up beaten so is no ambiguity, and a weak axis
+        along which every slid pose was beaten so is settled.
+    verdict_full_max_conflict : float
+        ... provided the answer itself puts at most this share of all points of both scans in
+        open space at full resolution (a right pose puts almost none there; a wrong one puts
+        the cue there, and beating other wrong poses does not make it right).
     verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
         How far a candidate must be from the answer to count as a different pose.
     verdict_max_rmse_ratio : float
@@ -178,6 +198,10 @@ class RegistrationConfig(Config):
     open3d_overlap_check: bool = False
     polish: bool = True
     aliases: bool = True
+    settle: bool = True
+    sweep_axis_strength: float = Field(0.03, ge=0, le=1)
+    sweep_range_m: Positive = 20.0
+    sweep_step_m: Positive = 0.5
     refine_guard: bool = True
     refine_guard_margin: float = Field(0.01, ge=0, le=1)
     verdict_min_overlap: float = Field(0.2, ge=0, le=1)
@@ -189,6 +213,8 @@ class RegistrationConfig(Config):
     verdict_ambiguity_ratio: float = Field(0.6, gt=0, allow_inf_nan=False)
     verdict_decisive_share: float = Field(0.005, ge=0, le=1)
     verdict_decisive_ratio: Positive = 3.0
+    verdict_full_decisive_share: float = Field(1e-4, ge=0, le=1)
+    verdict_full_max_conflict: float = Field(1e-4, ge=0, le=1)
     verdict_distinct_deg: Positive = 3.0
     verdict_distinct_m: Positive = 0.5
     verdict_max_rmse_ratio: Positive = 1.0

@@ -50,7 +50,9 @@ from flexreg.registration.candidates import (
     self_symmetries,
 )
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import FullPair, full_view
 from flexreg.registration.result import RegistrationResult
+from flexreg.registration.settle import Settlement, settle
 from flexreg.registration.verdict import (
     MAX_RIVALS,
     Scored,
@@ -259,9 +261,10 @@ def _plan_priors(
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
     overlays = plan_overlays(target, source, hypotheses=config.plan_hypotheses)  # type: ignore[arg-type]
+    up = np.asarray(target.levelling.up, dtype=np.float64)  # type: ignore[union-attr]
     if not config.aliases:
-        return overlays, Aliases()
-    return overlays, Aliases(self_symmetries(target), self_symmetries(source))
+        return overlays, Aliases(up=up)
+    return overlays, Aliases(self_symmetries(target), self_symmetries(source), up)
 
 
 def _plans_of(images: list[RangeImage], config: RegistrationConfig) -> list[PlanView | str]:
@@ -462,6 +465,7 @@ def _verdict(
     thr: float,
     refinement: dict[str, Any] | None,
     config: RegistrationConfig,
+    settled: Settlement,
 ) -> Verdict:
     """The evidence on the final transform and the verdict (:mod:`.verdict`)."""
     ups = runner_ups(
@@ -496,8 +500,16 @@ def _verdict(
         threshold_m=thr,
         refinement=refinement,
         rivals=rivals,
+        full=settled.pair,
+        full_ratio=config.verdict_ambiguity_ratio,
+        sweep=None if settled.sweep is None else settled.sweep | {"settled": settled.won},
     )
     return decide(ev, ups, config)
+
+
+def _full_pair(views: list[ScanView]) -> Callable[[], FullPair]:
+    """Makes both scans at full resolution (:mod:`.fullres`) when a near-tie needs them."""
+    return lambda: FullPair(*(full_view(v.image, v.measured, v.slack, v.normals) for v in views))  # type: ignore[arg-type]
 
 
 def _finish(
@@ -528,6 +540,12 @@ def _finish(
     priors = given if config.icp_only else given + plan_priors + m.priors
     with run.stage("estimation"):
         c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases=aliases)
+    settled = Settlement(c)
+    if config.settle and not config.icp_only:
+        with run.stage("settling"):
+            pair = _full_pair(views)
+            settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config)
+        c = settled.coarse
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
     if not dense_prior(c.origin):
@@ -572,7 +590,7 @@ def _finish(
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
         stage = (rmse, fitness, kind)
-        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config)
+        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config, settled)
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
         overlap = measure_overlap(

@@ -32,6 +32,7 @@ from flexreg.core.results import Hypothesis, Reason, Verdict
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.candidates import Check, Judged
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import FullPair, pose_masks
 from flexreg.stages.verification import AXES, axis_strength, plane_information, soft_score, spread
 
 #: most runner-up poses listed
@@ -178,6 +179,9 @@ def gather(
     residual_kind: str = "point-to-plane",
     refinement: dict[str, Any] | None,
     rivals: Sequence[Hypothesis] = (),
+    full: FullPair | None = None,
+    full_ratio: float = 0.6,
+    sweep: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The evidence of a registration (JSON-ready, units in the keys).
 
@@ -216,6 +220,15 @@ def gather(
         the answer puts in open space refutes it, even when it overlaps less (the true pose
         of two stations that barely see each other, against a wrong pose that overlays two
         identical rooms).
+    full : FullPair, optional
+        Both scans at full resolution: each runner-up scoring at least ``full_ratio`` of the
+        answer also duels it there (``full_refuted_share``, ``full_refuting_share``, shares of
+        ``full_points``; :mod:`flexreg.registration.fullres`).
+    full_ratio : float
+    sweep : dict, optional
+        What the sweep along a weak axis or a repeat did
+        (:class:`~flexreg.registration.settle.Settlement`), with ``settled``: the answer
+        beat every close slid pose at full resolution.
     """
     _, qf, okf, _ = final.forward
     _, _, okb, _ = final.backward
@@ -267,6 +280,9 @@ def gather(
         "refinement": refinement,
     }
     c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
+    full_answer = _full_answer(ev, full, final.T, runner_up, threshold_m, full_ratio)
+    if sweep is not None:
+        ev["sweep"] = dict(sweep)
     ups = []
     for h in runner_up:
         D = np.asarray(h.T_target_source) @ invert(final.T)
@@ -281,12 +297,52 @@ def gather(
                 "refuted_share": _r(won),
                 "refuting_share": _r(lost),
             }
+            | _full_duel(full, full_answer, h, threshold_m, full_ratio)
         )
     if ups:
         ev["runner_up"] = ups[0]
         ev["runner_ups"] = ups
     ev["rivals"] = [_rival(two, answer, h, threshold_m) for h in rivals]
     return ev
+
+
+def _full_answer(
+    ev: dict[str, Any],
+    full: FullPair | None,
+    T: NDArray[np.float64],
+    runner_up: Sequence[Hypothesis],
+    threshold_m: float,
+    ratio: float,
+) -> Masks | None:
+    """The answer's full-resolution masks when a close runner-up needs a duel there, and
+    its own open-space share under ``"full_resolution"`` in the evidence."""
+    if full is None or not any(h.score_ratio >= ratio for h in runner_up):
+        return None
+    masks = pose_masks(full, T, threshold_m)
+    bad = sum(int(b.sum()) for _, b in masks)
+    ev["full_resolution"] = {
+        "points": full.points,
+        "open_space_share": round(bad / full.points, 7) if full.points else 0.0,
+    }
+    return masks
+
+
+def _full_duel(
+    full: FullPair | None,
+    answer: Masks | None,
+    h: Hypothesis,
+    threshold_m: float,
+    ratio: float,
+) -> dict[str, Any]:
+    """The answer's full-resolution duel against a close runner-up (empty when not held)."""
+    if full is None or answer is None or h.score_ratio < ratio:
+        return {}
+    won, lost = duel(answer, pose_masks(full, h.T_target_source, threshold_m))
+    return {
+        "full_refuted_share": round(won, 6),
+        "full_refuting_share": round(lost, 6),
+        "full_points": full.points,
+    }
 
 
 def _rival(two: TwoWay, answer: Masks, h: Hypothesis, threshold_m: float) -> dict[str, Any]:
@@ -365,6 +421,13 @@ def _along(v: Sequence[float]) -> str:
     return "({:.2f}, {:.2f}, {:.2f}) of the target frame".format(*(a / n))
 
 
+def _sweep_settled(ev: dict[str, Any]) -> bool:
+    """Whether a sweep along the weak axis found every other position refuted at full
+    resolution (:mod:`flexreg.registration.settle`)."""
+    sw = ev.get("sweep") or {}
+    return bool(sw.get("kind") == "weak_axis" and sw.get("settled"))
+
+
 def _overlap_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     o = ev.get("overlap")
     if not o:
@@ -439,6 +502,8 @@ def _axis_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     w = a.get("weakest", {})
     direction = _along(w.get("direction_target", ()))
     if any(k in ("x", "y", "z") for k in weak) and w.get("kind", "translation") == "translation":
+        if _sweep_settled(ev):
+            return None
         return Reason(
             "weak_axis",
             f"the scans constrain almost nothing along {direction} ({limit}; a corridor or "
@@ -457,12 +522,40 @@ def decisive(won: float, lost: float, cfg: RegistrationConfig) -> bool:
     return won - lost >= cfg.verdict_decisive_share and won >= cfg.verdict_decisive_ratio * lost
 
 
+def decisive_full(won: float, lost: float, cfg: RegistrationConfig) -> bool:
+    """Whether full-resolution :func:`duel` shares (:mod:`flexreg.registration.fullres`)
+    settle two poses: ``won - lost >= verdict_full_decisive_share`` and
+    ``won >= verdict_decisive_ratio * lost``.
+
+    >>> cfg = RegistrationConfig()
+    >>> decisive_full(0.0005, 0.0, cfg), decisive_full(0.00005, 0.0, cfg)
+    (True, False)
+    >>> decisive_full(0.0006, 0.0003, cfg)
+    False
+    """
+    return (
+        won - lost >= cfg.verdict_full_decisive_share and won >= cfg.verdict_decisive_ratio * lost
+    )
+
+
+def _settled(u: dict[str, Any], ev: dict[str, Any], cfg: RegistrationConfig) -> bool:
+    """Whether the answer beats a runner-up decisively, on the samples or at full
+    resolution (there only when the answer itself puts almost nothing in open space)."""
+    if "refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], cfg):
+        return True
+    full = ev.get("full_resolution") or {}
+    if full.get("open_space_share", 1.0) > cfg.verdict_full_max_conflict:
+        return False
+    return "full_refuted_share" in u and decisive_full(
+        u["full_refuted_share"], u["full_refuting_share"], cfg
+    )
+
+
 def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     rivals = [
         u
         for u in ev.get("runner_ups") or ([ev["runner_up"]] if ev.get("runner_up") else [])
-        if u["score_ratio"] >= cfg.verdict_ambiguity_ratio
-        and not ("refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], cfg))
+        if u["score_ratio"] >= cfg.verdict_ambiguity_ratio and not _settled(u, ev, cfg)
     ]
     if not rivals:
         return None
@@ -564,6 +657,19 @@ def decide(
     if r is not None:
         reasons.append(r)
     notes: list[Reason] = []
+    if _sweep_settled(evidence) and _axis_reason(evidence, config) is None:
+        a = evidence.get("axis_strength") or {}
+        if any(a.get(k, 1.0) < config.verdict_min_axis_strength for k in ("x", "y", "z")):
+            sw = evidence["sweep"]
+            notes.append(
+                Reason(
+                    "weak_axis_settled",
+                    f"the surfaces constrain almost nothing along {_along(sw['direction_target'])}"
+                    f", but of {sw['poses']} positions tried along it within "
+                    f"{sw['range_m']:g} m every other one puts surfaces in open space where this "
+                    "one fits them (a unique object decides)",
+                )
+            )
     ref = evidence.get("refinement")
     if ref and not ref.get("kept", True):
         notes.append(
@@ -587,6 +693,7 @@ __all__ = [
     "TwoWay",
     "decide",
     "decisive",
+    "decisive_full",
     "duel",
     "duel_masks",
     "gather",

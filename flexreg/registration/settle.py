@@ -1,0 +1,500 @@
+"""Near-ties settled: candidates along a weak axis or a repeat, and a tournament of the close
+candidates decided by duels at full resolution (:mod:`flexreg.registration.fullres`).
+
+In a tunnel nothing but a niche fixes the position along the axis; in an arcade of identical
+bays nothing but a parked forklift tells one bay from the next; and a half turn maps both onto
+themselves. The priors then land anywhere along the axis, and the true pose is often not among
+the candidates at all. When the winning pose has a weak translation axis (the point-to-plane
+information of its overlap, :func:`weak_direction`) or the target's plan view repeats (a shift
+among its symmetries), :func:`sweep_candidates` slides the winner, and its turns by the plan's
+self-overlays, along that axis over ``sweep_range_m`` in steps of ``sweep_step_m``; each slid
+pose is scored on the source's points at full resolution (a cue near the stations covers many
+of them), the best local maxima are placed on the surfaces facing the axis and polished by the quick
+projective ICP, and they join the candidates. :func:`tournament` then duels every clearly
+different candidate that scores close to the best (:func:`~flexreg.registration.verdict.duel`
+on :func:`~flexreg.registration.fullres.pose_masks`): one that beats every other decisively
+(:func:`decisive_full`) is the answer; without one the near-tie stays and the verdict says so.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.core.transforms import rotation_error_deg, translation_error_m
+from flexreg.registration.candidates import Aliases, Check, Coarse, Judged, Keypoints3D, at_pose
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import FullPair, FullView, Masks, full_score, pose_masks
+from flexreg.registration.verdict import decisive_full, duel
+from flexreg.stages.verification import plane_information
+
+log = logging.getLogger(__name__)
+
+#: most source points scored per slid pose (every k-th point of its full view)
+SWEEP_POINTS = 40_000
+
+#: local maxima of each sweep refined, polished and judged
+SWEEP_PEAKS = 3
+
+#: most candidates in a :func:`tournament`
+TOURNAMENT_SIZE = 10
+
+#: a turn of the plan's self-overlays is a half turn or so when it turns more than this
+TURN_DEG = 90.0
+
+
+def weak_direction(
+    check: Check,
+    normals: NDArray[np.float32],
+    T: NDArray[np.float64],
+    threshold_m: float,
+    min_strength: float,
+) -> NDArray[np.float64] | None:
+    """The translation direction the overlap of pose ``T`` fixes least, when weaker than
+    ``min_strength`` (per point, as :func:`~flexreg.stages.verification.axis_strength`).
+
+    The translation block of the point-to-plane information of the source's sample points
+    the target explains, once the rotations may adjust (its Schur complement), divided by
+    their number; its weakest eigenvector is the direction (a corridor's axis).
+
+    Parameters
+    ----------
+    check : Check
+        The target's view and the source's even sample.
+    normals : (H, W, 3) float32
+        The target's grid normals.
+    T : (4, 4) float64
+        The pose.
+    threshold_m : float, metres
+        The inlier threshold (points within half of it count).
+    min_strength : float
+
+    Returns
+    -------
+    (3,) float64 or None
+        Unit direction in the target frame, or None when every direction is firm.
+    """
+    q, ok, _ = check.classify(T, threshold_m / 2, 0.002)
+    info, _, n = plane_information(check.view, normals, q[ok])
+    if n < 6:
+        return None
+    H = info / n
+    rr, rt, tt = H[:3, :3], H[:3, 3:], H[3:, 3:]
+    schur = tt - rt.T @ np.linalg.pinv(rr) @ rt
+    lam, V = np.linalg.eigh((schur + schur.T) / 2)
+    if lam[0] >= min_strength:
+        return None
+    return np.asarray(V[:, 0], dtype=np.float64)
+
+
+def repeat_direction(aliases: Aliases | None) -> NDArray[np.float64] | None:
+    """The direction of the first pure shift among the target's plan symmetries (a row of
+    bays or modules), unit, target frame; None without one."""
+    for S in aliases.target if aliases is not None else ():
+        t = S[:3, 3]
+        if rotation_error_deg(S, np.eye(4)) < 1.0 and np.linalg.norm(t) >= 1.0:
+            return np.asarray(t / np.linalg.norm(t), dtype=np.float64)
+    return None
+
+
+def half_turn(
+    W: NDArray[np.float64], up: NDArray[np.float64], pivot: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``W`` turned by 180 degrees about the vertical ``up`` through ``pivot`` (target frame).
+
+    >>> T = half_turn(np.eye(4), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
+    >>> T[:3, 3].round(6).tolist(), T[0, 0].round(6)
+    ([2.0, 0.0, 0.0], -1.0)
+    """
+    u = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    R = 2.0 * np.outer(u, u) - np.eye(3)  # rotation by pi about u
+    F = np.eye(4)
+    F[:3, :3] = R
+    F[:3, 3] = pivot - R @ pivot
+    return F @ W
+
+
+def _turns(
+    aliases: Aliases | None, W: NDArray[np.float64], pivot: NDArray[np.float64]
+) -> list[NDArray[np.float64]]:
+    """``W`` turned half about the target's vertical through ``pivot`` (the overlap's
+    centroid: on the axis of a symmetric cross-section when the surfaces are sampled by
+    area), when the vertical is known."""
+    if aliases is None or aliases.up is None:
+        return []
+    return [half_turn(W, aliases.up, pivot)]
+
+
+def _shifted(T: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    out = T.copy()
+    out[:3, 3] += v
+    return out
+
+
+@dataclass(eq=False)
+class _Scorer:
+    """Scores a pose on a strided subset of the source's full view
+    (:func:`~flexreg.registration.fullres.full_score`)."""
+
+    target: FullView
+    points: NDArray[np.float64]
+    slack: NDArray[np.float64]
+    threshold_m: float
+
+    @classmethod
+    def of(cls, pair: FullPair, threshold_m: float, points: int = SWEEP_POINTS) -> _Scorer:
+        s = pair.source
+        k = max(1, -(-len(s.points) // points))
+        return cls(pair.target, s.points[::k], s.point_slack[::k], threshold_m)
+
+    def __call__(self, T: NDArray[np.float64]) -> float:
+        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+
+
+def _peaks(scores: NDArray[np.float64], count: int, skip: int | None) -> list[int]:
+    """Indices of the best local maxima of a 1-D score (not ``skip``)."""
+    s = np.asarray(scores)
+    left = np.concatenate([[-np.inf], s[:-1]])
+    right = np.concatenate([s[1:], [-np.inf]])
+    idx = [int(i) for i in np.flatnonzero((s >= left) & (s >= right)) if i != skip]
+    return sorted(idx, key=lambda i: -s[i])[:count]
+
+
+def sweep_candidates(
+    W: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    aliases: Aliases | None,
+    pair: FullPair,
+    threshold_m: float,
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    *,
+    pivot: NDArray[np.float64],
+    range_m: float,
+    step_m: float,
+) -> list[NDArray[np.float64]]:
+    """Poses slid along ``direction``: the winner ``W`` and its half turn, each moved by every
+    multiple of ``step_m`` within ``range_m`` along ``direction`` (target frame), scored on
+    a subset of the source's full view (:data:`SWEEP_POINTS`); the :data:`SWEEP_PEAKS` best
+    local maxima of each sweep polished and then placed along the direction on the surfaces
+    facing it (:func:`place_along`; a polish afterwards may slide it off again).
+
+    Parameters
+    ----------
+    W : (4, 4) float64
+        The winning ``T_target_source``.
+    direction : (3,) float64
+        Unit direction, target frame.
+    aliases : Aliases or None
+        Gives the target's vertical (``up``) for the half turn.
+    pair : FullPair
+    threshold_m : float, metres
+    polish : callable or None
+        The quick local ICP.
+    pivot : (3,) float64, metres
+        Where the vertical axis of the half turn passes (target frame).
+    range_m, step_m : float, metres
+
+    Returns
+    -------
+    list of (4, 4) float64
+    """
+    score = _Scorer.of(pair, threshold_m)
+    n = int(np.floor(range_m / step_m))
+    offsets = np.arange(-n, n + 1) * step_m
+    out = []
+    for b, base in enumerate([W, *_turns(aliases, W, pivot)]):
+        u = _axis(base, direction, polish, range_m / 2)
+        s = np.array([score(_shifted(base, d * u)) for d in offsets])
+        for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None):
+            T = _shifted(base, offsets[i] * u)
+            T = polish(T) if polish is not None else T
+            out.append(place_along(T, u, pair, threshold_m, span_m=step_m))
+    log.info("sweep along %s: %d poses", np.round(direction, 3), len(out))
+    return out
+
+
+def _axis(
+    base: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    reach_m: float,
+) -> NDArray[np.float64]:
+    """The sweep's direction through ``base``, corrected by polishing ``base`` slid
+    ``reach_m`` either way: a direction estimated a third of a degree off puts a pose slid
+    15 m along it 8 cm beside the surfaces, which grazing floors and walls turn into range
+    residuals of decimetres; the polished ends lie on the true axis."""
+    if polish is None:
+        return direction
+    ends = [polish(_shifted(base, s * reach_m * direction))[:3, 3] for s in (1.0, -1.0)]
+    v = ends[0] - ends[1]
+    n = float(np.linalg.norm(v))
+    if n < reach_m or float(v @ direction) <= 0:  # the polish ran off: keep the estimate
+        return direction
+    return np.asarray(v / n, dtype=np.float64)
+
+
+def place_along(
+    T: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    pair: FullPair,
+    threshold_m: float,
+    *,
+    span_m: float,
+) -> NDArray[np.float64]:
+    """``T`` moved along ``direction`` (target frame) to where the full-resolution soft
+    score (:func:`~flexreg.registration.fullres.full_score`) of the source's points facing
+    that direction (normal within 60 degrees of it, either way) peaks, within ``span_m``
+    either way: first in tenths of the span, then in hundredths around the best. On an axis
+    that only a cue fixes, ICP has almost nothing to pull on (the cue's surfaces are beyond
+    its reach) and the other points only add noise; the surfaces facing the axis decide.
+
+    Returns
+    -------
+    (4, 4) float64
+    """
+    s = pair.source
+    n = s.normals @ T[:3, :3].T
+    with np.errstate(invalid="ignore"):
+        facing = np.abs(n @ direction) >= 0.5
+    pts, slack = s.points[facing], s.point_slack[facing]
+    if len(pts) == 0:
+        return T
+    best = 0.0
+    for step in (span_m / 10, span_m / 100):
+        offsets = best + np.arange(-10, 11) * step
+        scores = [
+            full_score(pair.target, pts, slack, _shifted(T, x * direction), threshold_m)
+            for x in offsets
+        ]
+        best = float(offsets[int(np.argmax(scores))])
+    return _shifted(T, best * direction)
+
+
+def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], config: RegistrationConfig) -> bool:
+    return (
+        rotation_error_deg(A, B) > config.verdict_distinct_deg
+        or translation_error_m(A, B) > config.verdict_distinct_m
+    )
+
+
+def contenders(
+    judged: Sequence[Judged], config: RegistrationConfig, *, floor: float | None = None
+) -> list[Judged]:
+    """The clearly different candidates, best first, each the best of its neighbourhood:
+    those scoring at least ``verdict_ambiguity_ratio`` of the best (``floor`` None), or at
+    least ``floor``; at most :data:`TOURNAMENT_SIZE`."""
+    ranked = sorted(judged, key=lambda j: -j.score)
+    if not ranked:
+        return []
+    top = ranked[0].score
+    low = config.verdict_ambiguity_ratio * top if floor is None else floor
+    out: list[Judged] = []
+    for j in ranked:
+        if j.score < low:
+            break
+        if all(_distinct(j.T_target_source, o.T_target_source, config) for o in out):
+            out.append(j)
+        if len(out) >= TOURNAMENT_SIZE:
+            break
+    return out
+
+
+def open_share(masks: Masks) -> float:
+    """Share of all points of both scans that a pose puts in open space (its
+    :func:`~flexreg.registration.fullres.pose_masks`)."""
+    n = sum(len(bad) for _, bad in masks)
+    return sum(int(bad.sum()) for _, bad in masks) / n if n else 0.0
+
+
+def tournament(
+    players: Sequence[Judged], pair: FullPair, threshold_m: float, config: RegistrationConfig
+) -> Judged | None:
+    """The one candidate that settles a near-tie at full resolution, or None.
+
+    A player is *close* when it scores at least ``verdict_ambiguity_ratio`` of the best, and
+    *passes* when it puts at most ``verdict_full_max_conflict`` of all points in open space
+    itself (a pose that puts the cue where the other scanner saw through is refuted by its
+    own contradictions). The winner is close and passes, no player beats it
+    :func:`~flexreg.registration.verdict.decisive_full`-ly, and it beats every other close
+    player decisively (there is at least one). A single inconclusive duel (a pose far along
+    a tunnel where neither scan sees the other's cue) leaves the near-tie open: nothing is
+    settled that the data do not settle.
+
+    Parameters
+    ----------
+    players : sequence of Judged
+        Clearly different candidates (:func:`contenders`).
+    pair : FullPair
+    threshold_m : float, metres
+    config : RegistrationConfig
+
+    Returns
+    -------
+    Judged or None
+        None without a single such player (or with fewer than two players).
+    """
+    if len(players) < 2:
+        return None
+    masks = [pose_masks(pair, p.T_target_source, threshold_m) for p in players]
+    passing = [open_share(m) <= config.verdict_full_max_conflict for m in masks]
+    top = max(p.score for p in players)
+    close = [k for k, p in enumerate(players) if p.score >= config.verdict_ambiguity_ratio * top]
+    winners = []
+    for i, p in enumerate(players):
+        if not passing[i] or i not in close:
+            continue
+        duels = {k: duel(masks[i], masks[k]) for k in range(len(players)) if k != i}
+        if any(decisive_full(lost, won, config) for won, lost in duels.values()):
+            continue
+        if all(decisive_full(*duels[k], config) for k in close if k != i):
+            winners.append(p)
+    if len(winners) != 1:
+        return None
+    log.info("tournament of %d: %s settles it", len(players), winners[0].origin)
+    return winners[0]
+
+
+@dataclass(eq=False)
+class Settlement:
+    """What :func:`settle` did.
+
+    Attributes
+    ----------
+    coarse : Coarse
+        The coarse result, at the tournament's winner when that is another pose; its
+        ``judged`` include the slid poses.
+    pair : FullPair or None
+        Both scans at full resolution, when a sweep or a tournament needed them.
+    sweep : dict or None
+        JSON-ready: ``kind`` (``"weak_axis"`` or ``"repeat"``), ``direction_target``,
+        ``range_m``, ``step_m``, ``poses`` (slid poses judged).
+    players : int
+        Clearly different candidates in the tournament (0 or 1: none was held).
+    won : bool
+        Whether one player beat every other decisively (it is the answer).
+    """
+
+    coarse: Coarse
+    pair: FullPair | None = None
+    sweep: dict[str, object] | None = None
+    players: int = 0
+    won: bool = False
+
+
+def settle(
+    c: Coarse,
+    full_pair: Callable[[], FullPair],
+    check: Check,
+    normals: NDArray[np.float32],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    threshold_m: float,
+    aliases: Aliases | None,
+    keypoints: tuple[Keypoints3D, Keypoints3D],
+    config: RegistrationConfig,
+) -> Settlement:
+    """Sweep along a weak axis or a repeat, then hold a tournament of the close candidates.
+
+    Parameters
+    ----------
+    c : Coarse
+        :func:`~flexreg.registration.candidates.choose`'s result.
+    full_pair : callable
+        Makes the :class:`~flexreg.registration.fullres.FullPair` of the scans (called only
+        when needed: not on a pair without a weak axis, a repeat or a close rival).
+    check : Check
+        The dense check (the source's sample in the target's view).
+    normals : (H, W, 3) float32
+        The target's grid normals.
+    polish : callable or None
+        The quick local ICP.
+    threshold_m : float, metres
+    aliases : Aliases or None
+        The plans' symmetries.
+    keypoints : (Keypoints3D, Keypoints3D)
+        Target and source keypoints (the final guided matches of a new winner).
+    config : RegistrationConfig
+
+    Returns
+    -------
+    Settlement
+    """
+    W, thr = c.T_target_source, threshold_m
+    rivals = len(contenders(c.judged, config)) >= 2
+    kind, u = "weak_axis", weak_direction(check, normals, W, thr, config.sweep_axis_strength)
+    if u is None and rivals:  # a repeat matters only when a pose beside the answer competes
+        kind, u = "repeat", repeat_direction(aliases)
+    if u is None and not rivals:
+        return Settlement(c)
+    pair = full_pair()
+    judged = list(c.judged)
+    sweep = None
+    if u is not None:
+        q, ok, _ = check.classify(W, thr / 2, 0.002)
+        pivot = q[ok].mean(axis=0) if ok.any() else W[:3, 3]
+        poses = sweep_candidates(
+            W,
+            u,
+            aliases,
+            pair,
+            thr,
+            polish,
+            pivot=pivot,
+            range_m=config.sweep_range_m,
+            step_m=config.sweep_step_m,
+        )
+        for T in poses:
+            judged.append(Judged("sweep", T, *check.judge(T, 2.5 * thr, 0.01)))
+        sweep = {
+            "kind": kind,
+            "direction_target": [round(float(x), 3) for x in u],
+            "range_m": config.sweep_range_m,
+            "step_m": config.sweep_step_m,
+            "poses": len(poses),
+        }
+    answer = Judged(c.origin, W, *check.judge(W, 2.5 * thr, 0.01))
+    others = contenders(judged, config, floor=0.0)
+    players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
+    players = players[:TOURNAMENT_SIZE]
+    winner = tournament(players, pair, thr, config)
+    out = Coarse(
+        c.origin,
+        W,
+        c.pairs,
+        c.target_points,
+        c.source_points,
+        c.residuals2,
+        c.inliers,
+        judged,
+        c.score,
+    )
+    if winner is not None and u is not None:
+        # the cue alone fixes the position along the axis: place the winner on it
+        T = place_along(winner.T_target_source, u, pair, thr, span_m=config.sweep_step_m)
+        winner = Judged(winner.origin, T, *check.judge(T, 2.5 * thr, 0.01))
+    if winner is not None and (u is not None or _distinct(winner.T_target_source, W, config)):
+        log.info("the tournament's winner (%s) is the answer", winner.origin)
+        kt, ks = keypoints
+        out = at_pose(winner.origin, winner.T_target_source, kt, ks, thr, judged, c.score)
+    return Settlement(out, pair, sweep, len(players), winner is not None)
+
+
+__all__ = [
+    "SWEEP_PEAKS",
+    "SWEEP_POINTS",
+    "TOURNAMENT_SIZE",
+    "TURN_DEG",
+    "Settlement",
+    "contenders",
+    "half_turn",
+    "open_share",
+    "place_along",
+    "repeat_direction",
+    "settle",
+    "sweep_candidates",
+    "tournament",
+    "weak_direction",
+]

@@ -30,7 +30,12 @@ from flexreg.core.transforms import (
 )
 from flexreg.errors import RegistrationError
 from flexreg.registration.config import RegistrationConfig
-from flexreg.stages.alignment import guided_fit, squared_residuals
+from flexreg.stages.alignment import (
+    COLLINEAR_RATIO,
+    guided_fit,
+    spread_ratio,
+    squared_residuals,
+)
 from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import match_guided
 from flexreg.stages.priors import PlanView, TopView, match_top_views
@@ -59,6 +64,27 @@ SHIFT_SHARE = 0.3
 
 #: distinct judged candidates whose offset from the winner is tried the other way round
 ALIAS_OFFSETS = 1
+
+
+def require_inliers(c: Coarse, thr: float, min_inliers: int, counts: str) -> None:
+    """A coarse transform fitted to keypoints needs at least ``max(3, min_inliers)`` inliers
+    within ``thr`` metres, not on one line (a dense prior carries its pose without them).
+
+    Raises
+    ------
+    RegistrationError
+        Too few or collinear inliers; ``counts`` (keypoints and matches) is in the message.
+    """
+    if dense_prior(c.origin):
+        return
+    inl = c.inliers
+    if inl.sum() < max(3, min_inliers):
+        raise RegistrationError(
+            f"only {int(inl.sum())} inliers within {thr:.3g} m (need "
+            f"{max(3, min_inliers)}); {counts}"
+        )
+    if spread_ratio(c.source_points[inl]) < COLLINEAR_RATIO:
+        raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
 
 
 def dense_prior(origin: str) -> bool:

@@ -24,7 +24,9 @@ puts in open space. :func:`pose_masks` gives a pose's masks; the verdict's
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -237,6 +239,13 @@ class FullPair:
         return len(self.source.points) + len(self.target.points)
 
 
+def full_pair_of(views: Sequence[Any]) -> Callable[[], FullPair]:
+    """Makes both scans at full resolution when a near-tie needs them: ``views`` are the
+    target's and the source's prepared views (``image``, ``measured``, ``slack``,
+    ``normals``)."""
+    return lambda: FullPair(*(full_view(v.image, v.measured, v.slack, v.normals) for v in views))
+
+
 def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m: float) -> Masks:
     """A pose's explained and open-space masks in both directions (the source's points in the
     target's view, then the target's points in the source's view), at full resolution: the
@@ -271,6 +280,7 @@ __all__ = [
     "FullView",
     "Masks",
     "full_masks",
+    "full_pair_of",
     "full_score",
     "full_view",
     "pose_masks",

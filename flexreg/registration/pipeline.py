@@ -47,10 +47,11 @@ from flexreg.registration.candidates import (
     choose,
     dense_prior,
     polisher,
+    require_inliers,
     self_symmetries,
 )
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import FullPair, full_view
+from flexreg.registration.fullres import full_pair_of
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, settle
 from flexreg.registration.verdict import (
@@ -62,12 +63,7 @@ from flexreg.registration.verdict import (
     runner_ups,
 )
 from flexreg.stages import feature_images
-from flexreg.stages.alignment import (
-    COLLINEAR_RATIO,
-    consistent_subset,
-    ransac_rigid,
-    spread_ratio,
-)
+from flexreg.stages.alignment import consistent_subset, ransac_rigid
 from flexreg.stages.correspondences import derive_threshold, lift
 from flexreg.stages.keypoints import detect_and_describe
 from flexreg.stages.matching import match
@@ -507,11 +503,6 @@ def _verdict(
     return decide(ev, ups, config)
 
 
-def _full_pair(views: list[ScanView]) -> Callable[[], FullPair]:
-    """Makes both scans at full resolution (:mod:`.fullres`) when a near-tie needs them."""
-    return lambda: FullPair(*(full_view(v.image, v.measured, v.slack, v.normals) for v in views))  # type: ignore[arg-type]
-
-
 def _finish(
     scans: list[Scan | RangeImage],
     kps: list[Keypoints3D],
@@ -543,19 +534,12 @@ def _finish(
     settled = Settlement(c)
     if config.settle and not config.icp_only:
         with run.stage("settling"):
-            pair = _full_pair(views)
+            pair = full_pair_of(views)
             settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config)
         c = settled.coarse
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
-    if not dense_prior(c.origin):
-        if inl.sum() < max(3, config.min_inliers):
-            raise RegistrationError(
-                f"only {int(inl.sum())} inliers within {thr:.3g} m (need "
-                f"{max(3, config.min_inliers)}); {counts}"
-            )
-        if spread_ratio(c.source_points[inl]) < COLLINEAR_RATIO:
-            raise RegistrationError(f"the {int(inl.sum())} inliers are collinear")
+    require_inliers(c, thr, config.min_inliers, counts)
     T_coarse = T.copy()
     rmse = float(np.sqrt(c.residuals2[inl].mean())) if inl.any() else float("nan")
     fine_tol = thr / 2

@@ -18,6 +18,7 @@ import multiprocessing
 import os
 import pickle
 import platform
+import signal
 import time
 import traceback
 import tracemalloc
@@ -150,7 +151,9 @@ def _child(
     """Process entry point: measure ``fn(*args, **kwargs)`` and send the :class:`Measured`.
 
     With ``pair_file``, ``(target, source)`` are read from it first (not measured) and
-    appended to ``args``."""
+    appended to ``args``. Ctrl-C reaches the whole process group: the child ignores it and
+    the parent, which handles it, kills the child (no traceback from here)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if pair_file is not None:
         with open(pair_file, "rb") as f:
             args = (*args, *pickle.load(f))

@@ -104,6 +104,16 @@ def _bounds(q):  # pragma: no cover - compiled
     return lo, hi
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _in_cell(q, j, lo, cell, kx, ky, kz):  # pragma: no cover - compiled
+    """Whether point ``j`` of ``q`` lies in the cell ``(kx, ky, kz)``."""
+    return (
+        np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
+        and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
+        and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
+    )
+
+
 @numba.njit(cache=True, nogil=True)
 def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
     """Indices (ascending) of the first point of each occupied cell of side ``cell`` anchored
@@ -126,11 +136,7 @@ def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
                 out[n] = i
                 n += 1
                 break
-            if (
-                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
-                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
-                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
-            ):
+            if _in_cell(q, j, lo, cell, kx, ky, kz):
                 break
             slot = (slot + 1) & mask
     return out[:n]
@@ -191,11 +197,7 @@ def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
                 m += 1
                 break
             j = first[v]
-            if (
-                np.int64(np.floor((q[j, 0] - lo[0]) / cell)) == kx
-                and np.int64(np.floor((q[j, 1] - lo[1]) / cell)) == ky
-                and np.int64(np.floor((q[j, 2] - lo[2]) / cell)) == kz
-            ):
+            if _in_cell(q, j, lo, cell, kx, ky, kz):
                 break
             slot = (slot + 1) & mask
         for c in range(3):

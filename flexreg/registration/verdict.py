@@ -379,11 +379,21 @@ def duel_masks(two: TwoWay, T: NDArray[np.float64], threshold_m: float) -> Masks
     ((explained, conflicting), (explained, conflicting))
         (N,) bool masks of the forward and the backward sample.
     """
-    fine, free = threshold_m / 2, FREE_SPACE_TOLERANCE * threshold_m
     return tuple(
-        (check.classify(TT, fine, FINE_REL)[1], check.classify(TT, free, FREE_SPACE_REL)[2])
+        check_masks(check, TT, threshold_m)
         for check, TT in ((two.forward, T), (two.backward, invert(T)))
     )
+
+
+def check_masks(
+    check: Check, T: NDArray[np.float64], threshold_m: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """One direction of :func:`duel_masks`: which of the check's sample ``T`` puts on the
+    view's surfaces (half an inlier threshold plus 0.2 %) and which in its free space
+    (:data:`FREE_SPACE_TOLERANCE` inlier thresholds plus 1 %); (N,) bool each."""
+    explained = check.classify(T, threshold_m / 2, FINE_REL)[1]
+    free = check.classify(T, FREE_SPACE_TOLERANCE * threshold_m, FREE_SPACE_REL)[2]
+    return explained, free
 
 
 def duel(A: Masks, B: Masks) -> tuple[float, float]:
@@ -691,6 +701,7 @@ __all__ = [
     "MAX_RUNNER_UPS",
     "Scored",
     "TwoWay",
+    "check_masks",
     "decide",
     "decisive",
     "decisive_full",

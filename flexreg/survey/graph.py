@@ -270,10 +270,7 @@ def _lone_suspect(
     ]
     vouched = [float(e.doubt) for e in confirmed if e.doubt is not None]
     ceiling = max([config.loop_doubt_min, *vouched]) if vouched else None
-    adj: dict[str, list[tuple[str, Link]]] = {s: [] for s in forest.adj}
-    for e in tree:
-        adj[e.target].append((e.source, e))
-        adj[e.source].append((e.target, e))
+    adj = forest.adj  # the tree's links per station
     out: list[tuple[float, int, Link, str]] = []
     for t in tree:
         if support.get(id(t), 0) > 0:

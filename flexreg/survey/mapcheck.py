@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.registration.candidates import Check
-from flexreg.registration.verdict import FINE_REL, FREE_SPACE_REL, FREE_SPACE_TOLERANCE
+from flexreg.registration.verdict import check_masks
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.stations import load_prepared
@@ -173,8 +173,7 @@ def look_from(
         thr = max(thr_a, thr_b)
         check = Check(v.image, v.measured, v.slack, sample)
         T = np.asarray(T, dtype=np.float64)
-        ok = check.classify(T, thr / 2, FINE_REL)[1]
-        bad = check.classify(T, FREE_SPACE_TOLERANCE * thr, FREE_SPACE_REL)[2]
+        ok, bad = check_masks(check, T, thr)
         n = len(ok)
         out.append((stem, float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n))
     return out

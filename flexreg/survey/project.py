@@ -572,14 +572,13 @@ def _map_check(
     """Check every pair of placed stations (:mod:`flexreg.survey.mapcheck`), veto the
     conflicting ones and solve again, until no pair conflicts or ``map_rounds`` are used.
     Returns the solution and the last round's pair scores (``vetoes`` grows in place)."""
-    stems_with = [s for s in stems if s in files]
     made = run_tasks(
         client,
         write_glance,
-        [(files[s],) for s in stems_with],
-        on_result=_Counter("map check", len(stems_with), progress),
+        [(files[s],) for s in stems],
+        on_result=_Counter("map check", len(stems), progress),
     )
-    glances = {s: g for s, g in zip(stems_with, made, strict=True) if g is not None}
+    glances = {s: g for s, g in zip(stems, made, strict=True) if g is not None}
     looks: list[PairLook] = []
     for i in range(config.map_rounds + 1):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)

@@ -161,6 +161,16 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     assert n > 1000
     assert ok_true > 0.5 and bad_true < 0.03
     assert bad_moved > 0.1 and bad_moved > 5 * bad_true and ok_moved < ok_true
+    # the graph's judge scores the same pair the same way, both directions at once
+    from flexreg.survey.mapcheck import PairJudge
+
+    judge = PairJudge(files, glances, SurveyConfig(), keep=1)
+    look = judge.look("station_00", "station_01", T)
+    assert look is not None and look.explained[0] == ok_true and look.conflicting[0] == bad_true
+    r_true, _ = judge("station_00", "station_01", T)
+    r_moved, c_moved = judge("station_00", "station_01", moved)
+    assert r_true < 0.05 and r_moved > 3 * r_true and c_moved >= bad_moved
+    assert judge("station_00", "nowhere", T) is None
 
 
 def test_in_a_disagreeing_triangle_a_link_far_more_doubtful_than_the_others_is_the_one_dropped():
@@ -236,3 +246,77 @@ def test_a_lone_link_more_doubtful_than_every_confirmed_link_places_nothing():
         assert sorted(sol.groups[0]) == names
     sol = solve_graph(names, links(0.40), SurveyConfig(trust_lone_links=True), reference="s0")
     assert sorted(sol.groups[0]) == names
+
+
+def _truth_judge(P, *, noise=0.01, wrong=0.08):
+    """A judge that knows the truth: two stations placed within 1 m of their true relative
+    pose contradict each other by ``noise``, anywhere else by ``wrong``."""
+    calls = []
+
+    def judge(a, b, T):
+        calls.append((a, b))
+        true = invert(P[a]) @ P[b]
+        r = noise if np.linalg.norm(T[:3, 3] - true[:3, 3]) < 1.0 else wrong
+        return r, r
+
+    return judge, calls
+
+
+def _twin_triangle():
+    """s0-s1 and s1-s2 right; s0-s2 overlays two identical rooms (wrong), equally doubtful."""
+    P = _poses()
+    twin = make_transform(rotation_about_axis([0, 0, 1], np.pi), [3.0, 2.0, 0.0])
+    links = [
+        _link(P, "s0", "s1", doubt=0.05),
+        _link(P, "s1", "s2", doubt=0.05),
+        _link(P, "s0", "s2", doubt=0.05, T=twin @ invert(P["s0"]) @ P["s2"]),
+    ]
+    return P, links
+
+
+def test_the_map_blames_the_link_whose_removal_leaves_the_loop_consistent():
+    P, links = _twin_triangle()
+    # no doubt stands out: without a judge the whole triangle is dropped
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) < 3
+    judge, calls = _truth_judge(P)
+    sol = solve_graph(list(P)[:3], links, SurveyConfig(), reference="s0", judge=judge)
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert [e.status for e in links] == ["accepted", "accepted", "rejected"]
+    assert "the map blames it" in links[2].why
+    np.testing.assert_allclose(sol.poses["s2"], invert(P["s0"]) @ P["s2"], atol=1e-6)
+    assert {frozenset(c) for c in calls} == {frozenset(("s0", "s1")), frozenset(("s1", "s2")),
+                                              frozenset(("s0", "s2"))}  # fmt: skip
+
+
+def test_the_map_decides_nothing_when_the_others_do_not_contradict_clearly_more():
+    P, links = _twin_triangle()
+    config = SurveyConfig()
+    for wrong in (0.025, 0.02):  # 2.5x the clean hypothesis; then below map_min_conflict
+        judge, _ = _truth_judge(P, noise=0.01, wrong=wrong)
+        sol = solve_graph(list(P)[:3], links, config, reference="s0", judge=judge)
+        assert len(sol.groups[0]) < 3
+        assert not any(e.why and "map blames" in e.why for e in links)
+    # two hypotheses equally clean (the judge cannot tell the pair apart): nothing decided
+    sol = solve_graph(list(P)[:3], links, config, reference="s0", judge=lambda *_: (0.01, 0.01))
+    assert len(sol.groups[0]) < 3
+    # a pair the judge cannot score: nothing decided either
+    sol = solve_graph(list(P)[:3], links, config, reference="s0", judge=lambda *_: None)
+    assert len(sol.groups[0]) < 3
+
+
+def test_judged_culprit_on_a_hand_scored_loop():
+    from flexreg.survey.links import implied_pose, judged_culprit
+
+    P, links = _twin_triangle()
+    # the rest of the loop places s0 and s2 at their true relative pose
+    np.testing.assert_allclose(implied_pose(links, links[2]), invert(P["s0"]) @ P["s2"], atol=1e-9)
+    scores = {("s0", "s1"): (0.09, 0.06), ("s1", "s2"): (0.04, 0.04), ("s0", "s2"): (0.01, 0.01)}
+
+    def judge(a, b, T):
+        return scores[(a, b)]
+
+    assert judged_culprit(links, judge, 3.0, 0.03) is links[2]
+    assert judged_culprit(links, judge, 5.0, 0.03) is None  # 0.04 is only 4x 0.01
+    assert judged_culprit(links, judge, 3.0, 0.05) is None  # s1-s2 conflicts only 0.04
+    assert judged_culprit(links, None, 3.0, 0.03) is None

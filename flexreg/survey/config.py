@@ -99,6 +99,13 @@ class SurveyConfig(Config):
         A conflict cuts the most doubtful link between its two stations (the highest
         free-space conflict ratio of its own check) and every link on that path whose doubt
         is within this factor of it (several when none stands out).
+    map_judges_loops : bool
+        A loop whose links disagree asks the map which link to blame: the one whose two
+        stations, placed by the rest of the loop, contradict each other least, when every
+        other choice contradicts ``map_judge_ratio`` times as much (:mod:`flexreg.survey.graph`,
+        step 2). Needs ``map_check``.
+    map_judge_ratio : float
+        See ``map_judges_loops``.
     """
 
     registration: RegistrationConfig = RegistrationConfig()
@@ -131,6 +138,8 @@ class SurveyConfig(Config):
     map_conflict_ratio: float = Field(1.0, gt=0)
     map_rounds: int = Field(4, ge=1, le=20)
     map_doubt_margin: float = Field(1.5, ge=1)
+    map_judges_loops: bool = True
+    map_judge_ratio: float = Field(3.0, gt=1)
 
 
 __all__ = ["PairsMode", "StoredPoses", "SurveyConfig"]

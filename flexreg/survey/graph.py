@@ -14,7 +14,13 @@ link must not place a station, so the graph is built in steps that each trust le
    one is blamed (or rejected, when it is the closing link). A tree link blamed more than
    supported is dropped and the tree rebuilt without it; when the blame is tied (one
    triangle, nobody can tell which link is wrong) every link of that cycle is dropped. What
-   is left disagreeing is rejected, with its loop error.
+   is left disagreeing is rejected, with its loop error. Given a *judge* (the map check's
+   dense scores, :class:`flexreg.survey.mapcheck.PairJudge`), a disagreeing cycle is first
+   put to it: for each link, the rest of the cycle places that link's two stations, and the
+   judge says how much of what each sees lands in the other's free space. When one link's
+   hypothesis is clean and every other contradicts ``map_judge_ratio`` times as much (and
+   at least ``map_min_conflict`` of a scan), that link alone is blamed (identical rooms:
+   the link that overlays two twins is the one whose removal leaves a consistent map).
 3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
    with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
    two or more that agree on the same relative pose (a loop through both) join the groups.
@@ -46,7 +52,15 @@ import numpy as np
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.errors import InputError
 from flexreg.survey.config import SurveyConfig
-from flexreg.survey.links import GraphSolution, Link, Matrix, Veto, loop_error
+from flexreg.survey.links import (
+    GraphSolution,
+    Judge,
+    Link,
+    Matrix,
+    Veto,
+    judged_culprit,
+    loop_error,
+)
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +173,9 @@ def _reject(e: Link, why: str, err: tuple[float, float] | None = None) -> None:
 # ------------------------------------------------------------------------------ steps
 
 
-def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -> _Forest:
+def _confident_tree(
+    stems: list[str], links: list[Link], config: SurveyConfig, judge: Judge | None = None
+) -> _Forest:
     """Steps 1 and 2: the tree of confident links after the loop checks."""
     active = [e for e in links if e.verdict == "confident" and e.status == "pending"]
     while True:
@@ -167,6 +183,7 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
         forest = _Forest(stems, tree)
         blame: dict[int, int] = {}
         support: dict[int, int] = {}
+        judged: dict[int, bool] = {}
         bad: list[tuple[Link, list[Link], tuple[float, float]]] = []
         agreeing: list[Link] = []
         for e in rest:
@@ -182,12 +199,23 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
                     support[id(t)] = support.get(id(t), 0) + 1
                     t.confirmed_by_loop = True
             else:
-                suspect = _standout([e, *p], config)
-                if suspect is e:  # the closer alone is far more doubtful than the loop
-                    _reject(
-                        e, "disagrees with the loop it closes, and is its most doubtful link", err
-                    )
-                    continue
+                suspect = judged_culprit(
+                    [e, *p], judge, config.map_judge_ratio, config.map_min_conflict
+                )
+                if suspect is not None:
+                    judged[id(suspect)] = True
+                    if suspect is e:
+                        _reject(e, _MAP_BLAMES, err)
+                        continue
+                else:
+                    suspect = _standout([e, *p], config)
+                    if suspect is e:  # the closer alone is far more doubtful than the loop
+                        _reject(
+                            e,
+                            "disagrees with the loop it closes, and is its most doubtful link",
+                            err,
+                        )
+                        continue
                 bad.append((e, p, err))
                 for t in [suspect] if suspect is not None else p:
                     blame[id(t)] = blame.get(id(t), 0) + 1
@@ -213,7 +241,12 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
             continue
         culprits = [t for t in tree if net[id(t)] == worst]
         for t in culprits:
-            _reject(t, f"on {blame.get(id(t), 0)} disagreeing loop(s), confirmed by none")
+            _reject(
+                t,
+                _MAP_BLAMES
+                if judged.get(id(t))
+                else f"on {blame.get(id(t), 0)} disagreeing loop(s), confirmed by none",
+            )
         for e, p, err in bad:
             if len(culprits) > 1 and any(t in culprits for t in p):
                 _reject(e, "closes a loop whose links disagree, undecidable which", err)
@@ -221,6 +254,12 @@ def _confident_tree(stems: list[str], links: list[Link], config: SurveyConfig) -
     for e in tree:
         e.in_tree = True
     return forest
+
+
+_MAP_BLAMES = (
+    "disagrees with a loop, and the map blames it: without it the loop places its stations "
+    "where their scans agree, while any other choice puts one in the other's free space"
+)
 
 
 def _beyond(adj: dict[str, list[tuple[str, Link]]], cut: Link, start: str) -> set[str]:
@@ -508,6 +547,7 @@ def solve_graph(
     *,
     reference: str | None = None,
     vetoes: Sequence[Veto] = (),
+    judge: Judge | None = None,
 ) -> GraphSolution:
     """Steps 1-6 of this module: statuses of ``links`` (set in place), poses and groups.
 
@@ -527,6 +567,10 @@ def solve_graph(
         Pairs of stations the map check found contradicting each other: while a solution
         keeps one in its refuted configuration, the most doubtful link between them is cut
         (step 7) and the graph solved again.
+    judge : callable, optional
+        ``judge(a, b, T_a_b)``: whether stations ``a`` and ``b`` contradict each other at
+        that relative pose (True / False / None when it cannot tell); it decides which link
+        of a disagreeing loop to blame where it can (step 2). Default: no judge.
 
     Returns
     -------
@@ -539,7 +583,7 @@ def solve_graph(
     """
     config = config if config is not None else SurveyConfig()
     dropped: dict[int, str] = {}
-    sol = _solve_once(stations, links, config, reference, dropped)
+    sol = _solve_once(stations, links, config, reference, dropped, judge)
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
         cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
@@ -547,7 +591,7 @@ def solve_graph(
             break
         for e, why in cuts:
             dropped[id(e)] = why
-        sol = _solve_once(stations, links, config, reference, dropped)
+        sol = _solve_once(stations, links, config, reference, dropped, judge)
     return sol
 
 
@@ -637,6 +681,7 @@ def _solve_once(
     config: SurveyConfig,
     reference: str | None,
     dropped: dict[int, str],
+    judge: Judge | None = None,
 ) -> GraphSolution:
     """Steps 1-5 with the links of ``dropped`` rejected beforehand."""
     for e in links:
@@ -649,7 +694,7 @@ def _solve_once(
             e.why = dropped.get(id(e))
             if e.why is not None:
                 e.status = "rejected"
-    forest = _confident_tree(stations, links, config)
+    forest = _confident_tree(stations, links, config, judge)
     _bridge(stations, forest, links, config)
     comp = forest.root
     ref = _reference(stations, comp, links, reference)
@@ -713,4 +758,4 @@ def _solve_once(
     return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
 
 
-__all__ = ["GraphSolution", "Link", "Veto", "loop_error", "solve_graph"]
+__all__ = ["GraphSolution", "Judge", "Link", "Veto", "loop_error", "solve_graph"]

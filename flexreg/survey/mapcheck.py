@@ -146,6 +146,17 @@ def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
         raise InputError(path, f"unreadable station sample ({e})") from e
 
 
+def _shares(
+    view: Any, thr_a: float, sample: NDArray[np.float64], thr_b: float, T: Matrix
+) -> tuple[float, float, int]:
+    """Explained and conflicting shares of ``sample`` (another station's, posed by ``T``)
+    in the view of a station, on the registration's dense check."""
+    check = Check(view.image, view.measured, view.slack, sample)
+    ok, bad = check_masks(check, np.asarray(T, dtype=np.float64), max(thr_a, thr_b))
+    n = len(ok)
+    return (float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n)
+
+
 def look_from(
     cache_file: str, glance: str, others: list[tuple[str, str, Matrix]]
 ) -> list[tuple[str, float, float, int]]:
@@ -162,21 +173,93 @@ def look_from(
     -------
     list of (stem, explained share, conflicting share, sample size)
     """
-    p = load_prepared(cache_file)
-    v = p.view
+    v = load_prepared(cache_file).view
     _, thr_a = _read_glance(glance)
-    out: list[tuple[str, float, float, int]] = []
     if v.measured is None or v.slack is None:
-        return out
+        return []
+    out: list[tuple[str, float, float, int]] = []
     for stem, g, T in others:
         sample, thr_b = _read_glance(g)
-        thr = max(thr_a, thr_b)
-        check = Check(v.image, v.measured, v.slack, sample)
-        T = np.asarray(T, dtype=np.float64)
-        ok, bad = check_masks(check, T, thr)
-        n = len(ok)
-        out.append((stem, float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n))
+        out.append((stem, *_shares(v, thr_a, sample, thr_b, T)))
     return out
+
+
+class PairJudge:
+    """The map check's dense scores for a single pair at any relative pose, in this process.
+
+    The graph asks it, for a disagreeing loop, whether two stations would contradict each
+    other where the rest of the loop places them (:func:`flexreg.survey.links.judged_culprit`).
+    Views are loaded from the prepared files on first use and the last ``keep`` kept;
+    answers are remembered per pair and pose (to 1 mm / 1e-4 of the rotation).
+
+    Parameters
+    ----------
+    files, glances : dict of str
+        Prepared file and glance (:func:`write_glance`) per station stem.
+    config : SurveyConfig
+        ``map_min_conflict`` and ``map_conflict_ratio``, as :meth:`PairLook.conflicts`.
+    keep : int
+        How many stations' views to hold at once.
+    """
+
+    def __init__(
+        self,
+        files: dict[str, str],
+        glances: dict[str, str],
+        config: SurveyConfig,
+        keep: int = 16,
+    ) -> None:
+        self.files, self.glances, self.config, self.keep = files, glances, config, keep
+        self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
+        self._memo: dict[tuple[str, str, bytes], tuple[float, float] | None] = {}
+
+    def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
+        if stem not in self.files or stem not in self.glances:
+            return None
+        if stem not in self._views:
+            v = load_prepared(self.files[stem]).view
+            if v.measured is None or v.slack is None:
+                return None
+            sample, thr = _read_glance(self.glances[stem])
+            if len(self._views) >= self.keep:
+                self._views.pop(next(iter(self._views)))
+            self._views[stem] = (v, sample, thr)
+        return self._views[stem]
+
+    def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
+        """Both directions of the pair at ``T_a_b``; None when a station has no view."""
+        va, vb = self._view(a), self._view(b)
+        if va is None or vb is None:
+            return None
+        T = np.asarray(T_a_b, dtype=np.float64)
+        ab = _shares(va[0], va[2], vb[1], vb[2], T)
+        ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
+        return PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
+
+    def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float] | None:
+        """How much ``a`` and ``b`` contradict each other at ``T_a_b`` (see
+        :data:`flexreg.survey.links.Judge`); None when a station has no view or, in both
+        directions, less than ``map_min_conflict`` of a sample lands on the other's surfaces
+        or in its free space (they hardly see each other there)."""
+        T = np.asarray(T_a_b, dtype=np.float64)
+        key = (a, b, np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes())
+        if key not in self._memo:
+            look = self.look(a, b, T)
+            self._memo[key] = None if look is None else self._contradiction(look)
+            if look is not None:
+                log.debug("map judge %s <- %s: %s", a, b, look.describe())
+        return self._memo[key]
+
+    def _contradiction(self, look: PairLook) -> tuple[float, float] | None:
+        seen = [x + c for x, c in zip(look.explained, look.conflicting, strict=True)]
+        if max(seen) < self.config.map_min_conflict:
+            return None
+        r = max(
+            c / s
+            for s, c in zip(seen, look.conflicting, strict=True)
+            if s >= self.config.map_min_conflict
+        )
+        return float(r), float(max(look.conflicting))
 
 
 def pairs_to_check(
@@ -235,6 +318,7 @@ def plan_looks(
 
 
 __all__ = [
+    "PairJudge",
     "PairLook",
     "assemble",
     "glance_path",

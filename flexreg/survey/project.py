@@ -29,6 +29,7 @@ from flexreg.survey.execute import (
 )
 from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
 from flexreg.survey.mapcheck import (
+    PairJudge,
     PairLook,
     assemble,
     look_from,
@@ -516,7 +517,8 @@ def run_survey(
             }
         )
         links = _register(client, cands, files, config, progress, stored)
-        sol = solve_graph(stems, links, config, reference=reference)
+        glances, judge = _glances(client, stems, files, config, progress)
+        sol = solve_graph(stems, links, config, reference=reference, judge=judge)
         auto = pairs_file is None and config.pairs == "auto"
         for _ in range(config.proximity_rounds if auto else 0):
             tried = {frozenset((e.target, e.source)) for e in links}
@@ -524,21 +526,32 @@ def run_survey(
             if not more:
                 break
             links += _register(client, more, files, config, progress, stored)
-            sol = solve_graph(stems, links, config, reference=reference)
+            sol = solve_graph(stems, links, config, reference=reference, judge=judge)
         timings["links"] = time.perf_counter() - t
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
         if config.map_check:
             t = time.perf_counter()
             sol, looks = _map_check(
-                client, stems, links, sol, files, config, reference, vetoes, progress
+                client,
+                stems,
+                links,
+                sol,
+                (files, glances),
+                config,
+                reference,
+                vetoes,
+                judge,
+                progress,
             )
             timings["map_check"] = time.perf_counter() - t
         if config.joint_refine:
             t = time.perf_counter()
             for _ in range(config.refine_iterations):
                 refine_links(client, sol, links, files, config, progress)
-                sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes)
+                sol = solve_graph(
+                    stems, links, config, reference=reference, vetoes=vetoes, judge=judge
+                )
             timings["refine"] = time.perf_counter() - t
     sol = _with_unreadable(sol, stations, prepared)
     log.info("survey: %d of %d stations placed", len(sol.groups[0]), len(stations))
@@ -563,22 +576,18 @@ def _map_check(
     stems: list[str],
     links: list[Link],
     sol: GraphSolution,
-    files: dict[str, str],
+    stored: tuple[dict[str, str], dict[str, str]],
     config: SurveyConfig,
     reference: str | None,
     vetoes: list[Veto],
+    judge: PairJudge | None,
     progress: Progress,
 ) -> tuple[GraphSolution, list[PairLook]]:
     """Check every pair of placed stations (:mod:`flexreg.survey.mapcheck`), veto the
     conflicting ones and solve again, until no pair conflicts or ``map_rounds`` are used.
-    Returns the solution and the last round's pair scores (``vetoes`` grows in place)."""
-    made = run_tasks(
-        client,
-        write_glance,
-        [(files[s],) for s in stems],
-        on_result=_Counter("map check", len(stems), progress),
-    )
-    glances = {s: g for s, g in zip(stems, made, strict=True) if g is not None}
+    ``stored``: the prepared files and glances per station. Returns the solution and the
+    last round's pair scores (``vetoes`` grows in place)."""
+    files, glances = stored
     looks: list[PairLook] = []
     for i in range(config.map_rounds + 1):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
@@ -598,8 +607,25 @@ def _map_check(
         bad.sort(key=lambda p: -max(p.conflicting))
         vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe()) for p in bad)
         log.info("map check: %d pair(s) of placed stations contradict each other", len(bad))
-        sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes)
+        sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
     return sol, looks
+
+
+def _glances(
+    client: Any, stems: list[str], files: dict[str, str], config: SurveyConfig, progress: Progress
+) -> tuple[dict[str, str], PairJudge | None]:
+    """Each station's glance (:func:`~flexreg.survey.mapcheck.write_glance`) for the map
+    check, and the graph's loop judge; neither without the map check."""
+    if not config.map_check:
+        return {}, None
+    made = run_tasks(
+        client,
+        write_glance,
+        [(files[s],) for s in stems],
+        on_result=_Counter("map check", len(stems), progress),
+    )
+    glances = {s: g for s, g in zip(stems, made, strict=True) if g is not None}
+    return glances, PairJudge(files, glances, config) if config.map_judges_loops else None
 
 
 def _with_unreadable(

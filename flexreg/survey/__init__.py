@@ -89,6 +89,8 @@ value does not exist (failed link, unplaced station)::
           "information": [[...]],            # 6x6, (rx, ry, rz, tx, ty, tz), Open3D order
           "in_tree": true,                   # in the spanning tree that placed the stations
           "confirmed_by_loop": true,         # a closed loop agrees with it
+          "map_joined": false,               # uncertain, joins two groups: the only placement
+                                             # the map allows (survey/groupjoin.py)
           "loop_error_deg": 0.01,            # accepted: disagreement with the final poses;
           "loop_error_m": 0.002,             # rejected: with the loop it closes; null: none
           "seconds": 3.8,                    # wall time of the pairwise registration

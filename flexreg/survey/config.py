@@ -106,6 +106,14 @@ class SurveyConfig(Config):
         step 2). Needs ``map_check``.
     map_judge_ratio : float
         See ``map_judges_loops``.
+    map_joins_groups : bool
+        A separate group joins the reference's group through an uncertain link when, of all
+        the placements the links between them propose, that link's is the only one under which
+        no station puts ``map_min_conflict`` of its scan in another's free space while the
+        groups see each other (:mod:`flexreg.survey.groupjoin`). Needs ``map_check``.
+    map_join_min_explained : float
+        "The groups see each other": some pair of stations, one of each group, explains at
+        least this share of both samples.
     """
 
     registration: RegistrationConfig = RegistrationConfig()
@@ -140,6 +148,8 @@ class SurveyConfig(Config):
     map_doubt_margin: float = Field(1.5, ge=1)
     map_judges_loops: bool = True
     map_judge_ratio: float = Field(3.0, gt=1)
+    map_joins_groups: bool = True
+    map_join_min_explained: float = Field(0.1, gt=0, le=1)
 
 
 __all__ = ["PairsMode", "StoredPoses", "SurveyConfig"]

@@ -23,7 +23,9 @@ link must not place a station, so the graph is built in steps that each trust le
    the link that overlays two twins is the one whose removal leaves a consistent map).
 3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
    with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
-   two or more that agree on the same relative pose (a loop through both) join the groups.
+   two or more that agree on the same relative pose (a loop through both) join the groups,
+   or the map allows no other placement of a group (``Link.map_joined``, set by
+   :mod:`flexreg.survey.groupjoin`).
 4. **Robust pose-graph optimisation** per group (Open3D's ``PoseGraph`` with its line
    process): tree links are trusted edges, the others loop-closure edges the line process
    may switch off; a pruned edge, or one that still disagrees with the optimised poses, is
@@ -356,7 +358,7 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
     )
     comp = forest.root
     tol_m = config.loop_max_m + 2 * config.loop_per_link_m
-    changed = config.uncertain_joins
+    changed = config.uncertain_joins or any(e.map_joined for e in uncertain)
     while changed:
         changed = False
         between: dict[tuple[str, str], list[tuple[Link, Matrix]]] = {}
@@ -383,17 +385,23 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
                     if rotation_error_deg(r, r0) <= config.loop_max_deg
                     and translation_error_m(r, r0) <= tol_m
                 ]
-                if len(agree) > len(best):
+                if (any(e.map_joined for e, _ in agree), len(agree)) > (
+                    any(e.map_joined for e, _ in best),
+                    len(best),
+                ):
                     best = agree
-            if len(best) < 2:
+            if not any(e.map_joined for e, _ in best) and (
+                len(best) < 2 or not config.uncertain_joins
+            ):
                 continue
             rel = best[0][1]
             for s in stems:
                 if comp[s] == cs:
                     forest.pose[s] = rel @ forest.pose[s]
                     comp[s] = ct
+            best.sort(key=lambda x: not x[0].map_joined)  # the map's link is the tree link
             for i, (e, _) in enumerate(best):
-                e.confirmed_by_loop = True
+                e.confirmed_by_loop = e.confirmed_by_loop or len(best) > 1
                 e.in_tree = i == 0
             changed = True
             break

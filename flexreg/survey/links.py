@@ -38,6 +38,9 @@ class Link:
         The verdict's larger free-space conflict ratio (share of a scan's sample in the other's
         free space over the share the other explains): which link of a conflicting pair's
         path the map check cuts first.
+    map_joined : bool
+        An uncertain link the map allows as the only placement of its stations' groups
+        (:mod:`flexreg.survey.groupjoin`): it joins them on its own.
     status : {"pending", "accepted", "rejected", "failed"}
     """
 
@@ -68,6 +71,7 @@ class Link:
     overlap_of: str | None = None
     open3d_fitness: float | None = None
     open3d_inlier_rmse_m: float | None = None
+    map_joined: bool = False
     doubt: float | None = None
 
     @property
@@ -109,6 +113,7 @@ class Link:
             "information": m(self.information),
             "in_tree": self.in_tree,
             "confirmed_by_loop": self.confirmed_by_loop,
+            "map_joined": self.map_joined,
             "loop_error_deg": self.loop_error_deg,
             "loop_error_m": self.loop_error_m,
             "seconds": self.seconds,

@@ -211,7 +211,7 @@ class PairJudge:
     ) -> None:
         self.files, self.glances, self.config, self.keep = files, glances, config, keep
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
-        self._memo: dict[tuple[str, str, bytes], tuple[float, float] | None] = {}
+        self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
 
     def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
@@ -228,29 +228,29 @@ class PairJudge:
 
     def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
         """Both directions of the pair at ``T_a_b``; None when a station has no view."""
-        va, vb = self._view(a), self._view(b)
-        if va is None or vb is None:
-            return None
         T = np.asarray(T_a_b, dtype=np.float64)
-        ab = _shares(va[0], va[2], vb[1], vb[2], T)
-        ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
-        return PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
+        key = (a, b, np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes())
+        if key not in self._memo:
+            va, vb = self._view(a), self._view(b)
+            look = None
+            if va is not None and vb is not None:
+                ab = _shares(va[0], va[2], vb[1], vb[2], T)
+                ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
+                look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
+                log.debug("map judge %s <- %s: %s", a, b, look.describe())
+            self._memo[key] = look
+        return self._memo[key]
 
     def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float] | None:
         """How much ``a`` and ``b`` contradict each other at ``T_a_b`` (see
         :data:`flexreg.survey.links.Judge`); None when a station has no view or, in both
         directions, less than ``map_min_conflict`` of a sample lands on the other's surfaces
         or in its free space (they hardly see each other there)."""
-        T = np.asarray(T_a_b, dtype=np.float64)
-        key = (a, b, np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes())
-        if key not in self._memo:
-            look = self.look(a, b, T)
-            self._memo[key] = None if look is None else self._contradiction(look)
-            if look is not None:
-                log.debug("map judge %s <- %s: %s", a, b, look.describe())
-        return self._memo[key]
+        look = self.look(a, b, T_a_b)
+        return None if look is None else self.contradiction(look)
 
-    def _contradiction(self, look: PairLook) -> tuple[float, float] | None:
+    def contradiction(self, look: PairLook) -> tuple[float, float] | None:
+        """``(contradiction, conflict)`` of a pair's scores (see :meth:`__call__`)."""
         seen = [x + c for x, c in zip(look.explained, look.conflicting, strict=True)]
         if max(seen) < self.config.map_min_conflict:
             return None

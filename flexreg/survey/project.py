@@ -28,6 +28,7 @@ from flexreg.survey.execute import (
     run_tasks,
 )
 from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
+from flexreg.survey.groupjoin import join_by_map
 from flexreg.survey.mapcheck import (
     PairJudge,
     PairLook,
@@ -147,6 +148,11 @@ class SurveyResult:
                 out.append(
                     f"link {e.target} <- {e.source}: kept although uncertain ({codes})"
                     + ("; a loop confirms it" if e.confirmed_by_loop else "")
+                    + (
+                        "; it joins two groups as the only placement no station contradicts"
+                        if e.map_joined
+                        else ""
+                    )
                 )
         return out
 
@@ -589,7 +595,8 @@ def _map_check(
     last round's pair scores (``vetoes`` grows in place)."""
     files, glances = stored
     looks: list[PairLook] = []
-    for i in range(config.map_rounds + 1):
+    rounds = config.map_rounds + 1 + (len(sol.groups) if config.map_joins_groups else 0)
+    for i in range(rounds):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
         todo = plan_looks(pairs, sol.poses, glances)
         order = sorted(todo)
@@ -602,7 +609,19 @@ def _map_check(
         seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
         looks = assemble(pairs, sol.poses, seen)
         bad = [p for p in looks if p.conflicts(config)]
-        if not bad or i == config.map_rounds:
+        if not bad:  # a consistent map: may a separate group join it in one place only?
+            joins = (
+                join_by_map(sol, links, judge, config)
+                if judge is not None and config.map_joins_groups and i < rounds - 1
+                else []
+            )
+            if not joins:
+                break
+            for e, _ in joins:
+                e.map_joined = True
+            sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
+            continue
+        if i >= config.map_rounds:
             break
         bad.sort(key=lambda p: -max(p.conflicting))
         vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe()) for p in bad)

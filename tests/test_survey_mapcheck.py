@@ -86,7 +86,7 @@ def test_when_no_link_stands_out_every_similarly_doubtful_one_on_the_path_is_cut
 
 def test_a_pair_conflicts_when_contradiction_outweighs_explanation_in_one_direction():
     cfg = SurveyConfig()  # map_min_conflict 0.03, map_conflict_ratio 1.0
-    T = np.eye(4)
+    T = make_transform(np.eye(3), [5.0, 0.0, 0.0])  # 5 m apart: two viewpoints
     assert PairLook("a", "b", T, (0.04, 0.02), (0.08, 0.05), (100, 100)).conflicts(cfg)
     assert PairLook("a", "b", T, (0.50, 0.02), (0.08, 0.03), (100, 100)).conflicts(cfg)
     # correct but barely overlapping: little explained, less contradicted
@@ -320,3 +320,20 @@ def test_judged_culprit_on_a_hand_scored_loop():
     assert judged_culprit(links, judge, 5.0, 0.03) is None  # 0.04 is only 4x 0.01
     assert judged_culprit(links, judge, 3.0, 0.05) is None  # s1-s2 conflicts only 0.04
     assert judged_culprit(links, None, 3.0, 0.03) is None
+
+
+def test_two_stations_placed_at_one_spot_must_see_the_same_scene():
+    """A warehouse folded onto itself puts stations of different aisles at one spot: their
+    scans agree on the racks (60 % explained) but not on the far walls."""
+    config = SurveyConfig()
+    near = make_transform(np.eye(3), [0.3, 0.0, 0.0])
+    folded = PairLook("a", "b", near, (0.6, 0.62), (0.1, 0.08), (100, 100))
+    assert folded.distance_m == 0.3
+    assert folded.coincident(config) and folded.conflicts(config)
+    assert "not one viewpoint" in folded.describe(config)
+    repeated_setup = PairLook("a", "b", near, (0.93, 0.95), (0.01, 0.01), (100, 100))
+    assert not repeated_setup.conflicts(config)
+    apart = PairLook("a", "b", make_transform(np.eye(3), [3.0, 0, 0]), (0.6, 0.62),
+                     (0.1, 0.08), (100, 100))  # fmt: skip
+    assert not apart.conflicts(config)
+    assert not folded.conflicts(SurveyConfig(map_coincident_m=0.0))

@@ -106,6 +106,12 @@ class SurveyConfig(Config):
         step 2). Needs ``map_check``.
     map_judge_ratio : float
         See ``map_judges_loops``.
+    map_coincident_m : float, metres
+        Two placed stations closer than this are one viewpoint: they conflict unless each
+        explains at least ``map_coincident_explained`` of the other (a repeated set-up does;
+        two stations folded onto one spot of a repeating structure do not).
+    map_coincident_explained : float
+        See ``map_coincident_m``.
     map_joins_groups : bool
         A separate group joins the reference's group through an uncertain link when, of all
         the placements the links between them propose, that link's is the only one under which
@@ -148,6 +154,8 @@ class SurveyConfig(Config):
     map_doubt_margin: float = Field(1.5, ge=1)
     map_judges_loops: bool = True
     map_judge_ratio: float = Field(3.0, gt=1)
+    map_coincident_m: float = Field(1.0, ge=0)
+    map_coincident_explained: float = Field(0.8, gt=0, le=1)
     map_joins_groups: bool = True
     map_join_min_explained: float = Field(0.1, gt=0, le=1)
 

@@ -22,6 +22,12 @@ correctly placed stations that barely see each other explain little and contradi
 (moving objects and grazing rays stay a few percent); a station placed into the twin of its
 room contradicts every station that looked into that room.
 
+Two stations placed within ``map_coincident_m`` (1 m) of each other are one viewpoint, and
+from one viewpoint two scans must show the same scene: they also conflict when either explains
+less than ``map_coincident_explained`` (80 %) of the other. A repeated set-up passes; stations
+of different aisles of a repeating hall folded onto one spot agree on the racks but not on
+the far walls, and do not.
+
 A conflict is handed to the graph as a *veto* (:func:`flexreg.survey.graph.solve_graph`):
 while the solution keeps the two stations in the vetoed configuration, the most doubtful
 accepted link between them is cut (doubt = the link's own free-space conflict ratio), and the
@@ -78,14 +84,36 @@ class PairLook:
     conflicting: tuple[float, float]
     samples: tuple[int, int]
 
+    @property
+    def distance_m(self) -> float:
+        """How far apart the two scanners are placed, metres."""
+        return float(np.linalg.norm(np.asarray(self.T_a_b)[:3, 3]))
+
+    def coincident(self, config: SurveyConfig) -> bool:
+        """Placed within ``map_coincident_m`` of each other but not seeing the same scene:
+        from (nearly) one viewpoint two scans must explain ``map_coincident_explained`` of
+        each other (a repeated set-up does); less means one is in the wrong place."""
+        return self.distance_m < config.map_coincident_m and min(self.explained) < (
+            config.map_coincident_explained
+        )
+
     def conflicts(self, config: SurveyConfig) -> bool:
-        """Whether either direction contradicts more than it explains (see the module)."""
-        return any(
+        """Whether either direction contradicts more than it explains, or the two are
+        placed at one spot without seeing the same scene (see the module)."""
+        return self.coincident(config) or any(
             c >= config.map_min_conflict and c >= config.map_conflict_ratio * x
             for x, c in zip(self.explained, self.conflicting, strict=True)
         )
 
-    def describe(self) -> str:
+    def describe(self, config: SurveyConfig | None = None) -> str:
+        """The contradiction in words (``config``: the coincidence test's thresholds)."""
+        if self.coincident(config or SurveyConfig()) and not any(
+            c >= x for x, c in zip(self.explained, self.conflicting, strict=True)
+        ):
+            return (
+                f"placed {self.distance_m:.2f} m apart, yet they explain only "
+                f"{100 * min(self.explained):.0f}% of each other: not one viewpoint"
+            )
         i = int(np.argmax(self.conflicting))
         seen, seer = (self.b, self.a) if i == 0 else (self.a, self.b)
         return (

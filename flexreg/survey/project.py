@@ -140,7 +140,7 @@ class SurveyResult:
             if look.conflicts(self.config):
                 out.append(
                     f"stations {look.a} and {look.b} contradict each other where they are "
-                    f"placed ({look.describe()}); one of them is placed wrongly"
+                    f"placed ({look.describe(self.config)}); one of them is placed wrongly"
                 )
         for e in self.links:
             if e.status == "accepted" and e.verdict == "uncertain":
@@ -624,7 +624,7 @@ def _map_check(
         if i >= config.map_rounds:
             break
         bad.sort(key=lambda p: -max(p.conflicting))
-        vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe()) for p in bad)
+        vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad)
         log.info("map check: %d pair(s) of placed stations contradict each other", len(bad))
         sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
     return sol, looks

@@ -248,6 +248,27 @@ def test_a_lone_link_more_doubtful_than_every_confirmed_link_places_nothing():
     assert sorted(sol.groups[0]) == names
 
 
+def test_the_lone_link_ceiling_comes_from_the_loops_where_it_attaches():
+    """A region folded onto itself (a separate group here) has its wrong links confirmed by
+    loops of wrong links, at a doubt of 0.45: that says nothing about a lone link attaching
+    a station to the reference's part, whose loops carry 0.05."""
+    P = _poses() | {f"t{i}": make_transform(np.eye(3), [2.0 * i, 30.0, 0.0]) for i in range(3)}
+    links = [
+        _link(P, "s0", "s1", doubt=0.05),
+        _link(P, "s1", "s2", doubt=0.05),
+        _link(P, "s0", "s2", doubt=0.04),
+        _link(P, "s2", "s3", doubt=0.30),  # lone: the only link placing s3
+        _link(P, "t0", "t1", doubt=0.45),
+        _link(P, "t1", "t2", doubt=0.45),
+        _link(P, "t0", "t2", doubt=0.45),
+    ]
+    names = ["s0", "s1", "s2", "s3", "t0", "t1", "t2"]
+    sol = solve_graph(names, links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert links[3].status == "rejected" and "(at most 0.15)" in links[3].why
+    assert sorted(sol.groups[1]) == ["t0", "t1", "t2"]
+
+
 def _truth_judge(P, *, noise=0.01, wrong=0.08):
     """A judge that knows the truth: two stations placed within 1 m of their true relative
     pose contradict each other by ``noise``, anywhere else by ``wrong``."""

@@ -293,9 +293,12 @@ def _lone_suspect(
       that fits about as well: a symmetric room, repeating bays) agrees with that placement:
       the placement is one of twins and nothing checks which (an ambiguous link that
       disagrees says nothing about it); or
-    * it is more doubtful (free-space conflict ratio) than every link a loop confirmed, and
-      than ``loop_doubt_min``: the loops show how much conflict this project's right links
-      carry, and this one carries more, unchecked.
+    * it is more doubtful (free-space conflict ratio) than every link a loop confirmed among
+      the stations it attaches to (the larger side; the whole project's when no loop
+      confirms a link there), and than ``loop_doubt_min``: the loops show how much conflict
+      that part's right links carry, and this one carries more, unchecked. (Another part of
+      the project may be a region folded onto itself, its wrong links confirmed by loops of
+      wrong links: their doubt says nothing about this one.)
 
     One at a time, the most doubtful first: a wrongly placed station's own ambiguous links
     agree with whatever placed it, and would make its neighbours' tree links look alike. Off
@@ -309,8 +312,8 @@ def _lone_suspect(
         and e.status != "failed"
         and any(r.get("code") == "ambiguous" for r in e.reasons)
     ]
-    vouched = [float(e.doubt) for e in confirmed if e.doubt is not None]
-    ceiling = max([config.loop_doubt_min, *vouched]) if vouched else None
+    vouched = [(e, float(e.doubt)) for e in confirmed if e.doubt is not None]
+    overall = max([config.loop_doubt_min, *(d for _, d in vouched)]) if vouched else None
     adj = forest.adj  # the tree's links per station
     out: list[tuple[float, int, Link, str]] = []
     for t in tree:
@@ -321,6 +324,8 @@ def _lone_suspect(
         rest = b if side is a else a
         placing = f"the only link placing {', '.join(sorted(side))}, confirmed by no loop"
         doubt = float(t.doubt or 0.0)
+        there = [d for e, d in vouched if e.target in rest and e.source in rest]
+        ceiling = max([config.loop_doubt_min, *there]) if there else overall
         if ceiling is not None and doubt > ceiling:
             why = (
                 f"{placing}, and more doubtful (free-space conflict ratio {doubt:.2f}) than "

@@ -163,19 +163,29 @@ def read_pair(
     """Read the target and the source scan (one setup each, see :func:`read_input`; with
     ``options``, the scanner position options of each and ``origins`` their values); the same
     setup of the same file on both sides is refused."""
+    from concurrent.futures import ThreadPoolExecutor
+
     import numpy as np
 
     from flexreg.errors import InputError
 
-    scans = []
-    for k, path in enumerate((target, source)):
-        with stage(f"Reading {path.name}"):
-            (scan,) = read_input(
-                path,
-                origin=None if origins is None else origins[k],
-                origin_option=None if options is None else options[k],
-            )
-        scans.append(scan)
+    def read(k: int) -> Any:
+        (scan,) = read_input(
+            (target, source)[k],
+            origin=None if origins is None else origins[k],
+            origin_option=None if options is None else options[k],
+        )
+        return scan
+
+    # both files at once: the parsers' serial parts (file reads, copying the valid points)
+    # overlap; the target's error, if any, is the one reported
+    pool = ThreadPoolExecutor(2)
+    try:
+        with stage(f"Reading {target.name} and {source.name}"):
+            jobs = [pool.submit(read, k) for k in (0, 1)]
+            scans = [job.result() for job in jobs]
+    finally:  # on an error or Ctrl-C, do not wait here for the other file
+        pool.shutdown(wait=False, cancel_futures=True)
     t, s = scans
     same_file = scan_file(target).resolve() == scan_file(source).resolve()
     if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):

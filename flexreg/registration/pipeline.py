@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numba
@@ -203,6 +203,8 @@ class _Run:
 
 def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) -> list[RangeImage]:
     images = [working_image(x, max_pixels=config.max_image_pixels) for x in scans]
+    if config.image != "intensity":  # only the intensity image reads it: do not keep it
+        images = [replace(i, intensity=None) for i in images]
     return [fill_holes(i) for i in images] if config.fill_holes else images
 
 
@@ -293,7 +295,8 @@ def _scan_view(
     if source:
         v.polish_sample = area_sample(pts, POLISH_POINTS)
     if projective:
-        v.refine_sample = area_sample_cell(as_points(scan, name="scan"), PROJECTIVE_ICP_POINTS // 2)
+        points = as_points(scan, name="scan", keep_float32=True)
+        v.refine_sample = area_sample_cell(points, PROJECTIVE_ICP_POINTS // 2)
     return v
 
 
@@ -578,8 +581,8 @@ def _finish(
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
         overlap = measure_overlap(
-            as_points(scans[0]),
-            as_points(scans[1]),
+            as_points(scans[0], keep_float32=True),
+            as_points(scans[1], keep_float32=True),
             T,
             open3d_check=config.open3d_overlap_check,
         )

@@ -20,6 +20,7 @@ from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
     RangeImage,
     downsample_image,
+    float_xyz,
     from_grid,
     from_index,
 )
@@ -298,7 +299,7 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
     if v.all() or not v.any():
         return image
     xyz, hole, filled = _fill_holes(
-        np.ascontiguousarray(image.xyz, dtype=np.float64),
+        float_xyz(image.xyz),
         np.ascontiguousarray(v),
         int(min_neighbours),
         float(max_jump),

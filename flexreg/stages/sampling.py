@@ -46,10 +46,11 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
 def area_sample_cell(
     points: NDArray[np.float64], samples: int
 ) -> tuple[float, NDArray[np.float64]]:
-    """:func:`area_cell` and :func:`area_sample` at once."""
-    p = np.asarray(points, dtype=np.float64)
+    """:func:`area_cell` and :func:`area_sample` at once (float32 points are read as they
+    are: only the sample becomes float64)."""
+    p = _float_points(points)
     cell, first = _area_cells(p, samples)
-    return cell, p if len(p) <= samples else p[first]
+    return cell, np.asarray(p if len(p) <= samples else p[first], dtype=np.float64)
 
 
 def area_cell(points: NDArray[np.float64], samples: int) -> float:
@@ -65,14 +66,21 @@ def area_cell(points: NDArray[np.float64], samples: int) -> float:
     samples : int
         Wanted number of occupied voxels.
     """
-    return _area_cells(np.asarray(points, dtype=np.float64), samples)[0]
+    return _area_cells(_float_points(points), samples)[0]
 
 
-def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
+def _float_points(points: NDArray[np.generic]) -> NDArray[np.floating]:
+    """(N, 3) points as float32 when they are, else float64 (no float64 copy of a float32
+    cloud)."""
+    p = np.asarray(points)
+    return p if p.dtype in (np.float32, np.float64) else p.astype(np.float64)
+
+
+def _area_cells(p: NDArray[np.floating], samples: int) -> tuple[float, NDArray[np.int64]]:
     """Cell size and the index of the first point in each occupied cell, ascending (of a
     thinned copy of ``p`` when it is large: indices then refer to ``p`` itself)."""
     step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
-    q = np.ascontiguousarray(p[::step])
+    q = np.ascontiguousarray(p[::step], dtype=np.float64)
     if len(q) == 0:
         return 1e-9, np.zeros(0, dtype=np.int64)
     lo, hi = _bounds(q)
@@ -154,11 +162,12 @@ def median_spacing(
     With ``tree_points``, the neighbours are searched among at most that many points (a
     fixed random subset), which overestimates the spacing of larger clouds but is fast.
     """
-    P = np.asarray(points, dtype=np.float64)
+    P = _float_points(points)
     if len(P) < 2:
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
     if tree_points is not None and len(P) > tree_points:
         P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
+    P = np.asarray(P, dtype=np.float64)
     from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
 
     tree = cKDTree(P)
@@ -211,11 +220,11 @@ def _voxels(
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Sums and counts of the points per occupied voxel, the voxels as Open3D's
     ``voxel_down_sample`` bins them: ``floor((p - origin) / voxel_m)`` from the cloud's
-    minimum less half a voxel."""
-    p = np.asarray(points, dtype=np.float64)
+    minimum less half a voxel. Float32 points are read as they are (sums in float64)."""
+    p = np.ascontiguousarray(_float_points(points))
     if len(p) == 0:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    lo, _ = _bounds(p)
+    lo = _bounds(p)[0].astype(np.float64)
     table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
     return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
 

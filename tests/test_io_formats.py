@@ -799,3 +799,17 @@ def test_e57_same_scans_give_identical_bytes(tmp_path):
     scans[1].points[0, 0] += 1.0  # different content -> different file GUIDs
     write_scan(tmp_path / "c.e57", scans)
     assert (tmp_path / "c.e57").read_bytes() != (tmp_path / "a.e57").read_bytes()
+
+
+def test_readers_keep_float64_for_project_coordinates(tmp_path):
+    """A PLY cloud within 8192 m of its origin is read as float32 (within float32's rounding),
+    one in map coordinates (a UTM northing) stays float64: float32 would round it to 0.5 m."""
+    near = np.array([[1.25, -3.5, 0.123456789], [100.0, 20.0, -3.0], [5.0, 6.0, 7.0]])
+    far = near + [512_345.678901, 5_412_345.678901, 0.0]
+    write_scan(tmp_path / "near.ply", Scan(points=near))
+    write_scan(tmp_path / "far.ply", Scan(points=far))
+    a, b = read_scan(tmp_path / "near.ply"), read_scan(tmp_path / "far.ply")
+    assert a.points.dtype == np.float32 and b.points.dtype == np.float64
+    np.testing.assert_array_equal(a.points, near.astype(np.float32))
+    np.testing.assert_array_equal(b.points, far)
+    assert read_scan(tmp_path / "near.ply", precise=True).points.dtype == np.float64

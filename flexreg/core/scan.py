@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -200,6 +200,12 @@ class Scan:
         return self.points @ T[:3, :3].T + T[:3, 3]
 
 
+@overload
+def as_points(
+    x: Any, *, name: str = ..., keep_float32: Literal[False] = ...
+) -> NDArray[np.float64]: ...
+@overload
+def as_points(x: Any, *, name: str = ..., keep_float32: bool) -> NDArray[np.floating]: ...
 def as_points(x: Any, *, name: str = "points", keep_float32: bool = False) -> NDArray[np.floating]:
     """(N, 3) float64 points of a :class:`Scan`, a
     :class:`~flexreg.core.range_image.RangeImage` (its valid pixels) or an array, in metres.

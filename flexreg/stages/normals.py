@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.grid import wrap_col
-from flexreg.core.range_image import RangeImage, float_xyz
+from flexreg.core.range_image import RangeImage
 
 #: each image's points with NaN where invalid, as the kernels read them (see masked_xyz)
 _MASKED: weakref.WeakKeyDictionary[RangeImage, tuple[object, object, NDArray[np.floating]]] = (
@@ -72,7 +72,7 @@ def surface_normals(
         Surface area each pixel covers (product of its neighbour spacings), so that sums over
         pixels measure surface independently of the distance to the scanner.
     """
-    xyz = float_xyz(image.xyz[::stride, ::stride])
+    xyz = np.ascontiguousarray(image.xyz[::stride, ::stride], dtype=np.float64)
     H, W = xyz.shape[:2]
     if H <= 2 * k or W <= 2 * k:
         z = np.zeros((0, 3))

@@ -92,7 +92,7 @@ _PROJECT_CHUNK = 1 << 18
 
 
 def _pixels(
-    points: NDArray[np.float64], camera: Camera
+    points: NDArray[np.floating], camera: Camera
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Linear pixel index (-1 outside the image or behind the camera) and depth of points."""
     H, W = camera.shape
@@ -106,7 +106,7 @@ def _pixels(
     return np.where(ok, iv * W + iu, -1).astype(np.int64), d
 
 
-def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None:
+def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | None:
     """``(rings, ring_spacing_rad, azimuth_pitch_rad)`` when the cloud is a spinning lidar's:
     its polar angles fall into a few narrow, about evenly spaced bands (one per beam); else None.
 
@@ -180,7 +180,7 @@ def _ring_azimuth_pitch(P: NDArray[np.float64], ring: NDArray[np.int64]) -> floa
 
 
 def auto_spherical_camera(
-    points: NDArray[np.float64], *, angular_resolution_rad: float | None = None
+    points: NDArray[np.floating], *, angular_resolution_rad: float | None = None
 ) -> SphericalCamera:
     """Choose an equirectangular camera that fits an unstructured cloud.
 

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from flexreg.errors import RegistrationError
 
 
-def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64]:
+def area_sample(points: NDArray[np.floating], samples: int) -> NDArray[np.float64]:
     """About ``samples`` points spread evenly over the surfaces of a cloud.
 
     One point (the first in input order) per occupied cell of the voxel grid of
@@ -29,7 +29,7 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
 
     Parameters
     ----------
-    points : (N, 3) float64
+    points : (N, 3) float32 or float64
         Metres.
     samples : int
         Wanted number of points (the result has about 0.7 to 1.4 times that, or all N points
@@ -44,7 +44,7 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
 
 
 def area_sample_cell(
-    points: NDArray[np.float64], samples: int
+    points: NDArray[np.floating], samples: int
 ) -> tuple[float, NDArray[np.float64]]:
     """:func:`area_cell` and :func:`area_sample` at once (float32 points are read as they
     are: only the sample becomes float64)."""
@@ -53,7 +53,7 @@ def area_sample_cell(
     return cell, np.asarray(p if len(p) <= samples else p[first], dtype=np.float64)
 
 
-def area_cell(points: NDArray[np.float64], samples: int) -> float:
+def area_cell(points: NDArray[np.floating], samples: int) -> float:
     """Voxel size at which about ``samples`` voxels of a cloud's surfaces are occupied, metres.
 
     Downsampling with it weights every part of a scene by its surface area rather than by its
@@ -151,7 +151,7 @@ def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
 
 
 def median_spacing(
-    points: NDArray[np.float64],
+    points: NDArray[np.floating],
     *,
     sample: int = 5000,
     seed: int = 0,
@@ -216,7 +216,7 @@ def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
 
 
 def _voxels(
-    points: NDArray[np.float64], voxel_m: float
+    points: NDArray[np.floating], voxel_m: float
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Sums and counts of the points per occupied voxel, the voxels as Open3D's
     ``voxel_down_sample`` bins them: ``floor((p - origin) / voxel_m)`` from the cloud's
@@ -229,19 +229,19 @@ def _voxels(
     return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
 
 
-def voxel_count(points: NDArray[np.float64], voxel_m: float) -> int:
+def voxel_count(points: NDArray[np.floating], voxel_m: float) -> int:
     """Occupied voxels of a cloud (as :func:`voxel_centroids` bins it)."""
     return len(_voxels(points, voxel_m)[1])
 
 
-def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
+def voxel_centroids(points: NDArray[np.floating], voxel_m: float) -> NDArray[np.float64]:
     """One point per occupied voxel, the centroid of its points: what Open3D's
     ``voxel_down_sample`` gives (the same voxels and centroids, in another order) without
     copying the cloud into Open3D or loading it. Compiled, one pass over the points.
 
     Parameters
     ----------
-    points : (N, 3) float64, metres
+    points : (N, 3) float32 or float64, metres
     voxel_m : float, metres
 
     Returns
@@ -259,7 +259,7 @@ def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.f
     return sums / np.maximum(counts, 1)[:, None]
 
 
-def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
+def thin(points: NDArray[Any], max_points: int) -> NDArray[Any]:
     """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
     the sizes the baselines use hold many points of a large scan, so the voxel grid of the
     thinned cloud hardly differs and downsampling gets much cheaper."""

@@ -56,8 +56,9 @@ def _goals(state: dict[str, Any]) -> list[str]:
         peak = None if r is None else r["median_peak_gb"]
         ok = None if peak is None else peak <= target
         miss = "" if peak is None else f"{peak / target:.2f}× the target"
+        got = "not measured in this run" if peak is None else f"{_f(peak)} GB"
         lines.append(
-            f"| whole-process peak RSS, {name} pair ≤ {target:g} GB | {_f(peak)} GB | "
+            f"| whole-process peak RSS, {name} pair ≤ {target:g} GB | {got} | "
             f"{_verdict(ok, miss)} |"
         )
     for p in prep:

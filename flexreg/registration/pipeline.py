@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 from typing import Any
 
 import numba
@@ -727,18 +728,23 @@ class Registration:
         _check_upright(config)
         self.config = config
 
-    def prepare(self, scan: Scan | RangeImage, *, progress: Progress = None) -> PreparedScan:
-        """Everything of one scan that :meth:`align` needs, in either role."""
+    def prepare(
+        self, scan: Scan | RangeImage, *, progress: Progress = None, overlap: bool = True
+    ) -> PreparedScan:
+        """Everything of one scan that :meth:`align` needs, in either role. ``overlap``: the
+        plan views and the checks' inputs run beside the feature stages (as in :func:`register`);
+        else after them, the same result at a lower peak memory (for survey workers)."""
         config, run = self.config, _Run(progress)
         with run.stage("range images"):
             images = _range_images([scan], config)
         with _single_threaded(2) as pool:
+            submit = pool.submit if overlap else (lambda job: SimpleNamespace(result=job))
             plan_job = (
-                pool.submit(run.background("plan views", _plans_of, images, config))
+                submit(run.background("plan views", _plans_of, images, config))
                 if _plan_wanted(config, images)
                 else None
             )
-            view_job = pool.submit(
+            view_job = submit(
                 run.background("preparation", _views, [scan], images, config, [(True, True)])
             )
             (kp,) = _keypoints(images, config, run)

@@ -125,7 +125,7 @@ def _before_table(state: dict[str, Any]) -> list[str]:
     before = state.get("before") or {}
     lines = [
         f"Before the memory and speed changes ({state.get('before_note', 'main')}), the same "
-        "harness on the same pairs in a separate run a few minutes earlier (so under a "
+        "harness on the same pairs in a separate run earlier the same hour (so under a "
         "different load):",
         "",
         "| pair | peak RSS GB before → after | CPU s before → after | wall s before → after |",

@@ -135,15 +135,17 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     ``option``)."""
     from flexreg.errors import InputError
     from flexreg.io.origin import centring_problem, recentre
+    from flexreg.io.scans import single_precision
 
     if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
         what = "a single point" if len(scan) == 1 else f"{len(scan)} copies of one point"
         raise InputError(file, f"holds {what}: nothing to make an image of")
     if origin is not None:
         try:
-            return recentre(scan, origin)
+            moved = recentre(scan, origin)  # in float64
         except InputError as e:
             raise InputError(option, e.problem) from None
+        return single_precision(moved)  # near its scanner now: float32, as read_scan gives
     why = centring_problem(scan)
     if why is not None:
         raise InputError(

@@ -56,8 +56,9 @@ def _goals(state: dict[str, Any]) -> list[str]:
         peak = None if r is None else r["median_peak_gb"]
         ok = None if peak is None else peak <= target
         miss = "" if peak is None else f"{peak / target:.2f}× the target"
+        got = "not measured in this run" if peak is None else f"{_f(peak)} GB"
         lines.append(
-            f"| whole-process peak RSS, {name} pair ≤ {target:g} GB | {_f(peak)} GB | "
+            f"| whole-process peak RSS, {name} pair ≤ {target:g} GB | {got} | "
             f"{_verdict(ok, miss)} |"
         )
     for p in prep:
@@ -124,7 +125,7 @@ def _before_table(state: dict[str, Any]) -> list[str]:
     before = state.get("before") or {}
     lines = [
         f"Before the memory and speed changes ({state.get('before_note', 'main')}), the same "
-        "harness on the same pairs in a separate run a few minutes earlier (so under a "
+        "harness on the same pairs in a separate run earlier the same hour (so under a "
         "different load):",
         "",
         "| pair | peak RSS GB before → after | CPU s before → after | wall s before → after |",

@@ -23,6 +23,7 @@ Usage::
     .venv/bin/python benchmarks/perf.py                  # everything (8192 x 4096 included)
     .venv/bin/python benchmarks/perf.py --write-docs     # also rewrite "## Memory and speed"
     .venv/bin/python benchmarks/perf.py --quick          # 1024x512 + 2048x1024, 4 pairs
+    .venv/bin/python benchmarks/perf.py --sizes 1024x512 2048x1024 4096x2048   # (disk space)
     .venv/bin/python benchmarks/perf.py --write-docs --from-json RESULTS_JSON
     .venv/bin/python benchmarks/perf.py --before BEFORE_JSON --before-note "main at abc123"
 
@@ -65,6 +66,13 @@ SIZES = ((1024, 512), (2048, 1024), (4096, 2048), (8192, 4096))
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="two small sizes, 4 comparison pairs")
+    ap.add_argument(
+        "--sizes",
+        nargs="+",
+        metavar="WxH",
+        help="pair sizes to run (default: 1024x512 2048x1024 4096x2048 8192x4096); the survey "
+        "preparation runs at 2048x1024 and at the largest size",
+    )
     ap.add_argument("--repeats", type=int, default=3, help="runs of the 2048 x 1024 pair")
     ap.add_argument("--pairs", type=int, default=16, help="comparison-suite pairs")
     ap.add_argument("--seed", type=int, default=0)
@@ -86,9 +94,15 @@ def _parser() -> argparse.ArgumentParser:
 
 def _run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
     sizes = SIZES[:2] if args.quick else SIZES
+    if args.sizes:
+        sizes = tuple(tuple(int(v) for v in x.lower().split("x")) for x in args.sizes)
+    prepare_at = {(2048, 1024), max(sizes, key=lambda wh: wh[0] * wh[1])}
     data = args.data or (args.results / "perf-data")
     state: dict[str, Any] = {
-        "command": "benchmarks/perf.py" + (" --quick" if args.quick else ""),
+        "command": "benchmarks/perf.py"
+        + (" --quick" if args.quick else "")
+        + (f" --sizes {' '.join(args.sizes)}" if args.sizes else "")
+        + (" --no-compare" if args.no_compare else ""),
         "machine": machine_info(),
         "whole": [],
         "prepare": [],
@@ -102,7 +116,7 @@ def _run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
         print(f"register {w}x{h} x{repeats}", flush=True)
         state["whole"].append({"width": w, "height": h, **whole_register(pair, repeats)})
         save()
-        if (w, h) in ((2048, 1024), (8192, 4096)):
+        if (w, h) in prepare_at:
             print(f"prepare {w}x{h}", flush=True)
             state["prepare"].append(prepare_station(pair / "station_00.ptx"))
             save()

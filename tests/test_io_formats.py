@@ -50,7 +50,7 @@ def test_e57_pump_grid_and_attributes(shared_data: Path) -> None:
     # every point sits in its own cell: 155,201 valid cells of 370,530
     _, valid = s.organized()
     assert int(valid.sum()) == 155_201 and valid.size == 370_530
-    assert s.points.dtype == np.float64
+    assert s.points.dtype == np.float32  # scanner frame: float32 unless precise=True
     assert s.intensity is not None and s.intensity.dtype == np.float32
     assert 0.38 < s.intensity.min() and s.intensity.max() < 0.70
     assert s.colors is not None and s.colors.dtype == np.uint8 and s.colors.shape == (155_201, 3)
@@ -99,7 +99,7 @@ def test_e57_roundtrip_two_scans_exact(tmp_path: Path, rng: np.random.Generator)
     scans[1].grid_index[:, 0] = np.minimum(scans[1].grid_index[:, 0], 29)
     scans[1].grid_index[:, 1] = np.minimum(scans[1].grid_index[:, 1], 15)
     p = write_scan(tmp_path / "two.e57", scans)
-    back = read_scans(p)
+    back = read_scans(p, precise=True)  # float64: the file's values exactly
     assert [b.name for b in back] == ["north", "south"]
     for a, b in zip(scans, back, strict=True):
         assert b.grid_shape == a.grid_shape
@@ -114,7 +114,7 @@ def test_e57_roundtrip_two_scans_exact(tmp_path: Path, rng: np.random.Generator)
 
 def test_e57_roundtrip_plain_scan(tmp_path: Path, rng: np.random.Generator) -> None:
     s = Scan(points=rng.normal(size=(50, 3)), name="bare")
-    b = read_scan(write_scan(tmp_path / "bare.e57", s))
+    b = read_scan(write_scan(tmp_path / "bare.e57", s), precise=True)
     np.testing.assert_array_equal(b.points, s.points)
     assert b.grid_shape is None and b.intensity is None and b.colors is None
     np.testing.assert_allclose(b.T_world_scanner, np.eye(4), atol=1e-15)
@@ -358,7 +358,7 @@ def test_ply_roundtrip_with_intensity(tmp_path: Path, rng: np.random.Generator) 
         T_world_scanner=make_transform(np.eye(3), [5.0, 0.0, 0.0]),
         name="s",
     )
-    b = read_scan(write_scan(tmp_path / "s.ply", s))
+    b = read_scan(write_scan(tmp_path / "s.ply", s), precise=True)
     np.testing.assert_array_equal(b.points, s.points)
     np.testing.assert_array_equal(b.intensity, s.intensity)
     np.testing.assert_array_equal(b.colors, s.colors)
@@ -799,3 +799,17 @@ def test_e57_same_scans_give_identical_bytes(tmp_path):
     scans[1].points[0, 0] += 1.0  # different content -> different file GUIDs
     write_scan(tmp_path / "c.e57", scans)
     assert (tmp_path / "c.e57").read_bytes() != (tmp_path / "a.e57").read_bytes()
+
+
+def test_readers_keep_float64_for_project_coordinates(tmp_path):
+    """A PLY cloud within 8192 m of its origin is read as float32 (within float32's rounding),
+    one in map coordinates (a UTM northing) stays float64: float32 would round it to 0.5 m."""
+    near = np.array([[1.25, -3.5, 0.123456789], [100.0, 20.0, -3.0], [5.0, 6.0, 7.0]])
+    far = near + [512_345.678901, 5_412_345.678901, 0.0]
+    write_scan(tmp_path / "near.ply", Scan(points=near))
+    write_scan(tmp_path / "far.ply", Scan(points=far))
+    a, b = read_scan(tmp_path / "near.ply"), read_scan(tmp_path / "far.ply")
+    assert a.points.dtype == np.float32 and b.points.dtype == np.float64
+    np.testing.assert_array_equal(a.points, near.astype(np.float32))
+    np.testing.assert_array_equal(b.points, far)
+    assert read_scan(tmp_path / "near.ply", precise=True).points.dtype == np.float64

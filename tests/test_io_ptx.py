@@ -74,7 +74,7 @@ def test_ptx_round_trip_exact(tmp_path, rng):
     scan = _gridded_scan(rng)
     p1, p2 = tmp_path / "a.ptx", tmp_path / "b.ptx"
     write_scan(p1, [scan, _gridded_scan(rng, 3, 4, colors=True)])
-    back = read_scans(p1)
+    back = read_scans(p1, precise=True)  # float64: the file's values exactly
     assert len(back) == 2
     b = back[0]
     assert b.grid_shape == scan.grid_shape
@@ -86,6 +86,33 @@ def test_ptx_round_trip_exact(tmp_path, rng):
     np.testing.assert_array_equal(b.T_world_scanner, scan.T_world_scanner)  # exact repr
     write_scan(p2, back)
     assert p1.read_bytes() == p2.read_bytes()
+
+
+def test_ptx_points_are_float32_within_a_scanners_reach(tmp_path, rng):
+    """By default the points are float32 (half the memory): each is the file's value rounded
+    to float32, so within 1e-7 relative (0.01 mm at 100 m)."""
+    scan = _gridded_scan(rng)
+    scan.points[0] = [123.456789, -98.765432, 0.000001]
+    p = tmp_path / "a.ptx"
+    write_scan(p, scan)
+    precise, small = read_scan(p, precise=True), read_scan(p)
+    assert precise.points.dtype == np.float64 and small.points.dtype == np.float32
+    np.testing.assert_array_equal(small.points, precise.points.astype(np.float32))
+    np.testing.assert_array_equal(small.grid_index, precise.grid_index)
+    assert np.abs(small.points - precise.points).max() <= 1e-7 * np.abs(precise.points).max()
+
+
+def test_ptx_far_coordinates_stay_float64(tmp_path, rng):
+    """A cloud in project coordinates (beyond FLOAT32_MAX_M) is read as float64: float32
+    would round a UTM northing to half a metre."""
+    far = _gridded_scan(rng)
+    far.points[:] += [512_345.678901, 5_412_345.678901, 0.0]
+    p = tmp_path / "far.ptx"
+    write_scan(p, [_gridded_scan(rng), far])
+    near_back, far_back = read_scans(p)
+    assert near_back.points.dtype == far_back.points.dtype == np.float64
+    order = np.lexsort((far.grid_index[:, 0], far.grid_index[:, 1]))
+    np.testing.assert_allclose(far_back.points, far.points[order], rtol=0, atol=5e-7)
 
 
 def test_ptx_parser_number_forms(tmp_path):
@@ -152,7 +179,10 @@ def test_embedded_laserscan_sidecar(tmp_path):
     raw = cv2.imread(str(REPO / "data" / "laserscan" / "laserscan-depth.png"), -1)
     assert len(s) == int(((raw > 0) & (raw < 65535)).sum())
     r = np.linalg.norm(s.points, axis=1)
-    np.testing.assert_allclose(np.sort(r), np.sort(raw[(raw > 0) & (raw < 65535)] / 1000.0))
+    # float32 points (the default): each range within float32's rounding of the stored value
+    np.testing.assert_allclose(
+        np.sort(r), np.sort(raw[(raw > 0) & (raw < 65535)] / 1000.0), rtol=2e-7
+    )
 
 
 def test_transform_files_round_trip(tmp_path):

@@ -180,3 +180,53 @@ def test_regular_native_grid_keeps_its_pixels_with_a_fitted_camera(rng):
     again = with_camera(shuffled)
     assert again.camera is not None and again.xyz is not shuffled.xyz
     assert again.n_valid > 0.9 * shuffled.n_valid
+
+
+# ----------------------------------------------------------------------------- float32 scans
+
+
+def test_scan_keeps_float32_points_and_makes_others_float64():
+    p = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]])
+    assert Scan(points=p.astype(np.float32)).points.dtype == np.float32
+    assert Scan(points=p).points.dtype == np.float64
+    assert Scan(points=p.astype(np.int32)).points.dtype == np.float64
+    with pytest.raises(InputError, match="NaN or Inf"):
+        Scan(points=np.float32([[1, 2, np.inf]]))
+
+
+def test_float32_grid_image_holds_the_points_without_conversion():
+    """A float32 gridded scan gives a float32 image whose pixels hold its points exactly,
+    NaN at the no-return cell, with the intensities at the same pixels."""
+    pts = np.float32([[1.5, 0.25, -2.0], [3.0, -1.0, 0.125], [7.0, 8.0, 9.0]])
+    scan = Scan(
+        points=pts,
+        intensity=np.float32([0.1, 0.2, 0.3]),
+        grid_shape=(2, 2),
+        grid_index=np.array([[0, 1], [1, 0], [1, 1]], dtype=np.int32),
+    )
+    img = from_grid(scan)
+    assert img.xyz.dtype == np.float32
+    np.testing.assert_array_equal(img.xyz[0, 1], pts[0])
+    np.testing.assert_array_equal(img.xyz[1, 0], pts[1])
+    np.testing.assert_array_equal(img.xyz[1, 1], pts[2])
+    assert np.isnan(img.xyz[0, 0]).all() and not img.valid[0, 0]
+    np.testing.assert_array_equal(img.index, [[-1, 0], [1, 2]])
+    assert img.intensity is not None and np.isnan(img.intensity[0, 0])
+    np.testing.assert_array_equal(img.intensity[[0, 1, 1], [1, 0, 1]], np.float32([0.1, 0.2, 0.3]))
+    half = from_grid(scan, stride=2)  # every 2nd row and column: only cell (0, 0), empty
+    assert half.xyz.dtype == np.float32 and half.shape == (1, 1) and not half.valid.any()
+
+
+def test_samples_and_voxels_of_float32_points_equal_those_of_their_float64_copy(rng):
+    """The samplers read float32 clouds as they are (no float64 copy of the cloud) and give
+    exactly what the same values in float64 give: only the samples become float64."""
+    from flexreg.stages.sampling import area_sample_cell, voxel_centroids, voxel_count
+
+    p32 = rng.uniform(-20, 20, (50_000, 3)).astype(np.float32)
+    p64 = p32.astype(np.float64)
+    cell32, s32 = area_sample_cell(p32, 2000)
+    cell64, s64 = area_sample_cell(p64, 2000)
+    assert cell32 == cell64 and s32.dtype == np.float64
+    np.testing.assert_array_equal(s32, s64)
+    np.testing.assert_array_equal(voxel_centroids(p32, 1.5), voxel_centroids(p64, 1.5))
+    assert voxel_count(p32, 0.7) == voxel_count(p64, 0.7)

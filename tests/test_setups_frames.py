@@ -1,6 +1,6 @@
 """Clouds in project coordinates: a georeferenced LAZ (written by flexreg's LAS writer) is
 refused with the fix in one line, and read with ``--origin`` / ``--target-origin`` /
-``--source-origin`` in full float64 precision."""
+``--source-origin``: moved to the scanner in full float64 precision, then float32."""
 
 from __future__ import annotations
 
@@ -78,3 +78,18 @@ def test_register_two_project_frame_clouds_with_their_origins(laz, tmp_path):
     T = np.asarray(json.loads(out.read_text())["T_target_source"])
     assert rotation_error_deg(T, truth) < 0.3
     assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.03
+
+
+def test_a_recentred_cloud_is_float32_near_its_scanner(laz):
+    """Read with the scanner position, a georeferenced cloud is moved in float64 and then
+    kept as float32 like any cloud read in its scanner's frame (within float32 rounding of
+    the float64 difference); its pose keeps the position exactly."""
+    from flexreg.cli._common import read_input
+
+    t, _, o, _ = laz
+    utm = read_scan(t)
+    assert utm.points.dtype == np.float64  # project coordinates: float64 as read
+    (near,) = read_input(t, origin=tuple(o), origin_option="--origin")
+    assert near.points.dtype == np.float32
+    np.testing.assert_array_equal(near.points, (utm.points - o).astype(np.float32))
+    np.testing.assert_array_equal(near.T_world_scanner[:3, 3], o)

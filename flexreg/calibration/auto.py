@@ -150,7 +150,7 @@ def render_flexion_view(
         raise ConfigError(f"scale must be in (0, 1], got {scale!r}")
     cam, s = _working_camera(intrinsics, s)
     ri = project(Scan(points=apply(T, scan.points)), cam)
-    z = normalized_fill(ri.xyz[..., 2], ri.valid, (1.0, 2.0, 4.0))
+    z = normalized_fill(np.asarray(ri.xyz[..., 2], dtype=np.float64), ri.valid, (1.0, 2.0, 4.0))
     v, u = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
     xyz = cam.backproject(u, v, z)
     F = images.flexion(xyz, n=n)

@@ -135,15 +135,17 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     ``option``)."""
     from flexreg.errors import InputError
     from flexreg.io.origin import centring_problem, recentre
+    from flexreg.io.scans import single_precision
 
     if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
         what = "a single point" if len(scan) == 1 else f"{len(scan)} copies of one point"
         raise InputError(file, f"holds {what}: nothing to make an image of")
     if origin is not None:
         try:
-            return recentre(scan, origin)
+            moved = recentre(scan, origin)  # in float64
         except InputError as e:
             raise InputError(option, e.problem) from None
+        return single_precision(moved)  # near its scanner now: float32, as read_scan gives
     why = centring_problem(scan)
     if why is not None:
         raise InputError(
@@ -163,19 +165,29 @@ def read_pair(
     """Read the target and the source scan (one setup each, see :func:`read_input`; with
     ``options``, the scanner position options of each and ``origins`` their values); the same
     setup of the same file on both sides is refused."""
+    from concurrent.futures import ThreadPoolExecutor
+
     import numpy as np
 
     from flexreg.errors import InputError
 
-    scans = []
-    for k, path in enumerate((target, source)):
-        with stage(f"Reading {path.name}"):
-            (scan,) = read_input(
-                path,
-                origin=None if origins is None else origins[k],
-                origin_option=None if options is None else options[k],
-            )
-        scans.append(scan)
+    def read(k: int) -> Any:
+        (scan,) = read_input(
+            (target, source)[k],
+            origin=None if origins is None else origins[k],
+            origin_option=None if options is None else options[k],
+        )
+        return scan
+
+    # both files at once: the parsers' serial parts (file reads, copying the valid points)
+    # overlap; the target's error, if any, is the one reported
+    pool = ThreadPoolExecutor(2)
+    try:
+        with stage(f"Reading {target.name} and {source.name}"):
+            jobs = [pool.submit(read, k) for k in (0, 1)]
+            scans = [job.result() for job in jobs]
+    finally:  # on an error or Ctrl-C, do not wait here for the other file
+        pool.shutdown(wait=False, cancel_futures=True)
     t, s = scans
     same_file = scan_file(target).resolve() == scan_file(source).resolve()
     if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):

@@ -324,7 +324,9 @@ def camera_from_dict(d: dict[str, object]) -> Camera:
     raise InputError("camera", f"unknown camera model {model!r}")
 
 
-def azimuth_polar_extent(points: NDArray[np.float64]) -> tuple[float, float, float, float, bool]:
+def azimuth_polar_extent(
+    points: NDArray[np.floating],
+) -> tuple[float, float, float, float, bool]:
     """Angular extent of points seen from the origin.
 
     Returns

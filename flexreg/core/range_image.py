@@ -20,7 +20,15 @@ from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamer
 from flexreg.core.scan import Scan
 from flexreg.errors import InputError
 
-__all__ = ["RangeImage", "downsample_image", "from_depth", "from_grid", "from_index", "to_scan"]
+__all__ = [
+    "RangeImage",
+    "downsample_image",
+    "float_xyz",
+    "from_depth",
+    "from_grid",
+    "from_index",
+    "to_scan",
+]
 
 
 @dataclass(eq=False)
@@ -29,8 +37,10 @@ class RangeImage:
 
     Attributes
     ----------
-    xyz : (H, W, 3) float64, metres
-        Scanner-frame point of each pixel; NaN where invalid.
+    xyz : (H, W, 3) float32 or float64, metres
+        Scanner-frame point of each pixel; NaN where invalid. Float32 when made from a float32
+        scan (the scanner-frame readers' points): the stages read it as it is and do their
+        sums and solves in float64.
     valid : (H, W) bool
         Pixels that hold a return.
     index : (H, W) int64
@@ -43,7 +53,7 @@ class RangeImage:
         Per-pixel intensity, NaN where invalid.
     """
 
-    xyz: NDArray[np.float64]
+    xyz: NDArray[np.floating]
     valid: NDArray[np.bool_]
     index: NDArray[np.int64]
     camera: Camera | None = None
@@ -103,6 +113,14 @@ class RangeImage:
         return out
 
 
+def float_xyz(a: NDArray[np.generic]) -> NDArray[np.floating]:
+    """``a`` as a C-contiguous float32 array when it is float32, float64 otherwise (no copy
+    when it already is one): what the compiled stages take, so that a float32 image is never
+    copied to float64 whole."""
+    a = np.asarray(a)
+    return np.ascontiguousarray(a, dtype=np.float32 if a.dtype == np.float32 else np.float64)
+
+
 def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
     """Range image on the scan's native grid, without resampling.
 
@@ -140,15 +158,45 @@ def _grid_index(grid_index, h, w, s):  # pragma: no cover - compiled
 
 def from_index(scan: Scan, index: NDArray[np.int64], camera: Camera | None) -> RangeImage:
     """Range image whose pixels show ``scan.points[index]`` (``index`` (H, W) int64, -1 where
-    there is no return), with the scan's intensities."""
+    there is no return), with the scan's intensities; ``xyz`` has the points' type."""
     valid = index >= 0
-    xyz = np.full((*index.shape, 3), np.nan)
-    xyz[valid] = scan.points[index[valid]]
-    intensity = None
-    if scan.intensity is not None:
-        intensity = np.full(index.shape, np.nan, dtype=np.float32)
-        intensity[valid] = scan.intensity[index[valid]]
+    xyz = np.empty((*index.shape, 3), dtype=scan.points.dtype)
+    intensity = None if scan.intensity is None else np.empty(index.shape, dtype=np.float32)
+    _gather(scan.points, scan.intensity, index, xyz, intensity)
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera, intensity=intensity)
+
+
+def _gather(
+    points: NDArray[np.floating],
+    intensity: NDArray[np.float32] | None,
+    index: NDArray[np.int64],
+    xyz: NDArray[np.floating],
+    out_intensity: NDArray[np.float32] | None,
+) -> None:
+    """``xyz`` and ``out_intensity`` (when not None) of the pixels of ``index``, NaN where it
+    is -1, without point-sized temporaries."""
+    _gather_points(points, index, xyz)
+    if out_intensity is not None:
+        _gather_values(intensity, index, out_intensity)
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather_points(points, index, xyz):  # pragma: no cover - compiled
+    H, W = index.shape
+    for i in range(H):
+        for j in range(W):
+            k = index[i, j]
+            for c in range(3):
+                xyz[i, j, c] = points[k, c] if k >= 0 else np.nan
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather_values(values, index, out):  # pragma: no cover - compiled
+    H, W = index.shape
+    for i in range(H):
+        for j in range(W):
+            k = index[i, j]
+            out[i, j] = values[k] if k >= 0 else np.nan
 
 
 def from_depth(

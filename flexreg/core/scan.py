@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +21,10 @@ if TYPE_CHECKING:
 GRID_CELL_BYTES = 64
 #: memory per point while a scan is read and used (float64 xyz, attributes, working copies)
 POINT_BYTES = 64
+#: largest |coordinate| a reader may store in float32, metres: float32 keeps about 0.5 mm there
+#: (a relative step of 6e-8), below a terrestrial scanner's noise; farther (project or map
+#: coordinates) points stay float64
+FLOAT32_MAX_M = 8192.0
 #: farthest coordinate a measured point may have, metres: beyond any geodetic frame (ECEF,
 #: UTM northing), so a larger one is a corrupt file or a unit error (1e30 from a broken export)
 MAX_COORDINATE_M = 1e8
@@ -32,8 +36,11 @@ class Scan:
 
     Attributes
     ----------
-    points : (N, 3) float64, metres
-        Valid returns only, in the scanner frame. No-return cells are not points.
+    points : (N, 3) float32 or float64, metres
+        Valid returns only, in the scanner frame. No-return cells are not points. Float32
+        points are kept as float32 (the scanner-frame readers store them so: half the memory,
+        about 0.5 mm or better within :data:`FLOAT32_MAX_M`); any other type becomes float64.
+        Stages that sum or solve (SVD, ICP's normal equations, transforms) do so in float64.
     intensity : (N,) float32 or None
         Return intensity as the file stores it (PTX 0..1, E57/LAS native units).
     colors : (N, 3) uint8 or None
@@ -55,7 +62,7 @@ class Scan:
         Scan name (file stem, E57 scan name, ``"cloud 2"`` for the third PTX cloud...).
     """
 
-    points: NDArray[np.float64]
+    points: NDArray[np.floating]
     intensity: NDArray[np.float32] | None = None
     colors: NDArray[np.uint8] | None = None
     grid_shape: tuple[int, int] | None = None
@@ -67,18 +74,20 @@ class Scan:
 
     def __post_init__(self) -> None:
         src = self.path if self.path is not None else (self.name or "scan")
-        pts = np.ascontiguousarray(self.points, dtype=np.float64)
+        pts = np.asarray(self.points)
+        pts = np.ascontiguousarray(pts, dtype=np.float32 if pts.dtype == np.float32 else np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise InputError(src, f"points must have shape (N, 3), got {pts.shape}")
-        if not np.all(np.isfinite(pts)):
+        lo, hi = (float(pts.min()), float(pts.max())) if pts.size else (0.0, 0.0)
+        if not (np.isfinite(lo) and np.isfinite(hi)):  # min and max propagate NaN and Inf
             bad = int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))
             raise InputError(src, f"{bad} point(s) have NaN or Inf coordinates")
-        if pts.size and max(-float(pts.min()), float(pts.max())) > MAX_COORDINATE_M:
+        if max(-lo, hi) > MAX_COORDINATE_M:
             far = int(np.count_nonzero((np.abs(pts) > MAX_COORDINATE_M).any(axis=1)))
             raise InputError(
                 src,
                 f"{far} point(s) lie beyond {MAX_COORDINATE_M:g} m of the origin (largest "
-                f"|coordinate| {max(-float(pts.min()), float(pts.max())):.3g} m): not measured "
+                f"|coordinate| {max(-lo, hi):.3g} m): not measured "
                 "points (a corrupt file, or a unit error?)",
             )
         self.points = pts
@@ -142,7 +151,7 @@ class Scan:
         rows, cols = np.nonzero(ok)
         gi = np.stack([rows, cols], axis=1).astype(np.int32)
         return cls(
-            points=xyz[ok].astype(np.float64),
+            points=xyz[ok],
             intensity=None if intensity is None else np.asarray(intensity)[ok],
             colors=None if colors is None else np.asarray(colors)[ok],
             grid_shape=(xyz.shape[0], xyz.shape[1]),
@@ -191,7 +200,13 @@ class Scan:
         return self.points @ T[:3, :3].T + T[:3, 3]
 
 
-def as_points(x: Any, *, name: str = "points") -> NDArray[np.float64]:
+@overload
+def as_points(
+    x: Any, *, name: str = ..., keep_float32: Literal[False] = ...
+) -> NDArray[np.float64]: ...
+@overload
+def as_points(x: Any, *, name: str = ..., keep_float32: bool) -> NDArray[np.floating]: ...
+def as_points(x: Any, *, name: str = "points", keep_float32: bool = False) -> NDArray[np.floating]:
     """(N, 3) float64 points of a :class:`Scan`, a
     :class:`~flexreg.core.range_image.RangeImage` (its valid pixels) or an array, in metres.
 
@@ -200,6 +215,9 @@ def as_points(x: Any, *, name: str = "points") -> NDArray[np.float64]:
     x : Scan, RangeImage or (N, 3) array_like
     name : str
         What to call ``x`` in error messages.
+    keep_float32 : bool
+        Return float32 points as they are (no float64 copy of a whole cloud); other types
+        still become float64.
 
     Raises
     ------
@@ -211,11 +229,13 @@ def as_points(x: Any, *, name: str = "points") -> NDArray[np.float64]:
     elif hasattr(x, "xyz") and hasattr(x, "valid"):  # a RangeImage (which imports this module)
         P = x.xyz[x.valid]
     else:
-        P = np.asarray(x, dtype=np.float64)
+        P = np.asarray(x)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InputError(name, f"points must have shape (N, 3), got {P.shape}")
-    if not np.isfinite(P).all():
+    dtype = np.float32 if keep_float32 and P.dtype == np.float32 else np.float64
+    P = np.ascontiguousarray(P, dtype=dtype)
+    if len(P) and not (np.isfinite(P.min()) and np.isfinite(P.max())):
         raise InputError(name, "points hold NaN or Inf")
     if len(P) < 3:
         raise InputError(name, f"need at least 3 points, got {len(P)}")
-    return np.ascontiguousarray(P, dtype=np.float64)
+    return P

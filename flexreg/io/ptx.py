@@ -23,6 +23,7 @@ raises :class:`~flexreg.errors.InputError` naming the file and the line.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -32,7 +33,7 @@ from numba import prange
 from numpy.typing import NDArray
 
 from flexreg.core.budget import check_memory
-from flexreg.core.scan import Scan
+from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import InputError
 
@@ -231,9 +232,15 @@ def _last_newline(buf: NDArray[np.uint8], n: int) -> int:
 Lines = tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]
 
 
+#: one parallel parse at a time: files read in several threads share the cores through the
+#: parser's own threads (not every numba threading layer accepts concurrent parallel calls)
+_PARSE_LOCK = threading.Lock()
+
+
 def _parse(buf: NDArray[np.uint8]) -> Lines:
     n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
-    return _parse_all(buf, n_chunks, _POW10)
+    with _PARSE_LOCK:
+        return _parse_all(buf, n_chunks, _POW10)
 
 
 def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
@@ -301,13 +308,16 @@ class _Cloud:
     final arrays (no file- or line-sized intermediate); problems are kept in the order
     :func:`read` reports them and raised once the cloud's lines are all seen."""
 
-    def __init__(self, path: Path, index: int, first: int, rows: int, cols: int, cap: int):
+    def __init__(
+        self, path: Path, index: int, first: int, rows: int, cols: int, cap: int, dtype: type
+    ):
+        self.dtype = dtype
         self.path, self.index, self.first, self.rows, self.cols = path, index, first, rows, cols
         self.n, self.cap, self.seen, self.kept = rows * cols, cap, 0, 0
         self.ncol = -1
         self.bad: tuple[int, int] | None = None  # (line, error code) of the first bad number
         self.wrong: tuple[int, int] | None = None  # (line, count) of the first ragged line
-        self.points: NDArray[np.float64] | None = None
+        self.points: NDArray[np.floating] | None = None
         self.grid_index: NDArray[np.int32] | None = None
         self.intensity: NDArray[np.float32] | None = None
         self.colors: NDArray[np.uint8] | None = None
@@ -318,9 +328,14 @@ class _Cloud:
 
     def _allocate(self, ncol: int) -> None:
         cap = self.cap
-        per = 24 + 8 + (4 if ncol >= 4 else 0) + (3 if ncol == 7 else 0)
+        per = (
+            3 * np.dtype(self.dtype).itemsize
+            + 8
+            + (4 if ncol >= 4 else 0)
+            + (3 if ncol == 7 else 0)
+        )
         check_memory(cap * per, f"cloud {self.index}: its {self.n:,} points", source=self.path)
-        self.points = np.empty((cap, 3), dtype=np.float64)
+        self.points = np.empty((cap, 3), dtype=self.dtype)
         self.grid_index = np.empty((cap, 2), dtype=np.int32)
         self.intensity = np.empty(cap, dtype=np.float32) if ncol >= 4 else None
         self.colors = np.empty((cap, 3), dtype=np.uint8) if ncol == 7 else None
@@ -391,6 +406,10 @@ class _Cloud:
         for a in (self.points, self.grid_index, self.intensity, self.colors):
             if a is not None:  # shrink in place: no second copy of the points
                 a.resize((m, *a.shape[1:]), refcheck=False)
+        if self.dtype == np.float32 and m and self.points is not None:
+            lo, hi = float(self.points.min()), float(self.points.max())
+            if not (-FLOAT32_MAX_M <= lo and hi <= FLOAT32_MAX_M):
+                raise _Wide()
         if not is_rigid(M):
             log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, self.index)
         try:
@@ -416,6 +435,7 @@ def _header_cloud(
     counts: list[int],
     errors: list[int],
     bytes_left: int,
+    dtype: type,
 ) -> tuple[_Cloud, NDArray[np.float64]]:
     """The cloud a complete 10-line header (starting at file line ``line``) announces, and its
     pose; ``bytes_left`` bounds how many point lines can follow."""
@@ -435,20 +455,30 @@ def _header_cloud(
         )
     M = _header_pose(np.stack(head[2:10])[:, :4])
     cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
-    return _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap), M
+    return _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype), M
 
 
-def read(path: Path, **_: object) -> list[Scan]:
+class _Wide(Exception):
+    """A cloud read as float32 has coordinates beyond :data:`FLOAT32_MAX_M`."""
+
+
+def read(path: Path, *, precise: bool = False, **_: object) -> list[Scan]:
     """Read every cloud of a PTX file.
 
     The text is parsed 16 to 64 MiB at a time (:func:`_chunk_bytes`) and each cloud's valid
     points go straight into their final arrays: the memory taken beyond the scans themselves
     is a few chunk-sized buffers, whatever the file's size.
 
+    Points are stored as float32 (half the memory of float64; 0.5 mm or better within
+    :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the scanner). A file with a coordinate beyond
+    that (points in project coordinates) is read again as float64, and so is every file with
+    ``precise=True`` (the values exactly as written, to write them back unchanged).
+
     Returns
     -------
     list of Scan
-        One per cloud: valid points (N, 3) float64 in the scanner frame, intensity (N,)
+        One per cloud: valid points (N, 3) float32 (float64 for far coordinates) in the
+        scanner frame, intensity (N,)
         float32, colours (N, 3) uint8 when the file has RGB, grid ``(rows, cols)`` with
         ``grid_index`` in file order (line ``k`` of a cloud is row ``k % rows`` of column
         ``k // rows``), and ``T_world_scanner`` = the file's (transposed-back) 4x4 matrix, or
@@ -457,6 +487,17 @@ def read(path: Path, **_: object) -> list[Scan]:
     """
     size = path.stat().st_size
     check_memory(3 * min(size, _chunk_bytes(size)), "parsing it", source=path)
+    if precise:
+        return _read(path, size, np.float64)
+    try:
+        return _read(path, size, np.float32)
+    except _Wide:
+        log.info("%s: coordinates beyond %g m, read as float64", path, FLOAT32_MAX_M)
+        return _read(path, size, np.float64)
+
+
+def _read(path: Path, size: int, dtype: type) -> list[Scan]:
+    """:func:`read` with points of ``dtype``."""
     scans: list[Scan] = []
     cloud: _Cloud | None = None
     pose = np.eye(4)
@@ -486,7 +527,7 @@ def read(path: Path, **_: object) -> list[Scan]:
             i += 1
             if len(hdr[1]) == _HEADER_LINES:
                 cloud, pose = _header_cloud(
-                    path, len(scans), hdr_line, *hdr, bytes_left=size - offset
+                    path, len(scans), hdr_line, *hdr, bytes_left=size - offset, dtype=dtype
                 )
                 hdr = ([], [], [])
         base += n_lines

@@ -8,17 +8,20 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
+from dataclasses import replace
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from flexreg.core.scan import Scan
+import numpy as np
+
+from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.errors import InputError
 from flexreg.io.files import atomic_write, protect
 from flexreg.io.formats import detect_format
 from flexreg.io.selector import parse_scan_ref, pick
 
-__all__ = ["check_file", "read_scan", "read_scans", "write_scan"]
+__all__ = ["check_file", "read_scan", "read_scans", "single_precision", "write_scan"]
 
 _WRITERS = {
     ".ply": "pointcloud",
@@ -61,7 +64,11 @@ def read_scans(
         ``3dtk``, ``npy``, ``npz``, ``depth``.
     **options
         Reader options (``camera``, ``depth_scale``, ``depth_kind`` for depth images; ``pose``
-        for 3DTK).
+        for 3DTK), and ``precise``: keep float64 points. By default points that all lie
+        within :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the scan's origin are float32
+        (:func:`single_precision`; half the memory, 0.5 mm or better); ``precise=True`` keeps
+        the file's values exactly (to write them back unchanged). An npz file gives back the
+        type it stores.
 
     Raises
     ------
@@ -72,14 +79,32 @@ def read_scans(
     p = ref.path
     mod, _ = detect_format(p, format)
     check_file(p)
+    precise = bool(options.pop("precise", False))
+    if mod == "ptx":  # reads float32 itself
+        options["precise"] = precise
     if ref.selector is not None and mod == "e57" and not options:
-        return [_module(mod).read_one(p, ref)]  # one setup of a large project file: only it
+        one = _module(mod).read_one(p, ref)  # one setup of a large project file: only it
+        return [one if precise else single_precision(one)]
     scans: list[Scan] = _module(mod).read(p, **options)
     if not scans:
         raise InputError(p, "file holds no scan")
     if all(len(s) == 0 for s in scans):
         raise InputError(p, "file holds no valid point (every cell is a no-return)")
+    if not precise and mod not in ("ptx", "npz"):  # PTX chooses; npz keeps what it stores
+        scans = [single_precision(s) for s in scans]
     return scans if ref.selector is None else [pick(scans, ref)]
+
+
+def single_precision(scan: Scan) -> Scan:
+    """The scan with float32 points when they all lie within
+    :data:`~flexreg.core.scan.FLOAT32_MAX_M` of its origin (0.5 mm or better), else as it is
+    (project or map coordinates keep float64). Half the memory for every later stage."""
+    P = scan.points
+    if P.dtype == np.float32 or not len(P):
+        return scan
+    if max(-float(P.min()), float(P.max())) > FLOAT32_MAX_M:
+        return scan
+    return replace(scan, points=P.astype(np.float32))
 
 
 def read_scan(

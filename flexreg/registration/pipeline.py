@@ -24,7 +24,8 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 from typing import Any
 
 import numba
@@ -203,6 +204,8 @@ class _Run:
 
 def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) -> list[RangeImage]:
     images = [working_image(x, max_pixels=config.max_image_pixels) for x in scans]
+    if config.image != "intensity":  # only the intensity image reads it: do not keep it
+        images = [replace(i, intensity=None) for i in images]
     return [fill_holes(i) for i in images] if config.fill_holes else images
 
 
@@ -293,7 +296,8 @@ def _scan_view(
     if source:
         v.polish_sample = area_sample(pts, POLISH_POINTS)
     if projective:
-        v.refine_sample = area_sample_cell(as_points(scan, name="scan"), PROJECTIVE_ICP_POINTS // 2)
+        points = as_points(scan, name="scan", keep_float32=True)
+        v.refine_sample = area_sample_cell(points, PROJECTIVE_ICP_POINTS // 2)
     return v
 
 
@@ -578,8 +582,8 @@ def _finish(
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
         overlap = measure_overlap(
-            as_points(scans[0]),
-            as_points(scans[1]),
+            as_points(scans[0], keep_float32=True),
+            as_points(scans[1], keep_float32=True),
             T,
             open3d_check=config.open3d_overlap_check,
         )
@@ -724,18 +728,23 @@ class Registration:
         _check_upright(config)
         self.config = config
 
-    def prepare(self, scan: Scan | RangeImage, *, progress: Progress = None) -> PreparedScan:
-        """Everything of one scan that :meth:`align` needs, in either role."""
+    def prepare(
+        self, scan: Scan | RangeImage, *, progress: Progress = None, overlap: bool = True
+    ) -> PreparedScan:
+        """Everything of one scan that :meth:`align` needs, in either role. ``overlap``: the
+        plan views and the checks' inputs run beside the feature stages (as in :func:`register`);
+        else after them, the same result at a lower peak memory (for survey workers)."""
         config, run = self.config, _Run(progress)
         with run.stage("range images"):
             images = _range_images([scan], config)
         with _single_threaded(2) as pool:
+            submit = pool.submit if overlap else (lambda job: SimpleNamespace(result=job))
             plan_job = (
-                pool.submit(run.background("plan views", _plans_of, images, config))
+                submit(run.background("plan views", _plans_of, images, config))
                 if _plan_wanted(config, images)
                 else None
             )
-            view_job = pool.submit(
+            view_job = submit(
                 run.background("preparation", _views, [scan], images, config, [(True, True)])
             )
             (kp,) = _keypoints(images, config, run)

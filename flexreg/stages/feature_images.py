@@ -202,7 +202,7 @@ def median_prefilter(
 
     Returns
     -------
-    (H, W, 3) float64, metres
+    (H, W, 3) float64 (float32 for float32 points), metres
         Filtered points, NaN where invalid.
 
     Examples
@@ -217,7 +217,7 @@ def median_prefilter(
     pts, w = _points(xyz, wrap)
     rng = np.empty(pts.shape[:2], dtype=np.float64)
     range_kernel(pts, rng)
-    out = np.empty(pts.shape, dtype=np.float64)
+    out = np.empty(pts.shape, dtype=pts.dtype)  # float32 points stay float32 (half the memory)
     median_kernel(pts, rng, (int(window) - 1) // 2, w, out)
     return out
 

@@ -38,7 +38,7 @@ def _sample(
     v, u = np.nonzero(image.valid)
     step = max(1, math.ceil(len(u) / _SAMPLES))
     v, u = v[::step], u[::step]
-    return u.astype(np.float64), v.astype(np.float64), image.xyz[v, u]
+    return u.astype(np.float64), v.astype(np.float64), image.xyz[v, u].astype(np.float64)
 
 
 def grid_camera_error(image: RangeImage, camera: Camera) -> float:

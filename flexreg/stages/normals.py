@@ -21,13 +21,14 @@ from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import RangeImage
 
 #: each image's points with NaN where invalid, as the kernels read them (see masked_xyz)
-_MASKED: weakref.WeakKeyDictionary[RangeImage, tuple[object, object, NDArray[np.float64]]] = (
+_MASKED: weakref.WeakKeyDictionary[RangeImage, tuple[object, object, NDArray[np.floating]]] = (
     weakref.WeakKeyDictionary()
 )
 
 
-def masked_xyz(image: RangeImage) -> NDArray[np.float64]:
-    """``image.xyz`` with NaN at invalid pixels, (H, W, 3) C-contiguous float64, metres.
+def masked_xyz(image: RangeImage) -> NDArray[np.floating]:
+    """``image.xyz`` with NaN at invalid pixels, (H, W, 3) C-contiguous float32 (a float32
+    image) or float64, metres.
 
     The image's own array when it already is (the usual case: every builder leaves invalid
     pixels NaN), else a copy made once per image and shared by every later call (the normals
@@ -37,7 +38,7 @@ def masked_xyz(image: RangeImage) -> NDArray[np.float64]:
     if hit is not None and hit[0] is image.xyz and hit[1] is image.valid:
         return hit[2]
     xyz = image.xyz
-    usable = xyz.dtype == np.float64 and xyz.flags.c_contiguous
+    usable = xyz.dtype in (np.float32, np.float64) and xyz.flags.c_contiguous
     if not (usable and np.isnan(xyz[~image.valid]).all()):  # else: already NaN where invalid
         xyz = np.ascontiguousarray(np.where(image.valid[..., None], xyz, np.nan))
     _MASKED[image] = (image.xyz, image.valid, xyz)
@@ -87,10 +88,20 @@ def surface_normals(
 def normals_area(xyz, k, wrap):  # pragma: no cover - compiled
     """Per pixel: unit normal (towards the scanner) from the cross product of the central
     differences at offset ``k`` and the area the pixel covers; area 0 where a neighbour is
-    missing or lies across a depth jump (a span of 0.2 x the range or more)."""
+    missing or lies across a depth jump (a span of 0.2 x the range or more). (H, W, 3) and
+    (H, W) float64."""
     H, W = xyz.shape[0], xyz.shape[1]
     nrm = np.zeros((H, W, 3))
     area = np.zeros((H, W))
+    _normals_area_into(xyz, k, wrap, nrm, area)
+    return nrm, area
+
+
+@numba.njit(cache=True, nogil=True)
+def _normals_area_into(xyz, k, wrap, nrm, area):  # pragma: no cover - compiled
+    """:func:`normals_area` written into ``nrm`` (H, W, 3) and ``area`` (H, W), zeroed, of
+    any float type."""
+    H, W = xyz.shape[0], xyz.shape[1]
     for i in range(k, H - k):
         for j in range(W):
             jl, jr = j - k, j + k
@@ -124,7 +135,6 @@ def normals_area(xyz, k, wrap):  # pragma: no cover - compiled
             nrm[i, j, 2] = nz / nn
             # neighbours 2k strided pixels apart: the product covers one stride x stride cell
             area[i, j] = lh * lv / (4.0 * k * k)
-    return nrm, area
 
 
 def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
@@ -149,7 +159,9 @@ def grid_normals(image: RangeImage, *, k: int = 1) -> NDArray[np.float32]:
     H, W = image.valid.shape
     if H <= 2 * k or W <= 2 * k:
         return np.full((H, W, 3), np.nan, dtype=np.float32)
-    nrm, area = normals_area(masked_xyz(image), int(k), image.wraps)
+    nrm = np.zeros((H, W, 3), dtype=np.float32)  # float32: the result's own precision
+    area = np.zeros((H, W), dtype=np.float32)
+    _normals_area_into(masked_xyz(image), int(k), image.wraps, nrm, area)
     nrm[~(area > 0)] = np.nan  # in place: no third (H, W, 3) array
     del area
     return _smooth_normals(nrm, image.wraps)

@@ -57,7 +57,7 @@ MAX_INPUT_POINTS = 4_000_000
 
 
 def scale_voxel(
-    target: NDArray[np.float64], *, max_points: int = SCALE_MAX_POINTS
+    target: NDArray[np.floating], *, max_points: int = SCALE_MAX_POINTS
 ) -> tuple[float, str]:
     """The scale parameter from the scan resolution: ``(voxel_m, how)``.
 
@@ -67,7 +67,7 @@ def scale_voxel(
 
     Parameters
     ----------
-    target : (N, 3) float64, metres
+    target : (N, 3) float32 or float64, metres
     max_points : int
         Point budget after downsampling.
 
@@ -107,7 +107,7 @@ class OverlapMeter:
 
     Parameters
     ----------
-    target, source : (N, 3) float64, metres
+    target, source : (N, 3) float32 or float64, metres
         Each in its own frame.
     voxel_m : float, optional, metres
         The voxel (default :func:`scale_voxel` of the target).
@@ -128,8 +128,8 @@ class OverlapMeter:
 
     def __init__(
         self,
-        target: NDArray[np.float64],
-        source: NDArray[np.float64],
+        target: NDArray[np.floating],
+        source: NDArray[np.floating],
         *,
         voxel_m: float | None = None,
         distance_m: float | None = None,
@@ -186,8 +186,8 @@ class OverlapMeter:
 
 
 def measure_overlap(
-    target: NDArray[np.float64],
-    source: NDArray[np.float64],
+    target: NDArray[np.floating],
+    source: NDArray[np.floating],
     T_target_source: NDArray[np.float64],
     *,
     voxel_m: float | None = None,
@@ -198,7 +198,7 @@ def measure_overlap(
 
     Parameters
     ----------
-    target, source : (N, 3) float64, metres
+    target, source : (N, 3) float32 or float64, metres
     T_target_source : (4, 4) float64
     voxel_m, distance_m : float, optional, metres
     open3d_check : bool

@@ -20,6 +20,7 @@ from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
     RangeImage,
     downsample_image,
+    float_xyz,
     from_grid,
     from_index,
 )
@@ -91,7 +92,7 @@ _PROJECT_CHUNK = 1 << 18
 
 
 def _pixels(
-    points: NDArray[np.float64], camera: Camera
+    points: NDArray[np.floating], camera: Camera
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Linear pixel index (-1 outside the image or behind the camera) and depth of points."""
     H, W = camera.shape
@@ -105,7 +106,7 @@ def _pixels(
     return np.where(ok, iv * W + iu, -1).astype(np.int64), d
 
 
-def _lidar_rings(points: NDArray[np.float64]) -> tuple[int, float, float] | None:
+def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | None:
     """``(rings, ring_spacing_rad, azimuth_pitch_rad)`` when the cloud is a spinning lidar's:
     its polar angles fall into a few narrow, about evenly spaced bands (one per beam); else None.
 
@@ -179,7 +180,7 @@ def _ring_azimuth_pitch(P: NDArray[np.float64], ring: NDArray[np.int64]) -> floa
 
 
 def auto_spherical_camera(
-    points: NDArray[np.float64], *, angular_resolution_rad: float | None = None
+    points: NDArray[np.floating], *, angular_resolution_rad: float | None = None
 ) -> SphericalCamera:
     """Choose an equirectangular camera that fits an unstructured cloud.
 
@@ -298,7 +299,7 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
     if v.all() or not v.any():
         return image
     xyz, hole, filled = _fill_holes(
-        np.ascontiguousarray(image.xyz, dtype=np.float64),
+        float_xyz(image.xyz),
         np.ascontiguousarray(v),
         int(min_neighbours),
         float(max_jump),

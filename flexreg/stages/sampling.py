@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from flexreg.errors import RegistrationError
 
 
-def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64]:
+def area_sample(points: NDArray[np.floating], samples: int) -> NDArray[np.float64]:
     """About ``samples`` points spread evenly over the surfaces of a cloud.
 
     One point (the first in input order) per occupied cell of the voxel grid of
@@ -29,7 +29,7 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
 
     Parameters
     ----------
-    points : (N, 3) float64
+    points : (N, 3) float32 or float64
         Metres.
     samples : int
         Wanted number of points (the result has about 0.7 to 1.4 times that, or all N points
@@ -44,15 +44,16 @@ def area_sample(points: NDArray[np.float64], samples: int) -> NDArray[np.float64
 
 
 def area_sample_cell(
-    points: NDArray[np.float64], samples: int
+    points: NDArray[np.floating], samples: int
 ) -> tuple[float, NDArray[np.float64]]:
-    """:func:`area_cell` and :func:`area_sample` at once."""
-    p = np.asarray(points, dtype=np.float64)
+    """:func:`area_cell` and :func:`area_sample` at once (float32 points are read as they
+    are: only the sample becomes float64)."""
+    p = _float_points(points)
     cell, first = _area_cells(p, samples)
-    return cell, p if len(p) <= samples else p[first]
+    return cell, np.asarray(p if len(p) <= samples else p[first], dtype=np.float64)
 
 
-def area_cell(points: NDArray[np.float64], samples: int) -> float:
+def area_cell(points: NDArray[np.floating], samples: int) -> float:
     """Voxel size at which about ``samples`` voxels of a cloud's surfaces are occupied, metres.
 
     Downsampling with it weights every part of a scene by its surface area rather than by its
@@ -65,14 +66,21 @@ def area_cell(points: NDArray[np.float64], samples: int) -> float:
     samples : int
         Wanted number of occupied voxels.
     """
-    return _area_cells(np.asarray(points, dtype=np.float64), samples)[0]
+    return _area_cells(_float_points(points), samples)[0]
 
 
-def _area_cells(p: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
+def _float_points(points: NDArray[np.generic]) -> NDArray[np.floating]:
+    """(N, 3) points as float32 when they are, else float64 (no float64 copy of a float32
+    cloud)."""
+    p = np.asarray(points)
+    return p if p.dtype in (np.float32, np.float64) else p.astype(np.float64)
+
+
+def _area_cells(p: NDArray[np.floating], samples: int) -> tuple[float, NDArray[np.int64]]:
     """Cell size and the index of the first point in each occupied cell, ascending (of a
     thinned copy of ``p`` when it is large: indices then refer to ``p`` itself)."""
     step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
-    q = np.ascontiguousarray(p[::step])
+    q = np.ascontiguousarray(p[::step], dtype=np.float64)
     if len(q) == 0:
         return 1e-9, np.zeros(0, dtype=np.int64)
     lo, hi = _bounds(q)
@@ -143,7 +151,7 @@ def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
 
 
 def median_spacing(
-    points: NDArray[np.float64],
+    points: NDArray[np.floating],
     *,
     sample: int = 5000,
     seed: int = 0,
@@ -154,11 +162,12 @@ def median_spacing(
     With ``tree_points``, the neighbours are searched among at most that many points (a
     fixed random subset), which overestimates the spacing of larger clouds but is fast.
     """
-    P = np.asarray(points, dtype=np.float64)
+    P = _float_points(points)
     if len(P) < 2:
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
     if tree_points is not None and len(P) > tree_points:
         P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
+    P = np.asarray(P, dtype=np.float64)
     from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
 
     tree = cKDTree(P)
@@ -207,32 +216,32 @@ def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
 
 
 def _voxels(
-    points: NDArray[np.float64], voxel_m: float
+    points: NDArray[np.floating], voxel_m: float
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Sums and counts of the points per occupied voxel, the voxels as Open3D's
     ``voxel_down_sample`` bins them: ``floor((p - origin) / voxel_m)`` from the cloud's
-    minimum less half a voxel."""
-    p = np.asarray(points, dtype=np.float64)
+    minimum less half a voxel. Float32 points are read as they are (sums in float64)."""
+    p = np.ascontiguousarray(_float_points(points))
     if len(p) == 0:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    lo, _ = _bounds(p)
+    lo = _bounds(p)[0].astype(np.float64)
     table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
     return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
 
 
-def voxel_count(points: NDArray[np.float64], voxel_m: float) -> int:
+def voxel_count(points: NDArray[np.floating], voxel_m: float) -> int:
     """Occupied voxels of a cloud (as :func:`voxel_centroids` bins it)."""
     return len(_voxels(points, voxel_m)[1])
 
 
-def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.float64]:
+def voxel_centroids(points: NDArray[np.floating], voxel_m: float) -> NDArray[np.float64]:
     """One point per occupied voxel, the centroid of its points: what Open3D's
     ``voxel_down_sample`` gives (the same voxels and centroids, in another order) without
     copying the cloud into Open3D or loading it. Compiled, one pass over the points.
 
     Parameters
     ----------
-    points : (N, 3) float64, metres
+    points : (N, 3) float32 or float64, metres
     voxel_m : float, metres
 
     Returns
@@ -250,7 +259,7 @@ def voxel_centroids(points: NDArray[np.float64], voxel_m: float) -> NDArray[np.f
     return sums / np.maximum(counts, 1)[:, None]
 
 
-def thin(points: NDArray[np.float64], max_points: int) -> NDArray[np.float64]:
+def thin(points: NDArray[Any], max_points: int) -> NDArray[Any]:
     """Every k-th point so that at most about ``max_points`` remain (deterministic). Voxels of
     the sizes the baselines use hold many points of a large scan, so the voxel grid of the
     thinned cloud hardly differs and downsampling gets much cheaper."""

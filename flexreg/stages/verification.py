@@ -89,8 +89,12 @@ def overlap_score(
     """
     if sampling not in ("area", "pixels"):
         raise ConfigError(f"sampling must be 'area' or 'pixels', got {sampling!r}")
-    ps = source.xyz[source.valid]
-    ps = area_sample(ps, samples) if sampling == "area" else ps[:: max(1, len(ps) // samples)]
+    valid = source.xyz[source.valid]
+    ps = (
+        area_sample(valid, samples)
+        if sampling == "area"
+        else np.asarray(valid[:: max(1, len(valid) // samples)], dtype=np.float64)
+    )
     _, ok, bad = classify_points(target, ps, T_target_source, tolerance_m, tolerance_rel, slack)
     return (float(ok.mean()), float(bad.mean())) if len(ok) else (0.0, 0.0)
 

@@ -299,7 +299,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         scan = read_scan(station.ref)
         n = len(scan)
         T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
-        prepared = _compact(Registration(config).prepare(scan))
+        prepared = _compact(Registration(config).prepare(scan, overlap=False))  # lower peak
         del scan
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))

@@ -106,7 +106,6 @@ def refine(
     -------
     IcpResult
     """
-    sp = as_points(source, name="source")
     kind: Any = method
     if uses_projective(method, voxel_m):
         vt = target_image if target_image is not None else camera_image(target)
@@ -125,6 +124,7 @@ def refine(
             source_normals=source_normals if source_image is not None else None,
         )
         return replace(r, voxel_m=cell_s, source_points=len(src_sample) + len(tgt_sample))
+    sp = as_points(source, name="source")
     tp = as_points(target, name="target")
     if voxel_m is not None:
         return refine_icp(
@@ -172,8 +172,9 @@ def refine_samples(
 ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
     """The projective refinement's area samples: source cell size, source and target points."""
     n = PROJECTIVE_ICP_POINTS // 2
-    cell_s, src = area_sample_cell(as_points(source, name="source"), n)
-    return cell_s, src, area_sample_cell(as_points(target, name="target"), n)[1]
+    cell_s, src = area_sample_cell(as_points(source, name="source", keep_float32=True), n)
+    tgt = area_sample_cell(as_points(target, name="target", keep_float32=True), n)[1]
+    return cell_s, src, tgt
 
 
 __all__ = [

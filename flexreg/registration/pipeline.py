@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numba
@@ -53,7 +53,7 @@ from flexreg.registration.candidates import (
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
 from flexreg.registration.result import RegistrationResult
-from flexreg.registration.settle import Settlement, settle
+from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.verdict import (
     MAX_RIVALS,
     Scored,
@@ -552,6 +552,8 @@ def _finish(
     info = point_information(q[cons])
     refinement = None
     icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
+    if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
+        icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, thr, config))
     with run.stage("verdict"):
         scored = coarse = two.score(T_coarse, fine_tol)
         kind = "keypoints"

@@ -155,13 +155,59 @@ class _Scorer:
         return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
 
 
-def _peaks(scores: NDArray[np.float64], count: int, skip: int | None) -> list[int]:
-    """Indices of the best local maxima of a 1-D score (not ``skip``)."""
+def _facing(
+    pair: FullPair, R: NDArray[np.float64], direction: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """The source's points whose normal, turned by ``R`` into the target frame, lies within
+    60 degrees of ``direction`` either way: the only surfaces a slide along it moves across
+    themselves (a tunnel's niche and its cabinets, a forklift's front and back)."""
+    n = pair.source.normals @ R.T
+    with np.errstate(invalid="ignore"):
+        return np.asarray(np.abs(n @ direction) >= 0.5)
+
+
+@dataclass(eq=False)
+class _FacingScorer:
+    """Scores a pose on the source's points facing the sweep's direction only (at most
+    :data:`SWEEP_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
+    tunnel the other surfaces change their score with the grazing angles and the reach of
+    the other scanner far more than a small cue does (tunnel-cue 1: the truth scores 1 % below
+    a pose 12 m away on all points); on the facing points it peaks at the cue."""
+
+    target: FullView
+    points: NDArray[np.float64]
+    slack: NDArray[np.float64]
+    threshold_m: float
+
+    @classmethod
+    def of(
+        cls, pair: FullPair, base: NDArray[np.float64], direction: NDArray[np.float64], thr: float
+    ) -> _FacingScorer:
+        s = pair.source
+        idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
+        idx = idx[:: max(1, -(-len(idx) // SWEEP_POINTS))]
+        return cls(pair.target, s.points[idx], s.point_slack[idx], thr)
+
+    def __call__(self, T: NDArray[np.float64]) -> float:
+        if len(self.points) == 0:
+            return 0.0
+        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+
+
+def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
+    """Indices of the best local maxima of a 1-D score (not ``skip``), each more than
+    ``away`` indices from every better one kept."""
     s = np.asarray(scores)
     left = np.concatenate([[-np.inf], s[:-1]])
     right = np.concatenate([s[1:], [-np.inf]])
     idx = [int(i) for i in np.flatnonzero((s >= left) & (s >= right)) if i != skip]
-    return sorted(idx, key=lambda i: -s[i])[:count]
+    out: list[int] = []
+    for i in sorted(idx, key=lambda i: -s[i]):
+        if all(abs(i - k) > away for k in out):
+            out.append(i)
+        if len(out) >= count:
+            break
+    return out
 
 
 def sweep_candidates(
@@ -178,9 +224,11 @@ def sweep_candidates(
 ) -> list[NDArray[np.float64]]:
     """Poses slid along ``direction``: the winner ``W`` and its half turn, each moved by every
     multiple of ``step_m`` within ``range_m`` along ``direction`` (target frame), scored on
-    a subset of the source's full view (:data:`SWEEP_POINTS`); the :data:`SWEEP_PEAKS` best
-    local maxima of each sweep polished and then placed along the direction on the surfaces
-    facing it (:func:`place_along`; a polish afterwards may slide it off again).
+    a subset of the source's full view (:data:`SWEEP_POINTS`), and in half steps on the
+    source's points facing the direction only (a cue's surfaces); the :data:`SWEEP_PEAKS` best
+    local maxima of each score (those of the second at least ``step_m`` from the first's)
+    polished and then placed along the direction on the surfaces facing it
+    (:func:`place_along`; a polish afterwards may slide it off again).
 
     Parameters
     ----------
@@ -205,12 +253,21 @@ def sweep_candidates(
     score = _Scorer.of(pair, threshold_m)
     n = int(np.floor(range_m / step_m))
     offsets = np.arange(-n, n + 1) * step_m
+    fine = np.arange(-2 * n, 2 * n + 1) * (step_m / 2)
     out = []
     for b, base in enumerate([W, *_turns(aliases, W, pivot)]):
         u = _axis(base, direction, polish, range_m / 2)
         s = np.array([score(_shifted(base, d * u)) for d in offsets])
-        for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None):
-            T = _shifted(base, offsets[i] * u)
+        found = [float(offsets[i]) for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None)]
+        # the surfaces facing the axis in half steps: where the cue fits, whatever the rest
+        facing = _FacingScorer.of(pair, base, u, threshold_m)
+        f = np.array([facing(_shifted(base, d * u)) for d in fine])
+        for i in _peaks(f, SWEEP_PEAKS, 2 * n if b == 0 else None, away=2):
+            if all(abs(fine[i] - d) >= step_m for d in found):
+                found.append(float(fine[i]))
+        log.debug("sweep base %d: offsets %s", b, found)
+        for d in found:
+            T = _shifted(base, d * u)
             T = polish(T) if polish is not None else T
             out.append(place_along(T, u, pair, threshold_m, span_m=step_m))
     log.info("sweep along %s: %d poses", np.round(direction, 3), len(out))
@@ -340,6 +397,7 @@ def tournament(
     if len(players) < 2:
         return None
     masks = [pose_masks(pair, p.T_target_source, threshold_m) for p in players]
+    n = pair.points
     passing = [open_share(m) <= config.verdict_full_max_conflict for m in masks]
     top = max(p.score for p in players)
     close = [k for k, p in enumerate(players) if p.score >= config.verdict_ambiguity_ratio * top]
@@ -348,10 +406,26 @@ def tournament(
         if not passing[i] or i not in close:
             continue
         duels = {k: duel(masks[i], masks[k]) for k in range(len(players)) if k != i}
-        if any(decisive_full(lost, won, config) for won, lost in duels.values()):
+        if any(decisive_full(lost, won, config, points=n) for won, lost in duels.values()):
             continue
-        if all(decisive_full(*duels[k], config) for k in close if k != i):
+        if all(decisive_full(*duels[k], config, points=n) for k in close if k != i):
             winners.append(p)
+    for i, p in enumerate(players):
+        log.debug(
+            "player %d %s score %.3f open %.0f t %s duels %s",
+            *(
+                i,
+                p.origin,
+                p.score,
+                open_share(masks[i]) * n,
+                np.round(p.T_target_source[:3, 3], 2),
+            ),
+            [
+                tuple(round(x * n) for x in duel(masks[i], masks[k]))
+                for k in range(len(players))
+                if k != i
+            ],
+        )
     if len(winners) != 1:
         return None
     log.info("tournament of %d: %s settles it", len(players), winners[0].origin)
@@ -376,6 +450,9 @@ class Settlement:
         Clearly different candidates in the tournament (0 or 1: none was held).
     won : bool
         Whether one player beat every other decisively (it is the answer).
+    axis : (3,) float64 or None
+        The swept direction (target frame) when the winner was placed along it: the cue
+        alone fixes the position there (:func:`pin_along`).
     """
 
     coarse: Coarse
@@ -383,6 +460,20 @@ class Settlement:
     sweep: dict[str, object] | None = None
     players: int = 0
     won: bool = False
+    axis: NDArray[np.float64] | None = None
+
+
+def pin_along(
+    settled: Settlement, T: NDArray[np.float64], threshold_m: float, config: RegistrationConfig
+) -> NDArray[np.float64]:
+    """``T`` (a refined pose) placed again along the axis the settlement placed its winner
+    on (:func:`place_along`, within ``sweep_step_m`` either way); ``T`` itself when there is
+    none. ICP has nothing but grazing floors and walls to pull on along a tunnel's axis and
+    slides: on tunnel-cue 3 it moved a pose placed 3 cm from the truth to 17 cm (the two-way
+    soft score, which the guard reads, rose by 0.013 all the same)."""
+    if settled.axis is None or settled.pair is None:
+        return T
+    return place_along(T, settled.axis, settled.pair, threshold_m, span_m=config.sweep_step_m)
 
 
 def settle(
@@ -479,7 +570,8 @@ def settle(
         log.info("the tournament's winner (%s) is the answer", winner.origin)
         kt, ks = keypoints
         out = at_pose(winner.origin, winner.T_target_source, kt, ks, thr, judged, c.score)
-    return Settlement(out, pair, sweep, len(players), winner is not None)
+    axis = u if winner is not None else None
+    return Settlement(out, pair, sweep, len(players), winner is not None, axis)
 
 
 __all__ = [
@@ -491,6 +583,7 @@ __all__ = [
     "contenders",
     "half_turn",
     "open_share",
+    "pin_along",
     "place_along",
     "repeat_direction",
     "settle",

@@ -6,11 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_verdict import CORRIDOR, NICHE, _full_pair, _station, _with
+from test_verdict import CORRIDOR, NICHE, _full_pair, _judged, _station, _with
 
-from flexreg.core.transforms import make_transform, translation_error_m
+from flexreg.core.transforms import make_transform, rotation_about_axis
 from flexreg.registration import RegistrationConfig
-from flexreg.registration.settle import Settlement, _FacingScorer, _peaks, pin_along
+from flexreg.registration.settle import (
+    Settlement,
+    _across,
+    _FacingScorer,
+    _peaks,
+    _Scorer,
+    pin_along,
+    screen,
+)
 from flexreg.registration.verdict import decide, decisive_full
 
 N = 850_000  # points of a 1024 x 512 pair's duel
@@ -80,12 +88,35 @@ def test_facing_score_peaks_on_the_niche():
     assert s[np.abs(offsets) >= 1.0].max() < 0.5 * s.max()
 
 
-def test_pin_along_puts_a_slid_refinement_back_on_the_niche():
-    pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
-    slid = make_transform(np.eye(3), [0.2, 0.0, 0.0]) @ T
-    cfg = RegistrationConfig()
+def test_pin_along_keeps_the_placed_position_along_the_axis_only():
+    """A refinement that slid 0.2 m along the settled axis and 3 cm across it is moved back
+    along the axis only: ICP keeps the other degrees of freedom."""
+    placed = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.5])
+    slid = make_transform(rotation_about_axis([0, 0, 1], 0.301), [1.2, 2.03, 0.5])
     axis = np.array([1.0, 0.0, 0.0])
-    settled = Settlement(coarse=None, pair=pair, won=True, axis=axis)  # type: ignore[arg-type]
-    assert translation_error_m(pin_along(settled, slid, 0.02, cfg), T) < 0.02
-    unsettled = Settlement(coarse=None, pair=pair)  # type: ignore[arg-type]
-    np.testing.assert_array_equal(pin_along(unsettled, slid, 0.02, cfg), slid)
+    settled = Settlement(coarse=None, won=True, axis=axis)  # type: ignore[arg-type]
+    pinned = pin_along(settled, slid, placed)
+    np.testing.assert_allclose(pinned[:3, 3], [1.0, 2.03, 0.5], atol=1e-12)
+    np.testing.assert_array_equal(pinned[:3, :3], slid[:3, :3])
+    unsettled = Settlement(coarse=None)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(pin_along(unsettled, slid, placed), slid)
+
+
+def test_a_turned_pose_beside_the_walls_is_slid_back_across_the_axis():
+    pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
+    beside = make_transform(np.eye(3), [0.0, 0.6, 0.0]) @ T
+    up, axis = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    back = _across(beside, axis, up, _Scorer.of(pair, 0.02))
+    assert abs(back[1, 3] - T[1, 3]) < 0.051
+    np.testing.assert_array_equal(back[[0, 2], 3], beside[[0, 2], 3])
+
+
+def test_screen_keeps_the_first_and_the_least_contradicted():
+    """Of two poses slid along the corridor, the one off the niche scores better on the
+    samples but contradicts the niche; the screen keeps the true one."""
+    pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
+    first = _judged(make_transform(np.eye(3), [4.0, 0.0, 0.0]) @ T, 0.95)
+    off = _judged(make_transform(np.eye(3), [0.5, 0.0, 0.0]) @ T, 0.99)
+    truth = _judged(T, 0.9)
+    assert screen([first, off, truth], pair, 0.02, size=2) == [first, truth]
+    assert screen([first, off], pair, 0.02, size=2) == [first, off]

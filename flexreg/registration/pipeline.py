@@ -553,7 +553,7 @@ def _finish(
     refinement = None
     icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
     if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
-        icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, thr, config))
+        icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, T))
     with run.stage("verdict"):
         scored = coarse = two.score(T_coarse, fine_tol)
         kind = "keypoints"

@@ -25,10 +25,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.transforms import rotation_error_deg, translation_error_m
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.candidates import Aliases, Check, Coarse, Judged, Keypoints3D, at_pose
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import FullPair, FullView, Masks, full_score, pose_masks
+from flexreg.registration.fullres import (
+    FullPair,
+    FullView,
+    Masks,
+    full_masks,
+    full_score,
+    pose_masks,
+)
 from flexreg.registration.verdict import decisive_full, duel
 from flexreg.stages.verification import plane_information
 
@@ -37,11 +44,18 @@ log = logging.getLogger(__name__)
 #: most source points scored per slid pose (every k-th point of its full view)
 SWEEP_POINTS = 40_000
 
+#: most source points facing the axis scored per slid pose (a tunnel at 1024 x 512 has about
+#: 11 000, a niche's sides a few hundred of them)
+FACING_POINTS = 10_000
+
 #: local maxima of each sweep refined, polished and judged
 SWEEP_PEAKS = 3
 
 #: most candidates in a :func:`tournament`
 TOURNAMENT_SIZE = 10
+
+#: most candidates :func:`screen`-ed for a tournament (best scores first)
+SCREENED = 30
 
 #: a turn of the plan's self-overlays is a half turn or so when it turns more than this
 TURN_DEG = 90.0
@@ -129,6 +143,32 @@ def _turns(
     return [half_turn(W, aliases.up, pivot)]
 
 
+#: how far (metres) and in what steps a turned pose is slid across the axis to fit the walls
+ACROSS_M, ACROSS_STEP_M = 2.0, 0.1
+
+
+def _across(
+    T: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    up: NDArray[np.float64],
+    score: Callable[[NDArray[np.float64]], float],
+) -> NDArray[np.float64]:
+    """``T`` slid horizontally across ``direction`` to where ``score`` peaks, within
+    :data:`ACROSS_M` in :data:`ACROSS_STEP_M` steps. The overlap's centroid misses the axis
+    of a tunnel's cross-section when one station stands near a wall (tunnel-cue 4: 57 cm,
+    so the half turn about it stood 1.1 m beside the walls and no slide along the axis
+    fitted); across the axis the walls fix the position."""
+    v = np.cross(np.asarray(up, dtype=np.float64), direction)
+    norm = float(np.linalg.norm(v))
+    if norm < 1e-6:
+        return T
+    v /= norm
+    k = round(ACROSS_M / ACROSS_STEP_M)
+    offsets = np.arange(-k, k + 1) * ACROSS_STEP_M
+    s = [score(_shifted(T, x * v)) for x in offsets]
+    return _shifted(T, float(offsets[int(np.argmax(s))]) * v)
+
+
 def _shifted(T: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
     out = T.copy()
     out[:3, 3] += v
@@ -169,7 +209,7 @@ def _facing(
 @dataclass(eq=False)
 class _FacingScorer:
     """Scores a pose on the source's points facing the sweep's direction only (at most
-    :data:`SWEEP_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
+    :data:`FACING_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
     tunnel the other surfaces change their score with the grazing angles and the reach of
     the other scanner far more than a small cue does (tunnel-cue 1: the truth scores 1 % below
     a pose 12 m away on all points); on the facing points it peaks at the cue."""
@@ -185,7 +225,7 @@ class _FacingScorer:
     ) -> _FacingScorer:
         s = pair.source
         idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
-        idx = idx[:: max(1, -(-len(idx) // SWEEP_POINTS))]
+        idx = idx[:: max(1, -(-len(idx) // FACING_POINTS))]
         return cls(pair.target, s.points[idx], s.point_slack[idx], thr)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
@@ -256,6 +296,8 @@ def sweep_candidates(
     fine = np.arange(-2 * n, 2 * n + 1) * (step_m / 2)
     out = []
     for b, base in enumerate([W, *_turns(aliases, W, pivot)]):
+        if b > 0 and aliases is not None and aliases.up is not None:
+            base = _across(base, direction, aliases.up, score)
         u = _axis(base, direction, polish, range_m / 2)
         s = np.array([score(_shifted(base, d * u)) for d in offsets])
         found = [float(offsets[i]) for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None)]
@@ -339,11 +381,15 @@ def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], config: Registrati
 
 
 def contenders(
-    judged: Sequence[Judged], config: RegistrationConfig, *, floor: float | None = None
+    judged: Sequence[Judged],
+    config: RegistrationConfig,
+    *,
+    floor: float | None = None,
+    size: int = TOURNAMENT_SIZE,
 ) -> list[Judged]:
     """The clearly different candidates, best first, each the best of its neighbourhood:
     those scoring at least ``verdict_ambiguity_ratio`` of the best (``floor`` None), or at
-    least ``floor``; at most :data:`TOURNAMENT_SIZE`."""
+    least ``floor``; at most ``size``."""
     ranked = sorted(judged, key=lambda j: -j.score)
     if not ranked:
         return []
@@ -355,9 +401,34 @@ def contenders(
             break
         if all(_distinct(j.T_target_source, o.T_target_source, config) for o in out):
             out.append(j)
-        if len(out) >= TOURNAMENT_SIZE:
+        if len(out) >= size:
             break
     return out
+
+
+def screen(
+    players: Sequence[Judged], pair: FullPair, threshold_m: float, size: int = TOURNAMENT_SIZE
+) -> list[Judged]:
+    """The first player and the ``size - 1`` others that put the fewest of every k-th point
+    of both scans in open space (:data:`SWEEP_POINTS` each way; ties: the better score
+    first). The samples' scores differ by a percent or two between poses of a tunnel or an
+    arcade, so the best scores are not the right pose's company: a pose slid onto the cue
+    ranked 13th of 20 on tunnel-cue 5; at full resolution it is the one pose that contradicts
+    nothing, and the poses that contradict little are those that can win or refute a
+    winner."""
+    if len(players) <= size:
+        return list(players)
+    s, t = pair.source, pair.target
+    ks = max(1, -(-len(s.points) // SWEEP_POINTS))
+    kt = max(1, -(-len(t.points) // SWEEP_POINTS))
+
+    def conflicts(T: NDArray[np.float64]) -> int:
+        fwd = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m)[1]
+        bwd = full_masks(s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m)[1]
+        return int(fwd.sum()) + int(bwd.sum())
+
+    rest = sorted(players[1:], key=lambda j: (conflicts(j.T_target_source), -j.score))
+    return [players[0], *rest[: size - 1]]
 
 
 def open_share(masks: Masks) -> float:
@@ -464,16 +535,20 @@ class Settlement:
 
 
 def pin_along(
-    settled: Settlement, T: NDArray[np.float64], threshold_m: float, config: RegistrationConfig
+    settled: Settlement, T: NDArray[np.float64], T_placed: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """``T`` (a refined pose) placed again along the axis the settlement placed its winner
-    on (:func:`place_along`, within ``sweep_step_m`` either way); ``T`` itself when there is
-    none. ICP has nothing but grazing floors and walls to pull on along a tunnel's axis and
-    slides: on tunnel-cue 3 it moved a pose placed 3 cm from the truth to 17 cm (the two-way
-    soft score, which the guard reads, rose by 0.013 all the same)."""
-    if settled.axis is None or settled.pair is None:
+    """``T`` (a refined pose) moved along the axis the settlement placed its winner on, so
+    that its position along it is ``T_placed``'s again; ``T`` itself without such an axis.
+    The cue fixes that one coordinate; ICP, with nothing but grazing floors and walls to pull
+    on along a tunnel, slides (tunnel-cue 3: from 3 cm to 17 cm, tunnel-cue 5: from 1 cm to
+    13 cm, while the two-way soft score that the guard reads barely moved). ICP keeps the
+    other five degrees of freedom."""
+    if settled.axis is None:
         return T
-    return place_along(T, settled.axis, settled.pair, threshold_m, span_m=config.sweep_step_m)
+    u = settled.axis / np.linalg.norm(settled.axis)
+    out = np.array(T, dtype=np.float64, copy=True)
+    out[:3, 3] -= float((out[:3, 3] - T_placed[:3, 3]) @ u) * u
+    return out
 
 
 def settle(
@@ -539,6 +614,7 @@ def settle(
         )
         for T in poses:
             judged.append(Judged("sweep", T, *check.judge(T, 2.5 * thr, 0.01)))
+            log.debug("sweep pose at %s: %.3f", np.round(T[:3, 3], 2), judged[-1].score)
         sweep = {
             "kind": kind,
             "direction_target": [round(float(x), 3) for x in u],
@@ -547,9 +623,9 @@ def settle(
             "poses": len(poses),
         }
     answer = Judged(c.origin, W, *check.judge(W, 2.5 * thr, 0.01))
-    others = contenders(judged, config, floor=0.0)
+    others = contenders(judged, config, floor=0.0, size=SCREENED)
     players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
-    players = players[:TOURNAMENT_SIZE]
+    players = screen(players, pair, thr)
     winner = tournament(players, pair, thr, config)
     out = Coarse(
         c.origin,
@@ -575,6 +651,10 @@ def settle(
 
 
 __all__ = [
+    "ACROSS_M",
+    "ACROSS_STEP_M",
+    "FACING_POINTS",
+    "SCREENED",
     "SWEEP_PEAKS",
     "SWEEP_POINTS",
     "TOURNAMENT_SIZE",
@@ -586,6 +666,7 @@ __all__ = [
     "pin_along",
     "place_along",
     "repeat_direction",
+    "screen",
     "settle",
     "sweep_candidates",
     "tournament",

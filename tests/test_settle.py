@@ -4,6 +4,8 @@ facing the axis, and a refined pose pinned back on the cue (hand-made corridor a
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from test_verdict import CORRIDOR, NICHE, _full_pair, _judged, _station, _with
@@ -120,3 +122,18 @@ def test_screen_keeps_the_first_and_the_least_contradicted():
     truth = _judged(T, 0.9)
     assert screen([first, off, truth], pair, 0.02, size=2) == [first, truth]
     assert screen([first, off], pair, 0.02, size=2) == [first, off]
+
+
+def test_a_degenerate_guided_fit_leaves_the_prior_a_candidate(monkeypatch):
+    """Three collinear keypoint inliers around a prior make no rotation: the prior stays a
+    candidate instead of ending the registration."""
+    import flexreg.registration.candidates as cand
+    from flexreg.errors import DegenerateGeometryError
+
+    def degenerate(*args, **kwargs):
+        raise DegenerateGeometryError("the 3 correspondences are collinear")
+
+    monkeypatch.setattr(cand, "guided_fit", degenerate)
+    T, kp = np.eye(4), SimpleNamespace(features=None, points=None)
+    fams = cand.families([("plan", T), ("descriptors", T)], kp, kp, 0.05, RegistrationConfig())
+    assert [[origin for origin, _ in f] for f in fams] == [["plan"]]

@@ -136,8 +136,8 @@ def test_surface_normals_of_a_box_point_towards_the_scanner():
 def test_estimate_up_box_room_recovers_tilt(axis, tilt_deg):
     R = rotation_about_axis(axis, math.radians(tilt_deg))
     img = from_depth(_box_ranges(PANO, R, BOX_LO, BOX_HI), PANO)
-    _, nrm, area = topview.surface_normals(img)
-    lev = topview.estimate_up(nrm, area)
+    pts, nrm, area = topview.surface_normals(img)
+    lev = topview.estimate_up(nrm, area, points=pts)  # the floor test passes a tilted room
     up_true = R.T @ Z
     assert _angle_deg(lev.up, up_true) < 0.05
     assert lev.up[2] > 0 and abs(np.linalg.norm(lev.up) - 1.0) < 1e-12
@@ -160,6 +160,29 @@ def test_estimate_up_from_floor_or_walls_alone(keep):
     assert _angle_deg(lev.up, R.T @ Z) < 0.1
     assert (lev.horizontal_area_m2 > 0) == ("floor" in keep)
     assert (lev.vertical_area_m2 > 0) == ("walls" in keep)
+
+
+def _vault_like(facet_m2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hand-made normals (towards the scanner), areas and points: a floor of 80 m² under the
+    scanner, side walls of 60 m² each, a wall of 60 m² across the axis, and one ceiling facet
+    of ``facet_m2`` inclined 40° (a tunnel's vault) above and beside the scanner."""
+    s, c = math.sin(math.radians(40.0)), math.cos(math.radians(40.0))
+    nrm = np.array([[0, 0, 1.0], [0, 1.0, 0], [0, -1.0, 0], [1.0, 0, 0], [0, -s, -c]])
+    area = np.array([80.0, 60.0, 60.0, 60.0, facet_m2])
+    pts = np.array([[0, 0, -1.5], [0, -4.0, 0], [0, 4.0, 0], [-9.0, 0, 0], [0, 3.0, 4.0]])
+    return np.repeat(nrm, 10, axis=0), np.repeat(area / 10, 10), np.repeat(pts, 10, axis=0)
+
+
+def test_estimate_up_a_vault_facet_without_floor_is_no_vertical():
+    # under Z: floor + walls + cross wall = 260 m² explained; under the facet's normal: the
+    # facet + the cross wall = 310 m² (> 1.1 x 260), but no floor below the scanner
+    nrm, area, pts = _vault_like(250.0)
+    with pytest.raises(DegenerateGeometryError, match=r"not levelled: tilt 40\.0°"):
+        topview.estimate_up(nrm, area)  # without points the floor test is skipped
+    lev = topview.estimate_up(nrm, area, points=pts)
+    assert math.degrees(lev.tilt_rad) < 1e-6
+    assert lev.horizontal_area_m2 == pytest.approx(80.0)
+    assert lev.vertical_area_m2 == pytest.approx(180.0)
 
 
 def test_estimate_up_tilt_beyond_limit_raises():

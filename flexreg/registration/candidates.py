@@ -28,7 +28,7 @@ from flexreg.core.transforms import (
     rotation_error_deg,
     translation_error_m,
 )
-from flexreg.errors import RegistrationError
+from flexreg.errors import DegenerateGeometryError, RegistrationError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
@@ -232,17 +232,23 @@ def _guided(
     thr: float,
     config: RegistrationConfig,
 ) -> tuple[NDArray[np.float64], int] | None:
-    """:func:`~flexreg.stages.alignment.guided_fit` around ``T0``: its transform and inliers."""
-    fit = guided_fit(
-        kt.features,
-        ks.features,
-        kt.points,
-        ks.points,
-        T0,
-        threshold_m=thr,
-        radius_m=config.guided_radius_m,
-        radius_per_m=config.guided_radius_per_m,
-    )
+    """:func:`~flexreg.stages.alignment.guided_fit` around ``T0``: its transform and inliers;
+    None when there is none, or when its matches are degenerate (three collinear inliers of
+    a tunnel against an arcade at 2048 x 1024 ended the whole registration there)."""
+    try:
+        fit = guided_fit(
+            kt.features,
+            ks.features,
+            kt.points,
+            ks.points,
+            T0,
+            threshold_m=thr,
+            radius_m=config.guided_radius_m,
+            radius_per_m=config.guided_radius_per_m,
+        )
+    except DegenerateGeometryError as e:
+        log.debug("guided fit around a prior skipped: %s", e)
+        return None
     return None if fit is None else (fit.T_target_source, int(fit.inliers.sum()))
 
 

@@ -54,7 +54,7 @@ from flexreg.registration.candidates import (
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
 from flexreg.registration.result import RegistrationResult
-from flexreg.registration.settle import Settlement, settle
+from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.verdict import (
     MAX_RIVALS,
     Scored,
@@ -66,7 +66,7 @@ from flexreg.registration.verdict import (
 from flexreg.stages import feature_images
 from flexreg.stages.alignment import consistent_subset, ransac_rigid
 from flexreg.stages.correspondences import derive_threshold, lift
-from flexreg.stages.keypoints import detect_and_describe
+from flexreg.stages.keypoints import detect_and_describe, strip_rows
 from flexreg.stages.matching import match
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.overlap import measure_overlap
@@ -209,15 +209,6 @@ def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) ->
     return [fill_holes(i) for i in images] if config.fill_holes else images
 
 
-def _strip_rows(shape: tuple[int, ...], pixels: int) -> int | None:
-    """Rows per strip of the feature detection on an image of ``shape`` (None: whole image):
-    ``config.feature_strip_pixels`` pixels per strip, at least 64 rows."""
-    H, W = shape[:2]
-    if pixels <= 0 or H * W <= pixels:
-        return None
-    return max(64, pixels // max(W, 1))
-
-
 def _keypoints(
     images: list[RangeImage], config: RegistrationConfig, run: _Run
 ) -> list[Keypoints3D]:
@@ -232,7 +223,7 @@ def _keypoints(
                 m,
                 max_features=config.max_features,
                 wrap=img.wraps,
-                strip_rows=_strip_rows(f.shape, config.feature_strip_pixels),
+                strip_rows=strip_rows(f.shape, config.feature_strip_pixels),
             )
             for (f, m), img in zip(converted, images, strict=True)
         ]
@@ -556,6 +547,8 @@ def _finish(
     info = point_information(q[cons])
     refinement = None
     icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
+    if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
+        icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, T))
     with run.stage("verdict"):
         scored = coarse = two.score(T_coarse, fine_tol)
         kind = "keypoints"

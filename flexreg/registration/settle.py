@@ -25,10 +25,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.transforms import rotation_error_deg, translation_error_m
+from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.candidates import Aliases, Check, Coarse, Judged, Keypoints3D, at_pose
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import FullPair, FullView, Masks, full_score, pose_masks
+from flexreg.registration.fullres import (
+    FullPair,
+    FullView,
+    Masks,
+    full_masks,
+    full_score,
+    pose_masks,
+)
 from flexreg.registration.verdict import decisive_full, duel
 from flexreg.stages.verification import plane_information
 
@@ -37,11 +44,18 @@ log = logging.getLogger(__name__)
 #: most source points scored per slid pose (every k-th point of its full view)
 SWEEP_POINTS = 40_000
 
+#: most source points facing the axis scored per slid pose (a tunnel at 1024 x 512 has about
+#: 11 000, a niche's sides a few hundred of them)
+FACING_POINTS = 10_000
+
 #: local maxima of each sweep refined, polished and judged
 SWEEP_PEAKS = 3
 
 #: most candidates in a :func:`tournament`
 TOURNAMENT_SIZE = 10
+
+#: most candidates :func:`screen`-ed for a tournament (best scores first)
+SCREENED = 30
 
 #: a turn of the plan's self-overlays is a half turn or so when it turns more than this
 TURN_DEG = 90.0
@@ -129,6 +143,32 @@ def _turns(
     return [half_turn(W, aliases.up, pivot)]
 
 
+#: how far (metres) and in what steps a turned pose is slid across the axis to fit the walls
+ACROSS_M, ACROSS_STEP_M = 2.0, 0.1
+
+
+def _across(
+    T: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    up: NDArray[np.float64],
+    score: Callable[[NDArray[np.float64]], float],
+) -> NDArray[np.float64]:
+    """``T`` slid horizontally across ``direction`` to where ``score`` peaks, within
+    :data:`ACROSS_M` in :data:`ACROSS_STEP_M` steps. The overlap's centroid misses the axis
+    of a tunnel's cross-section when one station stands near a wall (tunnel-cue 4: 57 cm,
+    so the half turn about it stood 1.1 m beside the walls and no slide along the axis
+    fitted); across the axis the walls fix the position."""
+    v = np.cross(np.asarray(up, dtype=np.float64), direction)
+    norm = float(np.linalg.norm(v))
+    if norm < 1e-6:
+        return T
+    v /= norm
+    k = round(ACROSS_M / ACROSS_STEP_M)
+    offsets = np.arange(-k, k + 1) * ACROSS_STEP_M
+    s = [score(_shifted(T, x * v)) for x in offsets]
+    return _shifted(T, float(offsets[int(np.argmax(s))]) * v)
+
+
 def _shifted(T: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
     out = T.copy()
     out[:3, 3] += v
@@ -155,13 +195,59 @@ class _Scorer:
         return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
 
 
-def _peaks(scores: NDArray[np.float64], count: int, skip: int | None) -> list[int]:
-    """Indices of the best local maxima of a 1-D score (not ``skip``)."""
+def _facing(
+    pair: FullPair, R: NDArray[np.float64], direction: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """The source's points whose normal, turned by ``R`` into the target frame, lies within
+    60 degrees of ``direction`` either way: the only surfaces a slide along it moves across
+    themselves (a tunnel's niche and its cabinets, a forklift's front and back)."""
+    n = pair.source.normals @ R.T
+    with np.errstate(invalid="ignore"):
+        return np.asarray(np.abs(n @ direction) >= 0.5)
+
+
+@dataclass(eq=False)
+class _FacingScorer:
+    """Scores a pose on the source's points facing the sweep's direction only (at most
+    :data:`FACING_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
+    tunnel the other surfaces change their score with the grazing angles and the reach of
+    the other scanner far more than a small cue does (tunnel-cue 1: the truth scores 1 % below
+    a pose 12 m away on all points); on the facing points it peaks at the cue."""
+
+    target: FullView
+    points: NDArray[np.float64]
+    slack: NDArray[np.float64]
+    threshold_m: float
+
+    @classmethod
+    def of(
+        cls, pair: FullPair, base: NDArray[np.float64], direction: NDArray[np.float64], thr: float
+    ) -> _FacingScorer:
+        s = pair.source
+        idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
+        idx = idx[:: max(1, -(-len(idx) // FACING_POINTS))]
+        return cls(pair.target, s.points[idx], s.point_slack[idx], thr)
+
+    def __call__(self, T: NDArray[np.float64]) -> float:
+        if len(self.points) == 0:
+            return 0.0
+        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+
+
+def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
+    """Indices of the best local maxima of a 1-D score (not ``skip``), each more than
+    ``away`` indices from every better one kept."""
     s = np.asarray(scores)
     left = np.concatenate([[-np.inf], s[:-1]])
     right = np.concatenate([s[1:], [-np.inf]])
     idx = [int(i) for i in np.flatnonzero((s >= left) & (s >= right)) if i != skip]
-    return sorted(idx, key=lambda i: -s[i])[:count]
+    out: list[int] = []
+    for i in sorted(idx, key=lambda i: -s[i]):
+        if all(abs(i - k) > away for k in out):
+            out.append(i)
+        if len(out) >= count:
+            break
+    return out
 
 
 def sweep_candidates(
@@ -178,9 +264,11 @@ def sweep_candidates(
 ) -> list[NDArray[np.float64]]:
     """Poses slid along ``direction``: the winner ``W`` and its half turn, each moved by every
     multiple of ``step_m`` within ``range_m`` along ``direction`` (target frame), scored on
-    a subset of the source's full view (:data:`SWEEP_POINTS`); the :data:`SWEEP_PEAKS` best
-    local maxima of each sweep polished and then placed along the direction on the surfaces
-    facing it (:func:`place_along`; a polish afterwards may slide it off again).
+    a subset of the source's full view (:data:`SWEEP_POINTS`), and in half steps on the
+    source's points facing the direction only (a cue's surfaces); the :data:`SWEEP_PEAKS` best
+    local maxima of each score (those of the second at least ``step_m`` from the first's)
+    polished and then placed along the direction on the surfaces facing it
+    (:func:`place_along`; a polish afterwards may slide it off again).
 
     Parameters
     ----------
@@ -205,12 +293,23 @@ def sweep_candidates(
     score = _Scorer.of(pair, threshold_m)
     n = int(np.floor(range_m / step_m))
     offsets = np.arange(-n, n + 1) * step_m
+    fine = np.arange(-2 * n, 2 * n + 1) * (step_m / 2)
     out = []
     for b, base in enumerate([W, *_turns(aliases, W, pivot)]):
+        if b > 0 and aliases is not None and aliases.up is not None:
+            base = _across(base, direction, aliases.up, score)
         u = _axis(base, direction, polish, range_m / 2)
         s = np.array([score(_shifted(base, d * u)) for d in offsets])
-        for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None):
-            T = _shifted(base, offsets[i] * u)
+        found = [float(offsets[i]) for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None)]
+        # the surfaces facing the axis in half steps: where the cue fits, whatever the rest
+        facing = _FacingScorer.of(pair, base, u, threshold_m)
+        f = np.array([facing(_shifted(base, d * u)) for d in fine])
+        for i in _peaks(f, SWEEP_PEAKS, 2 * n if b == 0 else None, away=2):
+            if all(abs(fine[i] - d) >= step_m for d in found):
+                found.append(float(fine[i]))
+        log.debug("sweep base %d: offsets %s", b, found)
+        for d in found:
+            T = _shifted(base, d * u)
             T = polish(T) if polish is not None else T
             out.append(place_along(T, u, pair, threshold_m, span_m=step_m))
     log.info("sweep along %s: %d poses", np.round(direction, 3), len(out))
@@ -282,11 +381,15 @@ def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], config: Registrati
 
 
 def contenders(
-    judged: Sequence[Judged], config: RegistrationConfig, *, floor: float | None = None
+    judged: Sequence[Judged],
+    config: RegistrationConfig,
+    *,
+    floor: float | None = None,
+    size: int = TOURNAMENT_SIZE,
 ) -> list[Judged]:
     """The clearly different candidates, best first, each the best of its neighbourhood:
     those scoring at least ``verdict_ambiguity_ratio`` of the best (``floor`` None), or at
-    least ``floor``; at most :data:`TOURNAMENT_SIZE`."""
+    least ``floor``; at most ``size``."""
     ranked = sorted(judged, key=lambda j: -j.score)
     if not ranked:
         return []
@@ -298,9 +401,34 @@ def contenders(
             break
         if all(_distinct(j.T_target_source, o.T_target_source, config) for o in out):
             out.append(j)
-        if len(out) >= TOURNAMENT_SIZE:
+        if len(out) >= size:
             break
     return out
+
+
+def screen(
+    players: Sequence[Judged], pair: FullPair, threshold_m: float, size: int = TOURNAMENT_SIZE
+) -> list[Judged]:
+    """The first player and the ``size - 1`` others that put the fewest of every k-th point
+    of both scans in open space (:data:`SWEEP_POINTS` each way; ties: the better score
+    first). The samples' scores differ by a percent or two between poses of a tunnel or an
+    arcade, so the best scores are not the right pose's company: a pose slid onto the cue
+    ranked 13th of 20 on tunnel-cue 5; at full resolution it is the one pose that contradicts
+    nothing, and the poses that contradict little are those that can win or refute a
+    winner."""
+    if len(players) <= size:
+        return list(players)
+    s, t = pair.source, pair.target
+    ks = max(1, -(-len(s.points) // SWEEP_POINTS))
+    kt = max(1, -(-len(t.points) // SWEEP_POINTS))
+
+    def conflicts(T: NDArray[np.float64]) -> int:
+        fwd = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m)[1]
+        bwd = full_masks(s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m)[1]
+        return int(fwd.sum()) + int(bwd.sum())
+
+    rest = sorted(players[1:], key=lambda j: (conflicts(j.T_target_source), -j.score))
+    return [players[0], *rest[: size - 1]]
 
 
 def open_share(masks: Masks) -> float:
@@ -340,6 +468,7 @@ def tournament(
     if len(players) < 2:
         return None
     masks = [pose_masks(pair, p.T_target_source, threshold_m) for p in players]
+    n = pair.points
     passing = [open_share(m) <= config.verdict_full_max_conflict for m in masks]
     top = max(p.score for p in players)
     close = [k for k, p in enumerate(players) if p.score >= config.verdict_ambiguity_ratio * top]
@@ -348,10 +477,26 @@ def tournament(
         if not passing[i] or i not in close:
             continue
         duels = {k: duel(masks[i], masks[k]) for k in range(len(players)) if k != i}
-        if any(decisive_full(lost, won, config) for won, lost in duels.values()):
+        if any(decisive_full(lost, won, config, points=n) for won, lost in duels.values()):
             continue
-        if all(decisive_full(*duels[k], config) for k in close if k != i):
+        if all(decisive_full(*duels[k], config, points=n) for k in close if k != i):
             winners.append(p)
+    for i, p in enumerate(players):
+        log.debug(
+            "player %d %s score %.3f open %.0f t %s duels %s",
+            *(
+                i,
+                p.origin,
+                p.score,
+                open_share(masks[i]) * n,
+                np.round(p.T_target_source[:3, 3], 2),
+            ),
+            [
+                tuple(round(x * n) for x in duel(masks[i], masks[k]))
+                for k in range(len(players))
+                if k != i
+            ],
+        )
     if len(winners) != 1:
         return None
     log.info("tournament of %d: %s settles it", len(players), winners[0].origin)
@@ -376,6 +521,9 @@ class Settlement:
         Clearly different candidates in the tournament (0 or 1: none was held).
     won : bool
         Whether one player beat every other decisively (it is the answer).
+    axis : (3,) float64 or None
+        The swept direction (target frame) when the winner was placed along it: the cue
+        alone fixes the position there (:func:`pin_along`).
     """
 
     coarse: Coarse
@@ -383,6 +531,24 @@ class Settlement:
     sweep: dict[str, object] | None = None
     players: int = 0
     won: bool = False
+    axis: NDArray[np.float64] | None = None
+
+
+def pin_along(
+    settled: Settlement, T: NDArray[np.float64], T_placed: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``T`` (a refined pose) moved along the axis the settlement placed its winner on, so
+    that its position along it is ``T_placed``'s again; ``T`` itself without such an axis.
+    The cue fixes that one coordinate; ICP, with nothing but grazing floors and walls to pull
+    on along a tunnel, slides (tunnel-cue 3: from 3 cm to 17 cm, tunnel-cue 5: from 1 cm to
+    13 cm, while the two-way soft score that the guard reads barely moved). ICP keeps the
+    other five degrees of freedom."""
+    if settled.axis is None:
+        return T
+    u = settled.axis / np.linalg.norm(settled.axis)
+    out = np.array(T, dtype=np.float64, copy=True)
+    out[:3, 3] -= float((out[:3, 3] - T_placed[:3, 3]) @ u) * u
+    return out
 
 
 def settle(
@@ -448,6 +614,7 @@ def settle(
         )
         for T in poses:
             judged.append(Judged("sweep", T, *check.judge(T, 2.5 * thr, 0.01)))
+            log.debug("sweep pose at %s: %.3f", np.round(T[:3, 3], 2), judged[-1].score)
         sweep = {
             "kind": kind,
             "direction_target": [round(float(x), 3) for x in u],
@@ -456,9 +623,9 @@ def settle(
             "poses": len(poses),
         }
     answer = Judged(c.origin, W, *check.judge(W, 2.5 * thr, 0.01))
-    others = contenders(judged, config, floor=0.0)
+    others = contenders(judged, config, floor=0.0, size=SCREENED)
     players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
-    players = players[:TOURNAMENT_SIZE]
+    players = screen(players, pair, thr)
     winner = tournament(players, pair, thr, config)
     out = Coarse(
         c.origin,
@@ -479,10 +646,15 @@ def settle(
         log.info("the tournament's winner (%s) is the answer", winner.origin)
         kt, ks = keypoints
         out = at_pose(winner.origin, winner.T_target_source, kt, ks, thr, judged, c.score)
-    return Settlement(out, pair, sweep, len(players), winner is not None)
+    axis = u if winner is not None else None
+    return Settlement(out, pair, sweep, len(players), winner is not None, axis)
 
 
 __all__ = [
+    "ACROSS_M",
+    "ACROSS_STEP_M",
+    "FACING_POINTS",
+    "SCREENED",
     "SWEEP_PEAKS",
     "SWEEP_POINTS",
     "TOURNAMENT_SIZE",
@@ -491,8 +663,10 @@ __all__ = [
     "contenders",
     "half_turn",
     "open_share",
+    "pin_along",
     "place_along",
     "repeat_direction",
+    "screen",
     "settle",
     "sweep_candidates",
     "tournament",

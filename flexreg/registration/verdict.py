@@ -532,20 +532,35 @@ def decisive(won: float, lost: float, cfg: RegistrationConfig) -> bool:
     return won - lost >= cfg.verdict_decisive_share and won >= cfg.verdict_decisive_ratio * lost
 
 
-def decisive_full(won: float, lost: float, cfg: RegistrationConfig) -> bool:
+def decisive_full(won: float, lost: float, cfg: RegistrationConfig, *, points: int = 0) -> bool:
     """Whether full-resolution :func:`duel` shares (:mod:`flexreg.registration.fullres`)
-    settle two poses: ``won - lost >= verdict_full_decisive_share`` and
-    ``won >= verdict_decisive_ratio * lost``.
+    settle two poses: ``won >= verdict_decisive_ratio * lost`` and a lead ``won - lost`` of
+    at least ``verdict_full_decisive_share`` of the points, or, given the number of
+    ``points`` checked, of at least ``verdict_full_decisive_points`` points.
+
+    The share scales with the scans; a small cue does not (a forklift seen two bays away
+    leads by 13-53 points of 850 000 at 1024 x 512, less than the share's 85), while the
+    duels of empty tunnels, arcades and rooms leave 0-2 points either way: a count floor
+    between them with the ratio settles the cue and leaves the empty scenes open.
 
     >>> cfg = RegistrationConfig()
     >>> decisive_full(0.0005, 0.0, cfg), decisive_full(0.00005, 0.0, cfg)
     (True, False)
     >>> decisive_full(0.0006, 0.0003, cfg)
     False
+    >>> n = 850_000  # 17 points against none, and 17 against 6 (not 3 : 1)
+    >>> decisive_full(17 / n, 0.0, cfg, points=n), decisive_full(17 / n, 6 / n, cfg, points=n)
+    (True, False)
+    >>> decisive_full(2 / n, 0.0, cfg, points=n)
+    False
     """
-    return (
-        won - lost >= cfg.verdict_full_decisive_share and won >= cfg.verdict_decisive_ratio * lost
-    )
+    if won < cfg.verdict_decisive_ratio * lost:
+        return False
+    lead = won - lost
+    if lead >= cfg.verdict_full_decisive_share:
+        return True
+    floor = cfg.verdict_full_decisive_points
+    return points > 0 and floor > 0 and lead * points >= floor - 1e-6
 
 
 def _settled(u: dict[str, Any], ev: dict[str, Any], cfg: RegistrationConfig) -> bool:
@@ -557,7 +572,7 @@ def _settled(u: dict[str, Any], ev: dict[str, Any], cfg: RegistrationConfig) -> 
     if full.get("open_space_share", 1.0) > cfg.verdict_full_max_conflict:
         return False
     return "full_refuted_share" in u and decisive_full(
-        u["full_refuted_share"], u["full_refuting_share"], cfg
+        u["full_refuted_share"], u["full_refuting_share"], cfg, points=u.get("full_points", 0)
     )
 
 

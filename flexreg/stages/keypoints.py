@@ -122,6 +122,16 @@ def to_uint8(image: NDArray[Any]) -> NDArray[np.uint8]:
     raise InputError("image", f"unsupported feature image dtype {a.dtype}")
 
 
+def strip_rows(shape: tuple[int, ...], pixels: int) -> int | None:
+    """Rows per strip of the feature detection on an image of ``shape`` (None: the whole
+    image): ``pixels`` pixels per strip (a configuration's ``feature_strip_pixels``), at
+    least 64 rows."""
+    H, W = shape[:2]
+    if pixels <= 0 or H * W <= pixels:
+        return None
+    return max(64, pixels // max(W, 1))
+
+
 def detect_and_describe(
     image: NDArray[Any],
     method: str = "sift",

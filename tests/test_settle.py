@@ -137,3 +137,56 @@ def test_a_degenerate_guided_fit_leaves_the_prior_a_candidate(monkeypatch):
     T, kp = np.eye(4), SimpleNamespace(features=None, points=None)
     fams = cand.families([("plan", T), ("descriptors", T)], kp, kp, 0.05, RegistrationConfig())
     assert [[origin for origin, _ in f] for f in fams] == [["plan"]]
+
+
+@pytest.mark.parametrize(
+    ("own", "refuted", "refuting", "ambiguous"),
+    [
+        (0.00026, 0.00915, 0.00025, False),  # warehouse 07 <- 08: a bay off refuted outright
+        (0.00026, 0.0025, 0.0, True),  # the runner-up under settle_open_share (0.3 %)
+        (0.0012, 0.00915, 0.0, True),  # the answer itself not clean (above 0.1 %)
+        (0.00026, 0.00915, 0.0012, True),  # the runner-up refutes the answer too (< 10 x)
+    ],
+)
+def test_a_runner_up_full_resolution_refutes_outright_is_no_ambiguity(
+    own, refuted, refuting, ambiguous
+):
+    """Rack bays leave the right pose 0.026 % of points in open space, above the empty
+    scenes' 0.01 % (``verdict_full_max_conflict``); a pose one bay off puts 0.9 % there."""
+    ev = _with()
+    ev["runner_up"] = {
+        "score_ratio": 1.0,
+        "rotation_deg": 0.0,
+        "translation_m": 5.65,
+        "offset_m": [-4.35, 3.61, 0.0],
+        "refuted_share": 0.04,
+        "refuting_share": 0.02,
+        "full_refuted_share": refuted,
+        "full_refuting_share": refuting,
+        "full_points": 757_580,
+    }
+    ev["runner_ups"] = [ev["runner_up"]]
+    ev["full_resolution"] = {"points": 757_580, "open_space_share": own}
+    assert ("ambiguous" in [r.code for r in decide(ev).reasons]) is ambiguous
+
+
+def test_rescue_replaces_an_answer_full_resolution_contradicts():
+    """A box with a cupboard: the answer is the pose turned 180° about the centre (its
+    cupboard lands where the other scanner saw the wall); the truth among the candidates is
+    clean and beats it; without the truth, nothing replaces the answer."""
+    from test_verdict import BOX, CUPBOARD, _turn_about_centre
+
+    from flexreg.core.transforms import invert
+    from flexreg.registration.fullres import pose_masks
+    from flexreg.registration.settle import open_share, rescue
+
+    T_wt, T_ws = _station(0.6, 0.4), _station(-1.0, 0.5, 30)
+    pair, T = _full_pair(*BOX, CUPBOARD, T_wt, T_ws)
+    wrong = invert(T_wt) @ _turn_about_centre(180) @ T_ws
+    cfg = RegistrationConfig(settle_open_share=1e-4)  # the hand-made box is tiny
+    masks = pose_masks(pair, wrong, 0.02)
+    assert open_share(masks) >= cfg.settle_open_share
+    out = rescue(masks, [_judged(T), _judged(wrong)], wrong, pair, 0.02, cfg)
+    assert out is not None and np.allclose(out.T_target_source, T)
+    far = make_transform(np.eye(3), [0.0, 40.0, 0.0]) @ T  # clean only by seeing nothing
+    assert rescue(masks, [_judged(far)], wrong, pair, 0.02, cfg) is None

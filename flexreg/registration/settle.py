@@ -431,6 +431,63 @@ def screen(
     return [players[0], *rest[: size - 1]]
 
 
+def _other_row(u: NDArray[np.float64], aliases: Aliases | None) -> NDArray[np.float64]:
+    """The horizontal direction across ``u`` (unit, target frame)."""
+    up = aliases.up if aliases is not None and aliases.up is not None else np.array([0, 0, 1.0])
+    v = np.cross(np.asarray(up, dtype=np.float64), u)
+    return np.asarray(v / (np.linalg.norm(v) or 1.0), dtype=np.float64)
+
+
+def rescue(
+    contradicted: Masks,
+    judged: Sequence[Judged],
+    W: NDArray[np.float64],
+    pair: FullPair,
+    threshold_m: float,
+    config: RegistrationConfig,
+) -> Judged | None:
+    """The candidate that replaces an answer full resolution contradicts, or None.
+
+    The answer ``W`` puts at least ``settle_open_share`` of both scans in open space (one bay
+    or aisle off in a repeating hall: the cue is where the other scanner saw through). Its
+    twins and the swept poses are screened (:func:`screen`); the one that puts the fewest
+    points in open space wins when that is under a third of ``settle_open_share``, it beats
+    the answer :func:`~flexreg.registration.verdict.decisive_full`-ly, explains at least half
+    as many points (not clean merely by seeing less of the other scan), and no other clearly
+    different clean candidate (within twice its open share) is left unbeaten."""
+    answer = Judged("answer", W, 0.0, 0.0, 0.0)
+    others = [j for j in judged if _distinct(j.T_target_source, W, config)]
+    ranked = screen([answer, *others], pair, threshold_m, size=TOURNAMENT_SIZE)[1:]
+    n = pair.points
+    scored = []
+    for j in ranked:
+        m = pose_masks(pair, j.T_target_source, threshold_m)
+        scored.append((open_share(m), j, m))
+    scored.sort(key=lambda x: x[0])
+    if not scored or scored[0][0] > config.settle_open_share / 3:
+        return None
+    share, best, masks = scored[0]
+    if not decisive_full(*duel(masks, contradicted), config, points=n):
+        return None
+    if _explained(masks) < 0.5 * _explained(contradicted):  # clean only by seeing less
+        return None
+    for other_share, j, m in scored[1:]:
+        if other_share <= 2 * max(share, 1.0 / n) and _distinct(
+            j.T_target_source, best.T_target_source, config
+        ):
+            if not decisive_full(*duel(masks, m), config, points=n):
+                return None
+    log.info("full resolution contradicts the answer; %s puts %.3f%% in open space", best.origin,
+             100 * share)  # fmt: skip
+    return best
+
+
+def _explained(masks: Masks) -> float:
+    """Share of all points of both scans a pose explains."""
+    n = sum(len(ok) for ok, _ in masks)
+    return sum(int(ok.sum()) for ok, _ in masks) / n if n else 0.0
+
+
 def open_share(masks: Masks) -> float:
     """Share of all points of both scans that a pose puts in open space (its
     :func:`~flexreg.registration.fullres.pose_masks`)."""
@@ -593,25 +650,41 @@ def settle(
     kind, u = "weak_axis", weak_direction(check, normals, W, thr, config.sweep_axis_strength)
     if u is None and rivals:  # a repeat matters only when a pose beside the answer competes
         kind, u = "repeat", repeat_direction(aliases)
-    if u is None and not rivals:
-        return Settlement(c)
-    pair = full_pair()
+    pair, contradicted = None, None
+    if u is None and not rivals:  # ... or when full resolution contradicts the answer
+        u = repeat_direction(aliases)
+        if u is None:
+            return Settlement(c)
+        pair = full_pair()
+        contradicted = pose_masks(pair, W, thr)
+        share = open_share(contradicted)
+        if share < config.settle_open_share:
+            return Settlement(c)
+        kind = "repeat"
+        log.debug("answer puts %.2f%% in open space at full resolution: sweep", 100 * share)
+    pair = pair if pair is not None else full_pair()
     judged = list(c.judged)
     sweep = None
     if u is not None:
         q, ok, _ = check.classify(W, thr / 2, 0.002)
         pivot = q[ok].mean(axis=0) if ok.any() else W[:3, 3]
-        poses = sweep_candidates(
-            W,
-            u,
-            aliases,
-            pair,
-            thr,
-            polish,
-            pivot=pivot,
-            range_m=config.sweep_range_m,
-            step_m=config.sweep_step_m,
-        )
+        # a contradicted answer in a repeating hall may be off along either of its rows
+        axes = [u] if contradicted is None else [u, _other_row(u, aliases)]
+        poses = [
+            T
+            for a in axes
+            for T in sweep_candidates(
+                W,
+                a,
+                aliases,
+                pair,
+                thr,
+                polish,
+                pivot=pivot,
+                range_m=config.sweep_range_m,
+                step_m=config.sweep_step_m,
+            )
+        ]
         for T in poses:
             judged.append(Judged("sweep", T, *check.judge(T, 2.5 * thr, 0.01)))
             log.debug("sweep pose at %s: %.3f", np.round(T[:3, 3], 2), judged[-1].score)
@@ -627,6 +700,8 @@ def settle(
     players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
     players = screen(players, pair, thr)
     winner = tournament(players, pair, thr, config)
+    if winner is None and contradicted is not None:
+        winner = rescue(contradicted, judged, W, pair, thr, config)
     out = Coarse(
         c.origin,
         W,
@@ -666,6 +741,7 @@ __all__ = [
     "pin_along",
     "place_along",
     "repeat_direction",
+    "rescue",
     "screen",
     "settle",
     "sweep_candidates",

@@ -565,11 +565,20 @@ def decisive_full(won: float, lost: float, cfg: RegistrationConfig, *, points: i
 
 def _settled(u: dict[str, Any], ev: dict[str, Any], cfg: RegistrationConfig) -> bool:
     """Whether the answer beats a runner-up decisively, on the samples or at full
-    resolution (there only when the answer itself puts almost nothing in open space)."""
+    resolution (there only when the answer itself puts almost nothing in open space, or
+    when the runner-up puts ``settle_open_share`` of the points in open space, ten times
+    what the answer does and what it refutes of the runner-up's)."""
     if "refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], cfg):
         return True
     full = ev.get("full_resolution") or {}
-    if full.get("open_space_share", 1.0) > cfg.verdict_full_max_conflict:
+    own = full.get("open_space_share", 1.0)
+    if (  # a runner-up full resolution refutes outright (a bay off in a repeating hall)
+        u.get("full_refuted_share", 0.0) >= cfg.settle_open_share
+        and own <= cfg.settle_open_share / 3
+        and u["full_refuted_share"] >= 10 * max(u["full_refuting_share"], own)
+    ):
+        return True
+    if own > cfg.verdict_full_max_conflict:
         return False
     return "full_refuted_share" in u and decisive_full(
         u["full_refuted_share"], u["full_refuting_share"], cfg, points=u.get("full_points", 0)

@@ -292,7 +292,9 @@ def _lone_suspect(
     * an *ambiguous* link across the same cut (its verdict found a clearly different pose
       that fits about as well: a symmetric room, repeating bays) agrees with that placement:
       the placement is one of twins and nothing checks which (an ambiguous link that
-      disagrees says nothing about it); or
+      disagrees says nothing about it). The tree links between the ambiguous link's stations
+      make the twin placement; the most doubtful of them is rejected (this one unless another
+      is more doubtful, even one a loop of links wrong in the same way confirms); or
     * it is more doubtful (free-space conflict ratio) than every link a loop confirmed among
       the stations it attaches to (the larger side; the whole project's when no loop
       confirms a link there), and than ``loop_doubt_min``: the loops show how much conflict
@@ -342,11 +344,22 @@ def _lone_suspect(
                 np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
             )
             if err[0] <= 1.0 and err[1] <= 0.1:
+                # the twin placement is made by the tree links between the ambiguous link's
+                # stations: the most doubtful of them goes (this one, unless another is worse)
+                worst = max(forest.path(e.target, e.source), key=lambda x: float(x.doubt or 0))
                 why = (
                     f"{placing}; link {e.target} <- {e.source} agrees with it but finds the "
                     "pose ambiguous (a clearly different pose fits about as well)"
                 )
-                out.append((doubt, -len(side), t, why))
+                if worst is not t:
+                    why = (
+                        f"link {e.target} <- {e.source} agrees with the tree's placement of "
+                        f"{e.target} and {e.source} but finds the pose ambiguous (a clearly "
+                        "different pose fits about as well); of the tree links between them "
+                        f"this one is the most doubtful (free-space conflict ratio "
+                        f"{float(worst.doubt or 0):.2f})"
+                    )
+                out.append((float(worst.doubt or 0), -len(side), worst, why))
                 break
     if not out:
         return []

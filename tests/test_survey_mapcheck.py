@@ -269,6 +269,31 @@ def test_the_lone_link_ceiling_comes_from_the_loops_where_it_attaches():
     assert sorted(sol.groups[1]) == ["t0", "t1", "t2"]
 
 
+def test_an_ambiguous_link_blames_the_most_doubtful_tree_link_of_its_twin_placement():
+    """s0-s1-s2 confirmed; s2-s3 right but lone; s3-s4 and s3-s5 put s4 and s5 into the twin
+    room (doubt 0.35), and s4-s5 between the twins confirms them by a loop. The ambiguous
+    link s2 <- s4 agrees with the twin placement: the wrong links go, not s2-s3."""
+    P = _poses() | {"s5": make_transform(np.eye(3), [22.0, 3.0, 0.0])}
+    twin = make_transform(rotation_about_axis([0, 0, 1], np.pi), [40.0, 0.0, 0.0])
+    Q = {**P, "s4": twin @ P["s4"], "s5": twin @ P["s5"]}  # where the twin links put them
+    links = [
+        _link(P, "s0", "s1", doubt=0.40),  # a hall: right links carry 0.4 (no ceiling rule)
+        _link(P, "s1", "s2", doubt=0.40),
+        _link(P, "s0", "s2", doubt=0.40),
+        _link(P, "s2", "s3", doubt=0.10),
+        _link(Q, "s3", "s4", doubt=0.35),
+        _link(Q, "s3", "s5", doubt=0.34),
+        _link(P, "s4", "s5", doubt=0.05),
+        _ambiguous(_link(Q, "s2", "s4", doubt=0.30)),
+    ]
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2", "s3"]
+    assert links[3].status == "accepted"
+    assert links[4].status == links[5].status == "rejected"
+    assert any("the most doubtful" in (e.why or "") for e in links[4:6])
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+
+
 def _truth_judge(P, *, noise=0.01, wrong=0.08):
     """A judge that knows the truth: two stations placed within 1 m of their true relative
     pose contradict each other by ``noise``, anywhere else by ``wrong``."""

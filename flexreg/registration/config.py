@@ -116,7 +116,8 @@ class RegistrationConfig(Config):
         axis, a repeat or a close rival.
     settle_open_share : float
         A pose in a repeating plan (the target's plan view overlays itself shifted by a bay)
-        with no close rival is still swept along the repeat when, at full resolution, at
+        with no close rival, explaining at least ``verdict_min_overlap`` of the source's
+        sample, is still swept along the repeat when, at full resolution, at
         least this share of both scans' points lies in the other's open space: right poses
         leave 0.00-0.24 % there (every placed pair of the synthetic survey projects), a
         warehouse pair one bay off 1.1 %.

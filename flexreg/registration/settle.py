@@ -431,6 +431,13 @@ def screen(
     return [players[0], *rest[: size - 1]]
 
 
+#: an answer that puts more than this share of both scans' points in open space at full
+#: resolution is not a bay or an aisle beside the truth but plainly wrong (low overlap, the
+#: wrong room): no rescue sweep for it (two sweeps cost 30-90 s on such building pairs); a
+#: warehouse pair one bay off puts 1.1 % there
+RESCUE_MAX_OPEN = 0.02
+
+
 def _other_row(u: NDArray[np.float64], aliases: Aliases | None) -> NDArray[np.float64]:
     """The horizontal direction across ``u`` (unit, target frame)."""
     up = aliases.up if aliases is not None and aliases.up is not None else np.array([0, 0, 1.0])
@@ -653,12 +660,12 @@ def settle(
     pair, contradicted = None, None
     if u is None and not rivals:  # ... or when full resolution contradicts the answer
         u = repeat_direction(aliases)
-        if u is None:
-            return Settlement(c)
+        if u is None or check.classify(W, thr / 2, 0.002)[1].mean() < config.verdict_min_overlap:
+            return Settlement(c)  # too little overlap to be confident anyway: nothing to rescue
         pair = full_pair()
         contradicted = pose_masks(pair, W, thr)
         share = open_share(contradicted)
-        if share < config.settle_open_share:
+        if not config.settle_open_share <= share < RESCUE_MAX_OPEN:
             return Settlement(c)
         kind = "repeat"
         log.debug("answer puts %.2f%% in open space at full resolution: sweep", 100 * share)
@@ -729,6 +736,7 @@ __all__ = [
     "ACROSS_M",
     "ACROSS_STEP_M",
     "FACING_POINTS",
+    "RESCUE_MAX_OPEN",
     "SCREENED",
     "SWEEP_PEAKS",
     "SWEEP_POINTS",

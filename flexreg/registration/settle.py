@@ -489,17 +489,21 @@ def rescue(
     return best
 
 
+def _share(masks: Masks, which: int) -> float:
+    """Share of all points of both scans set in mask ``which`` (0 explained, 1 open space)."""
+    n = sum(len(m[which]) for m in masks)
+    return sum(int(m[which].sum()) for m in masks) / n if n else 0.0
+
+
 def _explained(masks: Masks) -> float:
     """Share of all points of both scans a pose explains."""
-    n = sum(len(ok) for ok, _ in masks)
-    return sum(int(ok.sum()) for ok, _ in masks) / n if n else 0.0
+    return _share(masks, 0)
 
 
 def open_share(masks: Masks) -> float:
     """Share of all points of both scans that a pose puts in open space (its
     :func:`~flexreg.registration.fullres.pose_masks`)."""
-    n = sum(len(bad) for _, bad in masks)
-    return sum(int(bad.sum()) for _, bad in masks) / n if n else 0.0
+    return _share(masks, 1)
 
 
 def tournament(
@@ -657,10 +661,11 @@ def settle(
     kind, u = "weak_axis", weak_direction(check, normals, W, thr, config.sweep_axis_strength)
     if u is None and rivals:  # a repeat matters only when a pose beside the answer competes
         kind, u = "repeat", repeat_direction(aliases)
-    pair, contradicted = None, None
+    pair, contradicted, classified = None, None, None
     if u is None and not rivals:  # ... or when full resolution contradicts the answer
         u = repeat_direction(aliases)
-        if u is None or check.classify(W, thr / 2, 0.002)[1].mean() < config.verdict_min_overlap:
+        classified = check.classify(W, thr / 2, 0.002) if u is not None else None
+        if classified is None or classified[1].mean() < config.verdict_min_overlap:
             return Settlement(c)  # too little overlap to be confident anyway: nothing to rescue
         pair = full_pair()
         contradicted = pose_masks(pair, W, thr)
@@ -673,7 +678,7 @@ def settle(
     judged = list(c.judged)
     sweep = None
     if u is not None:
-        q, ok, _ = check.classify(W, thr / 2, 0.002)
+        q, ok, _ = classified if classified is not None else check.classify(W, thr / 2, 0.002)
         pivot = q[ok].mean(axis=0) if ok.any() else W[:3, 3]
         # a contradicted answer in a repeating hall may be off along either of its rows
         axes = [u] if contradicted is None else [u, _other_row(u, aliases)]

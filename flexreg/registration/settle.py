@@ -581,7 +581,8 @@ class Settlement:
         The coarse result, at the tournament's winner when that is another pose; its
         ``judged`` include the slid poses.
     pair : FullPair or None
-        Both scans at full resolution, when a sweep or a tournament needed them.
+        Both scans at full resolution, when a sweep, a tournament or the open-space test of
+        a repeating plan needed them (the verdict then reads the answer's share there).
     sweep : dict or None
         JSON-ready: ``kind`` (``"weak_axis"`` or ``"repeat"``), ``direction_target``,
         ``range_m``, ``step_m``, ``poses`` (slid poses judged).
@@ -671,7 +672,7 @@ def settle(
         contradicted = pose_masks(pair, W, thr)
         share = open_share(contradicted)
         if not config.settle_open_share <= share < RESCUE_MAX_OPEN:
-            return Settlement(c)
+            return Settlement(c, pair)  # the verdict reads the answer's share
         kind = "repeat"
         log.debug("answer puts %.2f%% in open space at full resolution: sweep", 100 * share)
     pair = pair if pair is not None else full_pair()

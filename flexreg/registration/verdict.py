@@ -320,11 +320,27 @@ def _full_answer(
     ``free_space``, :func:`decide`); None without them."""
     if full is None:
         return None
+    return full_evidence(ev, full, T, threshold_m)
+
+
+def full_evidence(
+    ev: dict[str, Any],
+    full: FullPair,
+    T: NDArray[np.float64],
+    threshold_m: float,
+    why: str = "settling",
+) -> Masks:
+    """Record under ``ev["full_resolution"]`` how many points of both scans ``full`` checks,
+    the share of them the pose ``T`` puts in the other's open space, and ``why`` they were
+    compared (``"settling"``: a repeat, a weak axis or a close rival, where a twin beside the
+    truth is likely; ``"check"``: a confident answer checked anyway); its masks
+    (:func:`~flexreg.registration.fullres.pose_masks`)."""
     masks = pose_masks(full, T, threshold_m)
     bad = sum(int(b.sum()) for _, b in masks)
     ev["full_resolution"] = {
         "points": full.points,
         "open_space_share": round(bad / full.points, 7) if full.points else 0.0,
+        "why": why,
     }
     return masks
 
@@ -480,17 +496,24 @@ def _free_space_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | 
 
 
 def _full_open_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    """The answer puts more than ``verdict_full_max_open`` of both scans' points in the
-    other's open space at full resolution (one bay, aisle or room beside the right pose: the
-    coarse checks cannot see the few pixels that tell)."""
+    """The answer puts more than ``verdict_full_max_open`` (where the settling compared the
+    scans: a twin beside the truth is likely) or ``verdict_full_max_open_check`` (a confident
+    answer checked anyway) of both scans' points in the other's open space at full
+    resolution: one bay, aisle or room beside the right pose, which the samples' checks
+    cannot tell."""
     f = ev.get("full_resolution")
-    if not f or f["open_space_share"] <= cfg.verdict_full_max_open:
+    if not f:
+        return None
+    allowed = (
+        cfg.verdict_full_max_open_check if f.get("why") == "check" else cfg.verdict_full_max_open
+    )
+    if f["open_space_share"] <= allowed:
         return None
     return Reason(
         "free_space",
         f"at full resolution {100 * f['open_space_share']:.2f}% of both scans' points land where "
-        f"the other scanner saw through empty space (allowed {100 * cfg.verdict_full_max_open:.1f}"
-        "%): the pose is contradicted, perhaps a bay or room beside the right one",
+        f"the other scanner saw through empty space (allowed {100 * allowed:.1f}%): the pose is "
+        "contradicted, perhaps a bay or room beside the right one",
     )
 
 
@@ -754,6 +777,7 @@ __all__ = [
     "decisive_full",
     "duel",
     "duel_masks",
+    "full_evidence",
     "gather",
     "runner_ups",
 ]

@@ -24,10 +24,13 @@ puts in open space. :func:`pose_masks` gives a pose's masks; the verdict's
 
 from __future__ import annotations
 
+import math
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
@@ -35,6 +38,7 @@ from scipy import ndimage
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.refinement.projective import camera_params, spherical_pixel
 
 #: points whose own range slack exceeds this share of their range (silhouettes, grazing
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
@@ -125,45 +129,87 @@ def full_view(
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], nv)
 
 
-def _lookup(
-    view: FullView, points: NDArray[np.float64], T: NDArray[np.float64]
-) -> tuple[NDArray[np.int64], tuple[NDArray[np.int64], NDArray[np.int64]], NDArray[np.float64]]:
-    """Which points (indices) fall inside the view, their pixels (row, column) and their
-    measured coordinate (range or depth) along the view's ray."""
-    T = np.asarray(T, dtype=np.float64)
-    q = points @ T[:3, :3].T + T[:3, 3]
-    if len(q) == 0 or view.image.camera is None:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, (empty, empty), np.zeros(0)
-    u, v, d = view.image.camera.project(q)
-    with np.errstate(invalid="ignore"):
-        iu, iv = np.floor(u + 0.5), np.floor(v + 0.5)
-        if view.image.wraps:
-            iu = np.where(iu >= view.image.width, iu - view.image.width, iu)
-        inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
-        inside &= (iu >= 0) & (iu < view.image.width) & (iv >= 0) & (iv < view.image.height)
-    k = np.flatnonzero(inside)
-    return k, (iv[k].astype(np.int64), iu[k].astype(np.int64)), d[k]
-
-
-def _tests(
-    view: FullView,
-    pix: tuple[NDArray[np.int64], NDArray[np.int64]],
-    dk: NDArray[np.float64],
-    own: NDArray[np.float64],
-    threshold_m: float,
-    coarse: bool = False,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """Range residuals, explained tolerances (``coarse``: the open-space tolerance's) and
-    open-space flags of looked-up points."""
-    with np.errstate(invalid="ignore"):
-        e = dk - view.measured[pix]
+@numba.njit(cache=True, nogil=True)
+def _check_full(
+    points, own, M, kind, cam, measured, slack, nearest, threshold_m, coarse, explained, open_space
+):  # pragma: no cover
+    """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
+    the points, without temporaries: each point mapped by ``M`` into the view's frame,
+    projected through its camera (``kind``, ``cam``: :func:`camera_params`) onto the nearest
+    pixel, and tested there. Fills ``explained`` and ``open_space`` when they are as long as
+    ``points`` (pass empty arrays for the score alone); returns the score."""
+    H, W = measured.shape[0], measured.shape[1]
+    wrap = kind == 0 and cam[4] > 0.5
+    masks = explained.shape[0] == points.shape[0]
+    total, bad_count = 0.0, 0
+    for i in range(points.shape[0]):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        qx = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
+        qy = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
+        qz = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
+        if kind == 0:  # spherical: range along the ray (eq. 4-7)
+            d = math.sqrt(qx * qx + qy * qy + qz * qz)
+            if not d > 0.0:
+                continue
+            u, v = spherical_pixel(qx, qy, qz, d, cam, W)
+        else:  # pinhole: depth (eq. 1)
+            d = qz
+            if not d > 0.0:
+                continue
+            x, y = qx / qz, qy / qz
+            u = cam[0] * x + cam[4] * y + cam[2]
+            v = cam[1] * y + cam[3]
+        fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
+        if wrap and fu >= W:
+            fu -= W
+        if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
+            continue
+        iu, iv = int(fu), int(fv)
+        e = d - np.float64(measured[iv, iu])
         if coarse:
-            fine = FREE_THRESHOLDS * threshold_m + FREE_REL * dk + view.slack[pix]
+            tol = FREE_THRESHOLDS * threshold_m + FREE_REL * d + np.float64(slack[iv, iu])
         else:
-            fine = threshold_m / 2 + FINE_REL * dk + view.slack[pix]
-        free = FREE_THRESHOLDS * threshold_m + FREE_REL * dk + own
-        return e, fine, dk < view.nearest[pix] - free
+            tol = threshold_m / 2 + FINE_REL * d + np.float64(slack[iv, iu])
+        free = FREE_THRESHOLDS * threshold_m + FREE_REL * d + own[i]
+        ok = abs(e) < tol
+        bad = d < nearest[iv, iu] - free
+        if ok:
+            total += 1.0 - (e / tol) ** 2
+        if bad:
+            bad_count += 1
+        if masks:
+            explained[i] = ok
+            open_space[i] = bad
+    return total - 3.0 * bad_count
+
+
+def _run_check(
+    view: FullView,
+    points: NDArray[np.float64],
+    point_slack: NDArray[np.float64],
+    T: NDArray[np.float64],
+    threshold_m: float,
+    coarse: bool,
+    explained: NDArray[np.bool_],
+    open_space: NDArray[np.bool_],
+) -> float:
+    if len(points) == 0 or view.image.camera is None:
+        return 0.0
+    kind, cam = camera_params(view.image)
+    return float(
+        _check_full(
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(point_slack, dtype=np.float64),
+            np.ascontiguousarray(T, dtype=np.float64), kind, cam,
+            np.ascontiguousarray(view.measured, dtype=np.float32),
+            np.ascontiguousarray(view.slack, dtype=np.float32),
+            np.ascontiguousarray(view.nearest, dtype=np.float64),
+            float(threshold_m), bool(coarse), explained, open_space,
+        )
+    )  # fmt: skip
+
+
+_NO_MASK = np.zeros(0, dtype=bool)
 
 
 def full_masks(
@@ -174,6 +220,14 @@ def full_masks(
     threshold_m: float,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Which of ``points`` a pose explains in ``view`` and which it puts in open space.
+
+    A point maps into the view's frame, falls on the view's nearest pixel (its camera
+    model), and is tested there: *explained* when its range (depth for a pinhole view) is
+    within half an inlier threshold plus :data:`FINE_REL` of its range plus the pixel's
+    range slack of what the view measured; in *open space* when it lies nearer than the
+    smallest range of the pixel's :data:`NEIGHBOURHOOD` square by more than
+    :data:`FREE_THRESHOLDS` inlier thresholds plus :data:`FREE_REL` of its range plus its own
+    range slack. Points outside the view are neither.
 
     Parameters
     ----------
@@ -194,11 +248,7 @@ def full_masks(
     """
     explained = np.zeros(len(points), dtype=bool)
     open_space = np.zeros(len(points), dtype=bool)
-    k, pix, dk = _lookup(view, points, T_view_points)
-    e, fine, bad = _tests(view, pix, dk, point_slack[k], threshold_m)
-    with np.errstate(invalid="ignore"):
-        explained[k] = np.abs(e) < fine
-    open_space[k] = bad
+    _run_check(view, points, point_slack, T_view_points, threshold_m, False, explained, open_space)
     return explained, open_space
 
 
@@ -219,19 +269,24 @@ def full_score(
     cue fixes. With ``coarse`` a point counts as explained within the open-space tolerance
     (for poses not yet polished).
     """
-    k, pix, dk = _lookup(view, points, T_view_points)
-    e, fine, bad = _tests(view, pix, dk, point_slack[k], threshold_m, coarse)
-    with np.errstate(invalid="ignore"):
-        ok = np.abs(e) < fine
-    return float(np.sum(1.0 - (e[ok] / fine[ok]) ** 2) - 3.0 * np.count_nonzero(bad))
+    return _run_check(
+        view, points, point_slack, T_view_points, threshold_m, coarse, _NO_MASK, _NO_MASK
+    )
+
+
+#: most poses whose :func:`pose_masks` a :class:`FullPair` keeps (about 3 MB each at
+#: 1024 x 512: the tournament, the rescue and the verdict's duels ask for the same poses)
+KEEP_MASKS = 16
 
 
 @dataclass(eq=False)
 class FullPair:
-    """Both scans at full resolution (see :class:`FullView`)."""
+    """Both scans at full resolution (see :class:`FullView`), with the masks of the last
+    :data:`KEEP_MASKS` poses asked of :func:`pose_masks`."""
 
     target: FullView
     source: FullView
+    masks: OrderedDict[tuple[bytes, float], Masks] = field(default_factory=OrderedDict, repr=False)
 
     @property
     def points(self) -> int:
@@ -263,17 +318,30 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
     ((explained, open_space), (explained, open_space))
     """
     s, t = pair.source, pair.target
-    T = np.asarray(T_target_source, dtype=np.float64)
-    return (
+    T = np.ascontiguousarray(T_target_source, dtype=np.float64)
+    key = (T.tobytes(), float(threshold_m))
+    hit = pair.masks.get(key)
+    if hit is not None:
+        pair.masks.move_to_end(key)
+        return hit
+    out = (
         full_masks(t, s.points, s.point_slack, T, threshold_m),
         full_masks(s, t.points, t.point_slack, invert(T), threshold_m),
     )
+    for m in out:  # shared between callers: nobody may change them
+        for a in m:
+            a.flags.writeable = False
+    pair.masks[key] = out
+    while len(pair.masks) > KEEP_MASKS:
+        pair.masks.popitem(last=False)
+    return out
 
 
 __all__ = [
     "FINE_REL",
     "FREE_REL",
     "FREE_THRESHOLDS",
+    "KEEP_MASKS",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
     "FullPair",

@@ -189,7 +189,8 @@ class _Scorer:
     def of(cls, pair: FullPair, threshold_m: float, points: int = SWEEP_POINTS) -> _Scorer:
         s = pair.source
         k = max(1, -(-len(s.points) // points))
-        return cls(pair.target, s.points[::k], s.point_slack[::k], threshold_m)
+        pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
+        return cls(pair.target, pts, slack, threshold_m)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
         return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)

@@ -18,6 +18,7 @@ from flexreg.registration.fullres import (
     FullPair,
     full_masks,
     full_score,
+    full_scores,
     full_view,
     pose_masks,
 )
@@ -150,3 +151,22 @@ def test_pose_masks_are_kept_per_pose_and_threshold_and_read_only():
     assert len(pair.masks) == KEEP_MASKS
     assert pose_masks(pair, T, 0.05) is not first  # evicted, computed again (the same masks)
     np.testing.assert_array_equal(pose_masks(pair, T, 0.05)[0][0], ok)
+
+
+@pytest.mark.parametrize("coarse", [False, True])
+def test_scores_of_shifted_poses_equal_each_pose_scored_alone(coarse):
+    """A sweep's scores in one pass are, bit for bit, those of each slid pose alone."""
+    rng = np.random.default_rng(11)
+    target, source = _view(CAMERAS["full turn"], rng), _view(CAMERAS["full turn"], rng)
+    T = _pose(rng)
+    u = np.array([0.6, -0.8, 0.0])
+    offsets = np.arange(-10, 11) * 0.05
+    many = full_scores(
+        target, source.points, source.point_slack, T, offsets[:, None] * u, 0.05, coarse=coarse
+    )
+    for x, got in zip(offsets, many, strict=True):
+        moved = T.copy()
+        moved[:3, 3] += x * u
+        alone = full_score(target, source.points, source.point_slack, moved, 0.05, coarse=coarse)
+        assert got == alone
+    assert np.ptp(many) > 1.0  # the slide changes what fits

@@ -131,56 +131,74 @@ def full_view(
 
 @numba.njit(cache=True, nogil=True)
 def _check_full(
-    points, own, M, kind, cam, measured, slack, nearest, threshold_m, coarse, explained, open_space
+    points,
+    own,
+    R,
+    t,
+    kind,
+    cam,
+    measured,
+    slack,
+    nearest,
+    threshold_m,
+    coarse,
+    explained,
+    open_space,
+    scores,
 ):  # pragma: no cover
     """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
-    the points, without temporaries: each point mapped by ``M`` into the view's frame,
-    projected through its camera (``kind``, ``cam``: :func:`camera_params`) onto the nearest
-    pixel, and tested there. Fills ``explained`` and ``open_space`` when they are as long as
-    ``points`` (pass empty arrays for the score alone); returns the score."""
+    the points, without temporaries, for the poses ``(R, t[k])``: each point turned by ``R``
+    (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
+    (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
+    Adds each pose's score to ``scores[k]``; fills ``explained`` and ``open_space`` (one pose)
+    when they are as long as ``points``."""
     H, W = measured.shape[0], measured.shape[1]
     wrap = kind == 0 and cam[4] > 0.5
     masks = explained.shape[0] == points.shape[0]
-    total, bad_count = 0.0, 0
+    K = t.shape[0]
+    free_m = FREE_THRESHOLDS * threshold_m
+    explain_m = free_m if coarse else threshold_m / 2
+    explain_rel = FREE_REL if coarse else FINE_REL
+    total = np.zeros(K)
+    bad_count = np.zeros(K, dtype=np.int64)
     for i in range(points.shape[0]):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        qx = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
-        qy = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
-        qz = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
-        if kind == 0:  # spherical: range along the ray (eq. 4-7)
-            d = math.sqrt(qx * qx + qy * qy + qz * qz)
-            if not d > 0.0:
+        rx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz
+        ry = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz
+        rz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz
+        for k in range(K):
+            qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
+            if kind == 0:  # spherical: range along the ray (eq. 4-7)
+                d = math.sqrt(qx * qx + qy * qy + qz * qz)
+                if not d > 0.0:
+                    continue
+                u, v = spherical_pixel(qx, qy, qz, d, cam, W)
+            else:  # pinhole: depth (eq. 1)
+                d = qz
+                if not d > 0.0:
+                    continue
+                x, y = qx / qz, qy / qz
+                u = cam[0] * x + cam[4] * y + cam[2]
+                v = cam[1] * y + cam[3]
+            fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
+            if wrap and fu >= W:
+                fu -= W
+            if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
                 continue
-            u, v = spherical_pixel(qx, qy, qz, d, cam, W)
-        else:  # pinhole: depth (eq. 1)
-            d = qz
-            if not d > 0.0:
-                continue
-            x, y = qx / qz, qy / qz
-            u = cam[0] * x + cam[4] * y + cam[2]
-            v = cam[1] * y + cam[3]
-        fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
-        if wrap and fu >= W:
-            fu -= W
-        if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
-            continue
-        iu, iv = int(fu), int(fv)
-        e = d - np.float64(measured[iv, iu])
-        if coarse:
-            tol = FREE_THRESHOLDS * threshold_m + FREE_REL * d + np.float64(slack[iv, iu])
-        else:
-            tol = threshold_m / 2 + FINE_REL * d + np.float64(slack[iv, iu])
-        free = FREE_THRESHOLDS * threshold_m + FREE_REL * d + own[i]
-        ok = abs(e) < tol
-        bad = d < nearest[iv, iu] - free
-        if ok:
-            total += 1.0 - (e / tol) ** 2
-        if bad:
-            bad_count += 1
-        if masks:
-            explained[i] = ok
-            open_space[i] = bad
-    return total - 3.0 * bad_count
+            iu, iv = int(fu), int(fv)
+            e = d - np.float64(measured[iv, iu])
+            tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
+            free = free_m + FREE_REL * d + own[i]
+            ok = abs(e) < tol
+            bad = d < nearest[iv, iu] - free
+            r = e / tol
+            total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
+            bad_count[k] += bad
+            if masks:
+                explained[i] = ok
+                open_space[i] = bad
+    for k in range(K):
+        scores[k] += total[k] - 3.0 * bad_count[k]
 
 
 def _run_check(
@@ -188,25 +206,29 @@ def _run_check(
     points: NDArray[np.float64],
     point_slack: NDArray[np.float64],
     T: NDArray[np.float64],
+    shifts: NDArray[np.float64] | None,
     threshold_m: float,
     coarse: bool,
     explained: NDArray[np.bool_],
     open_space: NDArray[np.bool_],
-) -> float:
+) -> NDArray[np.float64]:
+    """Scores of ``T`` moved by each of ``shifts`` (``T`` alone when None), masks of ``T``."""
+    T = np.asarray(T, dtype=np.float64)
+    t = T[:3, 3][None] if shifts is None else T[:3, 3] + np.asarray(shifts, dtype=np.float64)
+    scores = np.zeros(len(t))
     if len(points) == 0 or view.image.camera is None:
-        return 0.0
+        return scores
     kind, cam = camera_params(view.image)
-    return float(
-        _check_full(
-            np.ascontiguousarray(points, dtype=np.float64),
-            np.ascontiguousarray(point_slack, dtype=np.float64),
-            np.ascontiguousarray(T, dtype=np.float64), kind, cam,
-            np.ascontiguousarray(view.measured, dtype=np.float32),
-            np.ascontiguousarray(view.slack, dtype=np.float32),
-            np.ascontiguousarray(view.nearest, dtype=np.float64),
-            float(threshold_m), bool(coarse), explained, open_space,
-        )
+    _check_full(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(point_slack, dtype=np.float64),
+        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(t.reshape(-1, 3)), kind, cam,
+        np.ascontiguousarray(view.measured, dtype=np.float32),
+        np.ascontiguousarray(view.slack, dtype=np.float32),
+        np.ascontiguousarray(view.nearest, dtype=np.float64),
+        float(threshold_m), bool(coarse), explained, open_space, scores,
     )  # fmt: skip
+    return scores
 
 
 _NO_MASK = np.zeros(0, dtype=bool)
@@ -248,7 +270,9 @@ def full_masks(
     """
     explained = np.zeros(len(points), dtype=bool)
     open_space = np.zeros(len(points), dtype=bool)
-    _run_check(view, points, point_slack, T_view_points, threshold_m, False, explained, open_space)
+    _run_check(
+        view, points, point_slack, T_view_points, None, threshold_m, False, explained, open_space
+    )
     return explained, open_space
 
 
@@ -269,8 +293,41 @@ def full_score(
     cue fixes. With ``coarse`` a point counts as explained within the open-space tolerance
     (for poses not yet polished).
     """
+    return float(
+        _run_check(
+            view, points, point_slack, T_view_points, None, threshold_m, coarse, _NO_MASK, _NO_MASK
+        )[0]
+    )
+
+
+def full_scores(
+    view: FullView,
+    points: NDArray[np.float64],
+    point_slack: NDArray[np.float64],
+    T_view_points: NDArray[np.float64],
+    shifts_m: NDArray[np.float64],
+    threshold_m: float,
+    *,
+    coarse: bool = False,
+) -> NDArray[np.float64]:
+    """:func:`full_score` of ``T_view_points`` moved by each of ``shifts_m`` (added to its
+    translation, view frame), in one pass over the points: each point is turned once and looked
+    up at every shift while its pixels are at hand. Equal to calling :func:`full_score` on each
+    moved pose, bit for bit.
+
+    Parameters
+    ----------
+    view, points, point_slack, T_view_points, threshold_m, coarse
+        As :func:`full_score`.
+    shifts_m : (K, 3) float64, metres
+
+    Returns
+    -------
+    (K,) float64
+    """
+    shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
     return _run_check(
-        view, points, point_slack, T_view_points, threshold_m, coarse, _NO_MASK, _NO_MASK
+        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK, _NO_MASK
     )
 
 
@@ -350,6 +407,7 @@ __all__ = [
     "full_masks",
     "full_pair_of",
     "full_score",
+    "full_scores",
     "full_view",
     "pose_masks",
 ]

@@ -355,7 +355,12 @@ def full_pair_of(views: Sequence[Any]) -> Callable[[], FullPair]:
     """Makes both scans at full resolution when a near-tie needs them: ``views`` are the
     target's and the source's prepared views (``image``, ``measured``, ``slack``,
     ``normals``)."""
-    return lambda: FullPair(*(full_view(v.image, v.measured, v.slack, v.normals) for v in views))
+
+    def make() -> FullPair:
+        target, source = (full_view(v.image, v.measured, v.slack, v.normals) for v in views)
+        return FullPair(target, source)
+
+    return make
 
 
 def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m: float) -> Masks:

@@ -14,7 +14,6 @@ from flexreg.registration.fullres import (
     FINE_REL,
     FREE_REL,
     FREE_THRESHOLDS,
-    KEEP_MASKS,
     FullPair,
     full_masks,
     full_score,
@@ -135,22 +134,33 @@ def test_spherical_pixel_is_the_camera_models_pixel_at_edges_and_seams(name):
     np.testing.assert_array_equal(got, expect)
 
 
-def test_pose_masks_are_kept_per_pose_and_threshold_and_read_only():
+def test_pose_masks_are_kept_packed_per_pose_and_threshold_within_a_budget(monkeypatch):
     rng = np.random.default_rng(5)
     pair = FullPair(_view(CAMERAS["full turn"], rng), _view(CAMERAS["full turn"], rng))
     T = _pose(rng)
     first = pose_masks(pair, T, 0.05)
-    assert pose_masks(pair, T.copy(), 0.05) is first
-    assert pose_masks(pair, T, 0.02) is not first
-    (ok, _), (ok_b, bad_b) = first
-    assert not ok.flags.writeable and not bad_b.flags.writeable
-    fresh = full_masks(pair.source, pair.target.points, pair.target.point_slack, invert(T), 0.05)
-    np.testing.assert_array_equal(ok_b, fresh[0])
-    for _ in range(KEEP_MASKS + 2):
+    assert len(pair.masks) == 1
+    with monkeypatch.context() as m:  # a kept pose is not computed again
+        m.setattr("flexreg.registration.fullres.full_masks", _refuse)
+        again = pose_masks(pair, T.copy(), 0.05)
+    for x, y in zip(first, again, strict=True):
+        for a, b in zip(x, y, strict=True):
+            assert a.dtype == b.dtype == bool
+            np.testing.assert_array_equal(a, b)
+    assert first[0][0].any() and first[1][1].shape == (len(pair.target.points),)
+    pose_masks(pair, T, 0.02)  # another threshold: another entry
+    assert len(pair.masks) == 2
+    one = sum(p.nbytes for p in pair.masks[next(iter(pair.masks))])
+    monkeypatch.setattr("flexreg.registration.fullres.MASKS_BUDGET_BYTES", 3 * one)
+    for _ in range(5):
         pose_masks(pair, _pose(rng), 0.05)
-    assert len(pair.masks) == KEEP_MASKS
-    assert pose_masks(pair, T, 0.05) is not first  # evicted, computed again (the same masks)
-    np.testing.assert_array_equal(pose_masks(pair, T, 0.05)[0][0], ok)
+    assert len(pair.masks) == 3  # the oldest went
+    fresh = full_masks(pair.source, pair.target.points, pair.target.point_slack, invert(T), 0.05)
+    np.testing.assert_array_equal(pose_masks(pair, T, 0.05)[1][0], fresh[0])
+
+
+def _refuse(*args, **kwargs):
+    raise AssertionError("computed again")
 
 
 @pytest.mark.parametrize("coarse", [False, True])

@@ -331,19 +331,22 @@ def full_scores(
     )
 
 
-#: most poses whose :func:`pose_masks` a :class:`FullPair` keeps (about 3 MB each at
-#: 1024 x 512: the tournament, the rescue and the verdict's duels ask for the same poses)
-KEEP_MASKS = 16
+#: bytes of bit-packed :func:`pose_masks` a :class:`FullPair` keeps (the tournament, the
+#: rescue and the verdict ask for the same poses): about 0.2 MB a pose at 1024 x 512, 0.8 MB
+#: at 2048 x 1024, so a few dozen poses; none at 8192 x 4096 beyond four
+MASKS_BUDGET_BYTES = 64 * 2**20
 
 
 @dataclass(eq=False)
 class FullPair:
-    """Both scans at full resolution (see :class:`FullView`), with the masks of the last
-    :data:`KEEP_MASKS` poses asked of :func:`pose_masks`."""
+    """Both scans at full resolution (see :class:`FullView`), with the masks of the poses
+    last asked of :func:`pose_masks`, bit-packed, within :data:`MASKS_BUDGET_BYTES`."""
 
     target: FullView
     source: FullView
-    masks: OrderedDict[tuple[bytes, float], Masks] = field(default_factory=OrderedDict, repr=False)
+    masks: OrderedDict[tuple[bytes, float], list[NDArray[np.uint8]]] = field(
+        default_factory=OrderedDict, repr=False
+    )
 
     @property
     def points(self) -> int:
@@ -382,19 +385,20 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
     s, t = pair.source, pair.target
     T = np.ascontiguousarray(T_target_source, dtype=np.float64)
     key = (T.tobytes(), float(threshold_m))
-    hit = pair.masks.get(key)
-    if hit is not None:
+    sizes = (len(s.points), len(s.points), len(t.points), len(t.points))
+    packed = pair.masks.get(key)
+    if packed is not None:
         pair.masks.move_to_end(key)
-        return hit
+        a, b, c, d = (
+            np.unpackbits(p, count=n).view(bool) for p, n in zip(packed, sizes, strict=True)
+        )
+        return ((a, b), (c, d))
     out = (
         full_masks(t, s.points, s.point_slack, T, threshold_m),
         full_masks(s, t.points, t.point_slack, invert(T), threshold_m),
     )
-    for m in out:  # shared between callers: nobody may change them
-        for a in m:
-            a.flags.writeable = False
-    pair.masks[key] = out
-    while len(pair.masks) > KEEP_MASKS:
+    pair.masks[key] = [np.packbits(m) for direction in out for m in direction]
+    while sum(p.nbytes for v in pair.masks.values() for p in v) > MASKS_BUDGET_BYTES:
         pair.masks.popitem(last=False)
     return out
 
@@ -403,7 +407,7 @@ __all__ = [
     "FINE_REL",
     "FREE_REL",
     "FREE_THRESHOLDS",
-    "KEEP_MASKS",
+    "MASKS_BUDGET_BYTES",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
     "FullPair",

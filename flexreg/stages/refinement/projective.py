@@ -99,7 +99,11 @@ def _wrap(u, W):  # pragma: no cover
 def spherical_pixel(qx, qy, qz, r, cam, W):  # pragma: no cover
     """The pixel coordinates ``(u, v)`` (before rounding) of a point at range ``r > 0`` in a
     spherical camera ``cam`` (:func:`camera_params`) of width ``W``, as
-    :meth:`~flexreg.core.camera.SphericalCamera.project` computes them (eq. 4-7)."""
+    :meth:`~flexreg.core.camera.SphericalCamera.project` computes them (eq. 4-7).
+
+    Inlined into the kernels of this module and of :mod:`flexreg.registration.fullres`;
+    numba's on-disk cache of a kernel is keyed by its own file, so after changing this
+    function remove the ``*.nbi``/``*.nbc`` files of ``fullres`` too."""
     u = (math.atan2(qy, qx) - cam[0]) / cam[1]
     c = min(1.0, max(-1.0, qz / r))
     v = (math.acos(c) - cam[2]) / cam[3]

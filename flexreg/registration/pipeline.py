@@ -66,7 +66,7 @@ from flexreg.registration.verdict import (
 from flexreg.stages import feature_images
 from flexreg.stages.alignment import consistent_subset, ransac_rigid
 from flexreg.stages.correspondences import derive_threshold, lift
-from flexreg.stages.keypoints import detect_and_describe, strip_rows
+from flexreg.stages.keypoints import detect_and_describe
 from flexreg.stages.matching import match
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.overlap import measure_overlap
@@ -223,7 +223,7 @@ def _keypoints(
                 m,
                 max_features=config.max_features,
                 wrap=img.wraps,
-                strip_rows=strip_rows(f.shape, config.feature_strip_pixels),
+                tile_pixels=config.feature_strip_pixels,
             )
             for (f, m), img in zip(converted, images, strict=True)
         ]

@@ -89,3 +89,27 @@ def test_chunked_errors_name_the_same_line(tmp_path, monkeypatch, case, chunk):
     with pytest.raises(InputError) as e:
         read_scans(p)
     assert str(p) in str(e.value) and fragment in str(e.value)
+
+
+@pytest.mark.parametrize("chunk", [7, 1000])
+def test_reading_without_intensity_keeps_everything_else(tmp_path, rng, monkeypatch, chunk):
+    """``intensity=False`` stores no intensities; points, colours, grid and pose are those of
+    a full read, and a bad line is still found."""
+    p = tmp_path / "multi.ptx"
+    write_scan(p, [_scan(rng, 9, 6, colors=True), _scan(rng, 4, 5, colors=False)])
+    monkeypatch.setattr(ptx, "_CHUNK_BYTES", chunk)
+    full, lean = read_scans(p), read_scans(p, intensity=False)
+    for a, b in zip(full, lean, strict=True):
+        assert a.intensity is not None and b.intensity is None
+        a.intensity = None
+        _same(a, b)
+    npz = tmp_path / "s.npz"
+    write_scan(npz, _scan(rng, 3, 3, colors=False))
+    assert read_scans(npz)[0].intensity is not None
+    assert read_scans(npz, intensity=False)[0].intensity is None  # other readers: dropped
+    lines = p.read_text().splitlines()
+    lines[11] = "1 2 zz 0.5"
+    bad = tmp_path / "bad.ptx"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 12: not a valid number"):
+        read_scans(bad, intensity=False)

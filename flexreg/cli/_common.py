@@ -73,6 +73,7 @@ def read_input(
     all_scans: bool = False,
     origin: tuple[float, float, float] | None = None,
     origin_option: str | None = None,
+    intensity: bool = True,
 ) -> list[Any]:
     """Read the scans of an input (``FILE``, ``FILE#N`` or ``FILE#NAME``), building a camera for
     depth PNGs from the options.
@@ -81,7 +82,8 @@ def read_input(
     the file's only setup: a file holding several is refused with a line that names them.
     With ``origin_option`` (the command's option for the scanner position), a cloud in
     project coordinates is refused with a line that names that option, and ``origin`` moves
-    the points to the scanner (:mod:`flexreg.io.origin`).
+    the points to the scanner (:mod:`flexreg.io.origin`). ``intensity=False``: without
+    intensities (a command that never reads them keeps 4 bytes per point less).
     """
     from flexreg.errors import InputError
     from flexreg.io import detect_format, read_scans
@@ -122,6 +124,8 @@ def read_input(
         setups = list_setups(file)  # headers only: refuse a project file before reading it
         if len(setups) > 1:
             raise _several(file, [s.name for s in setups], [s.points for s in setups])
+    if not intensity:
+        opts["intensity"] = False
     scans = read_scans(path, **opts)
     if len(scans) > 1 and ref.selector is None and not all_scans:
         raise _several(file, [s.name for s in scans], [len(s) for s in scans])
@@ -161,10 +165,13 @@ def read_pair(
     source: Path,
     origins: tuple[Any, Any] | None = None,
     options: tuple[str, str] | None = None,
+    *,
+    intensity: bool = True,
 ) -> list[Any]:
     """Read the target and the source scan (one setup each, see :func:`read_input`; with
     ``options``, the scanner position options of each and ``origins`` their values); the same
-    setup of the same file on both sides is refused."""
+    setup of the same file on both sides is refused. ``intensity=False``: without
+    intensities."""
     from concurrent.futures import ThreadPoolExecutor
 
     import numpy as np
@@ -176,6 +183,7 @@ def read_pair(
             (target, source)[k],
             origin=None if origins is None else origins[k],
             origin_option=None if options is None else options[k],
+            intensity=intensity,
         )
         return scan
 

@@ -352,7 +352,11 @@ def register_command(
     T_true = None if truth is None else read_truth(truth, target, source)
     T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
     scans = read_pair(
-        target, source, (target_origin, source_origin), ("--target-origin", "--source-origin")
+        target,
+        source,
+        (target_origin, source_origin),
+        ("--target-origin", "--source-origin"),
+        intensity=config.image == "intensity",  # no other stage or output reads it
     )
     stored = stored_T_target_source(scans[0], scans[1])
     if init == "stored" and stored is None:

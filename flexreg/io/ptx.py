@@ -309,9 +309,17 @@ class _Cloud:
     :func:`read` reports them and raised once the cloud's lines are all seen."""
 
     def __init__(
-        self, path: Path, index: int, first: int, rows: int, cols: int, cap: int, dtype: type
+        self,
+        path: Path,
+        index: int,
+        first: int,
+        rows: int,
+        cols: int,
+        cap: int,
+        dtype: type,
+        intensity: bool = True,
     ):
-        self.dtype = dtype
+        self.dtype, self.keep_intensity = dtype, intensity
         self.path, self.index, self.first, self.rows, self.cols = path, index, first, rows, cols
         self.n, self.cap, self.seen, self.kept = rows * cols, cap, 0, 0
         self.ncol = -1
@@ -331,13 +339,14 @@ class _Cloud:
         per = (
             3 * np.dtype(self.dtype).itemsize
             + 8
-            + (4 if ncol >= 4 else 0)
+            + (4 if ncol >= 4 and self.keep_intensity else 0)
             + (3 if ncol == 7 else 0)
         )
         check_memory(cap * per, f"cloud {self.index}: its {self.n:,} points", source=self.path)
         self.points = np.empty((cap, 3), dtype=self.dtype)
         self.grid_index = np.empty((cap, 2), dtype=np.int32)
-        self.intensity = np.empty(cap, dtype=np.float32) if ncol >= 4 else None
+        keep = ncol >= 4 and self.keep_intensity
+        self.intensity = np.empty(cap, dtype=np.float32) if keep else None
         self.colors = np.empty((cap, 3), dtype=np.uint8) if ncol == 7 else None
 
     def add(self, lines: Lines, lo: int, hi: int, line0: int) -> None:
@@ -436,6 +445,7 @@ def _header_cloud(
     errors: list[int],
     bytes_left: int,
     dtype: type,
+    intensity: bool = True,
 ) -> tuple[_Cloud, NDArray[np.float64]]:
     """The cloud a complete 10-line header (starting at file line ``line``) announces, and its
     pose; ``bytes_left`` bounds how many point lines can follow."""
@@ -455,14 +465,15 @@ def _header_cloud(
         )
     M = _header_pose(np.stack(head[2:10])[:, :4])
     cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
-    return _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype), M
+    cloud = _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype, intensity)
+    return cloud, M
 
 
 class _Wide(Exception):
     """A cloud read as float32 has coordinates beyond :data:`FLOAT32_MAX_M`."""
 
 
-def read(path: Path, *, precise: bool = False, **_: object) -> list[Scan]:
+def read(path: Path, *, precise: bool = False, intensity: bool = True, **_: object) -> list[Scan]:
     """Read every cloud of a PTX file.
 
     The text is parsed 16 to 64 MiB at a time (:func:`_chunk_bytes`) and each cloud's valid
@@ -473,6 +484,8 @@ def read(path: Path, *, precise: bool = False, **_: object) -> list[Scan]:
     :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the scanner). A file with a coordinate beyond
     that (points in project coordinates) is read again as float64, and so is every file with
     ``precise=True`` (the values exactly as written, to write them back unchanged).
+    ``intensity=False`` does not keep the intensities (4 bytes per point less, for callers
+    that never read them); the lines are validated all the same.
 
     Returns
     -------
@@ -488,15 +501,15 @@ def read(path: Path, *, precise: bool = False, **_: object) -> list[Scan]:
     size = path.stat().st_size
     check_memory(3 * min(size, _chunk_bytes(size)), "parsing it", source=path)
     if precise:
-        return _read(path, size, np.float64)
+        return _read(path, size, np.float64, intensity)
     try:
-        return _read(path, size, np.float32)
+        return _read(path, size, np.float32, intensity)
     except _Wide:
         log.info("%s: coordinates beyond %g m, read as float64", path, FLOAT32_MAX_M)
-        return _read(path, size, np.float64)
+        return _read(path, size, np.float64, intensity)
 
 
-def _read(path: Path, size: int, dtype: type) -> list[Scan]:
+def _read(path: Path, size: int, dtype: type, intensity: bool = True) -> list[Scan]:
     """:func:`read` with points of ``dtype``."""
     scans: list[Scan] = []
     cloud: _Cloud | None = None
@@ -527,7 +540,13 @@ def _read(path: Path, size: int, dtype: type) -> list[Scan]:
             i += 1
             if len(hdr[1]) == _HEADER_LINES:
                 cloud, pose = _header_cloud(
-                    path, len(scans), hdr_line, *hdr, bytes_left=size - offset, dtype=dtype
+                    path,
+                    len(scans),
+                    hdr_line,
+                    *hdr,
+                    bytes_left=size - offset,
+                    dtype=dtype,
+                    intensity=intensity,
                 )
                 hdr = ([], [], [])
         base += n_lines

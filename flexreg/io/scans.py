@@ -68,7 +68,8 @@ def read_scans(
         within :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the scan's origin are float32
         (:func:`single_precision`; half the memory, 0.5 mm or better); ``precise=True`` keeps
         the file's values exactly (to write them back unchanged). An npz file gives back the
-        type it stores.
+        type it stores. ``intensity=False``: no intensities (for callers that never read
+        them; the PTX reader then does not store them at all, 4 bytes per point less).
 
     Raises
     ------
@@ -80,11 +81,16 @@ def read_scans(
     mod, _ = detect_format(p, format)
     check_file(p)
     precise = bool(options.pop("precise", False))
-    if mod == "ptx":  # reads float32 itself
+    intensity = bool(options.pop("intensity", True))
+    if mod == "ptx":  # reads float32 itself, and stores intensities only when asked
         options["precise"] = precise
+        options["intensity"] = intensity
     if ref.selector is not None and mod == "e57" and not options:
         one = _module(mod).read_one(p, ref)  # one setup of a large project file: only it
-        return [one if precise else single_precision(one)]
+        one = one if precise else single_precision(one)
+        if not intensity:
+            one.intensity = None
+        return [one]
     scans: list[Scan] = _module(mod).read(p, **options)
     if not scans:
         raise InputError(p, "file holds no scan")
@@ -92,6 +98,9 @@ def read_scans(
         raise InputError(p, "file holds no valid point (every cell is a no-return)")
     if not precise and mod not in ("ptx", "npz"):  # PTX chooses; npz keeps what it stores
         scans = [single_precision(s) for s in scans]
+    if not intensity:
+        for s in scans:  # scans of our own making: drop the array, no copy
+            s.intensity = None
     return scans if ref.selector is None else [pick(scans, ref)]
 
 

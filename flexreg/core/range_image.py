@@ -64,6 +64,24 @@ class RangeImage:
         if self.xyz.shape != (H, W, 3) or self.index.shape != (H, W):
             raise InputError("range image", "xyz, valid and index shapes disagree")
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled as it is, except an ``index`` that is one value repeated (a working image
+        that keeps no point numbers: a read-only broadcast view), which is stored as that
+        value and unpickled as the same view (no pixel-sized array in a cache file or in the
+        memory of the process that loads it)."""
+        state = dict(self.__dict__)
+        ix = self.index
+        if ix.size and not any(ix.strides):
+            state["index"] = ("broadcast", ix.dtype.str, ix.flat[0].item(), ix.shape)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        ix = state["index"]
+        if isinstance(ix, tuple):
+            _, dtype, value, shape = ix
+            state = {**state, "index": np.broadcast_to(np.array(value, dtype=dtype), shape)}
+        self.__dict__.update(state)
+
     def __repr__(self) -> str:
         cam = type(self.camera).__name__ if self.camera is not None else "native grid"
         return f"RangeImage({self.height}x{self.width}, {self.n_valid} valid, {cam})"

@@ -275,15 +275,28 @@ def _pair_plan_priors(images: list[RangeImage], config: RegistrationConfig) -> P
     return _plan_priors(t, s, config)
 
 
+def _refine_sample(
+    scan: Scan | RangeImage, config: RegistrationConfig
+) -> tuple[float, NDArray[np.float64]] | None:
+    """The projective refinement's even sample of the whole scan and its cell (None when the
+    refinement does not use one): the only part of a :class:`ScanView` that reads the scan's
+    own points rather than its working image."""
+    if not (config.refine and uses_projective(config.icp, config.voxel_m)):
+        return None
+    points = as_points(scan, name="scan", keep_float32=True)
+    return area_sample_cell(points, PROJECTIVE_ICP_POINTS // 2)
+
+
 def _scan_view(
-    scan: Scan | RangeImage,
+    scan: Scan | RangeImage | None,
     image: RangeImage,
     config: RegistrationConfig,
     *,
     target: bool,
     source: bool,
 ) -> ScanView:
-    """The parts of :class:`ScanView` the scan's roles need."""
+    """The parts of :class:`ScanView` the scan's roles need (the refinement's sample only
+    with ``scan``: the caller computed it otherwise)."""
     v = ScanView(with_camera(image))
     projective = config.refine and uses_projective(config.icp, config.voxel_m)
     # both roles: the verdict checks the transform in both directions
@@ -295,14 +308,13 @@ def _scan_view(
     v.sample = area_sample(pts, CHECK_POINTS)
     if source:
         v.polish_sample = area_sample(pts, POLISH_POINTS)
-    if projective:
-        points = as_points(scan, name="scan", keep_float32=True)
-        v.refine_sample = area_sample_cell(points, PROJECTIVE_ICP_POINTS // 2)
+    if scan is not None:
+        v.refine_sample = _refine_sample(scan, config)
     return v
 
 
 def _views(
-    scans: list[Scan | RangeImage],
+    scans: list[Scan | RangeImage] | list[None],
     images: list[RangeImage],
     config: RegistrationConfig,
     roles: list[tuple[bool, bool]],
@@ -731,14 +743,34 @@ class Registration:
         self.config = config
 
     def prepare(
-        self, scan: Scan | RangeImage, *, progress: Progress = None, overlap: bool = True
+        self,
+        scan: Scan | RangeImage,
+        *,
+        progress: Progress = None,
+        overlap: bool = True,
+        keep_scan: bool = True,
     ) -> PreparedScan:
         """Everything of one scan that :meth:`align` needs, in either role. ``overlap``: the
         plan views and the checks' inputs run beside the feature stages (as in :func:`register`);
-        else after them, the same result at a lower peak memory (for survey workers)."""
+        else after them, the same result at a lower peak memory (for survey workers).
+
+        ``keep_scan=False``: the prepared scan's ``scan`` is its working image, and this call
+        lets go of the scan as soon as the working image and the refinement's sample are
+        made, before the feature stages (a caller that keeps no reference of its own, as
+        ``prepare(read_scan(path), keep_scan=False)``, so frees it: the largest array of a
+        large station). :meth:`align` gives the same result unless the refinement reads the
+        scan's points (the Open3D ICP variants) or the overlap is measured on them: it is
+        measured on the working image's points then.
+        """
         config, run = self.config, _Run(progress)
         with run.stage("range images"):
             images = _range_images([scan], config)
+        refine_sample = None
+        if not keep_scan:
+            with _timed(run.timings, "preparation"):
+                refine_sample = _refine_sample(scan, config)
+            scan = images[0]
+        views_of = [None] if not keep_scan else [scan]
         with _single_threaded(2) as pool:
             submit = pool.submit if overlap else (lambda job: SimpleNamespace(result=job))
             plan_job = (
@@ -747,7 +779,7 @@ class Registration:
                 else None
             )
             view_job = submit(
-                run.background("preparation", _views, [scan], images, config, [(True, True)])
+                run.background("preparation", _views, views_of, images, config, [(True, True)])
             )
             (kp,) = _keypoints(images, config, run)
             plan = None
@@ -756,6 +788,8 @@ class Registration:
                 plan = plan_job.result()[0]
             run.wait("preparation")
             (view,) = view_job.result()
+        if not keep_scan:
+            view.refine_sample = refine_sample
         return PreparedScan(scan, images[0], kp, plan, view, config, run.timings)
 
     def align(

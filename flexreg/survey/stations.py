@@ -277,6 +277,23 @@ def _atomic_bytes(path: Path, write: Any) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def _read_and_prepare(
+    station: Station, config: RegistrationConfig
+) -> tuple[PreparedScan, int, NDArray[np.float64]]:
+    """The station read and prepared at the lowest peak memory, its number of points and its
+    stored pose. No intensities unless the feature image reads them; the checks' inputs after
+    the feature stages (``overlap=False``); when the refinement reads only the range images,
+    the scan is let go once its working image and the refinement's sample exist, before the
+    feature stages (``keep_scan=False``: only ``prepare`` holds it)."""
+    points_needed = config.refine and not uses_projective(config.icp, config.voxel_m)
+    held = [read_scan(station.ref, intensity=config.image == "intensity")]
+    n = len(held[0])
+    T_world = np.asarray(held[0].T_world_scanner, dtype=np.float64)
+    reg = Registration(config)
+    prepared = reg.prepare(held.pop(), overlap=False, keep_scan=points_needed)
+    return _compact(prepared), n, T_world
+
+
 def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig) -> Prepared:
     """Prepare one station unless the cache holds it; store it and its global descriptor.
 
@@ -296,11 +313,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
             stored = _stored_pose(z["T_world_scanner"]) if "T_world_scanner" in z else None
         return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0, None, stored)
     try:
-        scan = read_scan(station.ref)
-        n = len(scan)
-        T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
-        prepared = _compact(Registration(config).prepare(scan, overlap=False))  # lower peak
-        del scan
+        prepared, n, T_world = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
     g = global_descriptor(prepared)

@@ -124,7 +124,7 @@ def test_prepare_lets_go_of_the_scan_before_the_feature_stages(monkeypatch):
     from dataclasses import replace
 
     from flexreg.registration import Registration
-    from flexreg.registration import pipeline as pl
+    from flexreg.registration import preparation as pl
     from flexreg.synth import station_pair
 
     pair = station_pair("room", seed=4, resolution=(512, 256))

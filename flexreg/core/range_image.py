@@ -9,6 +9,7 @@ The z-buffer projection of unstructured clouds is a stage (:mod:`flexreg.stages.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,6 +130,16 @@ class RangeImage:
         m = self.index >= 0
         out[m] = values[self.index[m]]
         return out
+
+
+def working_stride(height: int, width: int, max_pixels: int) -> int:
+    """Every how many rows and columns a grid of ``height`` x ``width`` is kept so that its
+    working image has at most about ``max_pixels`` pixels (1: the whole grid).
+
+    >>> working_stride(1024, 2048, 2_500_000), working_stride(4096, 8192, 2_500_000)
+    (1, 4)
+    """
+    return max(1, math.ceil(math.sqrt(height * width / max(1, max_pixels))))
 
 
 def float_xyz(a: NDArray[np.generic]) -> NDArray[np.floating]:

@@ -33,6 +33,7 @@ from numba import prange
 from numpy.typing import NDArray
 
 from flexreg.core.budget import check_memory
+from flexreg.core.range_image import RangeImage, working_stride
 from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import InputError
@@ -303,6 +304,34 @@ def _keep_valid(
     return kept
 
 
+@numba.njit(cache=True, nogil=True)
+def _keep_valid_image(
+    head, lo, hi, seen, rows, kept, points, xyz, valid, stride
+):  # pragma: no cover - compiled
+    """:func:`_keep_valid` without grid index, intensity or colour: each valid point of lines
+    ``lo:hi`` is appended to ``points`` and, when it lies on every ``stride``-th row and
+    column of the grid, also written into its pixel of the working image ``xyz`` / ``valid``
+    (as :func:`flexreg.core.range_image.from_grid` gathers it). Returns the new number of
+    kept points."""
+    for i in range(lo, hi):
+        x, y, z = head[i, 0], head[i, 1], head[i, 2]
+        if x == 0.0 and y == 0.0 and z == 0.0:
+            continue
+        points[kept, 0] = x
+        points[kept, 1] = y
+        points[kept, 2] = z
+        k = seen + i - lo
+        r = k % rows
+        c = k // rows
+        if r % stride == 0 and c % stride == 0:
+            xyz[r // stride, c // stride, 0] = points[kept, 0]
+            xyz[r // stride, c // stride, 1] = points[kept, 1]
+            xyz[r // stride, c // stride, 2] = points[kept, 2]
+            valid[r // stride, c // stride] = True
+        kept += 1
+    return kept
+
+
 class _Cloud:
     """One cloud's point lines as they stream past: valid points written straight into their
     final arrays (no file- or line-sized intermediate); problems are kept in the order
@@ -318,8 +347,12 @@ class _Cloud:
         cap: int,
         dtype: type,
         intensity: bool = True,
+        stride: int | None = None,
     ):
-        self.dtype, self.keep_intensity = dtype, intensity
+        self.dtype, self.keep_intensity, self.stride = dtype, intensity and not stride, stride
+        self.image: RangeImage | None = None
+        self.xyz: NDArray[np.floating] | None = None
+        self.valid: NDArray[np.bool_] | None = None
         self.path, self.index, self.first, self.rows, self.cols = path, index, first, rows, cols
         self.n, self.cap, self.seen, self.kept = rows * cols, cap, 0, 0
         self.ncol = -1
@@ -336,6 +369,16 @@ class _Cloud:
 
     def _allocate(self, ncol: int) -> None:
         cap = self.cap
+        if self.stride:  # points and the working image only
+            s = self.stride
+            h, w = -(-self.rows // s), -(-self.cols // s)
+            size = np.dtype(self.dtype).itemsize
+            what = f"cloud {self.index}: its {self.n:,} points"
+            check_memory(3 * size * (cap + h * w), what, source=self.path)
+            self.points = np.empty((cap, 3), dtype=self.dtype)
+            self.xyz = np.full((h, w, 3), np.nan, dtype=self.dtype)
+            self.valid = np.zeros((h, w), dtype=bool)
+            return
         per = (
             3 * np.dtype(self.dtype).itemsize
             + 8
@@ -371,6 +414,21 @@ class _Cloud:
     def _keep(self, lines: Lines, lo: int, hi: int) -> None:
         """Copy the valid points (not ``0 0 0``) of lines ``lo:hi`` and their attributes."""
         head, tail, _, _ = lines
+        if self.stride:
+            assert self.points is not None and self.xyz is not None and self.valid is not None
+            self.kept = _keep_valid_image(
+                head,
+                lo,
+                hi,
+                self.seen,
+                self.rows,
+                self.kept,
+                self.points,
+                self.xyz,
+                self.valid,
+                self.stride,
+            )
+            return
         assert self.points is not None and self.grid_index is not None
         self.kept = _keep_valid(
             head,
@@ -421,13 +479,18 @@ class _Cloud:
                 raise _Wide()
         if not is_rigid(M):
             log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, self.index)
+        if self.stride:
+            assert self.xyz is not None and self.valid is not None
+            self.image = RangeImage(
+                self.xyz, self.valid, np.broadcast_to(np.int64(-1), self.valid.shape)
+            )
         try:
             return Scan(
                 points=self.points,  # type: ignore[arg-type]
                 intensity=self.intensity,
                 colors=self.colors,
-                grid_shape=(self.rows, self.cols),
-                grid_index=self.grid_index,
+                grid_shape=None if self.stride else (self.rows, self.cols),
+                grid_index=None if self.stride else self.grid_index,
                 T_world_scanner=M,
                 path=path,
                 name=path.stem if self.index == 0 else f"{path.stem}#{self.index}",
@@ -446,6 +509,7 @@ def _header_cloud(
     bytes_left: int,
     dtype: type,
     intensity: bool = True,
+    max_pixels: int | None = None,
 ) -> tuple[_Cloud, NDArray[np.float64]]:
     """The cloud a complete 10-line header (starting at file line ``line``) announces, and its
     pose; ``bytes_left`` bounds how many point lines can follow."""
@@ -465,7 +529,8 @@ def _header_cloud(
         )
     M = _header_pose(np.stack(head[2:10])[:, :4])
     cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
-    cloud = _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype, intensity)
+    stride = None if max_pixels is None else working_stride(rows, cols, max_pixels)
+    cloud = _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype, intensity, stride)
     return cloud, M
 
 
@@ -498,20 +563,49 @@ def read(path: Path, *, precise: bool = False, intensity: bool = True, **_: obje
         the scanner registration lines (position, axes) when the matrix is the identity and
         they are not.
     """
+    return [scan for scan, _ in _read_any(path, precise, intensity, None)]
+
+
+def read_working(
+    path: Path, *, max_pixels: int, precise: bool = False
+) -> list[tuple[Scan, RangeImage]]:
+    """Every cloud of a PTX file as its points and its working image, read at once: no grid
+    index, intensity or colour is kept (12 bytes per point instead of 24 for float32).
+
+    The working image is :func:`flexreg.stages.projection.working_image` of the scan
+    :func:`read` gives (every ``k``-th row and column, ``k`` from ``max_pixels``:
+    :func:`~flexreg.core.range_image.working_stride`), built while the lines stream past; its
+    ``index`` is not kept (a read-only -1 view). The points are those of :func:`read`, in
+    the same order, in a :class:`Scan` without grid. Errors are those of :func:`read`.
+
+    Returns
+    -------
+    list of (Scan, RangeImage)
+        One per cloud.
+    """
+    pairs = _read_any(path, precise, False, max_pixels)
+    return [(scan, image) for scan, image in pairs if image is not None]
+
+
+def _read_any(
+    path: Path, precise: bool, intensity: bool, max_pixels: int | None
+) -> list[tuple[Scan, RangeImage | None]]:
     size = path.stat().st_size
     check_memory(3 * min(size, _chunk_bytes(size)), "parsing it", source=path)
     if precise:
-        return _read(path, size, np.float64, intensity)
+        return _read(path, size, np.float64, intensity, max_pixels)
     try:
-        return _read(path, size, np.float32, intensity)
+        return _read(path, size, np.float32, intensity, max_pixels)
     except _Wide:
         log.info("%s: coordinates beyond %g m, read as float64", path, FLOAT32_MAX_M)
-        return _read(path, size, np.float64, intensity)
+        return _read(path, size, np.float64, intensity, max_pixels)
 
 
-def _read(path: Path, size: int, dtype: type, intensity: bool = True) -> list[Scan]:
+def _read(
+    path: Path, size: int, dtype: type, intensity: bool = True, max_pixels: int | None = None
+) -> list[tuple[Scan, RangeImage | None]]:
     """:func:`read` with points of ``dtype``."""
-    scans: list[Scan] = []
+    scans: list[tuple[Scan, RangeImage | None]] = []
     cloud: _Cloud | None = None
     pose = np.eye(4)
     hdr: tuple[list[NDArray[np.float64]], list[int], list[int]] = ([], [], [])
@@ -526,7 +620,7 @@ def _read(path: Path, size: int, dtype: type, intensity: bool = True) -> list[Sc
                 cloud.add(lines, i, j, base + i)
                 i = j
                 if cloud.remaining == 0:
-                    scans.append(cloud.finish(pose))
+                    scans.append((cloud.finish(pose), cloud.image))
                     cloud = None
                 continue
             if not hdr[1] and counts[i] == 0 and errors[i] == 0:  # blank line between clouds
@@ -547,6 +641,7 @@ def _read(path: Path, size: int, dtype: type, intensity: bool = True) -> list[Sc
                     bytes_left=size - offset,
                     dtype=dtype,
                     intensity=intensity,
+                    max_pixels=max_pixels,
                 )
                 hdr = ([], [], [])
         base += n_lines

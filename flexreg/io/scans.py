@@ -15,13 +15,21 @@ from typing import Any
 
 import numpy as np
 
+from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.errors import InputError
 from flexreg.io.files import atomic_write, protect
 from flexreg.io.formats import detect_format
-from flexreg.io.selector import parse_scan_ref, pick
+from flexreg.io.selector import parse_scan_ref, pick, select_setup
 
-__all__ = ["check_file", "read_scan", "read_scans", "single_precision", "write_scan"]
+__all__ = [
+    "check_file",
+    "read_scan",
+    "read_scans",
+    "read_working_scan",
+    "single_precision",
+    "write_scan",
+]
 
 _WRITERS = {
     ".ply": "pointcloud",
@@ -131,6 +139,33 @@ def read_scan(
     if not -len(scans) <= index < len(scans):
         raise InputError(path, f"scan index {index} out of range: the file holds {len(scans)}")
     return scans[index]
+
+
+def read_working_scan(
+    path: str | PathLike[str], *, max_pixels: int
+) -> tuple[Scan, RangeImage | None]:
+    """One scan of a file as :func:`read_scan` selects it, read for a caller that needs its
+    points and its working image only (a survey worker preparing a station).
+
+    A PTX file is read straight into both (:func:`flexreg.io.ptx.read_working`: no grid
+    index, intensity or colour is stored, 12 bytes per float32 point instead of 24, and the
+    working image of at most ``max_pixels`` pixels is built while the lines stream past).
+    Other formats: :func:`read_scan` without intensities, and None (the caller builds the
+    working image).
+    """
+    ref = parse_scan_ref(path)
+    p = ref.path
+    mod, _ = detect_format(p)
+    if mod != "ptx":
+        return read_scan(path, intensity=False), None
+    check_file(p)
+    pairs = _module(mod).read_working(p, max_pixels=int(max_pixels))
+    if not pairs:
+        raise InputError(p, "file holds no scan")
+    if all(len(s) == 0 for s, _ in pairs):
+        raise InputError(p, "file holds no valid point (every cell is a no-return)")
+    k = 0 if ref.selector is None else select_setup([s.name for s, _ in pairs], ref)
+    return pairs[k]
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:

@@ -172,11 +172,6 @@ def read_pair(
     ``options``, the scanner position options of each and ``origins`` their values); the same
     setup of the same file on both sides is refused. ``intensity=False``: without
     intensities."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numpy as np
-
-    from flexreg.errors import InputError
 
     def read(k: int) -> Any:
         (scan,) = read_input(
@@ -187,23 +182,76 @@ def read_pair(
         )
         return scan
 
-    # both files at once: the parsers' serial parts (file reads, copying the valid points)
-    # overlap; the target's error, if any, is the one reported
+    return _read_both(target, source, read, lambda scan: scan)
+
+
+class WorkingPair:
+    """Two scans read with their working images (:func:`read_pair_working`).
+
+    Attributes
+    ----------
+    scans : list of Scan
+        Target and source; a PTX scan keeps its points only (no grid, no attributes).
+    """
+
+    def __init__(self, scans: list[Any], images: list[Any]) -> None:
+        self.scans = scans
+        self._images: list[Any] | None = images
+
+    def take_images(self) -> list[Any]:
+        """The working images (None for a scan read without one), handed over: this object
+        keeps no reference, so the call they are given to can let go of them."""
+        images, self._images = self._images, None
+        if images is None:
+            raise RuntimeError("the working images were taken already")
+        return images
+
+
+def read_pair_working(target: Path, source: Path, *, max_pixels: int) -> WorkingPair:
+    """:func:`read_pair` for a command that needs each scan's points and working image only:
+    a PTX file is read straight into both (:func:`flexreg.io.read_working_scan`: no grid
+    index, intensity or colour, 12 bytes per point instead of 24); another file as
+    :func:`read_input` reads it without intensities, and no image."""
+    from flexreg.io import detect_format, read_working_scan
+    from flexreg.io.selector import parse_scan_ref
+
+    def read(k: int) -> Any:
+        path = (target, source)[k]
+        if detect_format(parse_scan_ref(path).path)[1] == "ptx":
+            return read_working_scan(path, max_pixels=max_pixels)
+        (scan,) = read_input(path, intensity=False)
+        return scan, None
+
+    pairs = _read_both(target, source, read, lambda pair: pair[0])
+    return WorkingPair([p[0] for p in pairs], [p[1] for p in pairs])
+
+
+def _read_both(target: Path, source: Path, read: Any, scan_of: Any) -> list[Any]:
+    """``read(0)`` and ``read(1)`` at once (the parsers' serial parts, file reads and copying
+    the valid points, overlap; the target's error, if any, is the one reported); the same
+    setup of the same file on both sides is refused (``scan_of`` finds the scan in what
+    ``read`` returns)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    from flexreg.errors import InputError
+
     pool = ThreadPoolExecutor(2)
     try:
         with stage(f"Reading {target.name} and {source.name}"):
             jobs = [pool.submit(read, k) for k in (0, 1)]
-            scans = [job.result() for job in jobs]
+            got = [job.result() for job in jobs]
     finally:  # on an error or Ctrl-C, do not wait here for the other file
         pool.shutdown(wait=False, cancel_futures=True)
-    t, s = scans
+    t, s = (scan_of(g) for g in got)
     same_file = scan_file(target).resolve() == scan_file(source).resolve()
     if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):
         raise InputError(
             source,
             f"is the same scan as the target {target}: name two setups (FILE#N) or two files",
         )
-    return scans
+    return got
 
 
 def _several(file: Path, names: list[str], counts: list[int]) -> Exception:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -452,6 +452,7 @@ def register(
     *,
     progress: Progress = None,
     init: NDArray[np.float64] | None = None,
+    images: Sequence[RangeImage | None] | None = None,
 ) -> RegistrationResult:
     """Register ``source`` onto ``target``: returns ``T_target_source``.
 
@@ -477,6 +478,11 @@ def register(
         A known rough ``T_target_source`` (a stored pose, a guess): it competes with the other
         priors on the same dense check (result ``prior`` ``"init"`` when it wins). With
         ``config.icp_only`` it is the only prior: no global search, ICP from it.
+    images : (RangeImage or None, RangeImage or None), optional
+        The target's and the source's working images when the caller has them already (read
+        with the scans, :func:`flexreg.io.read_working_scan`, which then keeps no grid in the
+        scans); each scan then serves only for its points. The call holds them no longer
+        than it needs them when the caller keeps no reference of its own.
 
     Raises
     ------
@@ -490,8 +496,14 @@ def register(
     init = _check_init(config, init)
     run = _Run(progress)
     scans = [target, source]
+    given: list[Scan | RangeImage] = [
+        x if i is None else i
+        for x, i in zip(scans, [None, None] if images is None else images, strict=True)
+    ]
+    images = None  # the working images made below replace the given ones
     with run.stage("range images"):
-        images = _range_images(scans, config)
+        images = _range_images(given, config)
+    del given
     roles = [(True, False), (False, True)]
     with _single_threaded(2) as pool:
         plan_job = (

@@ -30,7 +30,7 @@ from flexreg.stages.normals import grid_normals
 from flexreg.stages.priors import PlanView, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
-from flexreg.stages.sampling import area_sample, area_sample_cell
+from flexreg.stages.sampling import area_sample_cell, area_sample_image
 from flexreg.stages.verification import measured_image, range_slack
 
 #: points of the dense check (the source's even sample) and of the quick local ICP
@@ -235,10 +235,9 @@ def _scan_view(
     v.slack = range_slack(v.image, v.measured)
     if target or (source and projective):
         v.normals = grid_normals(v.image)
-    pts = image.xyz[image.valid]
-    v.sample = area_sample(pts, CHECK_POINTS)
+    v.sample = area_sample_image(image.xyz, image.valid, CHECK_POINTS)  # no copy of the points
     if source:
-        v.polish_sample = area_sample(pts, POLISH_POINTS)
+        v.polish_sample = area_sample_image(image.xyz, image.valid, POLISH_POINTS)
     if scan is not None:
         v.refine_sample = _refine_sample(scan, config)
     return v

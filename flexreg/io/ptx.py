@@ -244,11 +244,12 @@ def _parse(buf: NDArray[np.uint8]) -> Lines:
         return _parse_all(buf, n_chunks, _POW10)
 
 
-def _chunks(path: Path, size: int) -> Iterator[tuple[int, Lines]]:
+def _chunks(path: Path, size: int, chunk: int | None = None) -> Iterator[tuple[int, Lines]]:
     """The file's lines parsed about :data:`_CHUNK_BYTES` at a time (whole lines only):
     ``(offset of the chunk's first byte, (head, tail, counts, errors))`` of
-    :func:`_parse_all`. One buffer is reused; it grows only for a line longer than a chunk."""
-    buf = np.empty(min(_chunk_bytes(size), max(size, 1)), dtype=np.uint8)
+    :func:`_parse_all`. One buffer is reused; it grows only for a line longer than a chunk.
+    ``chunk``: bytes per chunk instead of :func:`_chunk_bytes`."""
+    buf = np.empty(min(chunk or _chunk_bytes(size), max(size, 1)), dtype=np.uint8)
     filled, offset = 0, 0
     with open(path, "rb") as f:
         while True:
@@ -587,6 +588,12 @@ def read_working(
     return [(scan, image) for scan, image in pairs if image is not None]
 
 
+#: chunk size of :func:`read_working` (survey workers, where memory counts most): the
+#: smallest of :func:`_chunk_bytes`; parsing a 4096 x 2048 station peaks 0.07 GB lower than
+#: with its eighth-of-the-file chunks, for about 20 % more parsing time
+_WORKING_CHUNK_BYTES = _MIN_CHUNK_BYTES
+
+
 def _read_any(
     path: Path, precise: bool, intensity: bool, max_pixels: int | None
 ) -> list[tuple[Scan, RangeImage | None]]:
@@ -611,7 +618,10 @@ def _read(
     hdr: tuple[list[NDArray[np.float64]], list[int], list[int]] = ([], [], [])
     hdr_line = 0
     base = 0  # file line number of the chunk's first line
-    for offset, lines in _chunks(path, size):
+    chunk = _chunk_bytes(size)
+    if max_pixels is not None:
+        chunk = min(chunk, _WORKING_CHUNK_BYTES)
+    for offset, lines in _chunks(path, size, chunk):
         head, counts, errors = lines[0], lines[2], lines[3]
         n_lines, i = len(counts), 0
         while i < n_lines:

@@ -212,15 +212,20 @@ def read_pair_working(target: Path, source: Path, *, max_pixels: int) -> Working
     a PTX file is read straight into both (:func:`flexreg.io.read_working_scan`: no grid
     index, intensity or colour, 12 bytes per point instead of 24); another file as
     :func:`read_input` reads it without intensities, and no image."""
-    from flexreg.io import detect_format, read_working_scan
+    from flexreg.io import detect_format
+    from flexreg.io.scans import read_working_scans
     from flexreg.io.selector import parse_scan_ref
 
     def read(k: int) -> Any:
         path = (target, source)[k]
-        if detect_format(parse_scan_ref(path).path)[1] == "ptx":
-            return read_working_scan(path, max_pixels=max_pixels)
-        (scan,) = read_input(path, intensity=False)
-        return scan, None
+        ref = parse_scan_ref(path)
+        if detect_format(ref.path)[1] != "ptx":
+            (scan,) = read_input(path, intensity=False)
+            return scan, None
+        pairs = read_working_scans(path, max_pixels=max_pixels)
+        if len(pairs) > 1:  # without a selector: refused as read_input refuses it
+            raise _several(ref.path, [s.name for s, _ in pairs], [len(s) for s, _ in pairs])
+        return pairs[0]
 
     pairs = _read_both(target, source, read, lambda pair: pair[0])
     return WorkingPair([p[0] for p in pairs], [p[1] for p in pairs])

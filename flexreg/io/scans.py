@@ -27,6 +27,7 @@ __all__ = [
     "read_scan",
     "read_scans",
     "read_working_scan",
+    "read_working_scans",
     "single_precision",
     "write_scan",
 ]
@@ -141,31 +142,43 @@ def read_scan(
     return scans[index]
 
 
-def read_working_scan(
+def read_working_scans(
     path: str | PathLike[str], *, max_pixels: int
-) -> tuple[Scan, RangeImage | None]:
-    """One scan of a file as :func:`read_scan` selects it, read for a caller that needs its
-    points and its working image only (a survey worker preparing a station).
+) -> list[tuple[Scan, RangeImage | None]]:
+    """The scans of a file as :func:`read_scans` selects them (every setup, or the one a
+    ``FILE#N`` / ``FILE#NAME`` selector names), read for a caller that needs their points and
+    working images only (a survey worker preparing a station, ``flexreg register``).
 
     A PTX file is read straight into both (:func:`flexreg.io.ptx.read_working`: no grid
     index, intensity or colour is stored, 12 bytes per float32 point instead of 24, and the
     working image of at most ``max_pixels`` pixels is built while the lines stream past).
-    Other formats: :func:`read_scan` without intensities, and None (the caller builds the
-    working image).
+    Other formats: :func:`read_scans` without intensities, and None for each image (the
+    caller builds the working images).
     """
     ref = parse_scan_ref(path)
     p = ref.path
     mod, _ = detect_format(p)
     if mod != "ptx":
-        return read_scan(path, intensity=False), None
+        return [(scan, None) for scan in read_scans(path, intensity=False)]
     check_file(p)
-    pairs = _module(mod).read_working(p, max_pixels=int(max_pixels))
+    pairs: list[tuple[Scan, RangeImage | None]] = list(
+        _module(mod).read_working(p, max_pixels=int(max_pixels))
+    )
     if not pairs:
         raise InputError(p, "file holds no scan")
     if all(len(s) == 0 for s, _ in pairs):
         raise InputError(p, "file holds no valid point (every cell is a no-return)")
-    k = 0 if ref.selector is None else select_setup([s.name for s, _ in pairs], ref)
-    return pairs[k]
+    if ref.selector is None:
+        return pairs
+    return [pairs[select_setup([s.name for s, _ in pairs], ref)]]
+
+
+def read_working_scan(
+    path: str | PathLike[str], *, max_pixels: int
+) -> tuple[Scan, RangeImage | None]:
+    """The first of :func:`read_working_scans` (the setup a selector names, else the file's
+    first), as :func:`read_scan` selects it."""
+    return read_working_scans(path, max_pixels=max_pixels)[0]
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:

@@ -207,11 +207,15 @@ class WorkingPair:
         return images
 
 
-def read_pair_working(target: Path, source: Path, *, max_pixels: int) -> WorkingPair:
+def read_pair_working(
+    target: Path, source: Path, *, max_pixels: int, options: tuple[str, str] | None = None
+) -> WorkingPair:
     """:func:`read_pair` for a command that needs each scan's points and working image only:
     a PTX file is read straight into both (:func:`flexreg.io.read_working_scan`: no grid
     index, intensity or colour, 12 bytes per point instead of 24); another file as
-    :func:`read_input` reads it without intensities, and no image."""
+    :func:`read_input` reads it without intensities, and no image. With ``options`` (the
+    scanner position options), a cloud in project coordinates is refused naming its
+    option, as :func:`read_pair` refuses it."""
     from flexreg.io import detect_format
     from flexreg.io.scans import read_working_scans
     from flexreg.io.selector import parse_scan_ref
@@ -219,13 +223,17 @@ def read_pair_working(target: Path, source: Path, *, max_pixels: int) -> Working
     def read(k: int) -> Any:
         path = (target, source)[k]
         ref = parse_scan_ref(path)
+        option = None if options is None else options[k]
         if detect_format(ref.path)[1] != "ptx":
-            (scan,) = read_input(path, intensity=False)
+            (scan,) = read_input(path, intensity=False, origin_option=option)
             return scan, None
         pairs = read_working_scans(path, max_pixels=max_pixels)
         if len(pairs) > 1:  # without a selector: refused as read_input refuses it
             raise _several(ref.path, [s.name for s, _ in pairs], [len(s) for s, _ in pairs])
-        return pairs[0]
+        scan, image = pairs[0]
+        if option is not None:  # centred on its scanner, else refused (nothing moved)
+            _centred(ref.path, scan, None, option)
+        return scan, image
 
     pairs = _read_both(target, source, read, lambda pair: pair[0])
     return WorkingPair([p[0] for p in pairs], [p[1] for p in pairs])

@@ -399,10 +399,11 @@ def _read(
     """Both scans, read for what the call and the outputs need: their points and working
     images straight from a PTX file unless the match figure needs the scans' grids, the
     intensity image their intensities, or a scanner position moves their points."""
-    if matches is None and config.image != "intensity" and not any(origins):
-        working = read_pair_working(target, source, max_pixels=config.max_image_pixels)
-        return working.scans, working
     options = ("--target-origin", "--source-origin")
+    if matches is None and config.image != "intensity" and not any(origins):
+        pixels = config.max_image_pixels
+        working = read_pair_working(target, source, max_pixels=pixels, options=options)
+        return working.scans, working
     intensity = config.image == "intensity"  # no other stage or output reads it
     return read_pair(target, source, origins, options, intensity=intensity), None
 

@@ -393,8 +393,11 @@ def test_normal_synthetic_pair_is_confident_with_every_field():
     assert {"roll", "pitch", "yaw", "x", "y", "z", "lever_arm_m"} <= set(ev["axis_strength"])
     assert {"inlier_rmse_m", "fitness", "threshold_m"} <= set(ev["residual"])
     assert ev["refinement"]["kept"] is True
+    # checked at full resolution whatever the settling did: a right pose puts almost nothing
+    # in the other's open space there
+    assert ev["full_resolution"]["why"] in ("check", "settling")
+    assert ev["full_resolution"]["open_space_share"] < 0.005
     assert ev["refinement"]["score_refined"] >= ev["refinement"]["score_coarse"] - 0.01
-    assert r.timings_s["verdict"] < 0.1 * r.wall_s
     for h in d["runner_up"]:
         assert np.asarray(h["T_target_source"]).shape == (4, 4)
     assert isinstance(r.verdict.runner_up, tuple)
@@ -658,3 +661,47 @@ def test_weak_axis_settled_by_the_sweep_is_a_note():
     v = decide(ev)
     assert v.confident and [n.code for n in v.notes] == ["weak_axis_settled"]
     assert "along x" in v.notes[0].message
+
+
+@pytest.mark.parametrize(
+    ("open_space", "confident"),
+    [
+        (0.0, True),
+        (0.0024, True),  # the worst right pair of the synthetic survey projects (a hall)
+        (0.0076, False),  # warehouse 05 <- 29: two bays off, kept confident before
+        (0.169, False),  # warehouse 03 <- 04: one bay off, plainly contradicted
+    ],
+)
+def test_an_answer_full_resolution_contradicts_is_not_confident(open_space, confident):
+    """Whatever the samples say, an answer that puts more than ``verdict_full_max_open`` of
+    both scans' points in the other's open space at full resolution is ``free_space``."""
+    ev = _with()
+    ev["full_resolution"] = {"points": 757_580, "open_space_share": open_space}
+    v = decide(ev)
+    assert v.confident is confident
+    if not confident:
+        assert [r.code for r in v.reasons] == ["free_space"]
+        assert "at full resolution" in v.reasons[0].message
+
+
+@pytest.mark.parametrize(
+    ("open_space", "confident"),
+    [
+        (0.0035, True),  # the bunny's right pose (two views of one object)
+        (0.0124, True),  # things that moved between the scans
+        (0.0429, False),  # building 04 <- 08: two identical rooms, 9.3 m off
+    ],
+)
+def test_a_confident_answer_checked_anyway_tolerates_more_open_space(open_space, confident):
+    """Where the settling did not compare the scans (no repeat, no rival, no weak axis) a
+    twin beside the truth is unlikely: only ``verdict_full_max_open_check`` is refused."""
+    ev = _with()
+    ev["full_resolution"] = {"points": 90_000, "open_space_share": open_space, "why": "check"}
+    assert decide(ev).confident is confident
+
+
+def test_full_resolution_test_reports_one_free_space_reason():
+    """A pose the samples already contradict gets one ``free_space`` reason, not two."""
+    ev = _with(free_space__source_conflicting=0.5)
+    ev["full_resolution"] = {"points": 757_580, "open_space_share": 0.2}
+    assert [r.code for r in decide(ev).reasons] == ["free_space"]

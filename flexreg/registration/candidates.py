@@ -12,8 +12,11 @@ member at a fine tolerance.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -346,7 +349,9 @@ def self_symmetries(
     overlaying the plan onto itself over yaw (:func:`~flexreg.stages.priors.match_top_views`),
     shifts from the peaks of its autocorrelation; only those overlaying at least
     ``min_share`` (shifts: ``min_shift_share``) of what the identity overlays count (an
-    ordinary room has none).
+    ordinary room has none). The last :data:`KEEP_SYMMETRIES` plan views' are kept by
+    content (a survey station takes part in a dozen links): later calls return the same
+    read-only arrays.
 
     Parameters
     ----------
@@ -367,6 +372,43 @@ def self_symmetries(
     """
     if not isinstance(plan, PlanView):
         return []
+    key = (_plan_key(plan), count, min_share, min_shift_share)
+    with _SYMMETRIES_LOCK:
+        kept = _SYMMETRIES.get(key)
+        if kept is not None:
+            _SYMMETRIES.move_to_end(key)
+    if kept is None:
+        kept = _self_symmetries(plan, count, min_share, min_shift_share)
+        for S in kept:
+            S.flags.writeable = False  # shared by every pair of this scan
+        with _SYMMETRIES_LOCK:
+            _SYMMETRIES[key] = kept
+            while len(_SYMMETRIES) > KEEP_SYMMETRIES:
+                _SYMMETRIES.popitem(last=False)
+    return list(kept)
+
+
+#: plan views whose :func:`self_symmetries` are kept (by content: a survey worker loads a
+#: station again for each of its dozen links, each of which asked for them anew, a third of
+#: a typical link's time)
+KEEP_SYMMETRIES = 256
+_SYMMETRIES: OrderedDict[tuple[bytes, int, float, float], list[NDArray[np.float64]]] = OrderedDict()
+_SYMMETRIES_LOCK = threading.Lock()
+
+
+def _plan_key(plan: PlanView) -> bytes:
+    """A digest of everything :func:`self_symmetries` reads of a plan view."""
+    c = plan.coarse
+    h = hashlib.blake2b(digest_size=20)
+    for a in (c.cells, c.values, c.xy, c.heights, plan.levelling.R_level):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(np.array([c.cell_m, c.z0_m, c.dz_m], dtype=np.float64).tobytes())
+    return h.digest()
+
+
+def _self_symmetries(
+    plan: PlanView, count: int, min_share: float, min_shift_share: float
+) -> list[NDArray[np.float64]]:
     matches = match_top_views(
         plan.coarse,
         plan.coarse,
@@ -541,6 +583,7 @@ def at_pose(
 
 __all__ = [
     "ALIAS_OFFSETS",
+    "KEEP_SYMMETRIES",
     "SHIFT_SHARE",
     "SYMMETRIES",
     "SYMMETRY_SHARE",

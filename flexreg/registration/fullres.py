@@ -24,10 +24,13 @@ puts in open space. :func:`pose_masks` gives a pose's masks; the verdict's
 
 from __future__ import annotations
 
+import math
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
@@ -35,6 +38,7 @@ from scipy import ndimage
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.refinement.projective import camera_params, spherical_pixel
 
 #: points whose own range slack exceeds this share of their range (silhouettes, grazing
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
@@ -125,45 +129,109 @@ def full_view(
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], nv)
 
 
-def _lookup(
-    view: FullView, points: NDArray[np.float64], T: NDArray[np.float64]
-) -> tuple[NDArray[np.int64], tuple[NDArray[np.int64], NDArray[np.int64]], NDArray[np.float64]]:
-    """Which points (indices) fall inside the view, their pixels (row, column) and their
-    measured coordinate (range or depth) along the view's ray."""
-    T = np.asarray(T, dtype=np.float64)
-    q = points @ T[:3, :3].T + T[:3, 3]
-    if len(q) == 0 or view.image.camera is None:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, (empty, empty), np.zeros(0)
-    u, v, d = view.image.camera.project(q)
-    with np.errstate(invalid="ignore"):
-        iu, iv = np.floor(u + 0.5), np.floor(v + 0.5)
-        if view.image.wraps:
-            iu = np.where(iu >= view.image.width, iu - view.image.width, iu)
-        inside = np.isfinite(iu) & np.isfinite(iv) & (d > 0)
-        inside &= (iu >= 0) & (iu < view.image.width) & (iv >= 0) & (iv < view.image.height)
-    k = np.flatnonzero(inside)
-    return k, (iv[k].astype(np.int64), iu[k].astype(np.int64)), d[k]
+@numba.njit(cache=True, nogil=True)
+def _check_full(
+    points,
+    own,
+    R,
+    t,
+    kind,
+    cam,
+    measured,
+    slack,
+    nearest,
+    threshold_m,
+    coarse,
+    explained,
+    open_space,
+    scores,
+):  # pragma: no cover
+    """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
+    the points, without temporaries, for the poses ``(R, t[k])``: each point turned by ``R``
+    (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
+    (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
+    Adds each pose's score to ``scores[k]``; fills ``explained`` and ``open_space`` (one pose)
+    when they are as long as ``points``."""
+    H, W = measured.shape[0], measured.shape[1]
+    wrap = kind == 0 and cam[4] > 0.5
+    masks = explained.shape[0] == points.shape[0]
+    K = t.shape[0]
+    free_m = FREE_THRESHOLDS * threshold_m
+    explain_m = free_m if coarse else threshold_m / 2
+    explain_rel = FREE_REL if coarse else FINE_REL
+    total = np.zeros(K)
+    bad_count = np.zeros(K, dtype=np.int64)
+    for i in range(points.shape[0]):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        rx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz
+        ry = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz
+        rz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz
+        for k in range(K):
+            qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
+            if kind == 0:  # spherical: range along the ray (eq. 4-7)
+                d = math.sqrt(qx * qx + qy * qy + qz * qz)
+                if not d > 0.0:
+                    continue
+                u, v = spherical_pixel(qx, qy, qz, d, cam, W)
+            else:  # pinhole: depth (eq. 1)
+                d = qz
+                if not d > 0.0:
+                    continue
+                x, y = qx / qz, qy / qz
+                u = cam[0] * x + cam[4] * y + cam[2]
+                v = cam[1] * y + cam[3]
+            fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
+            if wrap and fu >= W:
+                fu -= W
+            if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
+                continue
+            iu, iv = int(fu), int(fv)
+            e = d - np.float64(measured[iv, iu])
+            tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
+            free = free_m + FREE_REL * d + own[i]
+            ok = abs(e) < tol
+            bad = d < nearest[iv, iu] - free
+            r = e / tol
+            total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
+            bad_count[k] += bad
+            if masks:
+                explained[i] = ok
+                open_space[i] = bad
+    for k in range(K):
+        scores[k] += total[k] - 3.0 * bad_count[k]
 
 
-def _tests(
+def _run_check(
     view: FullView,
-    pix: tuple[NDArray[np.int64], NDArray[np.int64]],
-    dk: NDArray[np.float64],
-    own: NDArray[np.float64],
+    points: NDArray[np.float64],
+    point_slack: NDArray[np.float64],
+    T: NDArray[np.float64],
+    shifts: NDArray[np.float64] | None,
     threshold_m: float,
-    coarse: bool = False,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """Range residuals, explained tolerances (``coarse``: the open-space tolerance's) and
-    open-space flags of looked-up points."""
-    with np.errstate(invalid="ignore"):
-        e = dk - view.measured[pix]
-        if coarse:
-            fine = FREE_THRESHOLDS * threshold_m + FREE_REL * dk + view.slack[pix]
-        else:
-            fine = threshold_m / 2 + FINE_REL * dk + view.slack[pix]
-        free = FREE_THRESHOLDS * threshold_m + FREE_REL * dk + own
-        return e, fine, dk < view.nearest[pix] - free
+    coarse: bool,
+    explained: NDArray[np.bool_],
+    open_space: NDArray[np.bool_],
+) -> NDArray[np.float64]:
+    """Scores of ``T`` moved by each of ``shifts`` (``T`` alone when None), masks of ``T``."""
+    T = np.asarray(T, dtype=np.float64)
+    t = T[:3, 3][None] if shifts is None else T[:3, 3] + np.asarray(shifts, dtype=np.float64)
+    scores = np.zeros(len(t))
+    if len(points) == 0 or view.image.camera is None:
+        return scores
+    kind, cam = camera_params(view.image)
+    _check_full(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(point_slack, dtype=np.float64),
+        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(t.reshape(-1, 3)), kind, cam,
+        np.ascontiguousarray(view.measured, dtype=np.float32),
+        np.ascontiguousarray(view.slack, dtype=np.float32),
+        np.ascontiguousarray(view.nearest, dtype=np.float64),
+        float(threshold_m), bool(coarse), explained, open_space, scores,
+    )  # fmt: skip
+    return scores
+
+
+_NO_MASK = np.zeros(0, dtype=bool)
 
 
 def full_masks(
@@ -174,6 +242,14 @@ def full_masks(
     threshold_m: float,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Which of ``points`` a pose explains in ``view`` and which it puts in open space.
+
+    A point maps into the view's frame, falls on the view's nearest pixel (its camera
+    model), and is tested there: *explained* when its range (depth for a pinhole view) is
+    within half an inlier threshold plus :data:`FINE_REL` of its range plus the pixel's
+    range slack of what the view measured; in *open space* when it lies nearer than the
+    smallest range of the pixel's :data:`NEIGHBOURHOOD` square by more than
+    :data:`FREE_THRESHOLDS` inlier thresholds plus :data:`FREE_REL` of its range plus its own
+    range slack. Points outside the view are neither.
 
     Parameters
     ----------
@@ -194,11 +270,9 @@ def full_masks(
     """
     explained = np.zeros(len(points), dtype=bool)
     open_space = np.zeros(len(points), dtype=bool)
-    k, pix, dk = _lookup(view, points, T_view_points)
-    e, fine, bad = _tests(view, pix, dk, point_slack[k], threshold_m)
-    with np.errstate(invalid="ignore"):
-        explained[k] = np.abs(e) < fine
-    open_space[k] = bad
+    _run_check(
+        view, points, point_slack, T_view_points, None, threshold_m, False, explained, open_space
+    )
     return explained, open_space
 
 
@@ -219,19 +293,60 @@ def full_score(
     cue fixes. With ``coarse`` a point counts as explained within the open-space tolerance
     (for poses not yet polished).
     """
-    k, pix, dk = _lookup(view, points, T_view_points)
-    e, fine, bad = _tests(view, pix, dk, point_slack[k], threshold_m, coarse)
-    with np.errstate(invalid="ignore"):
-        ok = np.abs(e) < fine
-    return float(np.sum(1.0 - (e[ok] / fine[ok]) ** 2) - 3.0 * np.count_nonzero(bad))
+    return float(
+        _run_check(
+            view, points, point_slack, T_view_points, None, threshold_m, coarse, _NO_MASK, _NO_MASK
+        )[0]
+    )
+
+
+def full_scores(
+    view: FullView,
+    points: NDArray[np.float64],
+    point_slack: NDArray[np.float64],
+    T_view_points: NDArray[np.float64],
+    shifts_m: NDArray[np.float64],
+    threshold_m: float,
+    *,
+    coarse: bool = False,
+) -> NDArray[np.float64]:
+    """:func:`full_score` of ``T_view_points`` moved by each of ``shifts_m`` (added to its
+    translation, view frame), in one pass over the points: each point is turned once and looked
+    up at every shift while its pixels are at hand. Equal to calling :func:`full_score` on each
+    moved pose, bit for bit.
+
+    Parameters
+    ----------
+    view, points, point_slack, T_view_points, threshold_m, coarse
+        As :func:`full_score`.
+    shifts_m : (K, 3) float64, metres
+
+    Returns
+    -------
+    (K,) float64
+    """
+    shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
+    return _run_check(
+        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK, _NO_MASK
+    )
+
+
+#: bytes of bit-packed :func:`pose_masks` a :class:`FullPair` keeps (the tournament, the
+#: rescue and the verdict ask for the same poses): about 0.2 MB a pose at 1024 x 512, 0.8 MB
+#: at 2048 x 1024, so a few dozen poses; none at 8192 x 4096 beyond four
+MASKS_BUDGET_BYTES = 64 * 2**20
 
 
 @dataclass(eq=False)
 class FullPair:
-    """Both scans at full resolution (see :class:`FullView`)."""
+    """Both scans at full resolution (see :class:`FullView`), with the masks of the poses
+    last asked of :func:`pose_masks`, bit-packed, within :data:`MASKS_BUDGET_BYTES`."""
 
     target: FullView
     source: FullView
+    masks: OrderedDict[tuple[bytes, float], list[NDArray[np.uint8]]] = field(
+        default_factory=OrderedDict, repr=False
+    )
 
     @property
     def points(self) -> int:
@@ -243,7 +358,12 @@ def full_pair_of(views: Sequence[Any]) -> Callable[[], FullPair]:
     """Makes both scans at full resolution when a near-tie needs them: ``views`` are the
     target's and the source's prepared views (``image``, ``measured``, ``slack``,
     ``normals``)."""
-    return lambda: FullPair(*(full_view(v.image, v.measured, v.slack, v.normals) for v in views))
+
+    def make() -> FullPair:
+        target, source = (full_view(v.image, v.measured, v.slack, v.normals) for v in views)
+        return FullPair(target, source)
+
+    return make
 
 
 def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m: float) -> Masks:
@@ -263,17 +383,31 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
     ((explained, open_space), (explained, open_space))
     """
     s, t = pair.source, pair.target
-    T = np.asarray(T_target_source, dtype=np.float64)
-    return (
+    T = np.ascontiguousarray(T_target_source, dtype=np.float64)
+    key = (T.tobytes(), float(threshold_m))
+    sizes = (len(s.points), len(s.points), len(t.points), len(t.points))
+    packed = pair.masks.get(key)
+    if packed is not None:
+        pair.masks.move_to_end(key)
+        a, b, c, d = (
+            np.unpackbits(p, count=n).view(bool) for p, n in zip(packed, sizes, strict=True)
+        )
+        return ((a, b), (c, d))
+    out = (
         full_masks(t, s.points, s.point_slack, T, threshold_m),
         full_masks(s, t.points, t.point_slack, invert(T), threshold_m),
     )
+    pair.masks[key] = [np.packbits(m) for direction in out for m in direction]
+    while sum(p.nbytes for v in pair.masks.values() for p in v) > MASKS_BUDGET_BYTES:
+        pair.masks.popitem(last=False)
+    return out
 
 
 __all__ = [
     "FINE_REL",
     "FREE_REL",
     "FREE_THRESHOLDS",
+    "MASKS_BUDGET_BYTES",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
     "FullPair",
@@ -282,6 +416,7 @@ __all__ = [
     "full_masks",
     "full_pair_of",
     "full_score",
+    "full_scores",
     "full_view",
     "pose_masks",
 ]

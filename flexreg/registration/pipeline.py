@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -51,7 +51,7 @@ from flexreg.registration.candidates import (
     self_symmetries,
 )
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import full_pair_of
+from flexreg.registration.fullres import FullPair, full_pair_of
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
@@ -72,6 +72,7 @@ from flexreg.registration.verdict import (
     Scored,
     TwoWay,
     decide,
+    full_evidence,
     gather,
     runner_ups,
 )
@@ -261,6 +262,7 @@ def _verdict(
     refinement: dict[str, Any] | None,
     config: RegistrationConfig,
     settled: Settlement,
+    full_pair: Callable[[], FullPair],
 ) -> Verdict:
     """The evidence on the final transform and the verdict (:mod:`.verdict`)."""
     ups = runner_ups(
@@ -299,7 +301,11 @@ def _verdict(
         full_ratio=config.verdict_ambiguity_ratio,
         sweep=None if settled.sweep is None else settled.sweep | {"settled": settled.won},
     )
-    return decide(ev, ups, config)
+    verdict = decide(ev, ups, config)
+    if verdict.confident and settled.pair is None and config.verdict_full_check:  # see config
+        full_evidence(ev, full_pair(), scored.T, thr, "check")
+        verdict = decide(ev, ups, config)
+    return verdict
 
 
 def _finish(
@@ -330,10 +336,9 @@ def _finish(
     priors = given if config.icp_only else given + plan_priors + m.priors
     with run.stage("estimation"):
         c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases=aliases)
-    settled = Settlement(c)
+    settled, pair = Settlement(c), full_pair_of(views)
     if config.settle and not config.icp_only:
         with run.stage("settling"):
-            pair = full_pair_of(views)
             settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config)
         c = settled.coarse
     T, inl = c.T_target_source, c.inliers
@@ -375,7 +380,7 @@ def _finish(
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
         stage = (rmse, fitness, kind)
-        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config, settled)
+        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config, settled, pair)
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
         overlap = measure_overlap(

@@ -34,6 +34,7 @@ from flexreg.registration.fullres import (
     Masks,
     full_masks,
     full_score,
+    full_scores,
     pose_masks,
 )
 from flexreg.registration.verdict import decisive_full, duel
@@ -151,7 +152,7 @@ def _across(
     T: NDArray[np.float64],
     direction: NDArray[np.float64],
     up: NDArray[np.float64],
-    score: Callable[[NDArray[np.float64]], float],
+    score: _Scorer,
 ) -> NDArray[np.float64]:
     """``T`` slid horizontally across ``direction`` to where ``score`` peaks, within
     :data:`ACROSS_M` in :data:`ACROSS_STEP_M` steps. The overlap's centroid misses the axis
@@ -165,7 +166,7 @@ def _across(
     v /= norm
     k = round(ACROSS_M / ACROSS_STEP_M)
     offsets = np.arange(-k, k + 1) * ACROSS_STEP_M
-    s = [score(_shifted(T, x * v)) for x in offsets]
+    s = score.shifted(T, offsets[:, None] * v)
     return _shifted(T, float(offsets[int(np.argmax(s))]) * v)
 
 
@@ -189,10 +190,17 @@ class _Scorer:
     def of(cls, pair: FullPair, threshold_m: float, points: int = SWEEP_POINTS) -> _Scorer:
         s = pair.source
         k = max(1, -(-len(s.points) // points))
-        return cls(pair.target, s.points[::k], s.point_slack[::k], threshold_m)
+        pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
+        return cls(pair.target, pts, slack, threshold_m)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
         return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+
+    def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
+        return full_scores(
+            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
+        )
 
 
 def _facing(
@@ -232,6 +240,12 @@ class _FacingScorer:
         if len(self.points) == 0:
             return 0.0
         return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+
+    def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
+        return full_scores(
+            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
+        )
 
 
 def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
@@ -299,11 +313,11 @@ def sweep_candidates(
         if b > 0 and aliases is not None and aliases.up is not None:
             base = _across(base, direction, aliases.up, score)
         u = _axis(base, direction, polish, range_m / 2)
-        s = np.array([score(_shifted(base, d * u)) for d in offsets])
+        s = score.shifted(base, offsets[:, None] * u)
         found = [float(offsets[i]) for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None)]
         # the surfaces facing the axis in half steps: where the cue fits, whatever the rest
         facing = _FacingScorer.of(pair, base, u, threshold_m)
-        f = np.array([facing(_shifted(base, d * u)) for d in fine])
+        f = facing.shifted(base, fine[:, None] * u)
         for i in _peaks(f, SWEEP_PEAKS, 2 * n if b == 0 else None, away=2):
             if all(abs(fine[i] - d) >= step_m for d in found):
                 found.append(float(fine[i]))
@@ -365,10 +379,7 @@ def place_along(
     best = 0.0
     for step in (span_m / 10, span_m / 100):
         offsets = best + np.arange(-10, 11) * step
-        scores = [
-            full_score(pair.target, pts, slack, _shifted(T, x * direction), threshold_m)
-            for x in offsets
-        ]
+        scores = full_scores(pair.target, pts, slack, T, offsets[:, None] * direction, threshold_m)
         best = float(offsets[int(np.argmax(scores))])
     return _shifted(T, best * direction)
 
@@ -581,7 +592,8 @@ class Settlement:
         The coarse result, at the tournament's winner when that is another pose; its
         ``judged`` include the slid poses.
     pair : FullPair or None
-        Both scans at full resolution, when a sweep or a tournament needed them.
+        Both scans at full resolution, when a sweep, a tournament or the open-space test of
+        a repeating plan needed them (the verdict then reads the answer's share there).
     sweep : dict or None
         JSON-ready: ``kind`` (``"weak_axis"`` or ``"repeat"``), ``direction_target``,
         ``range_m``, ``step_m``, ``poses`` (slid poses judged).
@@ -671,7 +683,7 @@ def settle(
         contradicted = pose_masks(pair, W, thr)
         share = open_share(contradicted)
         if not config.settle_open_share <= share < RESCUE_MAX_OPEN:
-            return Settlement(c)
+            return Settlement(c, pair)  # the verdict reads the answer's share
         kind = "repeat"
         log.debug("answer puts %.2f%% in open space at full resolution: sweep", 100 * share)
     pair = pair if pair is not None else full_pair()

@@ -314,15 +314,33 @@ def _full_answer(
     threshold_m: float,
     ratio: float,
 ) -> Masks | None:
-    """The answer's full-resolution masks when a close runner-up needs a duel there, and
-    its own open-space share under ``"full_resolution"`` in the evidence."""
-    if full is None or not any(h.score_ratio >= ratio for h in runner_up):
+    """The answer's full-resolution masks, and its own open-space share under
+    ``"full_resolution"`` in the evidence, whenever the settling made both scans' full views
+    (a repeating plan, a weak axis or a close rival: the share then decides
+    ``free_space``, :func:`decide`); None without them."""
+    if full is None:
         return None
+    return full_evidence(ev, full, T, threshold_m)
+
+
+def full_evidence(
+    ev: dict[str, Any],
+    full: FullPair,
+    T: NDArray[np.float64],
+    threshold_m: float,
+    why: str = "settling",
+) -> Masks:
+    """Record under ``ev["full_resolution"]`` how many points of both scans ``full`` checks,
+    the share of them the pose ``T`` puts in the other's open space, and ``why`` they were
+    compared (``"settling"``: a repeat, a weak axis or a close rival, where a twin beside the
+    truth is likely; ``"check"``: a confident answer checked anyway); its masks
+    (:func:`~flexreg.registration.fullres.pose_masks`)."""
     masks = pose_masks(full, T, threshold_m)
     bad = sum(int(b.sum()) for _, b in masks)
     ev["full_resolution"] = {
         "points": full.points,
         "open_space_share": round(bad / full.points, 7) if full.points else 0.0,
+        "why": why,
     }
     return masks
 
@@ -475,6 +493,28 @@ def _free_space_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | 
             "fits",
         )
     return None
+
+
+def _full_open_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    """The answer puts more than ``verdict_full_max_open`` (where the settling compared the
+    scans: a twin beside the truth is likely) or ``verdict_full_max_open_check`` (a confident
+    answer checked anyway) of both scans' points in the other's open space at full
+    resolution: one bay, aisle or room beside the right pose, which the samples' checks
+    cannot tell."""
+    f = ev.get("full_resolution")
+    if not f:
+        return None
+    allowed = (
+        cfg.verdict_full_max_open_check if f.get("why") == "check" else cfg.verdict_full_max_open
+    )
+    if f["open_space_share"] <= allowed:
+        return None
+    return Reason(
+        "free_space",
+        f"at full resolution {100 * f['open_space_share']:.2f}% of both scans' points land where "
+        f"the other scanner saw through empty space (allowed {100 * allowed:.1f}%): the pose is "
+        "contradicted, perhaps a bay or room beside the right one",
+    )
 
 
 def _inlier_reasons(ev: dict[str, Any], cfg: RegistrationConfig) -> list[Reason]:
@@ -648,7 +688,9 @@ def decide(
     Tests (thresholds: ``config.verdict_*``; a test whose evidence is missing passes):
     ``low_overlap`` (either scan explained less than ``verdict_min_overlap``),
     ``free_space`` (either conflicting more than ``verdict_max_conflict``, or more than
-    ``verdict_max_conflict_ratio`` of what the other explains of it),
+    ``verdict_max_conflict_ratio`` of what the other explains of it, or, where the scans were
+    compared at full resolution, more than ``verdict_full_max_open`` of all their points in
+    the other's open space),
     ``few_inliers`` (fewer than ``verdict_min_inliers``) or ``clustered_inliers`` (their
     second principal spread below ``verdict_min_inlier_spread`` of the overlap's),
     ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
@@ -680,6 +722,10 @@ def decide(
     reasons: list[Reason] = []
     for test in (_overlap_reason, _free_space_reason, _axis_reason, _ambiguity_reason):
         r = test(evidence, config)
+        if r is not None:
+            reasons.append(r)
+    if not any(x.code == "free_space" for x in reasons):
+        r = _full_open_reason(evidence, config)
         if r is not None:
             reasons.append(r)
     if not any(x.code == "ambiguous" for x in reasons):
@@ -731,6 +777,7 @@ __all__ = [
     "decisive_full",
     "duel",
     "duel_masks",
+    "full_evidence",
     "gather",
     "runner_ups",
 ]

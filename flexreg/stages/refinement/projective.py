@@ -48,8 +48,15 @@ PARALLEL_MIN_POINTS = 200_000
 _LEVEL_TOLERANCE = 1e-5
 
 
-def _camera_params(image: RangeImage) -> tuple[int, NDArray[np.float64]]:
-    """The camera of ``image`` as (kind, parameters) for the kernels."""
+def camera_params(image: RangeImage) -> tuple[int, NDArray[np.float64]]:
+    """The camera of ``image`` as (kind, parameters) for compiled kernels: kind 0 spherical
+    (``phi_min, dphi, theta_min, dtheta, wraps``), kind 1 pinhole (``fx, fy, cx, cy, skew``).
+
+    Raises
+    ------
+    ConfigError
+        The image has no camera model.
+    """
     cam = image.camera
     if isinstance(cam, SphericalCamera):
         return _SPHERICAL, np.array(
@@ -74,6 +81,40 @@ def angular_step(image: RangeImage) -> float:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _wrap(u, W):  # pragma: no cover
+    """``u % W`` (Python's floating-point modulo, ``W > 0``), without the division for the
+    ``u`` within one turn either side that a projection gives: ``fmod`` is exact there, so
+    adding or subtracting ``W`` once is the same number."""
+    if u >= 0.0:
+        if u < W:
+            return u
+        if u < 2.0 * W:
+            return u - W
+    elif u >= -W:
+        return u + W
+    return u % W
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def spherical_pixel(qx, qy, qz, r, cam, W):  # pragma: no cover
+    """The pixel coordinates ``(u, v)`` (before rounding) of a point at range ``r > 0`` in a
+    spherical camera ``cam`` (:func:`camera_params`) of width ``W``, as
+    :meth:`~flexreg.core.camera.SphericalCamera.project` computes them (eq. 4-7).
+
+    Inlined into the kernels of this module and of :mod:`flexreg.registration.fullres`;
+    numba's on-disk cache of a kernel is keyed by its own file, so after changing this
+    function remove the ``*.nbi``/``*.nbc`` files of ``fullres`` too."""
+    u = (math.atan2(qy, qx) - cam[0]) / cam[1]
+    c = min(1.0, max(-1.0, qz / r))
+    v = (math.acos(c) - cam[2]) / cam[3]
+    if cam[4] > 0.5:
+        u = _wrap(u, W)
+    elif u < -0.5:
+        u += 2.0 * math.pi / cam[1]
+    return u, v
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _associate_chunk(
     ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
 ):  # pragma: no cover
@@ -94,13 +135,7 @@ def _associate_chunk(
         if kind == 0:
             if not rq > 0.0:
                 continue
-            u = (math.atan2(qy, qx) - cam[0]) / cam[1]
-            c = min(1.0, max(-1.0, qz / rq))
-            v = (math.acos(c) - cam[2]) / cam[3]
-            if wrap:
-                u = u % W
-            elif u < -0.5:
-                u += 2.0 * math.pi / cam[1]
+            u, v = spherical_pixel(qx, qy, qz, rq, cam, W)
         else:
             if not qz > 0.0:
                 continue
@@ -250,7 +285,7 @@ class _Side:
         points: NDArray[np.float64],
         reverse: bool,
     ) -> None:
-        self.kind, self.cam = _camera_params(image)
+        self.kind, self.cam = camera_params(image)
         self.normals = grid_normals(image) if normals is None else normals
         self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
@@ -421,6 +456,8 @@ def projective_icp(
 
 __all__ = [
     "angular_step",
+    "camera_params",
     "point_information",
     "projective_icp",
+    "spherical_pixel",
 ]

@@ -1,0 +1,182 @@
+"""Full-resolution duels: the compiled checks give exactly what the camera models and the
+tests of the module notes give, evaluated point by point in numpy; a pose's masks are kept."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.core.range_image import from_depth
+from flexreg.core.transforms import invert, make_transform, rotation_about_axis
+from flexreg.registration.fullres import (
+    FINE_REL,
+    FREE_REL,
+    FREE_THRESHOLDS,
+    FullPair,
+    full_masks,
+    full_score,
+    full_scores,
+    full_view,
+    pose_masks,
+)
+from flexreg.stages.refinement.projective import camera_params, spherical_pixel
+from flexreg.stages.verification import measured_image, range_slack
+
+CAMERAS = {
+    "full turn": SphericalCamera.from_reference(96, 48, 0.2, 2.9),
+    "part turn": SphericalCamera(80, 40, -1.0, 2.0, 0.4, 2.4),
+    "pinhole": PinholeCamera(60.0, 55.0, 40.0, 30.0, 80, 60),
+}
+
+
+def _view(camera, rng):
+    """A range image of smooth random ranges (2-12 m, a few holes) and its full view."""
+    H, W = camera.shape
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    d = 6.0 + 3.0 * np.sin(u / 7.0) * np.cos(v / 5.0) + rng.uniform(0, 0.05, (H, W))
+    d[rng.random((H, W)) < 0.05] = np.nan
+    image = from_depth(d, camera)
+    return full_view(image, measured_image(image), range_slack(image))
+
+
+def _reference(view, points, own, T, thr, coarse):
+    """The module's tests, point by point through the camera model's own projection."""
+    q = points @ T[:3, :3].T + T[:3, 3]
+    u, v, d = view.image.camera.project(q)
+    W, H = view.image.width, view.image.height
+    explained = np.zeros(len(points), bool)
+    open_space = np.zeros(len(points), bool)
+    score = 0.0
+    for i in range(len(points)):
+        if not (np.isfinite(u[i]) and np.isfinite(v[i]) and d[i] > 0):
+            continue
+        iu, iv = int(np.floor(u[i] + 0.5)), int(np.floor(v[i] + 0.5))
+        if view.image.wraps and iu >= W:
+            iu -= W
+        if not (0 <= iu < W and 0 <= iv < H):
+            continue
+        e = d[i] - float(view.measured[iv, iu])
+        base = FREE_THRESHOLDS * thr if coarse else thr / 2
+        rel = FREE_REL if coarse else FINE_REL
+        tol = base + rel * d[i] + float(view.slack[iv, iu])
+        free = FREE_THRESHOLDS * thr + FREE_REL * d[i] + own[i]
+        explained[i] = abs(e) < tol
+        open_space[i] = d[i] < view.nearest[iv, iu] - free
+        score += (1.0 - (e / tol) ** 2 if explained[i] else 0.0) - 3.0 * open_space[i]
+    return explained, open_space, score
+
+
+def _pose(rng, scale=0.3):
+    axis = rng.normal(size=3)
+    R = rotation_about_axis(axis / np.linalg.norm(axis), rng.normal() * scale)
+    return make_transform(R, rng.normal(size=3) * scale)
+
+
+@pytest.mark.parametrize("name", list(CAMERAS))
+def test_compiled_checks_equal_the_camera_models_tests(name):
+    rng = np.random.default_rng(7)
+    target, source = _view(CAMERAS[name], rng), _view(CAMERAS[name], rng)
+    tested = 0
+    for _ in range(4):
+        T = _pose(rng)
+        ok, bad = full_masks(target, source.points, source.point_slack, T, 0.05)
+        ok_ref, bad_ref, _ = _reference(target, source.points, source.point_slack, T, 0.05, False)
+        np.testing.assert_array_equal(ok, ok_ref)
+        np.testing.assert_array_equal(bad, bad_ref)
+        for coarse in (False, True):
+            s = full_score(target, source.points, source.point_slack, T, 0.05, coarse=coarse)
+            ref = _reference(target, source.points, source.point_slack, T, 0.05, coarse)[2]
+            assert s == pytest.approx(ref, rel=1e-12, abs=1e-9)
+        tested += int(ok.sum()) + int(bad.sum())
+    assert tested > 100  # the poses put points on both tests
+
+
+def test_no_points_and_no_camera_score_nothing():
+    rng = np.random.default_rng(1)
+    view = _view(CAMERAS["full turn"], rng)
+    none = np.zeros((0, 3))
+    assert full_score(view, none, np.zeros(0), np.eye(4), 0.05) == 0.0
+    ok, bad = full_masks(view, none, np.zeros(0), np.eye(4), 0.05)
+    assert ok.shape == bad.shape == (0,)
+
+
+@numba.njit
+def _pixels(P, cam, W):  # pragma: no cover
+    out = np.empty((P.shape[0], 2))
+    for i in range(P.shape[0]):
+        x, y, z = P[i, 0], P[i, 1], P[i, 2]
+        u, v = spherical_pixel(x, y, z, np.sqrt(x * x + y * y + z * z), cam, W)
+        out[i, 0], out[i, 1] = np.floor(u + 0.5), np.floor(v + 0.5)
+    return out
+
+
+@pytest.mark.parametrize("name", ["full turn", "part turn"])
+def test_spherical_pixel_is_the_camera_models_pixel_at_edges_and_seams(name):
+    """Points on pixel edges (to a nanometre), on the seam (x < 0, y = +-0) and at the poles
+    fall on the pixel the camera model's projection gives."""
+    cam = CAMERAS[name]
+    rng = np.random.default_rng(3)
+    n = 20_000
+    u = rng.integers(-1, cam.width + 1, n) + rng.normal(0, 1e-9, n)
+    v = rng.uniform(0, cam.height, n)
+    P = cam.backproject(u, v, rng.uniform(0.5, 30, n)).reshape(-1, 3)
+    seam = np.array([[-1.0, 0.0, 0.2], [-1.0, -0.0, 0.2], [-2.0, 1e-300, 0], [-2.0, -1e-300, 0]])
+    poles = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1e-12, 0.0, 3.0]])
+    P = np.ascontiguousarray(np.concatenate([P, seam, poles]))
+    uu, vv, _ = cam.project(P)
+    expect = np.stack([np.floor(uu + 0.5), np.floor(vv + 0.5)], axis=1)
+    got = _pixels(P, camera_params(from_depth(np.ones(cam.shape), cam))[1], cam.width)
+    if cam.wraps:
+        for a in (expect, got):
+            a[:, 0] = np.where(a[:, 0] >= cam.width, a[:, 0] - cam.width, a[:, 0])
+    np.testing.assert_array_equal(got, expect)
+
+
+def test_pose_masks_are_kept_packed_per_pose_and_threshold_within_a_budget(monkeypatch):
+    rng = np.random.default_rng(5)
+    pair = FullPair(_view(CAMERAS["full turn"], rng), _view(CAMERAS["full turn"], rng))
+    T = _pose(rng)
+    first = pose_masks(pair, T, 0.05)
+    assert len(pair.masks) == 1
+    with monkeypatch.context() as m:  # a kept pose is not computed again
+        m.setattr("flexreg.registration.fullres.full_masks", _refuse)
+        again = pose_masks(pair, T.copy(), 0.05)
+    for x, y in zip(first, again, strict=True):
+        for a, b in zip(x, y, strict=True):
+            assert a.dtype == b.dtype == bool
+            np.testing.assert_array_equal(a, b)
+    assert first[0][0].any() and first[1][1].shape == (len(pair.target.points),)
+    pose_masks(pair, T, 0.02)  # another threshold: another entry
+    assert len(pair.masks) == 2
+    one = sum(p.nbytes for p in pair.masks[next(iter(pair.masks))])
+    monkeypatch.setattr("flexreg.registration.fullres.MASKS_BUDGET_BYTES", 3 * one)
+    for _ in range(5):
+        pose_masks(pair, _pose(rng), 0.05)
+    assert len(pair.masks) == 3  # the oldest went
+    fresh = full_masks(pair.source, pair.target.points, pair.target.point_slack, invert(T), 0.05)
+    np.testing.assert_array_equal(pose_masks(pair, T, 0.05)[1][0], fresh[0])
+
+
+def _refuse(*args, **kwargs):
+    raise AssertionError("computed again")
+
+
+@pytest.mark.parametrize("coarse", [False, True])
+def test_scores_of_shifted_poses_equal_each_pose_scored_alone(coarse):
+    """A sweep's scores in one pass are, bit for bit, those of each slid pose alone."""
+    rng = np.random.default_rng(11)
+    target, source = _view(CAMERAS["full turn"], rng), _view(CAMERAS["full turn"], rng)
+    T = _pose(rng)
+    u = np.array([0.6, -0.8, 0.0])
+    offsets = np.arange(-10, 11) * 0.05
+    many = full_scores(
+        target, source.points, source.point_slack, T, offsets[:, None] * u, 0.05, coarse=coarse
+    )
+    for x, got in zip(offsets, many, strict=True):
+        moved = T.copy()
+        moved[:3, 3] += x * u
+        alone = full_score(target, source.points, source.point_slack, moved, 0.05, coarse=coarse)
+        assert got == alone
+    assert np.ptp(many) > 1.0  # the slide changes what fits

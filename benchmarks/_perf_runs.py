@@ -44,39 +44,52 @@ TARGET_PREPARE_RATIO = 1.5
 TARGET_SPEED_RATIO = 10.0
 TARGET_WHOLE_S = 2.0
 
-#: a child that reads one station and prepares it as a survey does, twice: first in a process
-#: fresh from its imports ("cold": numba's compiler and OpenCV initialise then, about 0.1 GB
-#: once per process), then again once the first is freed ("warm": what each further station
-#: costs a survey worker); the peak RSS above the process's size before each, with glibc
-#: returning large freed blocks as the command line sets it (``mallopt``)
+#: a child that prepares one station as a survey worker does (``prepare_station``: the file
+#: hashed, read, prepared and written to a cache folder), twice: first in a process fresh
+#: from its imports ("cold": numba's compiler and OpenCV initialise then, about 0.1 GB once
+#: per process), then again once the first is freed ("warm": what each further station costs
+#: a survey worker); the peak RSS above the process's size before each, with glibc returning
+#: large freed blocks as the command line sets it (``mallopt``). The PTX parsing time is
+#: measured apart, on a read as ``flexreg register`` reads (no intensities).
 _PREPARE_CHILD = """
-import ctypes, gc, json, sys, time
+import ctypes, gc, json, pickle, sys, tempfile, time
+from pathlib import Path
 ctypes.CDLL(None).mallopt(-3, 4 << 20)  # M_MMAP_THRESHOLD, as flexreg.cli.app sets it
 from flexreg.bench.measure import reset_high_water_mark
 from flexreg.io import read_scan
-from flexreg.registration import Registration, RegistrationConfig
+from flexreg.registration import RegistrationConfig
+from flexreg.survey.stations import Station, prepare_station
 
 def kib(key):
     for line in open("/proc/self/status"):
         if line.startswith(key + ":"):
             return int(line.split()[1])
 
-reg = Registration(RegistrationConfig())
+path = Path(sys.argv[1])
+with path.open() as f:
+    cols, rows = int(f.readline()), int(f.readline())
+config = RegistrationConfig()
 runs = []
 for _ in range(2):
+    with tempfile.TemporaryDirectory() as cache:
+        gc.collect()
+        base = kib("VmRSS")
+        reset_high_water_mark()
+        t = time.perf_counter()
+        done = prepare_station(Station(path.stem, path), cache, config)
+        total = time.perf_counter() - t
+        peak, after = kib("VmHWM"), kib("VmRSS")
+        if done.error is not None:
+            sys.exit(done.error)
+        with open(done.cache_file, "rb") as f:
+            timings = pickle.load(f).timings_s
     gc.collect()
-    base = kib("VmRSS")
-    reset_high_water_mark()
     t = time.perf_counter()
-    scan = read_scan(sys.argv[1])
+    scan = read_scan(path, intensity=False)
     read_s = time.perf_counter() - t
-    rows, cols = scan.grid_shape
-    prepared = reg.prepare(scan, overlap=False)  # as the survey prepares its stations
     del scan
-    runs.append({"base_kib": base, "peak_kib": kib("VmHWM"), "after_kib": kib("VmRSS"),
-        "read_s": read_s, "total_s": time.perf_counter() - t, "rows": rows, "cols": cols,
-        "timings_s": prepared.timings_s})
-    del prepared
+    runs.append({"base_kib": base, "peak_kib": peak, "after_kib": after, "read_s": read_s,
+        "total_s": total, "rows": rows, "cols": cols, "timings_s": timings})
 print(json.dumps(runs))
 """
 
@@ -186,11 +199,12 @@ def import_time(repeats: int) -> dict[str, Any]:
 
 
 def prepare_station(path: Path) -> dict[str, Any]:
-    """One station read and prepared (``Registration.prepare``, what a survey caches) in a
-    fresh process, twice (see :data:`_PREPARE_CHILD`): the peak RSS above the process's size
-    before each preparation, against the station's float32 xyz grid (rows x cols x 3 x 4
-    bytes). ``ratio`` is the warm one (each further station of a worker), ``cold_ratio`` the
-    first of a process (one-off library initialisation included)."""
+    """One station prepared as a survey worker prepares it (``prepare_station``: hashed,
+    read, ``Registration.prepare``, cached) in a fresh process, twice (see
+    :data:`_PREPARE_CHILD`): the peak RSS above the process's size before each preparation,
+    against the station's float32 xyz grid (rows x cols x 3 x 4 bytes). ``ratio`` is the warm
+    one (each further station of a worker), ``cold_ratio`` the first of a process (one-off
+    library initialisation included)."""
     r = run_measured([sys.executable, "-c", _HWM + _PREPARE_CHILD, str(path)])
     if r["exit"] != 0:
         return {"station": path.name, "failure": r["output"]}

@@ -138,6 +138,36 @@ def test_json_holds_the_true_transform_and_the_run(registered, pair):
     assert set(result.to_dict()) <= set(doc)
 
 
+def test_reading_straight_into_working_images_gives_the_same_result(registered, pair, tmp_path):
+    """Without --matches the PTX source is read straight into its points and working image
+    (no grid index or intensity kept): the same transform and overlap as the full read."""
+    target, source, _ = pair
+    calls = []
+    real_register = flexreg.registration.pipeline.register
+
+    def spy(*args, **kwargs):
+        calls.append((args, kwargs))
+        return real_register(*args, **kwargs)
+
+    argv = ["register", str(target), str(source), "--out", str(tmp_path / "T.json")]
+    argv += ["--voxel", "0.08", "--set", "open3d_overlap_check=true"]
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(io.StringIO()):
+        mp.setattr(flexreg.registration.pipeline, "register", spy)
+        assert run(argv) == 0
+    ((args, kwargs),) = calls
+    assert args[1].grid_index is None and args[1].intensity is None  # the PTX, read lean
+    assert kwargs["images"][0] is None and kwargs["images"][1] is not None
+    lean = json.loads((tmp_path / "T.json").read_text())
+    full = json.loads((registered["out"] / "T.json").read_text())
+    assert lean["T_target_source"] == full["T_target_source"]
+    o3d = ("open3d_fitness", "open3d_inlier_rmse_m")  # Open3D's own sums: last bits vary
+    for key, value in full["overlap"].items():
+        if key in o3d:
+            assert lean["overlap"][key] == pytest.approx(value, rel=1e-9)
+        else:
+            assert lean["overlap"][key] == value, key
+
+
 def test_truth_errors_reported_and_stored(registered):
     doc = json.loads((registered["out"] / "T.json").read_text())
     err = doc["error_vs_truth"]

@@ -10,7 +10,13 @@ from flexreg.core.camera import SphericalCamera
 from flexreg.core.range_image import from_depth
 from flexreg.errors import ConfigError
 from flexreg.stages.correspondences import lift
-from flexreg.stages.keypoints import METHODS, create_detector, detect_and_describe, to_uint8
+from flexreg.stages.keypoints import (
+    METHODS,
+    create_detector,
+    detect_and_describe,
+    tiles,
+    to_uint8,
+)
 from flexreg.stages.matching import match
 
 
@@ -139,4 +145,46 @@ def test_sift_in_strips_finds_the_keypoints_of_the_whole_image(rng):
     assert np.mean(same) > 0.97
     # other methods normalise over the whole image: strips are ignored
     orb = detect_and_describe(img, "orb", mask, strip_rows=128)
+    np.testing.assert_array_equal(orb.xy, detect_and_describe(img, "orb", mask).xy)
+
+
+def test_sift_in_tiles_finds_the_keypoints_of_the_whole_image(rng):
+    """SIFT tile by tile: the tiles cover the image once, and the keypoints and descriptors
+    are those of the whole image except a few large ones near the tiles' edges, none twice;
+    on a panorama the seam is handled as on the whole image."""
+    # a 2048 x 1024 panorama with its seam padding: 2 x 5 tiles of 512 x 436 (the last 432)
+    assert tiles((1024, 2176), 262_144) == [
+        (r, r + 512, c, min(c + 436, 2176)) for r in (0, 512) for c in range(0, 2176, 436)
+    ]
+    assert tiles((50, 70), 1_000) == [(0, 50, 0, 35), (0, 50, 35, 70)]  # at least 64 a side
+    for shape, px in [((600, 400), 40_000), ((1024, 2176), 262_144), ((333, 777), 5_000)]:
+        cover = np.zeros(shape, int)
+        for r0, r1, c0, c1 in tiles(shape, px):
+            assert (r1 - r0) * (c1 - c0) <= max(px, 64 * 64)
+            cover[r0:r1, c0:c1] += 1
+        assert (cover == 1).all()
+    assert tiles((600, 400), 0) == tiles((600, 400), 240_000) == [(0, 600, 0, 400)]
+    img = _texture(rng, 600, 400)
+    mask = np.ones(img.shape, bool)
+    mask[250:300, 100:200] = False
+
+    def keys(f):
+        return list(zip(*np.round(f.xy, 3).T, np.round(f.angle, 2), strict=True))
+
+    for wrap in (False, True):
+        whole = detect_and_describe(img, "sift", mask, wrap=wrap)
+        tiled = detect_and_describe(img, "sift", mask, wrap=wrap, tile_pixels=150 * 150)
+        assert len(whole) > 200
+        kw, kt = set(keys(whole)), set(keys(tiled))
+        assert len(kt) == len(tiled)  # no keypoint found by two tiles
+        assert len(kw & kt) >= 0.96 * len(kw) and len(kt - kw) <= 0.04 * len(kw)
+        at = {k: i for i, k in enumerate(keys(tiled))}
+        same = [
+            np.abs(whole.descriptors[i] - tiled.descriptors[at[k]]).max() <= 1
+            for i, k in enumerate(keys(whole))
+            if k in at
+        ]
+        assert np.mean(same) > 0.96
+        assert (tiled.xy[:, 0] >= -0.5).all() and (tiled.xy[:, 0] < 400).all()
+    orb = detect_and_describe(img, "orb", mask, tile_pixels=150 * 150)
     np.testing.assert_array_equal(orb.xy, detect_and_describe(img, "orb", mask).xy)

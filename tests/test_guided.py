@@ -28,7 +28,7 @@ from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import descriptor_distances, match_guided
 from flexreg.stages.priors import upright_priors
 from flexreg.stages.projection import range_image
-from flexreg.stages.sampling import area_cell, area_sample
+from flexreg.stages.sampling import area_cell, area_sample, area_sample_image
 from flexreg.stages.verification import overlap_score, range_slack
 from flexreg.synth import station_pair
 
@@ -373,6 +373,20 @@ def test_area_sample_is_the_first_point_of_each_occupied_cell():
     for i, key in enumerate(map(tuple, k)):
         first.setdefault(key, i)
     np.testing.assert_array_equal(area_sample(pts, 2000), pts[sorted(first.values())])
+
+
+def test_area_sample_of_an_image_is_that_of_its_valid_points():
+    """``area_sample_image`` gives exactly ``area_sample(xyz[valid])`` (no copy of the points),
+    for float32 and float64 images, thinned or not, and with fewer points than wanted."""
+    rng = np.random.default_rng(5)
+    xyz = rng.normal(0, 3, (120, 250, 3))
+    valid = rng.random((120, 250)) > 0.3
+    xyz[~valid] = np.nan
+    for dtype in (np.float32, np.float64):
+        x = xyz.astype(dtype)
+        for n in (300, 2000, 10**6):
+            np.testing.assert_array_equal(area_sample_image(x, valid, n), area_sample(x[valid], n))
+    assert area_sample_image(xyz, np.zeros(valid.shape, bool), 100).shape == (0, 3)
 
 
 def test_overlap_area_sampling_weights_surfaces_not_pixels():

@@ -89,3 +89,62 @@ def test_chunked_errors_name_the_same_line(tmp_path, monkeypatch, case, chunk):
     with pytest.raises(InputError) as e:
         read_scans(p)
     assert str(p) in str(e.value) and fragment in str(e.value)
+
+
+@pytest.mark.parametrize("chunk", [7, 1000])
+def test_reading_without_intensity_keeps_everything_else(tmp_path, rng, monkeypatch, chunk):
+    """``intensity=False`` stores no intensities; points, colours, grid and pose are those of
+    a full read, and a bad line is still found."""
+    p = tmp_path / "multi.ptx"
+    write_scan(p, [_scan(rng, 9, 6, colors=True), _scan(rng, 4, 5, colors=False)])
+    monkeypatch.setattr(ptx, "_CHUNK_BYTES", chunk)
+    full, lean = read_scans(p), read_scans(p, intensity=False)
+    for a, b in zip(full, lean, strict=True):
+        assert a.intensity is not None and b.intensity is None
+        a.intensity = None
+        _same(a, b)
+    npz = tmp_path / "s.npz"
+    write_scan(npz, _scan(rng, 3, 3, colors=False))
+    assert read_scans(npz)[0].intensity is not None
+    assert read_scans(npz, intensity=False)[0].intensity is None  # other readers: dropped
+    lines = p.read_text().splitlines()
+    lines[11] = "1 2 zz 0.5"
+    bad = tmp_path / "bad.ptx"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 12: not a valid number"):
+        read_scans(bad, intensity=False)
+
+
+@pytest.mark.parametrize("max_pixels", [10_000, 20, 8])
+def test_reading_straight_into_the_working_image(tmp_path, rng, monkeypatch, max_pixels):
+    """``read_working_scan``: the points of a full read in the same order, without grid index
+    or attributes, and the working image that :func:`working_image` makes of the full read
+    (every k-th row and column), for the setup a selector names; other formats fall back to
+    a plain read."""
+    from flexreg.io import read_working_scan
+    from flexreg.stages.projection import working_image
+
+    p = tmp_path / "multi.ptx"
+    write_scan(p, [_scan(rng, 9, 6, colors=True), _scan(rng, 7, 5, colors=False)])
+    monkeypatch.setattr(ptx, "_CHUNK_BYTES", 64)
+    for ref, k in [(p, 0), (f"{p}#1", 1)]:
+        full = read_scans(p)[k]
+        scan, image = read_working_scan(ref, max_pixels=max_pixels)
+        assert scan.grid_index is None and scan.intensity is None and scan.colors is None
+        np.testing.assert_array_equal(scan.points, full.points)
+        np.testing.assert_array_equal(scan.T_world_scanner, full.T_world_scanner)
+        expected = working_image(full, max_pixels=max_pixels)
+        assert image.shape == expected.shape and image.camera is None
+        np.testing.assert_array_equal(image.valid, expected.valid)
+        np.testing.assert_array_equal(image.xyz, expected.xyz)
+        assert (image.index == -1).all() and image.xyz.dtype == np.float32
+    npz = tmp_path / "s.npz"
+    write_scan(npz, _scan(rng, 3, 3, colors=False))
+    scan, image = read_working_scan(npz, max_pixels=max_pixels)
+    assert image is None and scan.intensity is None and scan.grid_index is not None
+    lines = p.read_text().splitlines()
+    lines[11] = "1 2 zz 0.5"
+    bad = tmp_path / "bad.ptx"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 12: not a valid number"):
+        read_working_scan(bad, max_pixels=max_pixels)

@@ -111,3 +111,49 @@ def test_prepare_without_overlap_is_bit_for_bit_the_same():
     Ta, Tb = reg.align(*one).T_target_source, reg.align(*two).T_target_source
     np.testing.assert_array_equal(Ta, Tb)
     assert rotation_error_deg(Ta, pair.T_target_source) < 0.1
+
+
+def test_prepare_lets_go_of_the_scan_before_the_feature_stages(monkeypatch):
+    """``prepare(keep_scan=False)`` (a survey worker with the projective refinement): the scan
+    is freed once its working image and the refinement's sample exist, before SIFT; the
+    prepared scan is what a survey caches (its ``scan`` the working image, whose index is one
+    repeated value and pickles as such) and aligns as the kept one does."""
+    import gc
+    import pickle
+    import weakref
+    from dataclasses import replace
+
+    from flexreg.registration import Registration
+    from flexreg.registration import preparation as pl
+    from flexreg.synth import station_pair
+
+    pair = station_pair("room", seed=4, resolution=(512, 256))
+    reg = Registration(RegistrationConfig())
+    kept = [reg.prepare(s, overlap=False) for s in (pair.target, pair.source)]
+    alive: list[object] = []
+    detect = pl.detect_and_describe
+
+    def watching(*args, **kwargs):
+        gc.collect()
+        alive.append(ref())
+        return detect(*args, **kwargs)
+
+    monkeypatch.setattr(pl, "detect_and_describe", watching)
+    lean = []
+    for s in (pair.target, pair.source):
+        held = [replace(s)]  # a copy only this list holds, as a survey worker's read scan
+        ref = weakref.ref(held[0])
+        lean.append(reg.prepare(held.pop(), overlap=False, keep_scan=False))
+    assert alive == [None, None]
+    for a, b in zip(kept, lean, strict=True):
+        assert b.scan is b.image and not any(b.image.index.strides)
+        np.testing.assert_array_equal(a.view.refine_sample[1], b.view.refine_sample[1])
+        np.testing.assert_array_equal(a.image.xyz, b.image.xyz)
+        full = replace(b.image, index=np.full(b.image.shape, -1, dtype=np.int64))
+        saved = len(pickle.dumps(full)) - len(pickle.dumps(b.image))
+        assert saved > full.index.nbytes - 1000  # the index is not stored pixel by pixel
+        back = pickle.loads(pickle.dumps(b))
+        assert not any(back.image.index.strides) and (back.image.index == -1).all()
+    Ta, Tb = reg.align(*kept).T_target_source, reg.align(*lean).T_target_source
+    assert rotation_error_deg(Ta, Tb) < 1e-3 and translation_error_m(Ta, Tb) < 1e-4
+    assert rotation_error_deg(Tb, pair.T_target_source) < 0.1

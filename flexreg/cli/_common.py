@@ -73,6 +73,7 @@ def read_input(
     all_scans: bool = False,
     origin: tuple[float, float, float] | None = None,
     origin_option: str | None = None,
+    intensity: bool = True,
 ) -> list[Any]:
     """Read the scans of an input (``FILE``, ``FILE#N`` or ``FILE#NAME``), building a camera for
     depth PNGs from the options.
@@ -81,7 +82,8 @@ def read_input(
     the file's only setup: a file holding several is refused with a line that names them.
     With ``origin_option`` (the command's option for the scanner position), a cloud in
     project coordinates is refused with a line that names that option, and ``origin`` moves
-    the points to the scanner (:mod:`flexreg.io.origin`).
+    the points to the scanner (:mod:`flexreg.io.origin`). ``intensity=False``: without
+    intensities (a command that never reads them keeps 4 bytes per point less).
     """
     from flexreg.errors import InputError
     from flexreg.io import detect_format, read_scans
@@ -122,6 +124,8 @@ def read_input(
         setups = list_setups(file)  # headers only: refuse a project file before reading it
         if len(setups) > 1:
             raise _several(file, [s.name for s in setups], [s.points for s in setups])
+    if not intensity:
+        opts["intensity"] = False
     scans = read_scans(path, **opts)
     if len(scans) > 1 and ref.selector is None and not all_scans:
         raise _several(file, [s.name for s in scans], [len(s) for s in scans])
@@ -161,41 +165,106 @@ def read_pair(
     source: Path,
     origins: tuple[Any, Any] | None = None,
     options: tuple[str, str] | None = None,
+    *,
+    intensity: bool = True,
 ) -> list[Any]:
     """Read the target and the source scan (one setup each, see :func:`read_input`; with
     ``options``, the scanner position options of each and ``origins`` their values); the same
-    setup of the same file on both sides is refused."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numpy as np
-
-    from flexreg.errors import InputError
+    setup of the same file on both sides is refused. ``intensity=False``: without
+    intensities."""
 
     def read(k: int) -> Any:
         (scan,) = read_input(
             (target, source)[k],
             origin=None if origins is None else origins[k],
             origin_option=None if options is None else options[k],
+            intensity=intensity,
         )
         return scan
 
-    # both files at once: the parsers' serial parts (file reads, copying the valid points)
-    # overlap; the target's error, if any, is the one reported
+    return _read_both(target, source, read, lambda scan: scan)
+
+
+class WorkingPair:
+    """Two scans read with their working images (:func:`read_pair_working`).
+
+    Attributes
+    ----------
+    scans : list of Scan
+        Target and source; a PTX scan keeps its points only (no grid, no attributes).
+    """
+
+    def __init__(self, scans: list[Any], images: list[Any]) -> None:
+        self.scans = scans
+        self._images: list[Any] | None = images
+
+    def take_images(self) -> list[Any]:
+        """The working images (None for a scan read without one), handed over: this object
+        keeps no reference, so the call they are given to can let go of them."""
+        images, self._images = self._images, None
+        if images is None:
+            raise RuntimeError("the working images were taken already")
+        return images
+
+
+def read_pair_working(
+    target: Path, source: Path, *, max_pixels: int, options: tuple[str, str] | None = None
+) -> WorkingPair:
+    """:func:`read_pair` for a command that needs each scan's points and working image only:
+    a PTX file is read straight into both (:func:`flexreg.io.read_working_scan`: no grid
+    index, intensity or colour, 12 bytes per point instead of 24); another file as
+    :func:`read_input` reads it without intensities, and no image. With ``options`` (the
+    scanner position options), a cloud in project coordinates is refused naming its
+    option, as :func:`read_pair` refuses it."""
+    from flexreg.io import detect_format
+    from flexreg.io.scans import read_working_scans
+    from flexreg.io.selector import parse_scan_ref
+
+    def read(k: int) -> Any:
+        path = (target, source)[k]
+        ref = parse_scan_ref(path)
+        option = None if options is None else options[k]
+        if detect_format(ref.path)[1] != "ptx":
+            (scan,) = read_input(path, intensity=False, origin_option=option)
+            return scan, None
+        pairs = read_working_scans(path, max_pixels=max_pixels)
+        if len(pairs) > 1:  # without a selector: refused as read_input refuses it
+            raise _several(ref.path, [s.name for s, _ in pairs], [len(s) for s, _ in pairs])
+        scan, image = pairs[0]
+        if option is not None:  # centred on its scanner, else refused (nothing moved)
+            _centred(ref.path, scan, None, option)
+        return scan, image
+
+    pairs = _read_both(target, source, read, lambda pair: pair[0])
+    return WorkingPair([p[0] for p in pairs], [p[1] for p in pairs])
+
+
+def _read_both(target: Path, source: Path, read: Any, scan_of: Any) -> list[Any]:
+    """``read(0)`` and ``read(1)`` at once (the parsers' serial parts, file reads and copying
+    the valid points, overlap; the target's error, if any, is the one reported); the same
+    setup of the same file on both sides is refused (``scan_of`` finds the scan in what
+    ``read`` returns)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    from flexreg.errors import InputError
+
     pool = ThreadPoolExecutor(2)
     try:
         with stage(f"Reading {target.name} and {source.name}"):
             jobs = [pool.submit(read, k) for k in (0, 1)]
-            scans = [job.result() for job in jobs]
+            got = [job.result() for job in jobs]
     finally:  # on an error or Ctrl-C, do not wait here for the other file
         pool.shutdown(wait=False, cancel_futures=True)
-    t, s = scans
+    t, s = (scan_of(g) for g in got)
     same_file = scan_file(target).resolve() == scan_file(source).resolve()
     if same_file and len(t) == len(s) and np.array_equal(t.points, s.points):
         raise InputError(
             source,
             f"is the same scan as the target {target}: name two setups (FILE#N) or two files",
         )
-    return scans
+    return got
 
 
 def _several(file: Path, names: list[str], counts: list[int]) -> Exception:

@@ -17,6 +17,7 @@ from flexreg.cli._common import (
     pair_label,
     print_verdict,
     read_pair,
+    read_pair_working,
     scan_file,
     stage,
     write_all,
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
+    from flexreg.cli._common import WorkingPair
     from flexreg.core.scan import Scan
     from flexreg.registration.pipeline import RegistrationResult
 
@@ -351,9 +353,7 @@ def register_command(
     )
     T_true = None if truth is None else read_truth(truth, target, source)
     T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
-    scans = read_pair(
-        target, source, (target_origin, source_origin), ("--target-origin", "--source-origin")
-    )
+    scans, working = _read(target, source, config, matches, (target_origin, source_origin))
     stored = stored_T_target_source(scans[0], scans[1])
     if init == "stored" and stored is None:
         raise InputError(
@@ -361,7 +361,14 @@ def register_command(
         )
     T_init = stored if init == "stored" else T_file
     with _StageSpinners() as spinners, about_pair(target, source):
-        result = register(scans[0], scans[1], config, progress=spinners, init=T_init)
+        result = register(
+            scans[0],
+            scans[1],
+            config,
+            progress=spinners,
+            init=T_init,
+            images=None if working is None else working.take_images(),  # handed over
+        )
     errors = None if T_true is None else _errors(result, T_true)
     check = None if stored is None or init is not None else _stored_check(result, stored)
     meta = {
@@ -380,6 +387,25 @@ def register_command(
         console.print(f"wrote {path}", markup=False, soft_wrap=True)
     look = f"{merged} shows" if merged is not None else "--merged merged.ply would show"
     exit_for(result.verdict, out, extra=f"; {look} both clouds as registered")
+
+
+def _read(
+    target: Path,
+    source: Path,
+    config: RegistrationConfig,
+    matches: Path | None,
+    origins: tuple[Any, Any],
+) -> tuple[list[Scan], WorkingPair | None]:
+    """Both scans, read for what the call and the outputs need: their points and working
+    images straight from a PTX file unless the match figure needs the scans' grids, the
+    intensity image their intensities, or a scanner position moves their points."""
+    options = ("--target-origin", "--source-origin")
+    if matches is None and config.image != "intensity" and not any(origins):
+        pixels = config.max_image_pixels
+        working = read_pair_working(target, source, max_pixels=pixels, options=options)
+        return working.scans, working
+    intensity = config.image == "intensity"  # no other stage or output reads it
+    return read_pair(target, source, origins, options, intensity=intensity), None
 
 
 def _writers(

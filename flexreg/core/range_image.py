@@ -9,6 +9,7 @@ The z-buffer projection of unstructured clouds is a stage (:mod:`flexreg.stages.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -64,6 +65,24 @@ class RangeImage:
         if self.xyz.shape != (H, W, 3) or self.index.shape != (H, W):
             raise InputError("range image", "xyz, valid and index shapes disagree")
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled as it is, except an ``index`` that is one value repeated (a working image
+        that keeps no point numbers: a read-only broadcast view), which is stored as that
+        value and unpickled as the same view (no pixel-sized array in a cache file or in the
+        memory of the process that loads it)."""
+        state = dict(self.__dict__)
+        ix = self.index
+        if ix.size and not any(ix.strides):
+            state["index"] = ("broadcast", ix.dtype.str, ix.flat[0].item(), ix.shape)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        ix = state["index"]
+        if isinstance(ix, tuple):
+            _, dtype, value, shape = ix
+            state = {**state, "index": np.broadcast_to(np.array(value, dtype=dtype), shape)}
+        self.__dict__.update(state)
+
     def __repr__(self) -> str:
         cam = type(self.camera).__name__ if self.camera is not None else "native grid"
         return f"RangeImage({self.height}x{self.width}, {self.n_valid} valid, {cam})"
@@ -111,6 +130,16 @@ class RangeImage:
         m = self.index >= 0
         out[m] = values[self.index[m]]
         return out
+
+
+def working_stride(height: int, width: int, max_pixels: int) -> int:
+    """Every how many rows and columns a grid of ``height`` x ``width`` is kept so that its
+    working image has at most about ``max_pixels`` pixels (1: the whole grid).
+
+    >>> working_stride(1024, 2048, 2_500_000), working_stride(4096, 8192, 2_500_000)
+    (1, 4)
+    """
+    return max(1, math.ceil(math.sqrt(height * width / max(1, max_pixels))))
 
 
 def float_xyz(a: NDArray[np.generic]) -> NDArray[np.floating]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from flexreg.io.files import atomic_write
 from flexreg.io.formats import FORMATS, detect_format
-from flexreg.io.scans import read_scan, read_scans, write_scan
+from flexreg.io.scans import read_scan, read_scans, read_working_scan, write_scan
 from flexreg.io.transform_io import read_transform, write_transform_json, write_transform_txt
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "read_scan",
     "read_scans",
     "read_transform",
+    "read_working_scan",
     "write_scan",
     "write_transform_json",
     "write_transform_txt",

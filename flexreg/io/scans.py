@@ -15,13 +15,22 @@ from typing import Any
 
 import numpy as np
 
+from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.errors import InputError
 from flexreg.io.files import atomic_write, protect
 from flexreg.io.formats import detect_format
-from flexreg.io.selector import parse_scan_ref, pick
+from flexreg.io.selector import parse_scan_ref, pick, select_setup
 
-__all__ = ["check_file", "read_scan", "read_scans", "single_precision", "write_scan"]
+__all__ = [
+    "check_file",
+    "read_scan",
+    "read_scans",
+    "read_working_scan",
+    "read_working_scans",
+    "single_precision",
+    "write_scan",
+]
 
 _WRITERS = {
     ".ply": "pointcloud",
@@ -68,7 +77,8 @@ def read_scans(
         within :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the scan's origin are float32
         (:func:`single_precision`; half the memory, 0.5 mm or better); ``precise=True`` keeps
         the file's values exactly (to write them back unchanged). An npz file gives back the
-        type it stores.
+        type it stores. ``intensity=False``: no intensities (for callers that never read
+        them; the PTX reader then does not store them at all, 4 bytes per point less).
 
     Raises
     ------
@@ -80,11 +90,16 @@ def read_scans(
     mod, _ = detect_format(p, format)
     check_file(p)
     precise = bool(options.pop("precise", False))
-    if mod == "ptx":  # reads float32 itself
+    intensity = bool(options.pop("intensity", True))
+    if mod == "ptx":  # reads float32 itself, and stores intensities only when asked
         options["precise"] = precise
+        options["intensity"] = intensity
     if ref.selector is not None and mod == "e57" and not options:
         one = _module(mod).read_one(p, ref)  # one setup of a large project file: only it
-        return [one if precise else single_precision(one)]
+        one = one if precise else single_precision(one)
+        if not intensity:
+            one.intensity = None
+        return [one]
     scans: list[Scan] = _module(mod).read(p, **options)
     if not scans:
         raise InputError(p, "file holds no scan")
@@ -92,6 +107,9 @@ def read_scans(
         raise InputError(p, "file holds no valid point (every cell is a no-return)")
     if not precise and mod not in ("ptx", "npz"):  # PTX chooses; npz keeps what it stores
         scans = [single_precision(s) for s in scans]
+    if not intensity:
+        for s in scans:  # scans of our own making: drop the array, no copy
+            s.intensity = None
     return scans if ref.selector is None else [pick(scans, ref)]
 
 
@@ -122,6 +140,45 @@ def read_scan(
     if not -len(scans) <= index < len(scans):
         raise InputError(path, f"scan index {index} out of range: the file holds {len(scans)}")
     return scans[index]
+
+
+def read_working_scans(
+    path: str | PathLike[str], *, max_pixels: int
+) -> list[tuple[Scan, RangeImage | None]]:
+    """The scans of a file as :func:`read_scans` selects them (every setup, or the one a
+    ``FILE#N`` / ``FILE#NAME`` selector names), read for a caller that needs their points and
+    working images only (a survey worker preparing a station, ``flexreg register``).
+
+    A PTX file is read straight into both (:func:`flexreg.io.ptx.read_working`: no grid
+    index, intensity or colour is stored, 12 bytes per float32 point instead of 24, and the
+    working image of at most ``max_pixels`` pixels is built while the lines stream past).
+    Other formats: :func:`read_scans` without intensities, and None for each image (the
+    caller builds the working images).
+    """
+    ref = parse_scan_ref(path)
+    p = ref.path
+    mod, _ = detect_format(p)
+    if mod != "ptx":
+        return [(scan, None) for scan in read_scans(path, intensity=False)]
+    check_file(p)
+    pairs: list[tuple[Scan, RangeImage | None]] = list(
+        _module(mod).read_working(p, max_pixels=int(max_pixels))
+    )
+    if not pairs:
+        raise InputError(p, "file holds no scan")
+    if all(len(s) == 0 for s, _ in pairs):
+        raise InputError(p, "file holds no valid point (every cell is a no-return)")
+    if ref.selector is None:
+        return pairs
+    return [pairs[select_setup([s.name for s, _ in pairs], ref)]]
+
+
+def read_working_scan(
+    path: str | PathLike[str], *, max_pixels: int
+) -> tuple[Scan, RangeImage | None]:
+    """The first of :func:`read_working_scans` (the setup a selector names, else the file's
+    first), as :func:`read_scan` selects it."""
+    return read_working_scans(path, max_pixels=max_pixels)[0]
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:

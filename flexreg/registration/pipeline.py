@@ -21,17 +21,16 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 from typing import Any
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy import fft
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
@@ -53,6 +52,19 @@ from flexreg.registration.candidates import (
 )
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import FullPair, full_pair_of
+from flexreg.registration.preparation import (
+    PreparedScan,
+    Progress,
+    ScanView,
+    _keypoints,
+    _plans_of,
+    _range_images,
+    _refine_sample,
+    _Run,
+    _timed,
+    _views,
+    feature_image,
+)
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.verdict import (
@@ -64,181 +76,15 @@ from flexreg.registration.verdict import (
     gather,
     runner_ups,
 )
-from flexreg.stages import feature_images
 from flexreg.stages.alignment import consistent_subset, ransac_rigid
-from flexreg.stages.correspondences import derive_threshold, lift
-from flexreg.stages.keypoints import detect_and_describe, strip_rows
+from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
-from flexreg.stages.normals import grid_normals
 from flexreg.stages.overlap import measure_overlap
-from flexreg.stages.priors import PlanView, plan_overlays, plan_view
-from flexreg.stages.projection import fill_holes, with_camera, working_image
-from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, refine, uses_projective
+from flexreg.stages.priors import PlanView, plan_overlays
+from flexreg.stages.refinement import refine
 from flexreg.stages.refinement.projective import point_information
-from flexreg.stages.sampling import area_sample, area_sample_cell
-from flexreg.stages.verification import measured_image, range_slack
 
 log = logging.getLogger(__name__)
-
-#: points of the dense check (the source's even sample) and of the quick local ICP
-CHECK_POINTS, POLISH_POINTS = 20_000, 5_000
-
-Progress = Callable[[str], None] | None
-
-
-def feature_image(
-    image: RangeImage, config: RegistrationConfig = RegistrationConfig()
-) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
-    """The 8-bit image :func:`register` detects features on, and its valid mask:
-    :func:`flexreg.stages.feature_images.feature_image` with the configured kind, ``n``,
-    ``median`` and ``stretch`` (holes are filled earlier, on the range image)."""
-    return feature_images.feature_image(
-        image,
-        kind=config.image,
-        n=config.n,
-        median=config.median,
-        stretch=config.stretch,  # type: ignore[arg-type]
-    )
-
-
-# ------------------------------------------------------------------------------ per scan
-
-
-@dataclass(eq=False)
-class ScanView:
-    """What the checks and the refinement need of one scan alone.
-
-    Attributes
-    ----------
-    image : RangeImage
-        The working range image with a camera model (re-projected when it had none).
-    measured, slack : (H, W) float32 or None
-        :func:`~flexreg.stages.verification.measured_image` and
-        :func:`~flexreg.stages.verification.range_slack` of ``image`` (the dense checks; the
-        verdict checks in both directions).
-    normals : (H, W, 3) float32 or None
-        :func:`~flexreg.stages.normals.grid_normals` of ``image`` (as target; as source for
-        the projective refinement).
-    sample : (N, 3) float64 or None
-        Even sample of the working image for the dense checks (as source; as target for the
-        verdict's check in the other direction).
-    polish_sample : (N, 3) float64 or None
-        As source: even sample for the quick ICP.
-    refine_sample : (float, (M, 3) float64) or None
-        The projective refinement's even sample of the whole scan and its cell, metres.
-    """
-
-    image: RangeImage
-    measured: NDArray[np.float32] | None = None
-    slack: NDArray[np.float32] | None = None
-    normals: NDArray[np.float32] | None = None
-    sample: NDArray[np.float64] | None = None
-    polish_sample: NDArray[np.float64] | None = None
-    refine_sample: tuple[float, NDArray[np.float64]] | None = None
-
-
-@dataclass(eq=False)
-class PreparedScan:
-    """One scan prepared for :meth:`Registration.align` (numpy arrays only, picklable).
-
-    Attributes
-    ----------
-    scan : Scan or RangeImage
-        The scan as given (the Open3D refinements use all its points).
-    image : RangeImage
-        The working range image (holes filled when configured).
-    keypoints : Keypoints3D
-        Keypoints, descriptors and their 3D points.
-    plan : PlanView, str or None
-        The plan views, the reason there are none (the scan is not levelled, ...), or None
-        when not computed (a pinhole scan without ``upright="on"``).
-    view : ScanView
-    config : RegistrationConfig
-        The configuration it was prepared with (:meth:`Registration.align` needs the same).
-    timings_s : dict
-        Seconds per stage.
-    """
-
-    scan: Scan | RangeImage
-    image: RangeImage
-    keypoints: Keypoints3D
-    plan: PlanView | str | None
-    view: ScanView
-    config: RegistrationConfig
-    timings_s: dict[str, float] = field(default_factory=dict)
-
-
-@contextmanager
-def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
-    t = time.perf_counter()
-    yield
-    timings[name] = timings.get(name, 0.0) + time.perf_counter() - t
-
-
-@dataclass(eq=False)
-class _Run:
-    """Timings and progress of one call."""
-
-    progress: Progress
-    timings: dict[str, float] = field(default_factory=dict)
-    start: float = field(default_factory=time.perf_counter)
-
-    def stage(self, name: str) -> Any:
-        self.wait(name)
-        return _timed(self.timings, name)
-
-    def wait(self, name: str) -> None:
-        if self.progress is not None:
-            self.progress(name)
-
-    def background(self, name: str, fn: Callable[..., Any], *args: Any) -> Callable[[], Any]:
-        """``fn(*args)`` for a background thread: single-threaded in numba (the threads fill
-        the cores together instead of competing for them), timed as ``name``."""
-
-        def job() -> Any:
-            numba.set_num_threads(1)
-            with _timed(self.timings, name), fft.set_workers(-1):
-                return fn(*args)
-
-        return job
-
-
-def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) -> list[RangeImage]:
-    images = [working_image(x, max_pixels=config.max_image_pixels) for x in scans]
-    if config.image != "intensity":  # only the intensity image reads it: do not keep it
-        images = [replace(i, intensity=None) for i in images]
-    return [fill_holes(i) for i in images] if config.fill_holes else images
-
-
-def _keypoints(
-    images: list[RangeImage], config: RegistrationConfig, run: _Run
-) -> list[Keypoints3D]:
-    """Feature images, keypoints and descriptors, and their 3D points, stage by stage."""
-    with run.stage("feature images"):
-        converted = [feature_image(img, config) for img in images]
-    with run.stage("features"):
-        feats = [
-            detect_and_describe(
-                f,
-                config.features,
-                m,
-                max_features=config.max_features,
-                wrap=img.wraps,
-                strip_rows=strip_rows(f.shape, config.feature_strip_pixels),
-            )
-            for (f, m), img in zip(converted, images, strict=True)
-        ]
-    with run.stage("lifting"):
-        lifted = [lift(img, f.xy) for img, f in zip(images, feats, strict=True)]
-    return [Keypoints3D(f, x, ok) for f, (x, ok) in zip(feats, lifted, strict=True)]
-
-
-def _plan_view(image: RangeImage, config: RegistrationConfig) -> PlanView | str:
-    try:
-        return plan_view(image, max_tilt_rad=config.max_tilt_rad, plan_cell_m=config.plan_cell_m)
-    except DegenerateGeometryError as e:
-        return str(e)
-
 
 PlanPriors = tuple[list[NDArray[np.float64]], Aliases]
 
@@ -258,51 +104,9 @@ def _plan_priors(
     return overlays, Aliases(self_symmetries(target), self_symmetries(source), up)
 
 
-def _plans_of(images: list[RangeImage], config: RegistrationConfig) -> list[PlanView | str]:
-    return [_plan_view(img, config) for img in images]
-
-
 def _pair_plan_priors(images: list[RangeImage], config: RegistrationConfig) -> PlanPriors:
     t, s = _plans_of(images, config)
     return _plan_priors(t, s, config)
-
-
-def _scan_view(
-    scan: Scan | RangeImage,
-    image: RangeImage,
-    config: RegistrationConfig,
-    *,
-    target: bool,
-    source: bool,
-) -> ScanView:
-    """The parts of :class:`ScanView` the scan's roles need."""
-    v = ScanView(with_camera(image))
-    projective = config.refine and uses_projective(config.icp, config.voxel_m)
-    # both roles: the verdict checks the transform in both directions
-    v.measured = measured_image(v.image)
-    v.slack = range_slack(v.image, v.measured)
-    if target or (source and projective):
-        v.normals = grid_normals(v.image)
-    pts = image.xyz[image.valid]
-    v.sample = area_sample(pts, CHECK_POINTS)
-    if source:
-        v.polish_sample = area_sample(pts, POLISH_POINTS)
-    if projective:
-        points = as_points(scan, name="scan", keep_float32=True)
-        v.refine_sample = area_sample_cell(points, PROJECTIVE_ICP_POINTS // 2)
-    return v
-
-
-def _views(
-    scans: list[Scan | RangeImage],
-    images: list[RangeImage],
-    config: RegistrationConfig,
-    roles: list[tuple[bool, bool]],
-) -> list[ScanView]:
-    return [
-        _scan_view(x, img, config, target=t, source=s)
-        for x, img, (t, s) in zip(scans, images, roles, strict=True)
-    ]
 
 
 # ------------------------------------------------------------------------------ per pair
@@ -653,6 +457,7 @@ def register(
     *,
     progress: Progress = None,
     init: NDArray[np.float64] | None = None,
+    images: Sequence[RangeImage | None] | None = None,
 ) -> RegistrationResult:
     """Register ``source`` onto ``target``: returns ``T_target_source``.
 
@@ -678,6 +483,11 @@ def register(
         A known rough ``T_target_source`` (a stored pose, a guess): it competes with the other
         priors on the same dense check (result ``prior`` ``"init"`` when it wins). With
         ``config.icp_only`` it is the only prior: no global search, ICP from it.
+    images : (RangeImage or None, RangeImage or None), optional
+        The target's and the source's working images when the caller has them already (read
+        with the scans, :func:`flexreg.io.read_working_scan`, which then keeps no grid in the
+        scans); each scan then serves only for its points. The call holds them no longer
+        than it needs them when the caller keeps no reference of its own.
 
     Raises
     ------
@@ -691,8 +501,14 @@ def register(
     init = _check_init(config, init)
     run = _Run(progress)
     scans = [target, source]
+    given: list[Scan | RangeImage] = [
+        x if i is None else i
+        for x, i in zip(scans, [None, None] if images is None else images, strict=True)
+    ]
+    images = None  # the working images made below replace the given ones
     with run.stage("range images"):
-        images = _range_images(scans, config)
+        images = _range_images(given, config)
+    del given
     roles = [(True, False), (False, True)]
     with _single_threaded(2) as pool:
         plan_job = (
@@ -727,14 +543,40 @@ class Registration:
         self.config = config
 
     def prepare(
-        self, scan: Scan | RangeImage, *, progress: Progress = None, overlap: bool = True
+        self,
+        scan: Scan | RangeImage,
+        *,
+        progress: Progress = None,
+        overlap: bool = True,
+        keep_scan: bool = True,
+        image: RangeImage | None = None,
     ) -> PreparedScan:
         """Everything of one scan that :meth:`align` needs, in either role. ``overlap``: the
         plan views and the checks' inputs run beside the feature stages (as in :func:`register`);
-        else after them, the same result at a lower peak memory (for survey workers)."""
+        else after them, the same result at a lower peak memory (for survey workers).
+
+        ``keep_scan=False``: the prepared scan's ``scan`` is its working image, and this call
+        lets go of the scan as soon as the working image and the refinement's sample are
+        made, before the feature stages (a caller that keeps no reference of its own, as
+        ``prepare(read_scan(path), keep_scan=False)``, so frees it: the largest array of a
+        large station). :meth:`align` gives the same result unless the refinement reads the
+        scan's points (the Open3D ICP variants) or the overlap is measured on them: it is
+        measured on the working image's points then.
+
+        ``image``: the scan's working image when the caller has it already (a reader that
+        builds it while reading, :func:`flexreg.io.read_working_scan`); the scan then serves
+        only for the refinement's sample.
+        """
         config, run = self.config, _Run(progress)
         with run.stage("range images"):
-            images = _range_images([scan], config)
+            images = _range_images([scan if image is None else image], config)
+        image = None  # the caller's working image, holes unfilled, is no longer needed
+        refine_sample = None
+        if not keep_scan:
+            with _timed(run.timings, "preparation"):
+                refine_sample = _refine_sample(scan, config)
+            scan = images[0]
+        views_of = [None] if not keep_scan else [scan]
         with _single_threaded(2) as pool:
             submit = pool.submit if overlap else (lambda job: SimpleNamespace(result=job))
             plan_job = (
@@ -743,7 +585,7 @@ class Registration:
                 else None
             )
             view_job = submit(
-                run.background("preparation", _views, [scan], images, config, [(True, True)])
+                run.background("preparation", _views, views_of, images, config, [(True, True)])
             )
             (kp,) = _keypoints(images, config, run)
             plan = None
@@ -752,6 +594,8 @@ class Registration:
                 plan = plan_job.result()[0]
             run.wait("preparation")
             (view,) = view_job.result()
+        if not keep_scan:
+            view.refine_sample = refine_sample
         return PreparedScan(scan, images[0], kp, plan, view, config, run.timings)
 
     def align(

@@ -10,6 +10,7 @@ found on a horizontally wrapped copy and mapped back.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -143,6 +144,7 @@ def detect_and_describe(
     wrap: bool = False,
     detector: Any = None,
     strip_rows: int | None = None,
+    tile_pixels: int | None = None,
 ) -> Features:
     """Detect keypoints and compute descriptors on a feature image.
 
@@ -177,6 +179,16 @@ def detect_and_describe(
         window crosses a strip's margin: on a 2048 x 1024 Flexion image 99.5 % of keypoints
         and descriptors are identical with 256-row strips. Other methods normalise over the whole
         image and always see it whole.
+    tile_pixels : int, optional
+        SIFT only: detect in tiles of about this many pixels of their own (:func:`tiles`: as
+        square as the image allows), each seen with :data:`STRIP_MARGIN_PX` pixels of image
+        on every inner side, keeping the keypoints whose centre lies in its own pixels (as
+        ``strip_rows``, whose strips it replaces when both are given). A square tile needs
+        less margin for its own pixels than a strip of the same area, so tiles of the same
+        memory cost less time, and tiles of the same time less memory: on a 2048 x 1024
+        image, 524,288 pixels per piece make six tiles of at most 576 x 811 pixels with their
+        margins (about 0.47 Mpx each) instead of four strips of up to 384 x 2048 (0.79 Mpx),
+        and the tiles see 1.27 times the image's pixels, the strips 1.38 times.
 
     Returns
     -------
@@ -202,8 +214,14 @@ def detect_and_describe(
         k = 2 * border_px + 1
         keep = cv2.erode(valid.astype(np.uint8), np.ones((k, k), np.uint8), borderValue=0) > 0
     mask8 = (keep * 255).astype(np.uint8)
-    if strip_rows is not None and method.lower() == "sift" and img.shape[0] > strip_rows:
-        found = _detect_strips(det, img, mask8, int(strip_rows))
+    boxes = None
+    if method.lower() == "sift" and tile_pixels is not None:
+        boxes = tiles(img.shape, int(tile_pixels))
+    elif method.lower() == "sift" and strip_rows is not None and img.shape[0] > strip_rows:
+        rows = max(1, int(strip_rows))
+        boxes = [(r, min(r + rows, H), 0, img.shape[1]) for r in range(0, H, rows)]
+    if boxes is not None and len(boxes) > 1:
+        found = _detect_tiles(det, img, mask8, boxes)
     else:
         found = _detect(det, img, mask8)
     if found is None:
@@ -252,25 +270,55 @@ def _detect(det: Any, img: NDArray[np.uint8], mask: NDArray[np.uint8]) -> _Found
     )
 
 
-def _detect_strips(
-    det: Any, img: NDArray[np.uint8], mask: NDArray[np.uint8], rows: int
+def tiles(shape: tuple[int, ...], pixels: int) -> list[tuple[int, int, int, int]]:
+    """The tiles of the SIFT detection on an image of ``shape`` (``detect_and_describe``
+    ``tile_pixels``): ``(r0, r1, c0, c1)`` boxes of their own pixels, covering the image
+    without overlap, each of at most ``pixels`` pixels and as square as the image allows
+    (so that the margins they are seen with add the fewest pixels), at least 64 pixels a
+    side. One box (the whole image) when the image has no more than ``pixels`` pixels or
+    ``pixels`` <= 0.
+
+    >>> tiles((1024, 2176), 524_288)[:2]
+    [(0, 512, 0, 726), (0, 512, 726, 1452)]
+    >>> len(tiles((1024, 2176), 524_288)), tiles((100, 100), 524_288)
+    (6, [(0, 100, 0, 100)])
+    """
+    H, W = int(shape[0]), int(shape[1])
+    if pixels <= 0 or H * W <= pixels:
+        return [(0, H, 0, W)]
+    side = max(64, math.isqrt(pixels))
+    nr = max(1, -(-H // side))
+    th = -(-H // nr)
+    nc = max(1, -(-(W * th) // max(pixels, 64 * th)))
+    tw = -(-W // nc)
+    return [
+        (r, min(r + th, H), c, min(c + tw, W)) for r in range(0, H, th) for c in range(0, W, tw)
+    ]
+
+
+Box = tuple[int, int, int, int]
+
+
+def _detect_tiles(
+    det: Any, img: NDArray[np.uint8], mask: NDArray[np.uint8], boxes: list[Box]
 ) -> _Found | None:
-    """:func:`_detect` strip by strip (``rows`` rows each, seen with :data:`STRIP_MARGIN_PX`
-    rows of margin): a keypoint belongs to the strip that holds its rounded centre, as OpenCV's
-    mask test reads it, so no keypoint is found twice."""
-    H = img.shape[0]
-    rows = max(1, rows)
+    """:func:`_detect` tile by tile (each box seen with :data:`STRIP_MARGIN_PX` pixels of
+    margin on its inner sides): a keypoint belongs to the tile that holds its rounded centre,
+    as OpenCV's mask test reads it, so no keypoint is found twice."""
+    H, W = img.shape
+    m0 = STRIP_MARGIN_PX
     parts: list[_Found] = []
-    for r0 in range(0, H, rows):
-        r1 = min(H, r0 + rows)
-        a0, a1 = max(0, r0 - STRIP_MARGIN_PX), min(H, r1 + STRIP_MARGIN_PX)
-        m = np.zeros((a1 - a0, img.shape[1]), dtype=np.uint8)
-        m[r0 - a0 : r1 - a0] = mask[r0:r1]
+    for r0, r1, c0, c1 in boxes:
+        a0, a1 = max(0, r0 - m0), min(H, r1 + m0)
+        b0, b1 = max(0, c0 - m0), min(W, c1 + m0)
+        m = np.zeros((a1 - a0, b1 - b0), dtype=np.uint8)
+        m[r0 - a0 : r1 - a0, c0 - b0 : c1 - b0] = mask[r0:r1, c0:c1]
         if not m.any():
             continue
-        found = _detect(det, img[a0:a1], m)
+        found = _detect(det, np.ascontiguousarray(img[a0:a1, b0:b1]), m)
         if found is not None:
             found[0][:, 1] += a0
+            found[0][:, 0] += b0
             parts.append(found)
     if not parts:
         return None

@@ -23,6 +23,7 @@ from flexreg.core.range_image import (
     float_xyz,
     from_grid,
     from_index,
+    working_stride,
 )
 from flexreg.core.scan import GRID_CELL_BYTES, Scan
 from flexreg.errors import DegenerateGeometryError, InputError
@@ -326,7 +327,7 @@ def working_image(x: Scan | RangeImage, *, max_pixels: int = MAX_IMAGE_PIXELS) -
     column of larger grids). A gridded scan keeps its native grid (:func:`range_image`)."""
 
     def factor(h: int, w: int) -> int:
-        return max(1, math.ceil(math.sqrt(h * w / max(1, max_pixels))))
+        return working_stride(h, w, max_pixels)
 
     if isinstance(x, Scan) and x.has_grid and x.grid_shape is not None:
         return from_grid(x, stride=factor(*x.grid_shape))

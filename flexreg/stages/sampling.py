@@ -53,6 +53,51 @@ def area_sample_cell(
     return cell, np.asarray(p if len(p) <= samples else p[first], dtype=np.float64)
 
 
+def area_sample_image(
+    xyz: NDArray[np.floating], valid: NDArray[np.bool_], samples: int
+) -> NDArray[np.float64]:
+    """:func:`area_sample` of an image's valid points, ``xyz[valid]`` (row by row), without
+    making that (N, 3) copy: only the thinned points the cells are found on are gathered.
+    Exactly ``area_sample(xyz[valid], samples)``.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float32 or float64, metres
+    valid : (H, W) bool
+    samples : int
+
+    Returns
+    -------
+    (M, 3) float64
+    """
+    v = np.ascontiguousarray(valid, dtype=np.bool_)
+    n = int(np.count_nonzero(v))
+    if n <= samples:
+        return np.asarray(xyz[v], dtype=np.float64)
+    step = max(1, n // (20 * samples))
+    x = np.ascontiguousarray(xyz)
+    q = _valid_every(x.reshape(-1, 3), v.reshape(-1), step, -(-n // step))
+    _, first = _thinned_cells(q, samples)
+    return q[first]
+
+
+@numba.njit(cache=True, nogil=True)
+def _valid_every(xyz, valid, step, m):  # pragma: no cover - compiled
+    """(m, 3) float64: every ``step``-th of the points ``xyz[valid]`` (in order), from the
+    first."""
+    out = np.empty((m, 3), dtype=np.float64)
+    k = 0
+    j = 0
+    for i in range(valid.shape[0]):
+        if valid[i]:
+            if k % step == 0:
+                for c in range(3):
+                    out[j, c] = xyz[i, c]
+                j += 1
+            k += 1
+    return out[:j]
+
+
 def area_cell(points: NDArray[np.floating], samples: int) -> float:
     """Voxel size at which about ``samples`` voxels of a cloud's surfaces are occupied, metres.
 
@@ -80,7 +125,12 @@ def _area_cells(p: NDArray[np.floating], samples: int) -> tuple[float, NDArray[n
     """Cell size and the index of the first point in each occupied cell, ascending (of a
     thinned copy of ``p`` when it is large: indices then refer to ``p`` itself)."""
     step = max(1, len(p) // (20 * samples))  # enough points to fill the cells
-    q = np.ascontiguousarray(p[::step], dtype=np.float64)
+    cell, first = _thinned_cells(np.ascontiguousarray(p[::step], dtype=np.float64), samples)
+    return cell, first * step
+
+
+def _thinned_cells(q: NDArray[np.float64], samples: int) -> tuple[float, NDArray[np.int64]]:
+    """:func:`_area_cells` on the thinned points ``q`` themselves (indices into ``q``)."""
     if len(q) == 0:
         return 1e-9, np.zeros(0, dtype=np.int64)
     lo, hi = _bounds(q)
@@ -94,7 +144,7 @@ def _area_cells(p: NDArray[np.floating], samples: int) -> tuple[float, NDArray[n
         if 0.7 < ratio < 1.4:
             break
         cell *= math.sqrt(ratio)
-    return cell, first * step
+    return cell, first
 
 
 @numba.njit(cache=True, nogil=True)
@@ -292,6 +342,7 @@ __all__ = [
     "area_cell",
     "area_sample",
     "area_sample_cell",
+    "area_sample_image",
     "median_spacing",
     "thin",
     "thin_random",

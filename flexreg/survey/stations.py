@@ -32,10 +32,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg._version import __version__
+from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import FlexregError, InputError
-from flexreg.io import read_scan
+from flexreg.io import read_scan, read_working_scan
 from flexreg.io.setups import list_setups
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import PreparedScan, Registration
@@ -277,6 +278,32 @@ def _atomic_bytes(path: Path, write: Any) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def _read_and_prepare(
+    station: Station, config: RegistrationConfig
+) -> tuple[PreparedScan, int, NDArray[np.float64]]:
+    """The station read and prepared at the lowest peak memory, its number of points and its
+    stored pose. No intensities unless the feature image reads them; the checks' inputs after
+    the feature stages (``overlap=False``); when the refinement reads only the range images,
+    a PTX station is read straight into its points and working image
+    (:func:`~flexreg.io.read_working_scan`: no grid index), and the points are let go once
+    the refinement's sample exists, before the feature stages (``keep_scan=False``: only
+    ``prepare`` holds them)."""
+    points_needed = config.refine and not uses_projective(config.icp, config.voxel_m)
+    image: RangeImage | None = None
+    if points_needed or config.image == "intensity":
+        scan = read_scan(station.ref, intensity=config.image == "intensity")
+    else:  # a PTX station straight into its points and its working image
+        scan, image = read_working_scan(station.ref, max_pixels=config.max_image_pixels)
+    n = len(scan)
+    T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
+    held: list[Any] = [scan, image]
+    del scan, image  # only prepare holds them now, and lets go of them when it can
+    prepared = Registration(config).prepare(
+        held.pop(0), image=held.pop(), overlap=False, keep_scan=points_needed
+    )
+    return _compact(prepared), n, T_world
+
+
 def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig) -> Prepared:
     """Prepare one station unless the cache holds it; store it and its global descriptor.
 
@@ -296,11 +323,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
             stored = _stored_pose(z["T_world_scanner"]) if "T_world_scanner" in z else None
         return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0, None, stored)
     try:
-        scan = read_scan(station.ref)
-        n = len(scan)
-        T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
-        prepared = _compact(Registration(config).prepare(scan, overlap=False))  # lower peak
-        del scan
+        prepared, n, T_world = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
     g = global_descriptor(prepared)

@@ -25,6 +25,7 @@ puts in open space. :func:`pose_masks` gives a pose's masks; the verdict's
 from __future__ import annotations
 
 import math
+import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -71,14 +72,14 @@ class FullView:
     measured, slack : (H, W) float32
         What it measured per pixel and the pixel's range slack
         (:func:`~flexreg.stages.verification.range_slack`).
-    nearest : (H, W) float64, metres
+    nearest : (H, W) float32 (the measured image's type), metres
         The smallest measured range over each pixel's :data:`NEIGHBOURHOOD` square; ``-inf`` where a
         neighbour has no return (nothing is known to be open there).
-    points : (N, 3) float64, metres
+    points : (N, 3) float32 or float64 (the image's type), metres
         Its valid points off its own silhouettes (see :data:`MAX_SLACK_PER_M`).
-    point_slack : (N,) float64, metres
+    point_slack : (N,) float32 or float64, metres
         Their own range slack.
-    normals : (N, 3) float64
+    normals : (N, 3) float32 (the normals' type)
         Their unit normals (:func:`~flexreg.stages.normals.grid_normals`), own frame; NaN
         where unknown.
     """
@@ -86,10 +87,10 @@ class FullView:
     image: RangeImage
     measured: NDArray[np.float32]
     slack: NDArray[np.float32]
-    nearest: NDArray[np.float64]
-    points: NDArray[np.float64]
-    point_slack: NDArray[np.float64]
-    normals: NDArray[np.float64]
+    nearest: NDArray[np.floating[Any]]
+    points: NDArray[np.floating[Any]]
+    point_slack: NDArray[np.floating[Any]]
+    normals: NDArray[np.floating[Any]]
 
 
 def full_view(
@@ -117,16 +118,18 @@ def full_view(
     -------
     FullView
     """
-    m = np.asarray(measured, dtype=np.float64)
-    m = np.where(np.isfinite(m), m, -np.inf)
+    # the scan's own types (float32 from every reader): the checks promote each value to
+    # float64 as they read it, so they test exactly what float64 copies would hold
+    m = np.asarray(measured)
+    m = np.where(np.isfinite(m), m, np.array(-np.inf, dtype=m.dtype))
     modes = ["nearest", "wrap" if image.wraps else "nearest"]
     nearest = ndimage.minimum_filter(m, size=NEIGHBOURHOOD, mode=modes)
-    pts = image.xyz[image.valid]
-    own = np.asarray(slack, dtype=np.float64)[image.valid]
-    keep = own <= max_slack_per_m * np.linalg.norm(pts, axis=1)
+    valid = image.valid
+    pts = image.xyz[valid]
+    own = np.asarray(slack)[valid]
+    keep = own <= max_slack_per_m * np.sqrt(np.einsum("ij,ij->i", pts, pts, dtype=np.float64))
     n = grid_normals(image) if normals is None else normals
-    nv = np.asarray(n, dtype=np.float64)[image.valid][keep]
-    return FullView(image, measured, slack, nearest, pts[keep], own[keep], nv)
+    return FullView(image, measured, slack, nearest, pts[keep], own[keep], n[valid][keep])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -201,10 +204,16 @@ def _check_full(
         scores[k] += total[k] - 3.0 * bad_count[k]
 
 
+def _floats(a: NDArray[Any]) -> NDArray[Any]:
+    """``a`` contiguous, float32 kept as it is, anything else as float64."""
+    a = np.asarray(a)
+    return np.ascontiguousarray(a, dtype=a.dtype if a.dtype == np.float32 else np.float64)
+
+
 def _run_check(
     view: FullView,
-    points: NDArray[np.float64],
-    point_slack: NDArray[np.float64],
+    points: NDArray[np.floating[Any]],
+    point_slack: NDArray[np.floating[Any]],
     T: NDArray[np.float64],
     shifts: NDArray[np.float64] | None,
     threshold_m: float,
@@ -219,13 +228,13 @@ def _run_check(
     if len(points) == 0 or view.image.camera is None:
         return scores
     kind, cam = camera_params(view.image)
-    _check_full(
-        np.ascontiguousarray(points, dtype=np.float64),
-        np.ascontiguousarray(point_slack, dtype=np.float64),
+    _check_full(  # float32 inputs stay float32 (read as float64 in the kernel: no copies)
+        _floats(points),
+        _floats(point_slack),
         np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(t.reshape(-1, 3)), kind, cam,
         np.ascontiguousarray(view.measured, dtype=np.float32),
         np.ascontiguousarray(view.slack, dtype=np.float32),
-        np.ascontiguousarray(view.nearest, dtype=np.float64),
+        _floats(view.nearest),
         float(threshold_m), bool(coarse), explained, open_space, scores,
     )  # fmt: skip
     return scores
@@ -236,8 +245,8 @@ _NO_MASK = np.zeros(0, dtype=bool)
 
 def full_masks(
     view: FullView,
-    points: NDArray[np.float64],
-    point_slack: NDArray[np.float64],
+    points: NDArray[np.floating[Any]],
+    point_slack: NDArray[np.floating[Any]],
     T_view_points: NDArray[np.float64],
     threshold_m: float,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
@@ -278,8 +287,8 @@ def full_masks(
 
 def full_score(
     view: FullView,
-    points: NDArray[np.float64],
-    point_slack: NDArray[np.float64],
+    points: NDArray[np.floating[Any]],
+    point_slack: NDArray[np.floating[Any]],
     T_view_points: NDArray[np.float64],
     threshold_m: float,
     *,
@@ -302,8 +311,8 @@ def full_score(
 
 def full_scores(
     view: FullView,
-    points: NDArray[np.float64],
-    point_slack: NDArray[np.float64],
+    points: NDArray[np.floating[Any]],
+    point_slack: NDArray[np.floating[Any]],
     T_view_points: NDArray[np.float64],
     shifts_m: NDArray[np.float64],
     threshold_m: float,
@@ -360,10 +369,26 @@ def full_pair_of(views: Sequence[Any]) -> Callable[[], FullPair]:
     ``normals``)."""
 
     def make() -> FullPair:
-        target, source = (full_view(v.image, v.measured, v.slack, v.normals) for v in views)
+        target, source = (_full_view_of(v) for v in views)
         return FullPair(target, source)
 
     return make
+
+
+#: each prepared view's full view, while the prepared view lives (a survey worker keeps its
+#: last stations loaded and registers each in a dozen links)
+_FULL_VIEWS: weakref.WeakKeyDictionary[Any, FullView] = weakref.WeakKeyDictionary()
+
+
+def _full_view_of(v: Any) -> FullView:
+    """:func:`full_view` of a prepared view, made once per view object."""
+    try:
+        hit = _FULL_VIEWS.get(v)
+    except TypeError:  # not weakly referable: made each time
+        return full_view(v.image, v.measured, v.slack, v.normals)
+    if hit is None:
+        hit = _FULL_VIEWS[v] = full_view(v.image, v.measured, v.slack, v.normals)
+    return hit
 
 
 def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m: float) -> Masks:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -182,8 +183,8 @@ class _Scorer:
     (:func:`~flexreg.registration.fullres.full_score`)."""
 
     target: FullView
-    points: NDArray[np.float64]
-    slack: NDArray[np.float64]
+    points: NDArray[np.floating[Any]]
+    slack: NDArray[np.floating[Any]]
     threshold_m: float
 
     @classmethod
@@ -223,8 +224,8 @@ class _FacingScorer:
     a pose 12 m away on all points); on the facing points it peaks at the cue."""
 
     target: FullView
-    points: NDArray[np.float64]
-    slack: NDArray[np.float64]
+    points: NDArray[np.floating[Any]]
+    slack: NDArray[np.floating[Any]]
     threshold_m: float
 
     @classmethod

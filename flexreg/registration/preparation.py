@@ -25,7 +25,7 @@ from flexreg.registration.candidates import Keypoints3D
 from flexreg.registration.config import RegistrationConfig
 from flexreg.stages import feature_images
 from flexreg.stages.correspondences import lift
-from flexreg.stages.keypoints import detect_and_describe
+from flexreg.stages.keypoints import detect_and_describe, strip_rows
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.priors import PlanView, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
@@ -186,7 +186,8 @@ def _keypoints(
                 m,
                 max_features=config.max_features,
                 wrap=img.wraps,
-                tile_pixels=config.feature_strip_pixels,
+                strip_rows=strip_rows(f.shape, config.feature_strip_pixels),
+                tile_pixels=config.feature_tile_pixels or None,
             )
             for (f, m), img in zip(converted, images, strict=True)
         ]

@@ -221,7 +221,8 @@ def gather(
         of two stations that barely see each other, against a wrong pose that overlays two
         identical rooms).
     full : FullPair, optional
-        Both scans at full resolution: each runner-up scoring at least ``full_ratio`` of the
+        Both scans at full resolution: the answer's own open-space share there is recorded
+        (:func:`full_evidence`), and each runner-up scoring at least ``full_ratio`` of the
         answer also duels it there (``full_refuted_share``, ``full_refuting_share``, shares of
         ``full_points``; :mod:`flexreg.registration.fullres`).
     full_ratio : float
@@ -280,7 +281,9 @@ def gather(
         "refinement": refinement,
     }
     c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
-    full_answer = _full_answer(ev, full, final.T, runner_up, threshold_m, full_ratio)
+    # whenever the settling made both scans' full views (a repeating plan, a weak axis or a
+    # close rival) the answer's own open-space share there decides ``free_space`` (decide)
+    full_answer = None if full is None else full_evidence(ev, full, final.T, threshold_m)
     if sweep is not None:
         ev["sweep"] = dict(sweep)
     ups = []
@@ -304,23 +307,6 @@ def gather(
         ev["runner_ups"] = ups
     ev["rivals"] = [_rival(two, answer, h, threshold_m) for h in rivals]
     return ev
-
-
-def _full_answer(
-    ev: dict[str, Any],
-    full: FullPair | None,
-    T: NDArray[np.float64],
-    runner_up: Sequence[Hypothesis],
-    threshold_m: float,
-    ratio: float,
-) -> Masks | None:
-    """The answer's full-resolution masks, and its own open-space share under
-    ``"full_resolution"`` in the evidence, whenever the settling made both scans' full views
-    (a repeating plan, a weak axis or a close rival: the share then decides
-    ``free_space``, :func:`decide`); None without them."""
-    if full is None:
-        return None
-    return full_evidence(ev, full, T, threshold_m)
 
 
 def full_evidence(

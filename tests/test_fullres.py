@@ -107,7 +107,8 @@ def _pixels(P, cam, W):  # pragma: no cover
     out = np.empty((P.shape[0], 2))
     for i in range(P.shape[0]):
         x, y, z = P[i, 0], P[i, 1], P[i, 2]
-        u, v = spherical_pixel(x, y, z, np.sqrt(x * x + y * y + z * z), cam, W)
+        r = np.sqrt(x * x + y * y + z * z)
+        u, v = spherical_pixel(x, y, z, r, cam[0], cam[1], cam[2], cam[3], cam[4], W)
         out[i, 0], out[i, 1] = np.floor(u + 0.5), np.floor(v + 0.5)
     return out
 
@@ -180,3 +181,18 @@ def test_scores_of_shifted_poses_equal_each_pose_scored_alone(coarse):
         alone = full_score(target, source.points, source.point_slack, moved, 0.05, coarse=coarse)
         assert got == alone
     assert np.ptp(many) > 1.0  # the slide changes what fits
+
+
+def test_wrap_is_pythons_modulo_in_every_turn():
+    """The projection's wrap (selects within one turn either side, ``%`` beyond) gives what
+    Python's floating-point modulo gives, on the edges of each turn too."""
+    from flexreg.stages.refinement import projective
+
+    W = 1024.0
+    tiny = np.nextafter(0.0, 1.0)
+    us = [0.0, -0.0, tiny, -tiny, 0.5, W - 1e-9, W, W + 1e-9, 2 * W - 1e-9, 2 * W, 5.5 * W]
+    us += [-1e-9, -0.5, -W + 1e-9, -W, -W - 1e-9, -3.25 * W, 1e300, -1e300]
+    for u in us:
+        got = projective._wrap(u, W)
+        assert got == u % W, u  # -0.0 stays -0.0 (the same number, the same pixel)
+    assert np.isnan(projective._wrap(float("nan"), W))

@@ -132,6 +132,79 @@ def full_view(
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], n[valid][keep])
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _check_loop(
+    spherical,
+    points,
+    own,
+    R,
+    t,
+    cam,
+    measured,
+    slack,
+    nearest,
+    threshold_m,
+    coarse,
+    explained,
+    open_space,
+    scores,
+):  # pragma: no cover
+    """The loop of :func:`_check_full` for one kind of camera (``spherical`` a constant where
+    it is inlined, so the camera's branch leaves the inner loop)."""
+    H, W = measured.shape[0], measured.shape[1]
+    wrap = spherical and cam[4] > 0.5
+    masks = explained.shape[0] == points.shape[0]
+    K = t.shape[0]
+    free_m = FREE_THRESHOLDS * threshold_m
+    explain_m = free_m if coarse else threshold_m / 2
+    explain_rel = FREE_REL if coarse else FINE_REL
+    c0, c1, c2, c3, c4 = cam[0], cam[1], cam[2], cam[3], cam[4]
+    r00, r01, r02, r10, r11, r12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    total = np.zeros(K)
+    bad_count = np.zeros(K, dtype=np.int64)
+    for i in range(points.shape[0]):
+        px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        rx = r00 * px + r01 * py + r02 * pz
+        ry = r10 * px + r11 * py + r12 * pz
+        rz = r20 * px + r21 * py + r22 * pz
+        own_i = np.float64(own[i])
+        ok = bad = False
+        for k in range(K):
+            qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
+            if spherical:  # range along the ray (eq. 4-7)
+                d = math.sqrt(qx * qx + qy * qy + qz * qz)
+                if not d > 0.0:
+                    continue
+                u, v = spherical_pixel(qx, qy, qz, d, c0, c1, c2, c3, c4, W)
+            else:  # pinhole: depth (eq. 1)
+                d = qz
+                if not d > 0.0:
+                    continue
+                x, y = qx / qz, qy / qz
+                u = c0 * x + c4 * y + c2
+                v = c1 * y + c3
+            fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
+            if wrap and fu >= W:
+                fu -= W
+            if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
+                continue
+            iu, iv = int(fu), int(fv)
+            e = d - np.float64(measured[iv, iu])
+            tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
+            free = free_m + FREE_REL * d + own_i
+            ok = abs(e) < tol
+            bad = d < nearest[iv, iu] - free
+            r = e / tol
+            total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
+            bad_count[k] += bad
+        if masks:  # one pose: its tests of this point (none when it falls outside)
+            explained[i] = ok
+            open_space[i] = bad
+    for k in range(K):
+        scores[k] += total[k] - 3.0 * bad_count[k]
+
+
 @numba.njit(cache=True, nogil=True)
 def _check_full(
     points,
@@ -155,53 +228,16 @@ def _check_full(
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
     Adds each pose's score to ``scores[k]``; fills ``explained`` and ``open_space`` (one pose)
     when they are as long as ``points``."""
-    H, W = measured.shape[0], measured.shape[1]
-    wrap = kind == 0 and cam[4] > 0.5
-    masks = explained.shape[0] == points.shape[0]
-    K = t.shape[0]
-    free_m = FREE_THRESHOLDS * threshold_m
-    explain_m = free_m if coarse else threshold_m / 2
-    explain_rel = FREE_REL if coarse else FINE_REL
-    total = np.zeros(K)
-    bad_count = np.zeros(K, dtype=np.int64)
-    for i in range(points.shape[0]):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        rx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz
-        ry = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz
-        rz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz
-        for k in range(K):
-            qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
-            if kind == 0:  # spherical: range along the ray (eq. 4-7)
-                d = math.sqrt(qx * qx + qy * qy + qz * qz)
-                if not d > 0.0:
-                    continue
-                u, v = spherical_pixel(qx, qy, qz, d, cam, W)
-            else:  # pinhole: depth (eq. 1)
-                d = qz
-                if not d > 0.0:
-                    continue
-                x, y = qx / qz, qy / qz
-                u = cam[0] * x + cam[4] * y + cam[2]
-                v = cam[1] * y + cam[3]
-            fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
-            if wrap and fu >= W:
-                fu -= W
-            if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
-                continue
-            iu, iv = int(fu), int(fv)
-            e = d - np.float64(measured[iv, iu])
-            tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
-            free = free_m + FREE_REL * d + own[i]
-            ok = abs(e) < tol
-            bad = d < nearest[iv, iu] - free
-            r = e / tol
-            total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
-            bad_count[k] += bad
-            if masks:
-                explained[i] = ok
-                open_space[i] = bad
-    for k in range(K):
-        scores[k] += total[k] - 3.0 * bad_count[k]
+    if kind == 0:
+        _check_loop(
+            True, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
+            explained, open_space, scores,
+        )  # fmt: skip
+    else:
+        _check_loop(
+            False, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
+            explained, open_space, scores,
+        )  # fmt: skip
 
 
 def _floats(a: NDArray[Any]) -> NDArray[Any]:

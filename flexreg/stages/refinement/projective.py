@@ -84,33 +84,32 @@ def angular_step(image: RangeImage) -> float:
 def _wrap(u, W):  # pragma: no cover
     """``u % W`` (Python's floating-point modulo, ``W > 0``), without the division for the
     ``u`` within one turn either side that a projection gives: ``fmod`` is exact there, so
-    adding or subtracting ``W`` once is the same number."""
-    if u >= 0.0:
-        if u < W:
-            return u
-        if u < 2.0 * W:
-            return u - W
-    elif u >= -W:
-        return u + W
+    adding or subtracting ``W`` once is the same number. Within that turn the choice is a
+    select, not a branch: whether ``u`` is negative follows the points' azimuths, which a
+    branch predictor cannot guess (half the points of a panorama whose azimuths start at 0)."""
+    if u >= -W and u < 2.0 * W:
+        return u + W if u < 0.0 else (u - W if u >= W else u)
     return u % W
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def spherical_pixel(qx, qy, qz, r, cam, W):  # pragma: no cover
+def spherical_pixel(qx, qy, qz, r, c0, c1, c2, c3, c4, W):  # pragma: no cover
     """The pixel coordinates ``(u, v)`` (before rounding) of a point at range ``r > 0`` in a
-    spherical camera ``cam`` (:func:`camera_params`) of width ``W``, as
-    :meth:`~flexreg.core.camera.SphericalCamera.project` computes them (eq. 4-7).
+    spherical camera ``c0 .. c4`` (the entries of :func:`camera_params`) of width ``W``, as
+    :meth:`~flexreg.core.camera.SphericalCamera.project` computes them (eq. 4-7). The
+    parameters come as scalars: a kernel reads them once, before its loop (read from the
+    array inside the loop, they cost a quarter of a full-resolution check's time).
 
     Inlined into the kernels of this module and of :mod:`flexreg.registration.fullres`;
     numba's on-disk cache of a kernel is keyed by its own file, so after changing this
     function remove the ``*.nbi``/``*.nbc`` files of ``fullres`` too."""
-    u = (math.atan2(qy, qx) - cam[0]) / cam[1]
+    u = (math.atan2(qy, qx) - c0) / c1
     c = min(1.0, max(-1.0, qz / r))
-    v = (math.acos(c) - cam[2]) / cam[3]
-    if cam[4] > 0.5:
+    v = (math.acos(c) - c2) / c3
+    if c4 > 0.5:
         u = _wrap(u, W)
     elif u < -0.5:
-        u += 2.0 * math.pi / cam[1]
+        u += 2.0 * math.pi / c1
     return u, v
 
 
@@ -122,6 +121,7 @@ def _associate_chunk(
     ``bc[ch]``, ``cc[ch]``)."""
     H, W = xyz.shape[0], xyz.shape[1]
     wrap = kind == 0 and cam[4] > 0.5
+    k0, k1, k2, k3, k4 = cam[0], cam[1], cam[2], cam[3], cam[4]
     n = pts.shape[0]
     J = np.empty(6)
     for i in range(ch * n // _CHUNKS, (ch + 1) * n // _CHUNKS):
@@ -135,12 +135,12 @@ def _associate_chunk(
         if kind == 0:
             if not rq > 0.0:
                 continue
-            u, v = spherical_pixel(qx, qy, qz, rq, cam, W)
+            u, v = spherical_pixel(qx, qy, qz, rq, k0, k1, k2, k3, k4, W)
         else:
             if not qz > 0.0:
                 continue
-            u = cam[0] * qx / qz + cam[4] * qy / qz + cam[2]
-            v = cam[1] * qy / qz + cam[3]
+            u = k0 * qx / qz + k4 * qy / qz + k2
+            v = k1 * qy / qz + k3
         iu = math.floor(u + 0.5)
         iv = math.floor(v + 0.5)
         if wrap and iu >= W:

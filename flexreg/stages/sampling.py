@@ -227,14 +227,16 @@ def median_spacing(
 
 
 @numba.njit(cache=True, nogil=True)
-def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
+def _voxel_sums(q, lo, cell, size):  # pragma: no cover - compiled
     """Per occupied cell of side ``cell`` anchored at ``lo`` (in the order of their first
-    points): the sum of its points and their number. An open-addressing hash set of the integer
-    cell coordinates as in :func:`_first_in_cells`; ``table`` is scratch space of a
-    power-of-two size at least twice the number of points."""
-    mask = table.shape[0] - 1
-    table[:] = -1
-    first = np.empty(1024, dtype=np.int64)
+    points): the sum of its points and their number. An open-addressing hash set of the
+    integer cell coordinates, each stored with its cell, of ``size`` slots (a power of two) to
+    start with, four times larger whenever half full: a table sized by the occupied cells
+    rather than by the points stays in the cache. Neither the table's size nor its growth
+    changes the cells, their order or their sums (each point is added in input order)."""
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    keys = np.empty((1024, 3), dtype=np.int64)
     sums = np.zeros((1024, 3), dtype=np.float64)
     counts = np.zeros(1024, dtype=np.int64)
     m = 0
@@ -246,17 +248,32 @@ def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
         while True:
             v = table[slot]
             if v < 0:
-                if m == first.shape[0]:  # grow the per-cell arrays
-                    first = np.concatenate((first, np.empty(m, dtype=np.int64)))
+                if m == keys.shape[0]:  # grow the per-cell arrays
+                    keys = np.concatenate((keys, np.empty((m, 3), dtype=np.int64)))
                     sums = np.concatenate((sums, np.zeros((m, 3), dtype=np.float64)))
                     counts = np.concatenate((counts, np.zeros(m, dtype=np.int64)))
                 v = m
-                table[slot] = v
-                first[v] = i
+                keys[v, 0] = kx
+                keys[v, 1] = ky
+                keys[v, 2] = kz
                 m += 1
+                if 2 * m > size:  # half full: a larger table, every cell placed again
+                    size *= 4
+                    mask = size - 1
+                    table = np.full(size, -1, dtype=np.int64)
+                    for u in range(m):
+                        s = (
+                            (keys[u, 0] * 73856093)
+                            ^ (keys[u, 1] * 19349663)
+                            ^ (keys[u, 2] * 83492791)
+                        ) & mask
+                        while table[s] >= 0:
+                            s = (s + 1) & mask
+                        table[s] = u
+                else:
+                    table[slot] = v
                 break
-            j = first[v]
-            if _in_cell(q, j, lo, cell, kx, ky, kz):
+            if keys[v, 0] == kx and keys[v, 1] == ky and keys[v, 2] == kz:
                 break
             slot = (slot + 1) & mask
         for c in range(3):
@@ -275,8 +292,8 @@ def _voxels(
     if len(p) == 0:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     lo = _bounds(p)[0].astype(np.float64)
-    table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
-    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
+    size = max(1 << 12, 1 << (len(p) // 4).bit_length())  # grown as cells appear
+    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), size)
 
 
 def voxel_count(points: NDArray[np.floating], voxel_m: float) -> int:
@@ -333,8 +350,11 @@ def to_open3d(points: NDArray[np.float64]) -> Any:
     """An Open3D point cloud of (N, 3) float64 points."""
     import open3d as o3d  # heavy: only the Open3D paths need it
 
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    if not p.flags.writeable:  # Open3D takes writeable arrays only (a kept, shared cloud)
+        p = p.copy()
     pc = o3d.geometry.PointCloud()
-    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    pc.points = o3d.utility.Vector3dVector(p)
     return pc
 
 

@@ -1,0 +1,94 @@
+"""The speed paths give exactly what the plain computations give: voxel sums from a grown hash
+table, scale voxels and centroids kept by content."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexreg.stages import overlap
+from flexreg.stages.overlap import OverlapMeter, measure_overlap, scale_voxel
+from flexreg.stages.sampling import voxel_centroids, voxel_count
+
+
+def _reference_voxels(points: np.ndarray, voxel_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sums and counts per voxel in the order of each voxel's first point, by numpy alone (the
+    points added one by one in input order, as the compiled pass adds them)."""
+    p = np.asarray(points)
+    lo = p.min(axis=0).astype(np.float64) - voxel_m / 2
+    keys = np.floor((p.astype(np.float64) - lo) / voxel_m).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # voxels by their first point
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    v = rank[inverse.reshape(-1)]
+    sums = np.zeros((len(first), 3))
+    for i in range(len(p)):  # sequential float64 sums, in input order
+        sums[v[i]] += p[i]
+    return sums, np.bincount(v, minlength=len(first))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("voxel_m", [0.05, 0.3, 2.0, 50.0])
+def test_voxel_sums_match_a_plain_reference(dtype, voxel_m):
+    rng = np.random.default_rng(3)
+    # many more cells than the table starts with at the small voxels: the table grows
+    pts = (rng.normal(size=(6000, 3)) * [4.0, 3.0, 1.0]).astype(dtype)
+    sums, counts = _reference_voxels(pts, voxel_m)
+    centroids = voxel_centroids(pts, voxel_m)
+    np.testing.assert_array_equal(centroids, sums / counts[:, None])
+    assert voxel_count(pts, voxel_m) == len(counts)
+
+
+def test_voxel_sums_of_identical_points():
+    pts = np.ones((5000, 3))
+    np.testing.assert_array_equal(voxel_centroids(pts, 0.1), [[1.0, 1.0, 1.0]])
+
+
+@pytest.fixture
+def room(rng):
+    """A box of walls with 20,000 points (metres)."""
+    n = 20_000
+    face = rng.integers(0, 6, n)
+    p = rng.uniform(-1, 1, (n, 3))
+    axis = face // 2
+    p[np.arange(n), axis] = np.where(face % 2 == 0, -1.0, 1.0)
+    return p * [5.0, 4.0, 1.5]
+
+
+def test_scale_voxel_is_kept_by_content(room, monkeypatch):
+    overlap._KEPT.clear()
+    first = scale_voxel(room, max_points=500)
+    calls = []
+    real = overlap.median_spacing
+    monkeypatch.setattr(overlap, "median_spacing", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert scale_voxel(room.copy(), max_points=500) == first  # same values, another array
+    assert calls == []
+    moved = room + [0.0, 0.0, 1e-3]  # other values: searched again
+    scale_voxel(moved, max_points=500)
+    assert calls == [1]
+    scale_voxel(room.astype(np.float32), max_points=500)  # another type: searched again
+    assert calls == [1, 1]
+
+
+def test_kept_overlap_equals_a_fresh_one(room):
+    T = np.eye(4)
+    T[:3, 3] = [0.3, -0.2, 0.0]
+    source = room[::2] - T[:3, 3]
+    overlap._KEPT.clear()
+    fresh = measure_overlap(room, source, T, open3d_check=False)
+    kept = measure_overlap(room.copy(), source, T, open3d_check=False)
+    assert kept == fresh
+    assert fresh.share > 0.5
+    meter = OverlapMeter(room, source, open3d_check=False)
+    assert not meter.target_points.flags.writeable  # shared by the links of this cloud
+    explicit = measure_overlap(room, source, T, voxel_m=fresh.voxel_m, open3d_check=False)
+    assert explicit.share == fresh.share and explicit.rmse_m == fresh.rmse_m
+
+
+def test_kept_clouds_are_bounded(rng, monkeypatch):
+    monkeypatch.setattr(overlap, "KEEP_CLOUDS", 3)
+    overlap._KEPT.clear()
+    for k in range(6):
+        scale_voxel(rng.normal(size=(300, 3)) + k, max_points=100)
+    assert len(overlap._KEPT) == 3

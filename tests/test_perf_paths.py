@@ -92,3 +92,33 @@ def test_kept_clouds_are_bounded(rng, monkeypatch):
     for k in range(6):
         scale_voxel(rng.normal(size=(300, 3)) + k, max_points=100)
     assert len(overlap._KEPT) == 3
+
+
+def _tree_spacing(points: np.ndarray, sample: int = 5000, seed: int = 0) -> float:
+    """The median spacing by SciPy's k-d tree (the former computation)."""
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, dtype=np.float64)
+    idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
+    d, _ = cKDTree(P).query(P[idx], k=2)
+    return float(np.median(d[:, 1]))
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda g: g.normal(size=(4000, 3)),
+        lambda g: np.vstack([g.normal(size=(999, 3)), [[1e4, 0.0, 0.0]]]),  # an isolated point
+        lambda g: np.repeat(g.normal(size=(60, 3)), 3, axis=0),  # duplicates: spacing 0
+        lambda g: np.c_[g.normal(size=(3000, 2)), np.zeros(3000)],  # a plane
+        lambda g: np.c_[g.uniform(0, 100, 3000), np.zeros((3000, 2))],  # a line
+        lambda g: g.normal(size=(2, 3)),
+        lambda g: (g.normal(size=(20_000, 3)) * [20.0, 10.0, 2.0]).astype(np.float32),
+    ],
+)
+def test_median_spacing_equals_the_k_d_trees(make):
+    from flexreg.stages.sampling import median_spacing
+
+    pts = make(np.random.default_rng(11))
+    assert median_spacing(pts) == _tree_spacing(pts)
+    assert median_spacing(pts, sample=100, seed=4) == _tree_spacing(pts, sample=100, seed=4)

@@ -122,3 +122,40 @@ def test_median_spacing_equals_the_k_d_trees(make):
     pts = make(np.random.default_rng(11))
     assert median_spacing(pts) == _tree_spacing(pts)
     assert median_spacing(pts, sample=100, seed=4) == _tree_spacing(pts, sample=100, seed=4)
+
+
+def _numpy_quantize(img: np.ndarray, bits: int, lo: float, hi: float) -> tuple:
+    """The quantisation as numpy evaluates it (the former computation)."""
+    top = float(2**bits - 1)
+    valid = np.isfinite(img)
+    with np.errstate(invalid="ignore"):
+        g = (img.astype(np.float64) - lo) * (top / (hi - lo))
+        g = np.rint(np.clip(np.where(valid, g, 0.0), 0.0, top))
+    return g.astype(np.uint8 if bits == 8 else np.uint16), valid
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("value_range", [(0.0, 1.0), (-0.3, 2.5), (0.0, np.pi)])
+def test_quantize_in_one_pass_equals_numpys(dtype, bits, value_range):
+    from flexreg.stages.feature_images import quantize
+
+    rng = np.random.default_rng(7)
+    img = rng.uniform(-0.5, 3.5, (64, 80))
+    top = 2**bits - 1
+    lo, hi = value_range
+    img[:8] = (np.arange(8 * 80).reshape(8, 80) % (top + 1) + 0.5) / top * (hi - lo) + lo  # ties
+    img[8, :4] = [np.nan, np.inf, -np.inf, 0.0]
+    img = img.astype(dtype)
+    q, valid = quantize(img, bits, value_range=value_range)
+    ref_q, ref_valid = _numpy_quantize(img, bits, lo, hi)
+    assert q.dtype == ref_q.dtype
+    np.testing.assert_array_equal(q, ref_q)
+    np.testing.assert_array_equal(valid, ref_valid)
+    q2, v2 = quantize(img, bits, value_range=value_range, stretch="percentile")
+    p_lo, p_hi = (float(x) for x in np.percentile(img[ref_valid], [1.0, 99.0]))
+    np.testing.assert_array_equal(q2, _numpy_quantize(img, bits, p_lo, p_hi)[0])
+    np.testing.assert_array_equal(v2, ref_valid)
+    q3, v3 = quantize(img, bits, value_range=value_range, stretch="clahe")
+    assert not q3[~ref_valid].any()
+    np.testing.assert_array_equal(v3, ref_valid)

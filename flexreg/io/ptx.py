@@ -56,25 +56,35 @@ def _is_space(b: np.uint8) -> bool:
     return b == 32 or b == 9 or b == 13 or b == 10
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _line_end(buf: NDArray[np.uint8], i: int, n: int) -> int:
+    """Index of the first ``\\n`` of ``buf[i:n]``, ``n`` when there is none."""
+    while i < n and buf[i] != 10:
+        i += 1
+    return i
+
+
 @numba.njit(cache=True, nogil=True)
 def _parse_line(
-    buf: NDArray[np.uint8], lo: int, hi: int, out: NDArray[np.float64], pow10: NDArray[np.float64]
-) -> tuple[int, int]:
-    """Parse whitespace-separated decimal numbers of ``buf[lo:hi]`` into ``out``.
+    buf: NDArray[np.uint8], lo: int, n: int, out: NDArray[np.float64], pow10: NDArray[np.float64]
+) -> tuple[int, int, int]:
+    """Parse the whitespace-separated decimal numbers of the line starting at ``buf[lo]`` (up
+    to its ``\\n`` or ``n``) into ``out``, in the same pass that finds the line's end.
 
-    Returns ``(count, error)``. Numbers: optional sign, digits, optional fraction, optional
-    exponent. Up to 18 significant digits are exact; with at most 15 digits and a decimal
-    exponent within +-22 the result is correctly rounded (exact integer / exact power of ten).
+    Returns ``(count, error, end)``, ``end`` the index of the line's ``\\n`` (or ``n``).
+    Numbers: optional sign, digits, optional fraction, optional exponent. Up to 18 significant
+    digits are exact; with at most 15 digits and a decimal exponent within +-22 the result is
+    correctly rounded (exact integer / exact power of ten).
     """
     i = lo
     count = 0
     while True:
-        while i < hi and _is_space(buf[i]):
+        while i < n and (buf[i] == 32 or buf[i] == 9 or buf[i] == 13):
             i += 1
-        if i >= hi:
-            return count, _OK
+        if i >= n or buf[i] == 10:
+            return count, _OK, i
         if count >= out.shape[0]:
-            return count, _TOO_MANY
+            return count, _TOO_MANY, _line_end(buf, i, n)
         neg = False
         if buf[i] == 45 or buf[i] == 43:  # - +
             neg = buf[i] == 45
@@ -83,7 +93,7 @@ def _parse_line(
         exp10 = 0
         ndig = 0  # significant digits kept in mant
         digits = 0  # digits seen at all
-        while i < hi and 48 <= buf[i] <= 57:
+        while i < n and 48 <= buf[i] <= 57:
             if ndig < 18:
                 mant = mant * 10 + (buf[i] - 48)
                 if mant > 0:
@@ -92,9 +102,9 @@ def _parse_line(
                 exp10 += 1
             digits += 1
             i += 1
-        if i < hi and buf[i] == 46:  # .
+        if i < n and buf[i] == 46:  # .
             i += 1
-            while i < hi and 48 <= buf[i] <= 57:
+            while i < n and 48 <= buf[i] <= 57:
                 if ndig < 18:
                     mant = mant * 10 + (buf[i] - 48)
                     exp10 -= 1
@@ -103,25 +113,25 @@ def _parse_line(
                 digits += 1
                 i += 1
         if digits == 0:
-            return count, _BAD_NUMBER
-        if i < hi and (buf[i] == 101 or buf[i] == 69):  # e E
+            return count, _BAD_NUMBER, _line_end(buf, i, n)
+        if i < n and (buf[i] == 101 or buf[i] == 69):  # e E
             i += 1
             eneg = False
-            if i < hi and (buf[i] == 45 or buf[i] == 43):
+            if i < n and (buf[i] == 45 or buf[i] == 43):
                 eneg = buf[i] == 45
                 i += 1
             e = 0
             ed = 0
-            while i < hi and 48 <= buf[i] <= 57:
+            while i < n and 48 <= buf[i] <= 57:
                 if e < 100000:
                     e = e * 10 + (buf[i] - 48)
                 i += 1
                 ed += 1
             if ed == 0:
-                return count, _BAD_NUMBER
+                return count, _BAD_NUMBER, _line_end(buf, i, n)
             exp10 += -e if eneg else e
-        if i < hi and not _is_space(buf[i]):
-            return count, _BAD_NUMBER
+        if i < n and not _is_space(buf[i]):
+            return count, _BAD_NUMBER, _line_end(buf, i, n)
         v = float(mant)
         if exp10 < 0:
             if exp10 >= -22:
@@ -134,7 +144,7 @@ def _parse_line(
             else:
                 v = v * 10.0**exp10
         if not np.isfinite(v):
-            return count, _BAD_NUMBER
+            return count, _BAD_NUMBER, _line_end(buf, i, n)
         out[count] = -v if neg else v
         count += 1
 
@@ -186,10 +196,7 @@ def _parse_all(
             li += 1
         vals = np.empty(_MAX_VALUES, dtype=np.float64)
         while s < hi:
-            e = s
-            while e < n and buf[e] != 10:
-                e += 1
-            cnt, err = _parse_line(buf, s, e, vals, pow10)
+            cnt, err, e = _parse_line(buf, s, n, vals, pow10)  # e: the line's end
             for j in range(min(cnt, 4)):
                 head[li, j] = vals[j]
             for j in range(4, cnt):

@@ -321,22 +321,30 @@ def _keep_valid_image(
     column of the grid, also written into its pixel of the working image ``xyz`` / ``valid``
     (as :func:`flexreg.core.range_image.from_grid` gathers it). Returns the new number of
     kept points."""
+    # the grid cell of line lo, then followed line by line (no divisions per point): row r,
+    # column c; the pixel (r // stride, c // stride) when both are multiples of stride
+    r = seen % rows
+    c = seen // rows
+    on_column = c % stride == 0
     for i in range(lo, hi):
         x, y, z = head[i, 0], head[i, 1], head[i, 2]
-        if x == 0.0 and y == 0.0 and z == 0.0:
-            continue
-        points[kept, 0] = x
-        points[kept, 1] = y
-        points[kept, 2] = z
-        k = seen + i - lo
-        r = k % rows
-        c = k // rows
-        if r % stride == 0 and c % stride == 0:
-            xyz[r // stride, c // stride, 0] = points[kept, 0]
-            xyz[r // stride, c // stride, 1] = points[kept, 1]
-            xyz[r // stride, c // stride, 2] = points[kept, 2]
-            valid[r // stride, c // stride] = True
-        kept += 1
+        if not (x == 0.0 and y == 0.0 and z == 0.0):
+            points[kept, 0] = x
+            points[kept, 1] = y
+            points[kept, 2] = z
+            if on_column and (stride == 1 or r % stride == 0):
+                pr = r if stride == 1 else r // stride
+                pc = c if stride == 1 else c // stride
+                xyz[pr, pc, 0] = points[kept, 0]
+                xyz[pr, pc, 1] = points[kept, 1]
+                xyz[pr, pc, 2] = points[kept, 2]
+                valid[pr, pc] = True
+            kept += 1
+        r += 1
+        if r == rows:
+            r = 0
+            c += 1
+            on_column = c % stride == 0
     return kept
 
 

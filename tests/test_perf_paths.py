@@ -159,3 +159,48 @@ def test_quantize_in_one_pass_equals_numpys(dtype, bits, value_range):
     q3, v3 = quantize(img, bits, value_range=value_range, stretch="clahe")
     assert not q3[~ref_valid].any()
     np.testing.assert_array_equal(v3, ref_valid)
+
+
+def test_overlap_inputs_kept_ahead_give_the_same_figure(room, monkeypatch):
+    from flexreg.stages.overlap import keep_overlap_inputs
+
+    T = np.eye(4)
+    T[:3, 3] = [0.2, 0.1, 0.0]
+    source = (room[1::2] - T[:3, 3]).astype(np.float32)
+    overlap._KEPT.clear()
+    overlap._KEPT_ARRAYS.clear()
+    fresh = measure_overlap(room, source, T, open3d_check=False)
+    overlap._KEPT.clear()
+    overlap._KEPT_ARRAYS.clear()
+    keep_overlap_inputs(room, source)
+    monkeypatch.setattr(overlap, "median_spacing", None)  # nothing left to search
+    monkeypatch.setattr(overlap, "voxel_centroids", None)
+    ahead = measure_overlap(room.copy(), source.copy(), T, open3d_check=False)
+    assert ahead == fresh
+
+
+def test_register_overlap_is_the_same_with_inputs_kept_ahead():
+    """register computes the overlap's inputs beside its feature stages; its figure is the one
+    measured afterwards from nothing."""
+    from pathlib import Path
+
+    from flexreg.core.camera import SphericalCamera
+    from flexreg.core.range_image import to_scan
+    from flexreg.core.scan import Scan
+    from flexreg.core.transforms import apply, make_transform, rotation_about_axis
+    from flexreg.io import read_scan
+    from flexreg.registration import RegistrationConfig, register
+    from flexreg.stages.projection import project
+
+    target = read_scan(Path(__file__).resolve().parents[1] / "data/laserscan/laserscan-depth.png")
+    T_st = make_transform(rotation_about_axis([0.0, 0.0, 1.0], np.radians(30.0)), [0.4, -0.2, 0])
+    cam = SphericalCamera.from_reference(1799, 397, 0.80, 2.34)
+    source = to_scan(project(Scan(points=apply(T_st, target.points)), cam))
+    res = register(target, source, RegistrationConfig(voxel_m=0.08, seed=1))
+    assert res.overlap is not None and res.overlap.share > 0.5
+    assert overlap._KEPT and overlap._KEPT_ARRAYS  # computed ahead, beside the features
+    overlap._KEPT.clear()
+    overlap._KEPT_ARRAYS.clear()
+    t32, s32 = (np.ascontiguousarray(x.points) for x in (target, source))
+    again = measure_overlap(t32, s32, res.T_target_source, open3d_check=False)
+    assert res.overlap == again

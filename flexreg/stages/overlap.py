@@ -41,12 +41,14 @@ from flexreg.errors import ConfigError, RegistrationError
 from flexreg.stages.sampling import median_spacing, thin, to_open3d, voxel_centroids, voxel_count
 
 __all__ = [
+    "KEEP_ARRAYS",
     "KEEP_CLOUDS",
     "MAX_INPUT_POINTS",
     "SCALE_MAX_POINTS",
     "SPACINGS_PER_VOXEL",
     "Overlap",
     "OverlapMeter",
+    "keep_overlap_inputs",
     "measure_overlap",
     "scale_voxel",
 ]
@@ -59,12 +61,15 @@ SPACINGS_PER_VOXEL = 2.0
 #: at most this many points of each cloud (every k-th) are voxelised: voxels of the scale size
 #: hold many points of a large scan, so the voxel centroids hardly change
 MAX_INPUT_POINTS = 4_000_000
-#: clouds whose scale voxel and voxel centroids are kept, by content: a survey station takes
-#: part in a dozen links, and its scale voxel (median spacing and voxel counts, 0.1-0.2 s at
-#: 2 M points) was found again for each; a kept cloud costs a digest of its points instead
-#: (about 0.01 s per million points)
-KEEP_CLOUDS = 32
+#: clouds whose scale voxel is kept, by content: a survey station takes part in a dozen
+#: links, and its scale voxel (median spacing and voxel counts, 0.1-0.2 s at 2 M points) was
+#: found again for each; a kept cloud costs a digest of its points instead (about 0.01 s per
+#: million points)
+KEEP_CLOUDS = 256
+#: voxel centroids and k-d trees kept, by cloud content and voxel (up to about 1 MB each)
+KEEP_ARRAYS = 32
 _KEPT: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+_KEPT_ARRAYS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
 _KEPT_LOCK = threading.Lock()
 
 
@@ -77,18 +82,20 @@ def _digest(points: NDArray[np.floating]) -> bytes:
     return h.digest()
 
 
-def _kept(key: tuple[Any, ...], make: Any) -> Any:
-    """``make()``, kept under ``key`` (the last :data:`KEEP_CLOUDS` keys)."""
+def _kept(key: tuple[Any, ...], make: Any, arrays: bool = False) -> Any:
+    """``make()``, kept under ``key`` (the last :data:`KEEP_CLOUDS` scale voxels, the last
+    :data:`KEEP_ARRAYS` centroids and trees)."""
+    kept, limit = (_KEPT_ARRAYS, KEEP_ARRAYS) if arrays else (_KEPT, KEEP_CLOUDS)
     with _KEPT_LOCK:
-        hit = _KEPT.get(key)
+        hit = kept.get(key)
         if hit is not None:
-            _KEPT.move_to_end(key)
+            kept.move_to_end(key)
             return hit
     value = make()
     with _KEPT_LOCK:
-        _KEPT[key] = value
-        while len(_KEPT) > KEEP_CLOUDS:
-            _KEPT.popitem(last=False)
+        kept[key] = value
+        while len(kept) > limit:
+            kept.popitem(last=False)
     return value
 
 
@@ -160,8 +167,8 @@ class OverlapMeter:
     target, source : (N, 3) float32 or float64, metres
         Each in its own frame.
     voxel_m : float, optional, metres
-        The voxel (default :func:`scale_voxel` of the target; the target's voxel centroids
-        are then kept by content with it).
+        The voxel (default :func:`scale_voxel` of the target; both clouds' voxel centroids
+        and the target's k-d tree are then kept by content with it).
     distance_m : float, optional, metres
         Inlier distance (default ``voxel_m``).
     open3d_check : bool
@@ -197,13 +204,20 @@ class OverlapMeter:
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a positive number of metres, got {value}")
         self.voxel_m, self.voxel_source, self.distance_m = float(voxel_m), how, float(distance_m)
-        self.target_points = (
-            _centroids(target, voxel_m)
-            if digest is None
-            else _kept(("centroids", digest, voxel_m), lambda: _centroids(target, voxel_m))
-        )
-        self.source_points = _centroids(source, voxel_m)
-        self._tree = cKDTree(self.target_points)
+        if digest is None:
+            self.target_points = _centroids(target, voxel_m)
+            self.source_points = _centroids(source, voxel_m)
+            self._tree = cKDTree(self.target_points)
+        else:  # the scale voxel's centroids and tree, kept by content (see keep_overlap_inputs)
+            v = float(voxel_m)
+            self.target_points = _kept(
+                ("centroids", digest, v), lambda: _centroids(target, v), arrays=True
+            )
+            self.source_points = _kept(
+                ("centroids", _digest(source), v), lambda: _centroids(source, v), arrays=True
+            )
+            pts = self.target_points
+            self._tree = _kept(("tree", digest, v), lambda: cKDTree(pts), arrays=True)
         self._open3d = (
             (to_open3d(self.source_points), to_open3d(self.target_points)) if open3d_check else None
         )
@@ -248,6 +262,26 @@ def _centroids(points: NDArray[np.floating], voxel_m: float) -> NDArray[np.float
     c = voxel_centroids(thin(points, MAX_INPUT_POINTS), voxel_m)
     c.flags.writeable = False
     return c
+
+
+def keep_overlap_inputs(target: NDArray[np.floating], source: NDArray[np.floating]) -> None:
+    """Compute ahead what :func:`measure_overlap` of these two clouds at the scale voxel needs
+    whatever the transform, and keep it by content (:data:`KEEP_CLOUDS`, :data:`KEEP_ARRAYS`):
+    the target's scale voxel, both clouds' voxel centroids and the target's k-d tree. A caller
+    with a spare thread runs this beside other work; the later :func:`measure_overlap` of the
+    same clouds (the same values, any arrays) then finds them, and gives exactly what it gives
+    without them.
+
+    Parameters
+    ----------
+    target, source : (N, 3) float32 or float64, metres
+
+    Raises
+    ------
+    RegistrationError
+        As :func:`scale_voxel` (the target's points coincide).
+    """
+    OverlapMeter(target, source, open3d_check=False)
 
 
 def measure_overlap(

@@ -24,6 +24,7 @@ from flexreg.core.scan import Scan, as_points
 from flexreg.errors import DegenerateGeometryError, FlexregError
 from flexreg.registration.candidates import Keypoints3D
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import full_pair_of
 from flexreg.stages import feature_images
 from flexreg.stages.correspondences import lift
 from flexreg.stages.keypoints import detect_and_describe, strip_rows
@@ -258,8 +259,13 @@ def _views(
         _scan_view(x, img, config, target=t, source=s)
         for x, img, (t, s) in zip(scans, images, roles, strict=True)
     ]
-    if roles == [(True, False), (False, True)] and None not in scans:
+    if roles == [(True, False), (False, True)] and None not in scans:  # register's pair
         _keep_overlap_inputs(scans)  # type: ignore[arg-type]
+        if config.verdict_full_check:
+            # the full-resolution views the verdict's check of a confident answer reads,
+            # made here beside the feature stages instead of at the end of the call (kept
+            # with these views: :func:`~flexreg.registration.fullres.full_pair_of`)
+            full_pair_of(views)()
     return views
 
 

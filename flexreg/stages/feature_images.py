@@ -552,6 +552,7 @@ def quantize(
         raise ConfigError(f"value_range must be finite and increasing, got {(lo, hi)}")
     top = float(2**bits - 1)
     dtype = np.uint8 if bits == 8 else np.uint16
+    out: NDArray[np.unsignedinteger]
     if img.dtype in (np.float32, np.float64):  # one compiled pass, the same arithmetic
         out = np.empty(img.shape, dtype=dtype)
         valid = np.empty(img.shape, dtype=np.bool_)
@@ -570,7 +571,7 @@ def quantize(
             tmp = np.where(valid, out, fill).astype(dtype)
             tx, ty = (int(t) for t in clahe_tiles)
             clahe = cv2.createCLAHE(clipLimit=float(clahe_clip), tileGridSize=(tx, ty))
-            out = clahe.apply(tmp)
+            out = np.asarray(clahe.apply(tmp), dtype=dtype)
             out[~valid] = 0
     return out, valid
 

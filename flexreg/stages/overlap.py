@@ -78,7 +78,7 @@ def _digest(points: NDArray[np.floating]) -> bytes:
     p = np.ascontiguousarray(points)
     h = hashlib.blake2b(digest_size=20)
     h.update(f"{p.dtype.str}{p.shape}".encode())
-    h.update(p)
+    h.update(p.data)
     return h.digest()
 
 
@@ -139,7 +139,7 @@ def _scale_voxel_of(
 ) -> tuple[float, str]:
     """:func:`scale_voxel` of a cloud whose :func:`_digest` is ``digest`` (kept by it)."""
     key = ("scale voxel", digest, max_points)
-    return _kept(key, lambda: _find_scale_voxel(target, max_points))  # type: ignore[no-any-return]
+    return _kept(key, lambda: _find_scale_voxel(target, max_points))
 
 
 def _find_scale_voxel(target: NDArray[np.floating], max_points: int) -> tuple[float, str]:

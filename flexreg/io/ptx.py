@@ -37,168 +37,11 @@ from flexreg.core.range_image import RangeImage, working_stride
 from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import InputError
+from flexreg.io._ptx_parse import _POW10, _TOO_MANY, _parse_all
 
 log = logging.getLogger(__name__)
 
 _HEADER_LINES = 10
-_MAX_VALUES = 7
-_POW10 = np.array([10.0**i for i in range(23)])
-
-# error codes of the line parser
-_OK, _BAD_NUMBER, _TOO_MANY = 0, 1, 2
-
-
-# ------------------------------------------------------------------------------ parsing kernels
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _is_space(b: np.uint8) -> bool:
-    return b == 32 or b == 9 or b == 13 or b == 10
-
-
-@numba.njit(cache=True, nogil=True)
-def _parse_line(
-    buf: NDArray[np.uint8], lo: int, hi: int, out: NDArray[np.float64], pow10: NDArray[np.float64]
-) -> tuple[int, int]:
-    """Parse whitespace-separated decimal numbers of ``buf[lo:hi]`` into ``out``.
-
-    Returns ``(count, error)``. Numbers: optional sign, digits, optional fraction, optional
-    exponent. Up to 18 significant digits are exact; with at most 15 digits and a decimal
-    exponent within +-22 the result is correctly rounded (exact integer / exact power of ten).
-    """
-    i = lo
-    count = 0
-    while True:
-        while i < hi and _is_space(buf[i]):
-            i += 1
-        if i >= hi:
-            return count, _OK
-        if count >= out.shape[0]:
-            return count, _TOO_MANY
-        neg = False
-        if buf[i] == 45 or buf[i] == 43:  # - +
-            neg = buf[i] == 45
-            i += 1
-        mant = 0
-        exp10 = 0
-        ndig = 0  # significant digits kept in mant
-        digits = 0  # digits seen at all
-        while i < hi and 48 <= buf[i] <= 57:
-            if ndig < 18:
-                mant = mant * 10 + (buf[i] - 48)
-                if mant > 0:
-                    ndig += 1
-            else:
-                exp10 += 1
-            digits += 1
-            i += 1
-        if i < hi and buf[i] == 46:  # .
-            i += 1
-            while i < hi and 48 <= buf[i] <= 57:
-                if ndig < 18:
-                    mant = mant * 10 + (buf[i] - 48)
-                    exp10 -= 1
-                    if mant > 0:
-                        ndig += 1
-                digits += 1
-                i += 1
-        if digits == 0:
-            return count, _BAD_NUMBER
-        if i < hi and (buf[i] == 101 or buf[i] == 69):  # e E
-            i += 1
-            eneg = False
-            if i < hi and (buf[i] == 45 or buf[i] == 43):
-                eneg = buf[i] == 45
-                i += 1
-            e = 0
-            ed = 0
-            while i < hi and 48 <= buf[i] <= 57:
-                if e < 100000:
-                    e = e * 10 + (buf[i] - 48)
-                i += 1
-                ed += 1
-            if ed == 0:
-                return count, _BAD_NUMBER
-            exp10 += -e if eneg else e
-        if i < hi and not _is_space(buf[i]):
-            return count, _BAD_NUMBER
-        v = float(mant)
-        if exp10 < 0:
-            if exp10 >= -22:
-                v = v / pow10[-exp10]
-            else:
-                v = v * 10.0**exp10
-        elif exp10 > 0:
-            if exp10 <= 22:
-                v = v * pow10[exp10]
-            else:
-                v = v * 10.0**exp10
-        if not np.isfinite(v):
-            return count, _BAD_NUMBER
-        out[count] = -v if neg else v
-        count += 1
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _parse_all(
-    buf: NDArray[np.uint8], n_chunks: int, pow10: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]:
-    """Parse every line of ``buf`` in one parallel pass.
-
-    The buffer is cut into ``n_chunks`` byte ranges; a first pass counts the newlines of each,
-    so every chunk knows the number of the first line that starts inside it and parses the lines
-    starting in its range straight into their rows.
-
-    Returns
-    -------
-    head : (L, 4) float64
-        First four values of each line.
-    tail : (L, 3) float32
-        Values 5-7 (PTX colour).
-    counts : (L,) int8
-        Number of values on each line.
-    errors : (L,) int8
-        0 ok, 1 not a number, 2 more than 7 values.
-    """
-    n = buf.shape[0]
-    size = (n + n_chunks - 1) // n_chunks
-    nl = np.zeros(n_chunks + 1, dtype=np.int64)
-    for c in prange(n_chunks):
-        k = 0
-        for i in range(c * size, min(n, (c + 1) * size)):
-            k += buf[i] == 10
-        nl[c + 1] = k
-    for c in range(n_chunks):
-        nl[c + 1] += nl[c]
-    n_lines = nl[n_chunks] + (1 if n > 0 and buf[n - 1] != 10 else 0)
-    head = np.zeros((n_lines, 4), dtype=np.float64)
-    tail = np.zeros((n_lines, 3), dtype=np.float32)
-    counts = np.zeros(n_lines, dtype=np.int8)
-    errors = np.zeros(n_lines, dtype=np.int8)
-    for c in prange(n_chunks):
-        lo, hi = c * size, min(n, (c + 1) * size)
-        s = lo
-        li = nl[c]
-        if lo > 0 and buf[lo - 1] != 10:  # the line holding `lo` belongs to an earlier chunk
-            while s < n and buf[s] != 10:
-                s += 1
-            s += 1
-            li += 1
-        vals = np.empty(_MAX_VALUES, dtype=np.float64)
-        while s < hi:
-            e = s
-            while e < n and buf[e] != 10:
-                e += 1
-            cnt, err = _parse_line(buf, s, e, vals, pow10)
-            for j in range(min(cnt, 4)):
-                head[li, j] = vals[j]
-            for j in range(4, cnt):
-                tail[li, j - 4] = vals[j]
-            counts[li] = cnt
-            errors[li] = err
-            li += 1
-            s = e + 1
-    return head, tail, counts, errors
 
 
 # ------------------------------------------------------------------------------ reader
@@ -314,22 +157,30 @@ def _keep_valid_image(
     column of the grid, also written into its pixel of the working image ``xyz`` / ``valid``
     (as :func:`flexreg.core.range_image.from_grid` gathers it). Returns the new number of
     kept points."""
+    # the grid cell of line lo, then followed line by line (no divisions per point): row r,
+    # column c; the pixel (r // stride, c // stride) when both are multiples of stride
+    r = seen % rows
+    c = seen // rows
+    on_column = c % stride == 0
     for i in range(lo, hi):
         x, y, z = head[i, 0], head[i, 1], head[i, 2]
-        if x == 0.0 and y == 0.0 and z == 0.0:
-            continue
-        points[kept, 0] = x
-        points[kept, 1] = y
-        points[kept, 2] = z
-        k = seen + i - lo
-        r = k % rows
-        c = k // rows
-        if r % stride == 0 and c % stride == 0:
-            xyz[r // stride, c // stride, 0] = points[kept, 0]
-            xyz[r // stride, c // stride, 1] = points[kept, 1]
-            xyz[r // stride, c // stride, 2] = points[kept, 2]
-            valid[r // stride, c // stride] = True
-        kept += 1
+        if not (x == 0.0 and y == 0.0 and z == 0.0):
+            points[kept, 0] = x
+            points[kept, 1] = y
+            points[kept, 2] = z
+            if on_column and (stride == 1 or r % stride == 0):
+                pr = r if stride == 1 else r // stride
+                pc = c if stride == 1 else c // stride
+                xyz[pr, pc, 0] = points[kept, 0]
+                xyz[pr, pc, 1] = points[kept, 1]
+                xyz[pr, pc, 2] = points[kept, 2]
+                valid[pr, pc] = True
+            kept += 1
+        r += 1
+        if r == rows:
+            r = 0
+            c += 1
+            on_column = c % stride == 0
     return kept
 
 

@@ -7,6 +7,7 @@ functions for its two scans.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -20,18 +21,22 @@ from scipy import fft
 
 from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan, as_points
-from flexreg.errors import DegenerateGeometryError
+from flexreg.errors import DegenerateGeometryError, FlexregError
 from flexreg.registration.candidates import Keypoints3D
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import full_pair_of
 from flexreg.stages import feature_images
 from flexreg.stages.correspondences import lift
 from flexreg.stages.keypoints import detect_and_describe, strip_rows
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.overlap import keep_overlap_inputs
 from flexreg.stages.priors import PlanView, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
 from flexreg.stages.sampling import area_sample_cell, area_sample_image
 from flexreg.stages.verification import measured_image, range_slack
+
+log = logging.getLogger(__name__)
 
 #: points of the dense check (the source's even sample) and of the quick local ICP
 CHECK_POINTS, POLISH_POINTS = 20_000, 5_000
@@ -250,7 +255,29 @@ def _views(
     config: RegistrationConfig,
     roles: list[tuple[bool, bool]],
 ) -> list[ScanView]:
-    return [
+    views = [
         _scan_view(x, img, config, target=t, source=s)
         for x, img, (t, s) in zip(scans, images, roles, strict=True)
     ]
+    if roles == [(True, False), (False, True)] and None not in scans:  # register's pair
+        _keep_overlap_inputs(scans)  # type: ignore[arg-type]
+        if config.verdict_full_check:
+            # the full-resolution views the verdict's check of a confident answer reads,
+            # made here beside the feature stages instead of at the end of the call (kept
+            # with these views: :func:`~flexreg.registration.fullres.full_pair_of`)
+            full_pair_of(views)()
+    return views
+
+
+def _keep_overlap_inputs(scans: list[Scan | RangeImage]) -> None:
+    """The overlap's inputs of a pair that do not depend on the transform (the target's scale
+    voxel, both clouds' voxel centroids, the target's k-d tree), computed here, beside the
+    feature stages, and kept by content for the overlap stage at the end of the call
+    (:func:`~flexreg.stages.overlap.keep_overlap_inputs`: the figure is the same). A scan the
+    overlap stage would refuse is left to it to refuse."""
+    try:
+        keep_overlap_inputs(
+            as_points(scans[0], keep_float32=True), as_points(scans[1], keep_float32=True)
+        )
+    except FlexregError as e:
+        log.debug("overlap inputs not computed ahead: %s", e)

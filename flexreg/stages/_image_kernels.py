@@ -368,3 +368,24 @@ def median_kernel(xyz, rng, half, wrap, out):  # pragma: no cover
             out[i, j, 0] = np.float64(xyz[i, j, 0]) * s
             out[i, j, 1] = np.float64(xyz[i, j, 1]) * s
             out[i, j, 2] = np.float64(xyz[i, j, 2]) * s
+
+
+@numba.njit(cache=True, nogil=True)
+def quantize_kernel(img, lo, scale, top, out, valid):  # pragma: no cover - compiled
+    """``out = rint(clip((img - lo) * scale, 0, top))`` where ``img`` is finite (float64
+    arithmetic, as numpy evaluates it), 0 elsewhere, and ``valid`` the finite pixels: the
+    quantisation of :func:`~flexreg.stages.feature_images.quantize` in one pass."""
+    for i in range(img.shape[0]):
+        for j in range(img.shape[1]):
+            v = np.float64(img[i, j])
+            ok = math.isfinite(v)
+            valid[i, j] = ok
+            g = 0.0
+            if ok:
+                g = (v - lo) * scale
+                if g < 0.0:
+                    g = 0.0
+                elif g > top:
+                    g = top
+                g = np.rint(g)
+            out[i, j] = g

@@ -63,6 +63,7 @@ from flexreg.stages._image_kernels import (
     curvature_kernel,
     flexion_kernel,
     median_kernel,
+    quantize_kernel,
     range_kernel,
 )
 from flexreg.stages.projection import fill_holes as fill_image_holes
@@ -532,9 +533,9 @@ def quantize(
     img = np.asarray(image)
     if img.ndim != 2:
         raise InputError("image", f"must be a 2D (H, W) array, got shape {img.shape}")
-    valid = np.isfinite(img)
     lo, hi = (float(value_range[0]), float(value_range[1]))
     if stretch == "percentile":
+        valid = np.isfinite(img)
         v = img[valid]
         if v.size:
             p_lo, p_hi = (float(p) for p in percentiles)
@@ -551,10 +552,17 @@ def quantize(
         raise ConfigError(f"value_range must be finite and increasing, got {(lo, hi)}")
     top = float(2**bits - 1)
     dtype = np.uint8 if bits == 8 else np.uint16
-    with np.errstate(invalid="ignore"):
-        g = (img.astype(np.float64) - lo) * (top / (hi - lo))
-        g = np.rint(np.clip(np.where(valid, g, 0.0), 0.0, top))
-    out = g.astype(dtype)
+    out: NDArray[np.unsignedinteger]
+    if img.dtype in (np.float32, np.float64):  # one compiled pass, the same arithmetic
+        out = np.empty(img.shape, dtype=dtype)
+        valid = np.empty(img.shape, dtype=np.bool_)
+        quantize_kernel(img, lo, top / (hi - lo), top, out, valid)
+    else:
+        valid = np.isfinite(img)
+        with np.errstate(invalid="ignore"):
+            g = (img.astype(np.float64) - lo) * (top / (hi - lo))
+            g = np.rint(np.clip(np.where(valid, g, 0.0), 0.0, top))
+        out = g.astype(dtype)
     if stretch == "clahe":
         import cv2
 
@@ -563,7 +571,7 @@ def quantize(
             tmp = np.where(valid, out, fill).astype(dtype)
             tx, ty = (int(t) for t in clahe_tiles)
             clahe = cv2.createCLAHE(clipLimit=float(clahe_clip), tileGridSize=(tx, ty))
-            out = clahe.apply(tmp)
+            out = np.asarray(clahe.apply(tmp), dtype=dtype)
             out[~valid] = 0
     return out, valid
 
@@ -618,6 +626,5 @@ def feature_image(
     else:
         f = convert(img, kind, n=n, median=median)
         vrange = value_range(kind, f)
-    mask = np.isfinite(f)
-    q, qmask = quantize(f, bits=8, value_range=vrange, stretch=stretch)
-    return np.asarray(q, dtype=np.uint8), mask & np.asarray(qmask, dtype=bool)
+    q, valid = quantize(f, bits=8, value_range=vrange, stretch=stretch)  # valid: finite f
+    return np.asarray(q, dtype=np.uint8), np.asarray(valid, dtype=bool)

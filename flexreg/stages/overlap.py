@@ -26,7 +26,11 @@ reported as such and never as an overlap.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,11 +41,14 @@ from flexreg.errors import ConfigError, RegistrationError
 from flexreg.stages.sampling import median_spacing, thin, to_open3d, voxel_centroids, voxel_count
 
 __all__ = [
+    "KEEP_ARRAYS",
+    "KEEP_CLOUDS",
     "MAX_INPUT_POINTS",
     "SCALE_MAX_POINTS",
     "SPACINGS_PER_VOXEL",
     "Overlap",
     "OverlapMeter",
+    "keep_overlap_inputs",
     "measure_overlap",
     "scale_voxel",
 ]
@@ -54,6 +61,42 @@ SPACINGS_PER_VOXEL = 2.0
 #: at most this many points of each cloud (every k-th) are voxelised: voxels of the scale size
 #: hold many points of a large scan, so the voxel centroids hardly change
 MAX_INPUT_POINTS = 4_000_000
+#: clouds whose scale voxel is kept, by content: a survey station takes part in a dozen
+#: links, and its scale voxel (median spacing and voxel counts, 0.1-0.2 s at 2 M points) was
+#: found again for each; a kept cloud costs a digest of its points instead (about 0.01 s per
+#: million points)
+KEEP_CLOUDS = 256
+#: voxel centroids and k-d trees kept, by cloud content and voxel (up to about 1 MB each)
+KEEP_ARRAYS = 32
+_KEPT: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+_KEPT_ARRAYS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+_KEPT_LOCK = threading.Lock()
+
+
+def _digest(points: NDArray[np.floating]) -> bytes:
+    """A digest of a cloud's type, shape and values."""
+    p = np.ascontiguousarray(points)
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"{p.dtype.str}{p.shape}".encode())
+    h.update(p.data)
+    return h.digest()
+
+
+def _kept(key: tuple[Any, ...], make: Any, arrays: bool = False) -> Any:
+    """``make()``, kept under ``key`` (the last :data:`KEEP_CLOUDS` scale voxels, the last
+    :data:`KEEP_ARRAYS` centroids and trees)."""
+    kept, limit = (_KEPT_ARRAYS, KEEP_ARRAYS) if arrays else (_KEPT, KEEP_CLOUDS)
+    with _KEPT_LOCK:
+        hit = kept.get(key)
+        if hit is not None:
+            kept.move_to_end(key)
+            return hit
+    value = make()
+    with _KEPT_LOCK:
+        kept[key] = value
+        while len(kept) > limit:
+            kept.popitem(last=False)
+    return value
 
 
 def scale_voxel(
@@ -63,7 +106,9 @@ def scale_voxel(
 
     ``SPACINGS_PER_VOXEL`` (2) times the target's median nearest-neighbour spacing
     (:func:`flexreg.stages.sampling.median_spacing`), enlarged until the voxel-downsampled
-    target keeps at most ``max_points`` points. Deterministic (fixed subsample seeds).
+    target keeps at most ``max_points`` points. Deterministic (fixed subsample seeds). The
+    last :data:`KEEP_CLOUDS` clouds' voxels are kept by content (a survey station is the
+    target of several links): the same points give the same voxel without the search.
 
     Parameters
     ----------
@@ -86,6 +131,18 @@ def scale_voxel(
     """
     if max_points < 100:
         raise ConfigError(f"max_points must be at least 100, got {max_points}")
+    return _scale_voxel_of(target, _digest(target), max_points)
+
+
+def _scale_voxel_of(
+    target: NDArray[np.floating], digest: bytes, max_points: int
+) -> tuple[float, str]:
+    """:func:`scale_voxel` of a cloud whose :func:`_digest` is ``digest`` (kept by it)."""
+    key = ("scale voxel", digest, max_points)
+    return _kept(key, lambda: _find_scale_voxel(target, max_points))
+
+
+def _find_scale_voxel(target: NDArray[np.floating], max_points: int) -> tuple[float, str]:
     spacing = median_spacing(target, tree_points=200_000)
     if not spacing > 0:
         raise RegistrationError("cannot derive a voxel size: the target's points coincide")
@@ -110,7 +167,8 @@ class OverlapMeter:
     target, source : (N, 3) float32 or float64, metres
         Each in its own frame.
     voxel_m : float, optional, metres
-        The voxel (default :func:`scale_voxel` of the target).
+        The voxel (default :func:`scale_voxel` of the target; both clouds' voxel centroids
+        and the target's k-d tree are then kept by content with it).
     distance_m : float, optional, metres
         Inlier distance (default ``voxel_m``).
     open3d_check : bool
@@ -135,8 +193,10 @@ class OverlapMeter:
         distance_m: float | None = None,
         open3d_check: bool = True,
     ) -> None:
+        digest = None
         if voxel_m is None:
-            voxel_m, how = scale_voxel(target)
+            digest = _digest(target)
+            voxel_m, how = _scale_voxel_of(target, digest, SCALE_MAX_POINTS)
         else:
             how = "given"
         distance_m = voxel_m if distance_m is None else distance_m
@@ -144,9 +204,20 @@ class OverlapMeter:
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a positive number of metres, got {value}")
         self.voxel_m, self.voxel_source, self.distance_m = float(voxel_m), how, float(distance_m)
-        self.target_points = voxel_centroids(thin(target, MAX_INPUT_POINTS), voxel_m)
-        self.source_points = voxel_centroids(thin(source, MAX_INPUT_POINTS), voxel_m)
-        self._tree = cKDTree(self.target_points)
+        if digest is None:
+            self.target_points = _centroids(target, voxel_m)
+            self.source_points = _centroids(source, voxel_m)
+            self._tree = cKDTree(self.target_points)
+        else:  # the scale voxel's centroids and tree, kept by content (see keep_overlap_inputs)
+            v = float(voxel_m)
+            self.target_points = _kept(
+                ("centroids", digest, v), lambda: _centroids(target, v), arrays=True
+            )
+            self.source_points = _kept(
+                ("centroids", _digest(source), v), lambda: _centroids(source, v), arrays=True
+            )
+            pts = self.target_points
+            self._tree = _kept(("tree", digest, v), lambda: cKDTree(pts), arrays=True)
         self._open3d = (
             (to_open3d(self.source_points), to_open3d(self.target_points)) if open3d_check else None
         )
@@ -183,6 +254,34 @@ class OverlapMeter:
             open3d_fitness=fitness,
             open3d_inlier_rmse_m=rmse,
         )
+
+
+def _centroids(points: NDArray[np.floating], voxel_m: float) -> NDArray[np.float64]:
+    """The voxel centroids of a cloud (every k-th point of a large one), read-only (they may
+    be kept and shared)."""
+    c = voxel_centroids(thin(points, MAX_INPUT_POINTS), voxel_m)
+    c.flags.writeable = False
+    return c
+
+
+def keep_overlap_inputs(target: NDArray[np.floating], source: NDArray[np.floating]) -> None:
+    """Compute ahead what :func:`measure_overlap` of these two clouds at the scale voxel needs
+    whatever the transform, and keep it by content (:data:`KEEP_CLOUDS`, :data:`KEEP_ARRAYS`):
+    the target's scale voxel, both clouds' voxel centroids and the target's k-d tree. A caller
+    with a spare thread runs this beside other work; the later :func:`measure_overlap` of the
+    same clouds (the same values, any arrays) then finds them, and gives exactly what it gives
+    without them.
+
+    Parameters
+    ----------
+    target, source : (N, 3) float32 or float64, metres
+
+    Raises
+    ------
+    RegistrationError
+        As :func:`scale_voxel` (the target's points coincide).
+    """
+    OverlapMeter(target, source, open3d_check=False)
 
 
 def measure_overlap(

@@ -211,30 +211,152 @@ def median_spacing(
 
     With ``tree_points``, the neighbours are searched among at most that many points (a
     fixed random subset), which overestimates the spacing of larger clouds but is fast.
+
+    The nearest neighbours are found exactly in a grid of cells that holds only the points'
+    indices (:func:`_nearest_other`), which gives bit for bit the distances a k-d tree gives
+    (the same float64 sum of squared differences) without building the tree over every point.
     """
     P = _float_points(points)
     if len(P) < 2:
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
     if tree_points is not None and len(P) > tree_points:
         P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
-    P = np.asarray(P, dtype=np.float64)
-    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
-
-    tree = cKDTree(P)
+    P = np.ascontiguousarray(P, dtype=np.float64)
     idx = np.random.default_rng(seed).choice(len(P), min(sample, len(P)), replace=False)
-    d, _ = tree.query(P[idx], k=2)
-    return float(np.median(d[:, 1]))
+    lo, hi = _bounds(P) if np.isfinite(P).all() else (None, None)
+    if lo is None or not np.isfinite(hi - lo).all():
+        from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module early
+
+        d, _ = cKDTree(P).query(P[idx], k=2)
+        return float(np.median(d[:, 1]))
+    span = float(np.max(hi - lo))
+    # an eighth of the side of a box's share per point: a few points per cell on the surfaces
+    # of a scene (the fastest on the test rooms, halls and courtyards)
+    extent = np.maximum(hi - lo, span * 1e-3)
+    cell = max(float(np.prod(extent) / len(P)) ** (1 / 3) / 8, span * 1e-6, 1e-12)
+    return float(np.median(_nearest_other(P, np.asarray(idx, dtype=np.int64), lo, cell)))
+
+
+#: rings of cells :func:`_nearest_other` searches around a point before it compares the point
+#: with every other one (a point far from all others)
+_MAX_RINGS = 6
 
 
 @numba.njit(cache=True, nogil=True)
-def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
+def _nearest_other(P, idx, lo, cell):  # pragma: no cover - compiled
+    """(len(idx),) float64: the distance from each point ``P[idx[k]]`` to its nearest other
+    point of ``P`` (0 for a duplicate), exactly: the points are binned into cells of side
+    ``cell`` (a hash table of the occupied cells, each holding its points' indices), and each
+    query searches rings of cells around its own until the best distance found is no larger
+    than the ring's reach (any point farther out is farther away); beyond :data:`_MAX_RINGS`
+    rings, with every other point."""
+    n = P.shape[0]
+    keys = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        for c in range(3):
+            keys[i, c] = np.int64(np.floor((P[i, c] - lo[c]) / cell))
+    size = 1 << 4
+    while size < 2 * n:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)  # slot -> cell number
+    cell_key = np.empty((n, 3), dtype=np.int64)
+    count = np.zeros(n + 1, dtype=np.int64)
+    of = np.empty(n, dtype=np.int64)  # point -> cell number
+    m = 0
+    for i in range(n):
+        kx, ky, kz = keys[i, 0], keys[i, 1], keys[i, 2]
+        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+        while True:
+            v = table[slot]
+            if v < 0:
+                v = m
+                table[slot] = v
+                cell_key[v, 0], cell_key[v, 1], cell_key[v, 2] = kx, ky, kz
+                m += 1
+                break
+            if cell_key[v, 0] == kx and cell_key[v, 1] == ky and cell_key[v, 2] == kz:
+                break
+            slot = (slot + 1) & mask
+        of[i] = v
+        count[v + 1] += 1
+    for v in range(m):
+        count[v + 1] += count[v]
+    members = np.empty(n, dtype=np.int64)
+    fill = count[:m].copy()
+    for i in range(n):
+        members[fill[of[i]]] = i
+        fill[of[i]] += 1
+    # the farthest ring that can be needed: the whole box
+    reach = 1
+    for c in range(3):
+        r = int(keys[:, c].max() - keys[:, c].min()) + 1
+        if r > reach:
+            reach = r
+    out = np.empty(idx.shape[0], dtype=np.float64)
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        qx, qy, qz = P[i, 0], P[i, 1], P[i, 2]
+        best = np.inf
+        for r in range(reach + 1):
+            if r > _MAX_RINGS:  # an isolated point: every other point, one by one
+                for j in range(n):
+                    if j != i:
+                        dx = qx - P[j, 0]
+                        dy = qy - P[j, 1]
+                        dz = qz - P[j, 2]
+                        d = dx * dx + dy * dy + dz * dz
+                        if d < best:
+                            best = d
+                break
+            # the cells at Chebyshev distance r from the query's cell
+            for ax in range(-r, r + 1):
+                for ay in range(-r, r + 1):
+                    edge = abs(ax) == r or abs(ay) == r
+                    az = -r
+                    while az <= r:
+                        kx, ky, kz = keys[i, 0] + ax, keys[i, 1] + ay, keys[i, 2] + az
+                        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+                        while True:
+                            v = table[slot]
+                            if v < 0:
+                                break
+                            if (
+                                cell_key[v, 0] == kx
+                                and cell_key[v, 1] == ky
+                                and cell_key[v, 2] == kz
+                            ):
+                                for t in range(count[v], count[v + 1]):
+                                    j = members[t]
+                                    if j != i:
+                                        dx = qx - P[j, 0]
+                                        dy = qy - P[j, 1]
+                                        dz = qz - P[j, 2]
+                                        d = dx * dx + dy * dy + dz * dz
+                                        if d < best:
+                                            best = d
+                                break
+                            slot = (slot + 1) & mask
+                        # inside the ring's faces only its two z layers are new cells
+                        az = az + 1 if edge or az == r else r
+            # every point not yet seen lies beyond r whole cells of the query
+            if best < np.inf and math.sqrt(best) <= r * cell * (1.0 - 1e-9):
+                break
+        out[k] = math.sqrt(best)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _voxel_sums(q, lo, cell, size):  # pragma: no cover - compiled
     """Per occupied cell of side ``cell`` anchored at ``lo`` (in the order of their first
-    points): the sum of its points and their number. An open-addressing hash set of the integer
-    cell coordinates as in :func:`_first_in_cells`; ``table`` is scratch space of a
-    power-of-two size at least twice the number of points."""
-    mask = table.shape[0] - 1
-    table[:] = -1
-    first = np.empty(1024, dtype=np.int64)
+    points): the sum of its points and their number. An open-addressing hash set of the
+    integer cell coordinates, each stored with its cell, of ``size`` slots (a power of two) to
+    start with, four times larger whenever half full: a table sized by the occupied cells
+    rather than by the points stays in the cache. Neither the table's size nor its growth
+    changes the cells, their order or their sums (each point is added in input order)."""
+    mask = size - 1
+    table = np.full(size, -1, dtype=np.int64)
+    keys = np.empty((1024, 3), dtype=np.int64)
     sums = np.zeros((1024, 3), dtype=np.float64)
     counts = np.zeros(1024, dtype=np.int64)
     m = 0
@@ -246,17 +368,32 @@ def _voxel_sums(q, lo, cell, table):  # pragma: no cover - compiled
         while True:
             v = table[slot]
             if v < 0:
-                if m == first.shape[0]:  # grow the per-cell arrays
-                    first = np.concatenate((first, np.empty(m, dtype=np.int64)))
+                if m == keys.shape[0]:  # grow the per-cell arrays
+                    keys = np.concatenate((keys, np.empty((m, 3), dtype=np.int64)))
                     sums = np.concatenate((sums, np.zeros((m, 3), dtype=np.float64)))
                     counts = np.concatenate((counts, np.zeros(m, dtype=np.int64)))
                 v = m
-                table[slot] = v
-                first[v] = i
+                keys[v, 0] = kx
+                keys[v, 1] = ky
+                keys[v, 2] = kz
                 m += 1
+                if 2 * m > size:  # half full: a larger table, every cell placed again
+                    size *= 4
+                    mask = size - 1
+                    table = np.full(size, -1, dtype=np.int64)
+                    for u in range(m):
+                        s = (
+                            (keys[u, 0] * 73856093)
+                            ^ (keys[u, 1] * 19349663)
+                            ^ (keys[u, 2] * 83492791)
+                        ) & mask
+                        while table[s] >= 0:
+                            s = (s + 1) & mask
+                        table[s] = u
+                else:
+                    table[slot] = v
                 break
-            j = first[v]
-            if _in_cell(q, j, lo, cell, kx, ky, kz):
+            if keys[v, 0] == kx and keys[v, 1] == ky and keys[v, 2] == kz:
                 break
             slot = (slot + 1) & mask
         for c in range(3):
@@ -275,8 +412,8 @@ def _voxels(
     if len(p) == 0:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     lo = _bounds(p)[0].astype(np.float64)
-    table = np.empty(1 << max(4, int(2 * len(p) - 1).bit_length()), dtype=np.int64)
-    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), table)
+    size = max(1 << 12, 1 << (len(p) // 4).bit_length())  # grown as cells appear
+    return _voxel_sums(p, lo - voxel_m / 2, float(voxel_m), size)
 
 
 def voxel_count(points: NDArray[np.floating], voxel_m: float) -> int:
@@ -333,8 +470,11 @@ def to_open3d(points: NDArray[np.float64]) -> Any:
     """An Open3D point cloud of (N, 3) float64 points."""
     import open3d as o3d  # heavy: only the Open3D paths need it
 
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    if not p.flags.writeable:  # Open3D takes writeable arrays only (a kept, shared cloud)
+        p = p.copy()
     pc = o3d.geometry.PointCloud()
-    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    pc.points = o3d.utility.Vector3dVector(p)
     return pc
 
 

@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 
 from flexreg.bench.harness import results_folder, write_json  # noqa: E402
 from flexreg.registration.fullres import FullPair, FullView, full_view, pose_masks  # noqa: E402
-from flexreg.registration.settle import open_share  # noqa: E402
+from flexreg.registration.settle import explained_share, open_share  # noqa: E402
 from flexreg.survey.config import SurveyConfig  # noqa: E402
 from flexreg.survey.stations import (  # noqa: E402
     cache_paths,
@@ -57,12 +57,6 @@ RESULTS = REPO / "benchmarks" / "results"
 FIT_OPEN = 0.0005
 #: an answer counts as right within this distance of the truth, metres
 RIGHT_M = 0.05
-
-
-def explained_share(masks: Any) -> float:
-    """Share of both scans' points a pose explains (its :func:`pose_masks`)."""
-    n = sum(len(m[0]) for m in masks)
-    return sum(int(m[0].sum()) for m in masks) / n if n else 0.0
 
 
 class Views:

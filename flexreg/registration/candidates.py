@@ -12,11 +12,8 @@ member at a fine tolerance.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
-import threading
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -24,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, ndimage
 
+from flexreg.core.kept import Kept, digest
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import (
     invert,
@@ -373,37 +371,32 @@ def self_symmetries(
     if not isinstance(plan, PlanView):
         return []
     key = (_plan_key(plan), count, min_share, min_shift_share)
-    with _SYMMETRIES_LOCK:
-        kept = _SYMMETRIES.get(key)
-        if kept is not None:
-            _SYMMETRIES.move_to_end(key)
-    if kept is None:
-        kept = _self_symmetries(plan, count, min_share, min_shift_share)
-        for S in kept:
-            S.flags.writeable = False  # shared by every pair of this scan
-        with _SYMMETRIES_LOCK:
-            _SYMMETRIES[key] = kept
-            while len(_SYMMETRIES) > KEEP_SYMMETRIES:
-                _SYMMETRIES.popitem(last=False)
-    return list(kept)
+    return list(
+        _SYMMETRIES.get(
+            key, lambda: _frozen(_self_symmetries(plan, count, min_share, min_shift_share))
+        )
+    )
+
+
+def _frozen(moves: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    for S in moves:
+        S.flags.writeable = False  # shared by every pair of this scan
+    return moves
 
 
 #: plan views whose :func:`self_symmetries` are kept (by content: a survey worker loads a
 #: station again for each of its dozen links, each of which asked for them anew, a third of
 #: a typical link's time)
 KEEP_SYMMETRIES = 256
-_SYMMETRIES: OrderedDict[tuple[bytes, int, float, float], list[NDArray[np.float64]]] = OrderedDict()
-_SYMMETRIES_LOCK = threading.Lock()
+_SYMMETRIES: Kept[list[NDArray[np.float64]]] = Kept(KEEP_SYMMETRIES)
 
 
 def _plan_key(plan: PlanView) -> bytes:
     """A digest of everything :func:`self_symmetries` reads of a plan view."""
     c = plan.coarse
-    h = hashlib.blake2b(digest_size=20)
-    for a in (c.cells, c.values, c.xy, c.heights, plan.levelling.R_level):
-        h.update(np.ascontiguousarray(a).tobytes())
-    h.update(np.array([c.cell_m, c.z0_m, c.dz_m], dtype=np.float64).tobytes())
-    return h.digest()
+    return digest(
+        c.cells, c.values, c.xy, c.heights, plan.levelling.R_level, [c.cell_m, c.z0_m, c.dz_m]
+    )
 
 
 def _self_symmetries(

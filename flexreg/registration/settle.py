@@ -488,7 +488,7 @@ def rescue(
     share, best, masks = scored[0]
     if not decisive_full(*duel(masks, contradicted), config, points=n):
         return None
-    if _explained(masks) < 0.5 * _explained(contradicted):  # clean only by seeing less
+    if explained_share(masks) < 0.5 * explained_share(contradicted):  # clean only by seeing less
         return None
     for other_share, j, m in scored[1:]:
         if other_share <= 2 * max(share, 1.0 / n) and _distinct(
@@ -507,8 +507,9 @@ def _share(masks: Masks, which: int) -> float:
     return sum(int(m[which].sum()) for m in masks) / n if n else 0.0
 
 
-def _explained(masks: Masks) -> float:
-    """Share of all points of both scans a pose explains."""
+def explained_share(masks: Masks) -> float:
+    """Share of all points of both scans that a pose explains (its
+    :func:`~flexreg.registration.fullres.pose_masks`)."""
     return _share(masks, 0)
 
 
@@ -762,6 +763,7 @@ __all__ = [
     "TURN_DEG",
     "Settlement",
     "contenders",
+    "explained_share",
     "half_turn",
     "open_share",
     "pin_along",

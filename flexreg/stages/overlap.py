@@ -26,16 +26,14 @@ reported as such and never as an overlap.
 
 from __future__ import annotations
 
-import hashlib
 import math
-import threading
-from collections import OrderedDict
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from flexreg.core.kept import Kept, digest
 from flexreg.core.results import Overlap
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.stages.sampling import median_spacing, thin, to_open3d, voxel_centroids, voxel_count
@@ -68,35 +66,16 @@ MAX_INPUT_POINTS = 4_000_000
 KEEP_CLOUDS = 256
 #: voxel centroids and k-d trees kept, by cloud content and voxel (up to about 1 MB each)
 KEEP_ARRAYS = 32
-_KEPT: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
-_KEPT_ARRAYS: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
-_KEPT_LOCK = threading.Lock()
-
-
-def _digest(points: NDArray[np.floating]) -> bytes:
-    """A digest of a cloud's type, shape and values."""
-    p = np.ascontiguousarray(points)
-    h = hashlib.blake2b(digest_size=20)
-    h.update(f"{p.dtype.str}{p.shape}".encode())
-    h.update(p.data)
-    return h.digest()
+_KEPT: Kept[tuple[float, str]] = Kept(KEEP_CLOUDS)
+_KEPT_ARRAYS: Kept[Any] = Kept(KEEP_ARRAYS)
 
 
 def _kept(key: tuple[Any, ...], make: Any, arrays: bool = False) -> Any:
     """``make()``, kept under ``key`` (the last :data:`KEEP_CLOUDS` scale voxels, the last
     :data:`KEEP_ARRAYS` centroids and trees)."""
-    kept, limit = (_KEPT_ARRAYS, KEEP_ARRAYS) if arrays else (_KEPT, KEEP_CLOUDS)
-    with _KEPT_LOCK:
-        hit = kept.get(key)
-        if hit is not None:
-            kept.move_to_end(key)
-            return hit
-    value = make()
-    with _KEPT_LOCK:
-        kept[key] = value
-        while len(kept) > limit:
-            kept.popitem(last=False)
-    return value
+    if arrays:
+        return _KEPT_ARRAYS.get(key, make, KEEP_ARRAYS)
+    return _KEPT.get(key, make, KEEP_CLOUDS)
 
 
 def scale_voxel(
@@ -131,14 +110,15 @@ def scale_voxel(
     """
     if max_points < 100:
         raise ConfigError(f"max_points must be at least 100, got {max_points}")
-    return _scale_voxel_of(target, _digest(target), max_points)
+    return _scale_voxel_of(target, digest(target), max_points)
 
 
 def _scale_voxel_of(
-    target: NDArray[np.floating], digest: bytes, max_points: int
+    target: NDArray[np.floating], content: bytes, max_points: int
 ) -> tuple[float, str]:
-    """:func:`scale_voxel` of a cloud whose :func:`_digest` is ``digest`` (kept by it)."""
-    key = ("scale voxel", digest, max_points)
+    """:func:`scale_voxel` of a cloud whose :func:`~flexreg.core.kept.digest` is ``content``
+    (kept by it)."""
+    key = ("scale voxel", content, max_points)
     return _kept(key, lambda: _find_scale_voxel(target, max_points))
 
 
@@ -193,10 +173,10 @@ class OverlapMeter:
         distance_m: float | None = None,
         open3d_check: bool = True,
     ) -> None:
-        digest = None
+        content = None
         if voxel_m is None:
-            digest = _digest(target)
-            voxel_m, how = _scale_voxel_of(target, digest, SCALE_MAX_POINTS)
+            content = digest(target)
+            voxel_m, how = _scale_voxel_of(target, content, SCALE_MAX_POINTS)
         else:
             how = "given"
         distance_m = voxel_m if distance_m is None else distance_m
@@ -204,20 +184,20 @@ class OverlapMeter:
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{name} must be a positive number of metres, got {value}")
         self.voxel_m, self.voxel_source, self.distance_m = float(voxel_m), how, float(distance_m)
-        if digest is None:
+        if content is None:
             self.target_points = _centroids(target, voxel_m)
             self.source_points = _centroids(source, voxel_m)
             self._tree = cKDTree(self.target_points)
         else:  # the scale voxel's centroids and tree, kept by content (see keep_overlap_inputs)
             v = float(voxel_m)
             self.target_points = _kept(
-                ("centroids", digest, v), lambda: _centroids(target, v), arrays=True
+                ("centroids", content, v), lambda: _centroids(target, v), arrays=True
             )
             self.source_points = _kept(
-                ("centroids", _digest(source), v), lambda: _centroids(source, v), arrays=True
+                ("centroids", digest(source), v), lambda: _centroids(source, v), arrays=True
             )
             pts = self.target_points
-            self._tree = _kept(("tree", digest, v), lambda: cKDTree(pts), arrays=True)
+            self._tree = _kept(("tree", content, v), lambda: cKDTree(pts), arrays=True)
         self._open3d = (
             (to_open3d(self.source_points), to_open3d(self.target_points)) if open3d_check else None
         )

@@ -163,6 +163,23 @@ def _bounds(q):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _slot(kx, ky, kz, mask):  # pragma: no cover - compiled
+    """The first slot of the integer cell ``(kx, ky, kz)`` in an open-addressing table of
+    ``mask + 1`` slots (a power of two)."""
+    return ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearer(qx, qy, qz, P, j, best):  # pragma: no cover - compiled
+    """The smaller of ``best`` and the squared distance from ``(qx, qy, qz)`` to ``P[j]``."""
+    dx = qx - P[j, 0]
+    dy = qy - P[j, 1]
+    dz = qz - P[j, 2]
+    d = dx * dx + dy * dy + dz * dz
+    return d if d < best else best
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _in_cell(q, j, lo, cell, kx, ky, kz):  # pragma: no cover - compiled
     """Whether point ``j`` of ``q`` lies in the cell ``(kx, ky, kz)``."""
     return (
@@ -185,8 +202,7 @@ def _first_in_cells(q, lo, cell, table):  # pragma: no cover - compiled
         kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
         ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
         kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
-        h = (kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)
-        slot = h & mask
+        slot = _slot(kx, ky, kz, mask)
         while True:
             j = table[slot]
             if j < 0:
@@ -266,7 +282,7 @@ def _nearest_other(P, idx, lo, cell):  # pragma: no cover - compiled
     m = 0
     for i in range(n):
         kx, ky, kz = keys[i, 0], keys[i, 1], keys[i, 2]
-        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+        slot = _slot(kx, ky, kz, mask)
         while True:
             v = table[slot]
             if v < 0:
@@ -302,12 +318,7 @@ def _nearest_other(P, idx, lo, cell):  # pragma: no cover - compiled
             if r > _MAX_RINGS:  # an isolated point: every other point, one by one
                 for j in range(n):
                     if j != i:
-                        dx = qx - P[j, 0]
-                        dy = qy - P[j, 1]
-                        dz = qz - P[j, 2]
-                        d = dx * dx + dy * dy + dz * dz
-                        if d < best:
-                            best = d
+                        best = _nearer(qx, qy, qz, P, j, best)
                 break
             # the cells at Chebyshev distance r from the query's cell
             for ax in range(-r, r + 1):
@@ -316,7 +327,7 @@ def _nearest_other(P, idx, lo, cell):  # pragma: no cover - compiled
                     az = -r
                     while az <= r:
                         kx, ky, kz = keys[i, 0] + ax, keys[i, 1] + ay, keys[i, 2] + az
-                        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+                        slot = _slot(kx, ky, kz, mask)
                         while True:
                             v = table[slot]
                             if v < 0:
@@ -329,12 +340,7 @@ def _nearest_other(P, idx, lo, cell):  # pragma: no cover - compiled
                                 for t in range(count[v], count[v + 1]):
                                     j = members[t]
                                     if j != i:
-                                        dx = qx - P[j, 0]
-                                        dy = qy - P[j, 1]
-                                        dz = qz - P[j, 2]
-                                        d = dx * dx + dy * dy + dz * dz
-                                        if d < best:
-                                            best = d
+                                        best = _nearer(qx, qy, qz, P, j, best)
                                 break
                             slot = (slot + 1) & mask
                         # inside the ring's faces only its two z layers are new cells
@@ -364,7 +370,7 @@ def _voxel_sums(q, lo, cell, size):  # pragma: no cover - compiled
         kx = np.int64(np.floor((q[i, 0] - lo[0]) / cell))
         ky = np.int64(np.floor((q[i, 1] - lo[1]) / cell))
         kz = np.int64(np.floor((q[i, 2] - lo[2]) / cell))
-        slot = ((kx * 73856093) ^ (ky * 19349663) ^ (kz * 83492791)) & mask
+        slot = _slot(kx, ky, kz, mask)
         while True:
             v = table[slot]
             if v < 0:
@@ -382,11 +388,7 @@ def _voxel_sums(q, lo, cell, size):  # pragma: no cover - compiled
                     mask = size - 1
                     table = np.full(size, -1, dtype=np.int64)
                     for u in range(m):
-                        s = (
-                            (keys[u, 0] * 73856093)
-                            ^ (keys[u, 1] * 19349663)
-                            ^ (keys[u, 2] * 83492791)
-                        ) & mask
+                        s = _slot(keys[u, 0], keys[u, 1], keys[u, 2], mask)
                         while table[s] >= 0:
                             s = (s + 1) & mask
                         table[s] = u

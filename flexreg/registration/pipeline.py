@@ -67,6 +67,7 @@ from flexreg.registration.preparation import (
 )
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
+from flexreg.registration.twins import find_twins
 from flexreg.registration.verdict import (
     MAX_RIVALS,
     Scored,
@@ -263,8 +264,12 @@ def _verdict(
     config: RegistrationConfig,
     settled: Settlement,
     full_pair: Callable[[], FullPair],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    up: NDArray[np.float64] | None,
 ) -> Verdict:
-    """The evidence on the final transform and the verdict (:mod:`.verdict`)."""
+    """The evidence on the final transform and the verdict (:mod:`.verdict`); a confident
+    answer of two levelled scans (``up``: the target's vertical) also has its twins along
+    the target's walls checked (:mod:`.twins`)."""
     ups = runner_ups(
         c.judged,
         scored.T,
@@ -304,6 +309,12 @@ def _verdict(
     verdict = decide(ev, ups, config)
     if verdict.confident and settled.pair is None and config.verdict_full_check:  # see config
         full_evidence(ev, full_pair(), scored.T, thr, "check")
+        verdict = decide(ev, ups, config)
+    if verdict.confident and up is not None and config.verdict_twins:
+        pair = settled.pair if settled.pair is not None else full_pair()
+        ev["twins"] = find_twins(
+            pair, scored.T, up, polish, thr, range_m=config.twin_range_m, step_m=config.twin_step_m
+        )
         verdict = decide(ev, ups, config)
     return verdict
 
@@ -380,7 +391,10 @@ def _finish(
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
         stage = (rmse, fitness, kind)
-        verdict = _verdict(c, scored, two, vt, stage, thr, refinement, config, settled, pair)
+        up = aliases.up if aliases is not None else None
+        verdict = _verdict(
+            c, scored, two, vt, stage, thr, refinement, config, settled, pair, polish, up
+        )
     log.info("verdict: %s", verdict.summary())
     with run.stage("overlap"):
         overlap = measure_overlap(

@@ -650,6 +650,33 @@ def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | Non
     )
 
 
+def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+    """The answer moved a whole bay (:mod:`flexreg.registration.twins`) fits too: it puts at
+    most ``verdict_twin_fit_open`` (or twice the answer's share) in open space and explains
+    at least ``verdict_twin_min_ratio`` of what the answer explains."""
+    tw = ev.get("twins") or {}
+    a = tw.get("answer")
+    if not a:
+        return None
+    limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])
+    least = cfg.verdict_twin_min_ratio * a["explained_share"]
+    fits = [
+        t
+        for t in tw.get("twins", ())
+        if t["open_share"] <= limit and t["explained_share"] >= max(least, 1e-9)
+    ]
+    if not fits:
+        return None
+    t = max(fits, key=lambda t: t["explained_share"])
+    return Reason(
+        "ambiguous",
+        f"the answer moved {t['shift_m']:.1f} m along {_along(t['offset_m'])} fits too: it "
+        f"explains {100 * t['explained_share']:.0f}% of both scans (the answer "
+        f"{100 * a['explained_share']:.0f}%) and contradicts nothing more: repeating structure "
+        "(identical bays or rooms) that these two scans alone cannot tell apart",
+    )
+
+
 def _residual_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     r = ev.get("residual")
     if not r or r.get("rmse_over_threshold") is None or r.get("kind") == "open3d":
@@ -682,7 +709,8 @@ def decide(
     ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
     ``ambiguous`` (a clearly different pose scores at least ``verdict_ambiguity_ratio`` of
     the winner and the answer does not beat it :func:`decisive`-ly, or any rival pose beats
-    the answer :func:`decisive`-ly in their duel), ``high_residual``
+    the answer :func:`decisive`-ly in their duel, or the answer moved a whole bay fits
+    too: :func:`_twin_reason`), ``high_residual``
     (inlier RMSE above ``verdict_max_rmse_ratio`` inlier thresholds). A rejected refinement
     is a note, not a reason.
 
@@ -714,10 +742,11 @@ def decide(
         r = _full_open_reason(evidence, config)
         if r is not None:
             reasons.append(r)
-    if not any(x.code == "ambiguous" for x in reasons):
-        r = _refuted_reason(evidence, config)
-        if r is not None:
-            reasons.append(r)
+    for extra in (_refuted_reason, _twin_reason):
+        if not any(x.code == "ambiguous" for x in reasons):
+            r = extra(evidence, config)
+            if r is not None:
+                reasons.append(r)
     reasons += _inlier_reasons(evidence, config)
     r = _residual_reason(evidence, config)
     if r is not None:

@@ -1,0 +1,208 @@
+"""Whole-shift twins: would the answer, moved along the hall, fit as well?
+
+In a hall of identical bays (a warehouse's racks, an arcade, a car park) a pairwise answer
+several bays off overlays identical structure: at full resolution it explains most points and
+puts none in open space, exactly as the truth does, which lies a few bays away where the two
+scans overlap less (docs/survey.md, "halls of identical bays"). No test of the answer alone
+can refuse it; what gives it away is that the answer *moved by a bay* fits too.
+
+:func:`find_twins` looks for such moves without knowing the bay. The source's points, placed
+by the answer, are slid along the target's two horizontal wall directions
+(:func:`horizontal_axes`) within ``range_m`` in ``step_m`` steps and scored at full
+resolution on a sample (:func:`~flexreg.registration.fullres.full_scores`, coarse); the best
+local maxima at least :data:`MIN_SHIFT_M` away are polished by the quick ICP and checked on
+both scans (explained and open-space shares of a sample each way,
+:func:`~flexreg.registration.fullres.full_masks`). The verdict
+(:func:`flexreg.registration.verdict.decide`, ``ambiguous``) then calls the answer ambiguous
+when a twin *fits* (it puts at most ``verdict_twin_fit_open`` of the points in open space, or
+twice what the answer does) and explains at least ``verdict_twin_min_ratio`` of what the
+answer explains: two poses a whole bay apart that both fit are two answers, and the larger
+overlap of one is no evidence for it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import find_peaks
+
+from flexreg.core.transforms import invert
+from flexreg.registration.fullres import FullPair, FullView, full_masks, full_scores
+
+log = logging.getLogger(__name__)
+
+#: source points scored per slid pose (every k-th point of its full view)
+SWEEP_POINTS = 8_000
+
+#: points of each scan checked per twin (every k-th point of its full view)
+CHECK_POINTS = 20_000
+
+#: best local maxima of each axis's sweep that are polished and checked
+PEAKS = 4
+
+#: a twin is at least this far from the answer, metres (nearer: the same pose, polished)
+MIN_SHIFT_M = 1.0
+
+#: normals used to find the wall directions (every k-th of the view's)
+AXIS_NORMALS = 50_000
+
+
+def horizontal_axes(view: FullView, up: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """The two horizontal directions of a scan's walls (unit, the scan's frame).
+
+    The horizontal parts of the normals of its vertical surfaces (normals within about 25
+    degrees of horizontal) vote for an orientation modulo 90 degrees (the mean of
+    ``exp(4i angle)``): the first direction is the dominant wall normal, the second is
+    square to it and to ``up``. Racks, aisles and corridors run along one of them.
+
+    Parameters
+    ----------
+    view : FullView
+    up : (3,) float64
+        The vertical, the scan's frame.
+
+    Returns
+    -------
+    list of two (3,) float64, or [] when the scan shows no vertical surface
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> n = np.array([[0.6, 0.8, 0.0], [-0.8, 0.6, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
+    >>> a, b = horizontal_axes(SimpleNamespace(normals=n), np.array([0.0, 0.0, 1.0]))
+    >>> np.round(np.abs(a), 3).tolist(), round(float(abs(a @ b)), 6)
+    ([0.6, 0.8, 0.0], 0.0)
+    """
+    u = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    n = np.asarray(view.normals, dtype=np.float64)
+    n = n[:: max(1, -(-len(n) // AXIS_NORMALS))]
+    n = n[np.isfinite(n).all(axis=1)]
+    h = n - np.outer(n @ u, u)
+    w = np.linalg.norm(h, axis=1)
+    h = h[w > 0.9] / w[w > 0.9, None]
+    if len(h) == 0:
+        return []
+    e1 = np.cross(u, [1.0, 0.0, 0.0])
+    if np.linalg.norm(e1) < 0.1:
+        e1 = np.cross(u, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    angle = np.angle(np.exp(4j * np.arctan2(h @ e2, h @ e1)).mean()) / 4
+    a = math.cos(angle) * e1 + math.sin(angle) * e2
+    return [a, np.cross(u, a)]
+
+
+def _every(n: int, most: int) -> int:
+    return max(1, -(-n // most))
+
+
+def shares(pair: FullPair, T: NDArray[np.float64], threshold_m: float) -> tuple[float, float]:
+    """The shares of both scans' points (every k-th, :data:`CHECK_POINTS` each way) that the
+    pose ``T`` explains and puts in open space
+    (:func:`~flexreg.registration.fullres.full_masks`)."""
+    s, t = pair.source, pair.target
+    ks, kt = _every(len(s.points), CHECK_POINTS), _every(len(t.points), CHECK_POINTS)
+    fe, fo = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m)
+    be, bo = full_masks(s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m)
+    n = len(fe) + len(be)
+    if n == 0:
+        return 0.0, 0.0
+    return (int(fe.sum()) + int(be.sum())) / n, (int(fo.sum()) + int(bo.sum())) / n
+
+
+def _peaks(scores: NDArray[np.float64], offsets: NDArray[np.float64]) -> list[int]:
+    """The :data:`PEAKS` best local maxima at least :data:`MIN_SHIFT_M` from the answer,
+    each more than two steps from a better one."""
+    idx, _ = find_peaks(np.concatenate([[-np.inf], scores, [-np.inf]]), distance=3)
+    idx = [int(i) - 1 for i in idx if abs(offsets[int(i) - 1]) >= MIN_SHIFT_M]
+    return sorted(idx, key=lambda i: (-scores[i], i))[:PEAKS]
+
+
+def find_twins(
+    pair: FullPair,
+    T: NDArray[np.float64],
+    up: NDArray[np.float64],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    threshold_m: float,
+    *,
+    range_m: float,
+    step_m: float,
+) -> dict[str, Any]:
+    """The answer ``T`` slid along the target's wall directions: where else it fits.
+
+    Parameters
+    ----------
+    pair : FullPair
+        Both scans at full resolution.
+    T : (4, 4) float64
+        The answer, ``T_target_source``.
+    up : (3,) float64
+        The target's vertical (its frame).
+    polish : callable or None
+        The quick local ICP (:func:`~flexreg.registration.candidates.polisher`).
+    threshold_m : float, metres
+        The inlier threshold.
+    range_m, step_m : float, metres
+        How far either way and in which steps the answer is slid.
+
+    Returns
+    -------
+    dict
+        JSON-ready: ``axes_target`` (the two directions), ``range_m``, ``step_m``,
+        ``answer`` and each of ``twins`` with ``explained_share`` and ``open_share`` (of both
+        scans' checked points), each twin with its ``offset_m`` from the answer (target
+        frame) and ``shift_m`` (its length).
+    """
+    axes = horizontal_axes(pair.target, up)
+    x0, o0 = shares(pair, T, threshold_m)
+    s = pair.source
+    k = _every(len(s.points), SWEEP_POINTS)
+    pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
+    n = math.floor(range_m / step_m)
+    offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
+    twins = []
+    for a in axes:
+        scores = full_scores(
+            pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
+        )
+        for i in _peaks(scores, offsets):
+            Tk = T.copy()
+            Tk[:3, 3] += offsets[i] * a
+            Tk = polish(Tk) if polish is not None else Tk
+            d = Tk[:3, 3] - T[:3, 3]
+            if float(np.linalg.norm(d)) < MIN_SHIFT_M:  # polished back onto the answer
+                continue
+            x, o = shares(pair, Tk, threshold_m)
+            twins.append(
+                {
+                    "offset_m": [round(float(v), 3) for v in d],
+                    "shift_m": round(float(np.linalg.norm(d)), 3),
+                    "explained_share": round(x, 5),
+                    "open_share": round(o, 6),
+                }
+            )
+    log.debug("twins of the answer: %s", twins)
+    return {
+        "axes_target": [[round(float(v), 4) for v in a] for a in axes],
+        "range_m": range_m,
+        "step_m": step_m,
+        "answer": {"explained_share": round(x0, 5), "open_share": round(o0, 6)},
+        "twins": twins,
+    }
+
+
+__all__ = [
+    "AXIS_NORMALS",
+    "CHECK_POINTS",
+    "MIN_SHIFT_M",
+    "PEAKS",
+    "SWEEP_POINTS",
+    "find_twins",
+    "horizontal_axes",
+    "shares",
+]

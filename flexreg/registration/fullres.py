@@ -148,6 +148,7 @@ def _check_loop(
     explained,
     open_space,
     scores,
+    opens,
 ):  # pragma: no cover
     """The loop of :func:`_check_full` for one kind of camera (``spherical`` a constant where
     it is inlined, so the camera's branch leaves the inner loop)."""
@@ -203,6 +204,9 @@ def _check_loop(
             open_space[i] = bad
     for k in range(K):
         scores[k] += total[k] - 3.0 * bad_count[k]
+    if opens.shape[0] == K:
+        for k in range(K):
+            opens[k] += bad_count[k]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -221,23 +225,28 @@ def _check_full(
     explained,
     open_space,
     scores,
+    opens,
 ):  # pragma: no cover
     """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
     the points, without temporaries, for the poses ``(R, t[k])``: each point turned by ``R``
     (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
-    Adds each pose's score to ``scores[k]``; fills ``explained`` and ``open_space`` (one pose)
-    when they are as long as ``points``."""
+    Adds each pose's score to ``scores[k]`` (and its count of points in open space to
+    ``opens[k]`` when ``opens`` has a slot per pose); fills ``explained`` and ``open_space``
+    (one pose) when they are as long as ``points``."""
     if kind == 0:
         _check_loop(
             True, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
-            explained, open_space, scores,
+            explained, open_space, scores, opens,
         )  # fmt: skip
     else:
         _check_loop(
             False, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
-            explained, open_space, scores,
+            explained, open_space, scores, opens,
         )  # fmt: skip
+
+
+_NO_COUNT = np.zeros(0, dtype=np.int64)
 
 
 def _floats(a: NDArray[Any]) -> NDArray[Any]:
@@ -256,8 +265,10 @@ def _run_check(
     coarse: bool,
     explained: NDArray[np.bool_],
     open_space: NDArray[np.bool_],
+    opens: NDArray[np.int64] = _NO_COUNT,
 ) -> NDArray[np.float64]:
-    """Scores of ``T`` moved by each of ``shifts`` (``T`` alone when None), masks of ``T``."""
+    """Scores of ``T`` moved by each of ``shifts`` (``T`` alone when None), masks of ``T``,
+    counts of points in open space per pose (into ``opens`` when it has a slot per pose)."""
     T = np.asarray(T, dtype=np.float64)
     t = T[:3, 3][None] if shifts is None else T[:3, 3] + np.asarray(shifts, dtype=np.float64)
     scores = np.zeros(len(t))
@@ -271,7 +282,7 @@ def _run_check(
         np.ascontiguousarray(view.measured, dtype=np.float32),
         np.ascontiguousarray(view.slack, dtype=np.float32),
         _floats(view.nearest),
-        float(threshold_m), bool(coarse), explained, open_space, scores,
+        float(threshold_m), bool(coarse), explained, open_space, scores, opens,
     )  # fmt: skip
     return scores
 
@@ -376,6 +387,33 @@ def full_scores(
     )
 
 
+def full_profile(
+    view: FullView,
+    points: NDArray[np.floating[Any]],
+    point_slack: NDArray[np.floating[Any]],
+    T_view_points: NDArray[np.float64],
+    shifts_m: NDArray[np.float64],
+    threshold_m: float,
+    *,
+    coarse: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """:func:`full_scores` and, per shifted pose, how many of ``points`` it puts in open
+    space (the test of :func:`full_masks`), in the same pass.
+
+    Returns
+    -------
+    scores : (K,) float64
+    open_counts : (K,) int64
+    """
+    shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
+    opens = np.zeros(len(shifts), dtype=np.int64)
+    scores = _run_check(
+        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK,
+        _NO_MASK, opens,
+    )  # fmt: skip
+    return scores, opens
+
+
 #: bytes of bit-packed :func:`pose_masks` a :class:`FullPair` keeps (the tournament, the
 #: rescue and the verdict ask for the same poses): about 0.2 MB a pose at 1024 x 512, 0.8 MB
 #: at 2048 x 1024, so a few dozen poses; none at 8192 x 4096 beyond four
@@ -476,6 +514,7 @@ __all__ = [
     "Masks",
     "full_masks",
     "full_pair_of",
+    "full_profile",
     "full_score",
     "full_scores",
     "full_view",

@@ -8,10 +8,11 @@ can refuse it; what gives it away is that the answer *moved by a bay* fits too.
 
 :func:`find_twins` looks for such moves without knowing the bay. The source's points, placed
 by the answer, are slid along the target's two horizontal wall directions
-(:func:`horizontal_axes`) within ``range_m`` in ``step_m`` steps and scored at full
-resolution on a sample (:func:`~flexreg.registration.fullres.full_scores`, coarse); the best
-local maxima at least :data:`MIN_SHIFT_M` away are polished by the quick ICP and checked on
-both scans (explained and open-space shares of a sample each way,
+(:func:`horizontal_axes`) within ``range_m`` in ``step_m`` steps and checked at full
+resolution on a sample (:func:`~flexreg.registration.fullres.full_profile`, coarse): the
+slid poses that put least in open space nearby and explain most, at least
+:data:`MIN_SHIFT_M` away, are polished by the quick ICP and checked on both scans
+(explained and open-space shares of a sample each way,
 :func:`~flexreg.registration.fullres.full_masks`). The verdict
 (:func:`flexreg.registration.verdict.decide`, ``ambiguous``) then calls the answer ambiguous
 when a twin *fits* (it puts at most ``verdict_twin_fit_open`` of the points in open space, or
@@ -29,10 +30,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import find_peaks
+from scipy import ndimage
 
 from flexreg.core.transforms import invert
-from flexreg.registration.fullres import FullPair, FullView, full_masks, full_scores
+from flexreg.registration.fullres import FullPair, FullView, full_masks, full_profile
 
 log = logging.getLogger(__name__)
 
@@ -115,12 +116,32 @@ def shares(pair: FullPair, T: NDArray[np.float64], threshold_m: float) -> tuple[
     return (int(fe.sum()) + int(be.sum())) / n, (int(fo.sum()) + int(bo.sum())) / n
 
 
-def _peaks(scores: NDArray[np.float64], offsets: NDArray[np.float64]) -> list[int]:
-    """The :data:`PEAKS` best local maxima at least :data:`MIN_SHIFT_M` from the answer,
-    each more than two steps from a better one."""
-    idx, _ = find_peaks(np.concatenate([[-np.inf], scores, [-np.inf]]), distance=3)
-    idx = [int(i) - 1 for i in idx if abs(offsets[int(i) - 1]) >= MIN_SHIFT_M]
-    return sorted(idx, key=lambda i: (-scores[i], i))[:PEAKS]
+#: an unpolished slid pose is a candidate when it puts at most this share of the sampled
+#: points in open space (a whole bay off, a step from the truth, the uprights' faces stand
+#: up to half a step in front of what the other scanner saw)
+SWEEP_OPEN = 0.01
+
+
+def _candidates(
+    explained: NDArray[np.float64], opens: NDArray[np.float64], offsets: NDArray[np.float64]
+) -> list[int]:
+    """Indices of the slid poses worth polishing: the local minima of the open-space share
+    (over two steps either way) at most :data:`SWEEP_OPEN` (or twice the answer's) and at
+    least :data:`MIN_SHIFT_M` from the answer, the :data:`PEAKS` that explain most, each
+    more than two steps from a better one. Along a hall the explained share falls steadily
+    with the distance from the answer (the scans overlap less), so its peaks miss the bays;
+    the open space drops to nothing at each bay, where the uprights fit again."""
+    centre = int(np.argmin(np.abs(offsets)))
+    limit = max(SWEEP_OPEN, 2.0 * float(opens[centre]))
+    low = opens == ndimage.minimum_filter1d(opens, size=5, mode="nearest")
+    idx = np.flatnonzero(low & (opens <= limit) & (np.abs(offsets) >= MIN_SHIFT_M))
+    out: list[int] = []
+    for i in sorted(idx.tolist(), key=lambda i: (-explained[i], i)):
+        if all(abs(i - k) > 2 for k in out):
+            out.append(i)
+        if len(out) >= PEAKS:
+            break
+    return out
 
 
 def find_twins(
@@ -167,10 +188,11 @@ def find_twins(
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins = []
     for a in axes:
-        scores = full_scores(
+        scores, opens = full_profile(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
         )
-        for i in _peaks(scores, offsets):
+        m = max(1, len(pts))
+        for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets):
             Tk = T.copy()
             Tk[:3, 3] += offsets[i] * a
             Tk = polish(Tk) if polish is not None else Tk
@@ -201,6 +223,7 @@ __all__ = [
     "CHECK_POINTS",
     "MIN_SHIFT_M",
     "PEAKS",
+    "SWEEP_OPEN",
     "SWEEP_POINTS",
     "find_twins",
     "horizontal_axes",

@@ -398,6 +398,13 @@ def test_normal_synthetic_pair_is_confident_with_every_field():
     assert ev["full_resolution"]["why"] in ("check", "settling")
     assert ev["full_resolution"]["open_space_share"] < 0.005
     assert ev["refinement"]["score_refined"] >= ev["refinement"]["score_coarse"] - 0.01
+    # slid along the room's walls, no twin both fits and explains a fifth of the answer
+    tw = ev["twins"]
+    assert len(tw["axes_target"]) == 2 and tw["answer"]["explained_share"] > 0.5
+    assert all(
+        t["open_share"] > 0.001 or t["explained_share"] < 0.2 * tw["answer"]["explained_share"]
+        for t in tw["twins"]
+    )
     for h in d["runner_up"]:
         assert np.asarray(h["T_target_source"]).shape == (4, 4)
     assert isinstance(r.verdict.runner_up, tuple)

@@ -84,9 +84,7 @@ def judge(
     start = time.perf_counter()
     polish = polisher(pt.view.image, pt.view.normals, ps.view.polish_sample, thr)
     up = np.asarray(pt.plan.levelling.up, dtype=np.float64)
-    ev = find_twins(
-        FullPair(vt, vs), T, up, polish, thr, range_m=cfg.twin_range_m, step_m=cfg.twin_step_m
-    )
+    ev = find_twins(FullPair(vt, vs), T, up, polish, thr, cfg)
     verdict = decide({"twins": ev}, config=cfg)
     a = ev["answer"]
     limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])

@@ -41,7 +41,7 @@ def _twins(pair, T):
     src = pair.source.image
     sample = area_sample(src.xyz[src.valid].astype(np.float64), 5000)
     polish = polisher(pair.target.image, grid_normals(pair.target.image), sample, THR)
-    return find_twins(pair, T, UP, polish, THR, range_m=12.0, step_m=0.25)
+    return find_twins(pair, T, UP, polish, THR, RegistrationConfig(twin_range_m=12.0))
 
 
 def test_the_axes_of_a_hall_are_its_walls():

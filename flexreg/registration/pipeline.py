@@ -312,9 +312,7 @@ def _verdict(
         verdict = decide(ev, ups, config)
     if verdict.confident and up is not None and config.verdict_twins:
         pair = settled.pair if settled.pair is not None else full_pair()
-        ev["twins"] = find_twins(
-            pair, scored.T, up, polish, thr, range_m=config.twin_range_m, step_m=config.twin_step_m
-        )
+        ev["twins"] = find_twins(pair, scored.T, up, polish, thr, config)
         verdict = decide(ev, ups, config)
     return verdict
 

@@ -33,7 +33,16 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from flexreg.core.transforms import invert
-from flexreg.registration.fullres import FullPair, FullView, full_masks, full_profile
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import (
+    FullPair,
+    FullView,
+    Masks,
+    full_masks,
+    full_profile,
+    pose_masks,
+)
+from flexreg.registration.verdict import duel
 
 log = logging.getLogger(__name__)
 
@@ -150,9 +159,7 @@ def find_twins(
     up: NDArray[np.float64],
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     threshold_m: float,
-    *,
-    range_m: float,
-    step_m: float,
+    config: RegistrationConfig,
 ) -> dict[str, Any]:
     """The answer ``T`` slid along the target's wall directions: where else it fits.
 
@@ -168,8 +175,12 @@ def find_twins(
         The quick local ICP (:func:`~flexreg.registration.candidates.polisher`).
     threshold_m : float, metres
         The inlier threshold.
-    range_m, step_m : float, metres
-        How far either way and in which steps the answer is slid.
+    config : RegistrationConfig
+        ``twin_range_m`` and ``twin_step_m``: how far either way and in which steps the
+        answer is slid; a twin that fits and explains enough on the samples
+        (``verdict_twin_fit_open``, ``verdict_twin_min_ratio``) also duels the answer on
+        every pixel of both scans (a small unique object, a niche or a forklift, refutes it
+        there; :func:`~flexreg.registration.verdict.duel`).
 
     Returns
     -------
@@ -177,8 +188,11 @@ def find_twins(
         JSON-ready: ``axes_target`` (the two directions), ``range_m``, ``step_m``,
         ``answer`` and each of ``twins`` with ``explained_share`` and ``open_share`` (of both
         scans' checked points), each twin with its ``offset_m`` from the answer (target
-        frame) and ``shift_m`` (its length).
+        frame) and ``shift_m`` (its length); a twin that dueled the answer also with
+        ``full_refuted_share``, ``full_refuting_share`` (the duel's shares of
+        ``full_points``, both scans' full views).
     """
+    range_m, step_m = config.twin_range_m, config.twin_step_m
     axes = horizontal_axes(pair.target, up)
     x0, o0 = shares(pair, T, threshold_m)
     s = pair.source
@@ -186,7 +200,9 @@ def find_twins(
     pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
-    twins = []
+    twins: list[dict[str, Any]] = []
+    limit = max(config.verdict_twin_fit_open, 2.0 * o0)
+    answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
     for a in axes:
         scores, opens = full_profile(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
@@ -200,14 +216,21 @@ def find_twins(
             if float(np.linalg.norm(d)) < MIN_SHIFT_M:  # polished back onto the answer
                 continue
             x, o = shares(pair, Tk, threshold_m)
-            twins.append(
-                {
-                    "offset_m": [round(float(v), 3) for v in d],
-                    "shift_m": round(float(np.linalg.norm(d)), 3),
-                    "explained_share": round(x, 5),
-                    "open_share": round(o, 6),
+            twin: dict[str, Any] = {
+                "offset_m": [round(float(v), 3) for v in d],
+                "shift_m": round(float(np.linalg.norm(d)), 3),
+                "explained_share": round(x, 5),
+                "open_share": round(o, 6),
+            }
+            if o <= limit and x >= config.verdict_twin_min_ratio * x0:
+                answer = answer or [pose_masks(pair, T, threshold_m)]
+                won, lost = duel(answer[0], pose_masks(pair, Tk, threshold_m))
+                twin |= {
+                    "full_refuted_share": round(won, 7),
+                    "full_refuting_share": round(lost, 7),
+                    "full_points": pair.points,
                 }
-            )
+            twins.append(twin)
     log.debug("twins of the answer: %s", twins)
     return {
         "axes_target": [[round(float(v), 4) for v in a] for a in axes],

@@ -312,7 +312,7 @@ def _verdict(
         verdict = decide(ev, ups, config)
     if verdict.confident and up is not None and config.verdict_twins:
         pair = settled.pair if settled.pair is not None else full_pair()
-        ev["twins"] = find_twins(pair, scored.T, up, polish, thr, config)
+        ev["twins"] = find_twins(pair, scored.T, up, polish, thr, config, settled.axis)
         verdict = decide(ev, ups, config)
     return verdict
 

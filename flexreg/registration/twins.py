@@ -34,15 +34,7 @@ from scipy import ndimage
 
 from flexreg.core.transforms import invert
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import (
-    FullPair,
-    FullView,
-    Masks,
-    full_masks,
-    full_profile,
-    pose_masks,
-)
-from flexreg.registration.verdict import duel
+from flexreg.registration.fullres import FullPair, FullView, full_masks, full_profile
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +49,9 @@ PEAKS = 4
 
 #: a twin is at least this far from the answer, metres (nearer: the same pose, polished)
 MIN_SHIFT_M = 1.0
+
+#: a wall direction within this many degrees of the settling's swept axis is not slid
+SETTLED_DEG = 15.0
 
 #: normals used to find the wall directions (every k-th of the view's)
 AXIS_NORMALS = 50_000
@@ -160,6 +155,7 @@ def find_twins(
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     threshold_m: float,
     config: RegistrationConfig,
+    settled_axis: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
     """The answer ``T`` slid along the target's wall directions: where else it fits.
 
@@ -177,10 +173,14 @@ def find_twins(
         The inlier threshold.
     config : RegistrationConfig
         ``twin_range_m`` and ``twin_step_m``: how far either way and in which steps the
-        answer is slid; a twin that fits and explains enough on the samples
-        (``verdict_twin_fit_open``, ``verdict_twin_min_ratio``) also duels the answer on
-        every pixel of both scans (a small unique object, a niche or a forklift, refutes it
-        there; :func:`~flexreg.registration.verdict.duel`).
+        answer is slid.
+    settled_axis : (3,) float64, optional
+        The direction (target frame) along which the settling swept the answer and placed
+        it by a tournament it won at full resolution
+        (:attr:`~flexreg.registration.settle.Settlement.axis`): every pose slid along it
+        within 20 m, the truth's included, has lost a duel against the answer there (a niche
+        in a tunnel, a forklift among identical bays), so the wall direction within
+        :data:`SETTLED_DEG` of it is not slid again.
 
     Returns
     -------
@@ -188,12 +188,17 @@ def find_twins(
         JSON-ready: ``axes_target`` (the two directions), ``range_m``, ``step_m``,
         ``answer`` and each of ``twins`` with ``explained_share`` and ``open_share`` (of both
         scans' checked points), each twin with its ``offset_m`` from the answer (target
-        frame) and ``shift_m`` (its length); a twin that dueled the answer also with
-        ``full_refuted_share``, ``full_refuting_share`` (the duel's shares of
-        ``full_points``, both scans' full views).
+        frame) and ``shift_m`` (its length); ``settled_axes_target``: the wall directions
+        left out as settled.
     """
     range_m, step_m = config.twin_range_m, config.twin_step_m
-    axes = horizontal_axes(pair.target, up)
+    axes: list[NDArray[np.float64]] = []
+    settled: list[NDArray[np.float64]] = []
+    for a in horizontal_axes(pair.target, up):
+        along = settled_axis is not None and abs(float(a @ settled_axis)) >= math.cos(
+            math.radians(SETTLED_DEG)
+        ) * float(np.linalg.norm(settled_axis))
+        (settled if along else axes).append(a)
     x0, o0 = shares(pair, T, threshold_m)
     s = pair.source
     k = _every(len(s.points), SWEEP_POINTS)
@@ -201,8 +206,6 @@ def find_twins(
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins: list[dict[str, Any]] = []
-    limit = max(config.verdict_twin_fit_open, 2.0 * o0)
-    answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
     for a in axes:
         scores, opens = full_profile(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
@@ -216,24 +219,18 @@ def find_twins(
             if float(np.linalg.norm(d)) < MIN_SHIFT_M:  # polished back onto the answer
                 continue
             x, o = shares(pair, Tk, threshold_m)
-            twin: dict[str, Any] = {
-                "offset_m": [round(float(v), 3) for v in d],
-                "shift_m": round(float(np.linalg.norm(d)), 3),
-                "explained_share": round(x, 5),
-                "open_share": round(o, 6),
-            }
-            if o <= limit and x >= config.verdict_twin_min_ratio * x0:
-                answer = answer or [pose_masks(pair, T, threshold_m)]
-                won, lost = duel(answer[0], pose_masks(pair, Tk, threshold_m))
-                twin |= {
-                    "full_refuted_share": round(won, 7),
-                    "full_refuting_share": round(lost, 7),
-                    "full_points": pair.points,
+            twins.append(
+                {
+                    "offset_m": [round(float(v), 3) for v in d],
+                    "shift_m": round(float(np.linalg.norm(d)), 3),
+                    "explained_share": round(x, 5),
+                    "open_share": round(o, 6),
                 }
-            twins.append(twin)
+            )
     log.debug("twins of the answer: %s", twins)
     return {
         "axes_target": [[round(float(v), 4) for v in a] for a in axes],
+        "settled_axes_target": [[round(float(v), 4) for v in a] for a in settled],
         "range_m": range_m,
         "step_m": step_m,
         "answer": {"explained_share": round(x0, 5), "open_share": round(o0, 6)},
@@ -246,6 +243,7 @@ __all__ = [
     "CHECK_POINTS",
     "MIN_SHIFT_M",
     "PEAKS",
+    "SETTLED_DEG",
     "SWEEP_OPEN",
     "SWEEP_POINTS",
     "find_twins",

@@ -651,21 +651,18 @@ def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | Non
 
 
 def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    """The answer moved a whole bay fits, unrefuted on every pixel (:mod:`.twins`)."""
+    """The answer moved a whole bay (:mod:`flexreg.registration.twins`) fits too: it puts at
+    most ``verdict_twin_fit_open`` (or twice the answer's share) in open space and explains
+    at least ``verdict_twin_min_ratio`` of what the answer explains."""
     a = (ev.get("twins") or {}).get("answer")
     if not a:
         return None
     limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])
     least = max(cfg.verdict_twin_min_ratio * a["explained_share"], 1e-9)
-    won, lost = "full_refuted_share", "full_refuting_share"
     fits = [
         t
         for t in ev["twins"].get("twins", ())
-        if t["open_share"] <= limit
-        and t["explained_share"] >= least
-        and not decisive_full(
-            t.get(won, 0.0), t.get(lost, 0.0), cfg, points=t.get("full_points", 0)
-        )
+        if t["open_share"] <= limit and t["explained_share"] >= least
     ]
     if not fits:
         return None

@@ -203,6 +203,14 @@ class RegistrationConfig(Config):
         projects no right answer of the accuracy set has such a twin (the best fitting one
         explains 0-8 % of what the answer does), while 91 of the 93 confident answers whole
         bays off on the 64-station warehouse have one (docs/benchmarks.md, Survey).
+    verdict_twin_strong_ratio : float
+        A fitting twin that explains less than this share of what the answer explains also
+        duels the answer on every pixel, and one the answer beats decisively (a forklift, a
+        niche: :func:`~flexreg.registration.verdict.decisive_full`) does not count. A
+        stronger twin counts whatever its duel: a neighbouring bay seen almost as well as
+        the answer's, which the answer may beat by a hundred points of clutter while the
+        truth lies bays further (warehouse 36, station_10 <- station_27). The wall direction
+        the settling swept and won a tournament along is not slid at all.
     twin_range_m, twin_step_m : float, metres
         How far either way and in which steps the answer is slid.
     verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
@@ -269,6 +277,7 @@ class RegistrationConfig(Config):
     verdict_twins: bool = True
     verdict_twin_min_ratio: float = Field(0.2, gt=0, le=1)
     verdict_twin_fit_open: float = Field(1e-3, ge=0, le=1)
+    verdict_twin_strong_ratio: float = Field(0.4, gt=0, le=1)
     twin_range_m: Positive = 15.0
     twin_step_m: Positive = 0.25
     verdict_distinct_deg: Positive = 3.0

@@ -34,7 +34,15 @@ from scipy import ndimage
 
 from flexreg.core.transforms import invert
 from flexreg.registration.config import RegistrationConfig
-from flexreg.registration.fullres import FullPair, FullView, full_masks, full_profile
+from flexreg.registration.fullres import (
+    FullPair,
+    FullView,
+    Masks,
+    full_masks,
+    full_profile,
+    pose_masks,
+)
+from flexreg.registration.verdict import duel
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +181,10 @@ def find_twins(
         The inlier threshold.
     config : RegistrationConfig
         ``twin_range_m`` and ``twin_step_m``: how far either way and in which steps the
-        answer is slid.
+        answer is slid; a twin that fits (``verdict_twin_fit_open``) and explains between
+        ``verdict_twin_min_ratio`` and ``verdict_twin_strong_ratio`` of what the answer
+        explains also duels the answer on every pixel of both scans
+        (:func:`~flexreg.registration.verdict.duel`).
     settled_axis : (3,) float64, optional
         The direction (target frame) along which the settling swept the answer and placed
         it by a tournament it won at full resolution
@@ -188,8 +199,9 @@ def find_twins(
         JSON-ready: ``axes_target`` (the two directions), ``range_m``, ``step_m``,
         ``answer`` and each of ``twins`` with ``explained_share`` and ``open_share`` (of both
         scans' checked points), each twin with its ``offset_m`` from the answer (target
-        frame) and ``shift_m`` (its length); ``settled_axes_target``: the wall directions
-        left out as settled.
+        frame) and ``shift_m`` (its length), a dueled one also ``full_refuted_share`` and
+        ``full_refuting_share`` (shares of ``full_points``); ``settled_axes_target``: the
+        wall directions left out as settled.
     """
     range_m, step_m = config.twin_range_m, config.twin_step_m
     axes: list[NDArray[np.float64]] = []
@@ -206,6 +218,9 @@ def find_twins(
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins: list[dict[str, Any]] = []
+    limit = max(config.verdict_twin_fit_open, 2.0 * o0)
+    weak = (config.verdict_twin_min_ratio * x0, config.verdict_twin_strong_ratio * x0)
+    answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
     for a in axes:
         scores, opens = full_profile(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
@@ -219,14 +234,21 @@ def find_twins(
             if float(np.linalg.norm(d)) < MIN_SHIFT_M:  # polished back onto the answer
                 continue
             x, o = shares(pair, Tk, threshold_m)
-            twins.append(
-                {
-                    "offset_m": [round(float(v), 3) for v in d],
-                    "shift_m": round(float(np.linalg.norm(d)), 3),
-                    "explained_share": round(x, 5),
-                    "open_share": round(o, 6),
+            twin: dict[str, Any] = {
+                "offset_m": [round(float(v), 3) for v in d],
+                "shift_m": round(float(np.linalg.norm(d)), 3),
+                "explained_share": round(x, 5),
+                "open_share": round(o, 6),
+            }
+            if o <= limit and weak[0] <= x < weak[1]:
+                answer = answer or [pose_masks(pair, T, threshold_m)]
+                won, lost = duel(answer[0], pose_masks(pair, Tk, threshold_m))
+                twin |= {
+                    "full_refuted_share": round(won, 7),
+                    "full_refuting_share": round(lost, 7),
+                    "full_points": pair.points,
                 }
-            )
+            twins.append(twin)
     log.debug("twins of the answer: %s", twins)
     return {
         "axes_target": [[round(float(v), 4) for v in a] for a in axes],

@@ -651,18 +651,21 @@ def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | Non
 
 
 def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    """The answer moved a whole bay (:mod:`flexreg.registration.twins`) fits too: it puts at
-    most ``verdict_twin_fit_open`` (or twice the answer's share) in open space and explains
-    at least ``verdict_twin_min_ratio`` of what the answer explains."""
+    """A twin of the answer fits (:mod:`flexreg.registration.twins`, ``verdict_twin_*``)."""
     a = (ev.get("twins") or {}).get("answer")
     if not a:
         return None
     limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])
     least = max(cfg.verdict_twin_min_ratio * a["explained_share"], 1e-9)
-    fits = [
+    won, lost = "full_refuted_share", "full_refuting_share"
+    fits = [  # a weak twin the answer beats on every pixel does not count
         t
         for t in ev["twins"].get("twins", ())
-        if t["open_share"] <= limit and t["explained_share"] >= least
+        if t["open_share"] <= limit
+        and t["explained_share"] >= least
+        and not decisive_full(
+            t.get(won, 0.0), t.get(lost, 0.0), cfg, points=t.get("full_points", 0)
+        )
     ]
     if not fits:
         return None
@@ -671,8 +674,8 @@ def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
         "ambiguous",
         f"the answer moved {t['shift_m']:.1f} m along {_along(t['offset_m'])} fits too: it "
         f"explains {100 * t['explained_share']:.0f}% of both scans (the answer "
-        f"{100 * a['explained_share']:.0f}%) and contradicts nothing more: repeating structure "
-        "(identical bays or rooms) that these two scans alone cannot tell apart",
+        f"{100 * a['explained_share']:.0f}%) and contradicts nothing more: repeating "
+        "structure (identical bays or rooms) these two scans alone cannot tell apart",
     )
 
 

@@ -365,6 +365,7 @@ def full_scores(
     threshold_m: float,
     *,
     coarse: bool = False,
+    open_counts: NDArray[np.int64] | None = None,
 ) -> NDArray[np.float64]:
     """:func:`full_score` of ``T_view_points`` moved by each of ``shifts_m`` (added to its
     translation, view frame), in one pass over the points: each point is turned once and looked
@@ -376,42 +377,20 @@ def full_scores(
     view, points, point_slack, T_view_points, threshold_m, coarse
         As :func:`full_score`.
     shifts_m : (K, 3) float64, metres
+    open_counts : (K,) int64, optional
+        Zeros, filled with how many of ``points`` each moved pose puts in open space (the
+        test of :func:`full_masks`), in the same pass.
 
     Returns
     -------
     (K,) float64
     """
     shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
+    opens = _NO_COUNT if open_counts is None else open_counts
     return _run_check(
-        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK, _NO_MASK
-    )
-
-
-def full_profile(
-    view: FullView,
-    points: NDArray[np.floating[Any]],
-    point_slack: NDArray[np.floating[Any]],
-    T_view_points: NDArray[np.float64],
-    shifts_m: NDArray[np.float64],
-    threshold_m: float,
-    *,
-    coarse: bool = False,
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """:func:`full_scores` and, per shifted pose, how many of ``points`` it puts in open
-    space (the test of :func:`full_masks`), in the same pass.
-
-    Returns
-    -------
-    scores : (K,) float64
-    open_counts : (K,) int64
-    """
-    shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
-    opens = np.zeros(len(shifts), dtype=np.int64)
-    scores = _run_check(
         view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK,
         _NO_MASK, opens,
     )  # fmt: skip
-    return scores, opens
 
 
 #: bytes of bit-packed :func:`pose_masks` a :class:`FullPair` keeps (the tournament, the
@@ -514,7 +493,6 @@ __all__ = [
     "Masks",
     "full_masks",
     "full_pair_of",
-    "full_profile",
     "full_score",
     "full_scores",
     "full_view",

@@ -9,7 +9,7 @@ can refuse it; what gives it away is that the answer *moved by a bay* fits too.
 :func:`find_twins` looks for such moves without knowing the bay. The source's points, placed
 by the answer, are slid along the target's two horizontal wall directions
 (:func:`horizontal_axes`) within ``range_m`` in ``step_m`` steps and checked at full
-resolution on a sample (:func:`~flexreg.registration.fullres.full_profile`, coarse): the
+resolution on a sample (:func:`~flexreg.registration.fullres.full_scores`, coarse): the
 slid poses that put least in open space nearby and explain most, at least
 :data:`MIN_SHIFT_M` away, are polished by the quick ICP and checked on both scans
 (explained and open-space shares of a sample each way,
@@ -39,7 +39,7 @@ from flexreg.registration.fullres import (
     FullView,
     Masks,
     full_masks,
-    full_profile,
+    full_scores,
     pose_masks,
 )
 from flexreg.registration.verdict import duel
@@ -222,9 +222,11 @@ def find_twins(
     weak = (config.verdict_twin_min_ratio * x0, config.verdict_twin_strong_ratio * x0)
     answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
     for a in axes:
-        scores, opens = full_profile(
-            pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True
-        )
+        opens = np.zeros(len(offsets), dtype=np.int64)
+        scores = full_scores(
+            pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True,
+            open_counts=opens,
+        )  # fmt: skip
         m = max(1, len(pts))
         for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets):
             Tk = T.copy()

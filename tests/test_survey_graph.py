@@ -252,3 +252,28 @@ def test_a_link_within_the_loop_tolerance_but_centimetres_off_is_dropped():
     assert all(e.status == "accepted" for e in links if e is not bad)
     # the optimisation without it converges back onto the exact poses
     assert all(r < 1e-3 and t < 1e-4 for r, t in _errors(sol, P).values())
+
+
+@pytest.mark.parametrize("repeat", [False, True])
+def test_a_lone_link_in_repeating_structure_poses_no_separate_group(repeat):
+    """A separate group held by one unconfirmed link keeps its relative pose, unless one of
+    its stations has a whole-bay ambiguous link (a hall of identical bays): then the link is
+    cut and both stations stay single. The reference's group is not touched."""
+    from flexreg.survey.lone import WHY
+
+    P = _grid(3, seed=7)
+    names = sorted(P)
+    tri = [_link(P, "s00", "s01"), _link(P, "s01", "s02"), _link(P, "s00", "s02")]
+    lone = _link(P, "s06", "s07")
+    ambiguous = _link(P, "s07", "s08", verdict="uncertain")
+    ambiguous.repeat = repeat
+    tri[0].repeat = True  # a repeat link inside the reference's group changes nothing there
+    sol = solve_graph(names, [*tri, lone, ambiguous])
+    assert sorted(sol.groups[0]) == ["s00", "s01", "s02"]
+    together = any(sorted(g) == ["s06", "s07"] for g in sol.groups)
+    assert together is not repeat
+    assert (lone.status == "accepted") is not repeat
+    if repeat:
+        assert lone.why == WHY and "s06" not in sol.poses and "s07" not in sol.poses
+    else:
+        assert "s07" in sol.poses

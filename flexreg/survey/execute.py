@@ -278,6 +278,7 @@ def align_link(
         open3d_inlier_rmse_m=None if one is None else one.to_dict()["open3d_inlier_rmse_m"],
         strength=_strength(ev),
         doubt=_doubt(ev),
+        repeat=v is not None and not v.confident and "twins" in ev,
         seconds=time.perf_counter() - t0,
         origin=cand.origin,
         place_score=cand.place_score,

@@ -41,6 +41,9 @@ link must not place a station, so the graph is built in steps that each trust le
    whose scans contradict each other at their solved relative pose (linked or not) mean a
    wrong link between them; the most doubtful one on a path between them (the highest
    free-space conflict ratio of its own check) is cut and everything solved again.
+8. **Lone links in repeating structure** (:mod:`flexreg.survey.lone`): a separate group held
+   only by unconfirmed tree links, one of whose stations has a whole-bay ambiguous link,
+   poses nothing; its links are cut and everything solved again.
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ from flexreg.survey.links import (
     judged_culprit,
     loop_error,
 )
+from flexreg.survey.lone import lone_cuts
 
 log = logging.getLogger(__name__)
 
@@ -613,6 +617,7 @@ def solve_graph(
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
         cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
+        cuts = cuts or lone_cuts(sol, links)  # step 8: lone links in repeating structure
         if not cuts:
             break
         for e, why in cuts:

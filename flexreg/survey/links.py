@@ -34,6 +34,11 @@ class Link:
         ``overlap_target`` / ``overlap_source`` are the verdict's view-consistency shares,
         which order the links.
     verdict : {"confident", "uncertain"} or None
+    repeat : bool
+        The verdict called the pair ambiguous because the answer moved along the hall fits
+        too (its evidence holds ``twins`` and it is uncertain: the twin test runs only on
+        answers otherwise confident, :mod:`flexreg.registration.twins`): the two stations
+        stand in repeating structure.
     doubt : float or None
         The verdict's larger free-space conflict ratio (share of a scan's sample in the other's
         free space over the share the other explains): which link of a conflicting pair's
@@ -73,6 +78,7 @@ class Link:
     open3d_inlier_rmse_m: float | None = None
     map_joined: bool = False
     doubt: float | None = None
+    repeat: bool = False
 
     @property
     def overlap(self) -> float:
@@ -114,6 +120,7 @@ class Link:
             "in_tree": self.in_tree,
             "confirmed_by_loop": self.confirmed_by_loop,
             "map_joined": self.map_joined,
+            "repeat": self.repeat,
             "loop_error_deg": self.loop_error_deg,
             "loop_error_m": self.loop_error_m,
             "seconds": self.seconds,

@@ -91,6 +91,8 @@ value does not exist (failed link, unplaced station)::
           "confirmed_by_loop": true,         # a closed loop agrees with it
           "map_joined": false,               # uncertain, joins two groups: the only placement
                                              # the map allows (survey/groupjoin.py)
+          "repeat": false,                   # ambiguous: the answer moved a whole bay fits
+                                             # too (registration/twins.py)
           "loop_error_deg": 0.01,            # accepted: disagreement with the final poses;
           "loop_error_m": 0.002,             # rejected: with the loop it closes; null: none
           "seconds": 3.8,                    # wall time of the pairwise registration

@@ -162,7 +162,7 @@ def _example_trouble(links: list[dict]) -> None:
         {
             "code": "weak_axis",
             "message": "the scans constrain almost nothing along x (strength 0.002, need "
-            "0.005; a corridor or tunnel?): the position along it is a guess",
+            "0.01; a corridor or tunnel?): the position along it is a guess",
         }
     ]
     corridor["confirmed_by_loop"] = False

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from conftest import one_error_line, run_cli
 
+from flexreg.errors import InputError
 from flexreg.io import read_scans
-from flexreg.survey import SurveyConfig, evaluate, run_survey, write_outputs
+from flexreg.survey import SurveyConfig, evaluate, find_scans, run_survey, write_outputs
 
 STATIONS = ["station_00", "station_01", "station_02"]
 
@@ -172,6 +173,39 @@ def test_bad_input_one_line_exit_1_nothing_written(case, message, project, tmp_p
     assert rc == 1
     assert message in one_error_line(err)
     assert not out.exists()
+
+
+def _ply(path: Path, faces: int | None) -> Path:
+    verts = "0 0 0\n1 0 0\n0 1 0\n"
+    header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+    header += "property float z\n"
+    if faces is not None:
+        header += f"element face {faces}\nproperty list uchar int vertex_indices\n"
+    path.write_text(header + "end_header\n" + verts + "3 0 1 2\n" * (faces or 0))
+    return path
+
+
+def test_a_folder_skips_meshes_with_a_warning_a_named_mesh_is_taken(project, tmp_path, caplog):
+    # flexreg synth writes its scene's mesh beside the stations: not a station
+    assert (project / "scene.ply").exists()
+    with caplog.at_level("WARNING", logger="flexreg.survey.stations"):
+        found = find_scans([project])
+    assert [f.name for f in found] == [f"station_0{k}.ptx" for k in range(4)]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{project / 'scene.ply'}: a triangle mesh, not a scan: skipped (name it to survey it)"
+    ]
+    # a PLY point cloud (no faces, or a face element of 0) is a scan
+    folder = tmp_path / "site"
+    folder.mkdir()
+    cloud, empty_faces = _ply(folder / "a.ply", None), _ply(folder / "b.ply", 0)
+    mesh = _ply(folder / "c.ply", 2)
+    assert find_scans([folder]) == [cloud, empty_faces]
+    assert find_scans([mesh]) == [mesh]
+    only = tmp_path / "only-mesh"
+    only.mkdir()
+    _ply(only / "model.ply", 1)
+    with pytest.raises(InputError, match=r"no scan files in this folder .*skipped 1 mesh"):
+        find_scans([only])
 
 
 def test_refine_merged_cloud_and_e57(first, project, tmp_path):

@@ -24,7 +24,7 @@ from flexreg.core.scan import POINT_BYTES, Scan
 from flexreg.core.transforms import quat_to_matrix
 from flexreg.errors import InputError
 
-__all__ = ["read", "write"]
+__all__ = ["is_mesh", "read", "write"]
 
 _INTENSITY_NAMES = ("intensity", "intensities", "scalar_intensity", "reflectance", "remission")
 _PLY_TYPE_SIZE = {
@@ -38,6 +38,32 @@ _MAX_HEADER_LINES = 100_000
 
 
 # --------------------------------------------------------------------------------- reading
+def is_mesh(path: Path) -> bool:
+    """Whether ``path`` is a PLY triangle mesh (its header declares faces), not a point cloud.
+
+    Only the header is read. A file that is not PLY, or whose header cannot be parsed, is not
+    called a mesh here: reading it reports what is wrong with it.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    bool
+        True when the header has a ``face`` element with at least one face.
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+        if head[:3] != b"ply" or head[3:4] not in (b"\n", b"\r"):
+            return False
+        face = _parse_ply_header(path).element("face")
+    except (OSError, InputError):
+        return False
+    return face is not None and face.count > 0
+
+
 def read(path: Path, **options: Any) -> list[Scan]:
     """Read a PLY or PCD point cloud (one scan).
 

@@ -37,6 +37,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import FlexregError, InputError
 from flexreg.io import read_scan, read_working_scan
+from flexreg.io.pointcloud import is_mesh
 from flexreg.io.setups import list_setups
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import PreparedScan, Registration
@@ -140,7 +141,10 @@ class Prepared:
 def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
     """The scan files among ``paths``: files as given, folders by :data:`FOLDER_SUFFIXES`.
 
-    Folders are listed (not recursively) in name order; hidden files are skipped.
+    Folders are listed (not recursively) in name order; hidden files are skipped, and so are
+    PLY triangle meshes (a model of the site, such as the ``scene.ply`` that ``flexreg synth``
+    writes beside its stations, is not a station): each skipped mesh is logged as a warning. A
+    file named explicitly is always taken.
 
     Raises
     ------
@@ -150,15 +154,22 @@ def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
     found: list[Path] = []
     for p in paths:
         if p.is_dir():
-            inside = sorted(
+            listed = sorted(
                 f
                 for f in p.iterdir()
                 if f.is_file()
                 and not f.name.startswith(".")
                 and f.suffix.lower() in FOLDER_SUFFIXES
             )
+            meshes = [f for f in listed if f.suffix.lower() == ".ply" and is_mesh(f)]
+            for f in meshes:
+                log.warning("%s: a triangle mesh, not a scan: skipped (name it to survey it)", f)
+            inside = [f for f in listed if f not in meshes]
             if not inside:
-                raise InputError(p, f"no scan files in this folder ({', '.join(FOLDER_SUFFIXES)})")
+                also = f"; skipped {len(meshes)} mesh file(s)" if meshes else ""
+                raise InputError(
+                    p, f"no scan files in this folder ({', '.join(FOLDER_SUFFIXES)}){also}"
+                )
             found.extend(inside)
         elif p.exists():
             found.append(p)

@@ -4,6 +4,8 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.flexreg-installed
 DEMO   ?= demo-output
+# test processes of make test (pytest-xdist; each test file runs whole in one of them)
+TEST_WORKERS ?= 2
 
 .PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare bench-perf clean
 
@@ -35,7 +37,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	@bash scripts/ensure-system-libs.sh
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check flexreg tests benchmarks

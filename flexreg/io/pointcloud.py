@@ -38,6 +38,13 @@ _MAX_HEADER_LINES = 100_000
 
 
 # --------------------------------------------------------------------------------- reading
+def _starts_as_ply(path: Path) -> bool:
+    """Whether the file begins with PLY's magic line (``ply`` and a line end)."""
+    with open(path, "rb") as f:
+        head = f.read(4)
+    return head[:3] == b"ply" and head[3:4] in (b"\n", b"\r")
+
+
 def is_mesh(path: Path) -> bool:
     """Whether ``path`` is a PLY triangle mesh (its header declares faces), not a point cloud.
 
@@ -54,9 +61,7 @@ def is_mesh(path: Path) -> bool:
         True when the header has a ``face`` element with at least one face.
     """
     try:
-        with open(path, "rb") as f:
-            head = f.read(4)
-        if head[:3] != b"ply" or head[3:4] not in (b"\n", b"\r"):
+        if not _starts_as_ply(path):
             return False
         face = _parse_ply_header(path).element("face")
     except (OSError, InputError):
@@ -95,9 +100,7 @@ def read(path: Path, **options: Any) -> list[Scan]:
     """
     if options:
         raise InputError(path, f"unknown PLY/PCD option(s): {', '.join(sorted(options))}")
-    with open(path, "rb") as f:
-        head = f.read(4)
-    if head[:3] == b"ply" and head[3:4] in (b"\n", b"\r"):
+    if _starts_as_ply(path):
         ply = _parse_ply_header(path)
         _check_ply_data(path, ply)
         return [_read_ply(path, ply)]

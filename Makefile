@@ -7,7 +7,7 @@ DEMO   ?= demo-output
 # test processes of make test (pytest-xdist; each test file runs whole in one of them)
 TEST_WORKERS ?= 2
 
-.PHONY: install demo test lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare bench-perf clean
+.PHONY: install demo test test-variants lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare bench-perf clean
 
 install: $(STAMP)
 
@@ -38,6 +38,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	@bash scripts/ensure-system-libs.sh
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+
+# the numeric tests under the CPU variants of other machines (numpy SIMD caps, OpenBLAS core
+# types, numba's target CPU, thread counts, rays moved by a few ulps): run it before resolving an
+# issue that adds numeric tests (docs/determinism.md); about three times `make test`
+test-variants: $(STAMP)
+	@bash scripts/ensure-system-libs.sh
+	TEST_WORKERS=$(TEST_WORKERS) bash scripts/test-variants.sh
 
 lint: $(STAMP)
 	$(BIN)/ruff check flexreg tests benchmarks

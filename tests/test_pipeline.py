@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import REPO
+from conftest import REPO, room_pair
 
 from flexreg import Scan, read_scan
 from flexreg.core.camera import SphericalCamera
@@ -99,9 +99,8 @@ def test_prepare_without_overlap_is_bit_for_bit_the_same():
     from dataclasses import replace
 
     from flexreg.registration import Registration
-    from flexreg.synth import station_pair
 
-    pair = station_pair("room", seed=4, resolution=(512, 256))
+    pair = room_pair(4, (512, 256))
     reg = Registration(RegistrationConfig())
     one = [reg.prepare(s) for s in (pair.target, pair.source)]
     two = [reg.prepare(s, overlap=False) for s in (pair.target, pair.source)]
@@ -125,9 +124,8 @@ def test_prepare_lets_go_of_the_scan_before_the_feature_stages(monkeypatch):
 
     from flexreg.registration import Registration
     from flexreg.registration import preparation as pl
-    from flexreg.synth import station_pair
 
-    pair = station_pair("room", seed=4, resolution=(512, 256))
+    pair = room_pair(4, (512, 256))
     reg = Registration(RegistrationConfig())
     kept = [reg.prepare(s, overlap=False) for s in (pair.target, pair.source)]
     alive: list[object] = []

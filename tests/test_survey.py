@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import one_error_line, run_cli
+from conftest import one_error_line, room_project, run_cli
 
 from flexreg.errors import InputError
 from flexreg.io import read_scans
@@ -19,14 +19,8 @@ STATIONS = ["station_00", "station_01", "station_02"]
 
 @pytest.fixture(scope="module")
 def project(tmp_path_factory) -> Path:
-    """Four stations of a seeded synthetic room at 512 x 256, with gt.json."""
-    folder = tmp_path_factory.mktemp("project")
-    rc, _, err = run_cli(
-        ["synth", "--scene", "room", "--stations", "4", "--resolution", "512x256", "--seed", "0",
-         "--out", folder]
-    )  # fmt: skip
-    assert rc == 0, err
-    return folder
+    """Four stations of a synthetic room at 512 x 256 at fixed poses, with gt.json."""
+    return room_project(tmp_path_factory.mktemp("project"), 4)
 
 
 def _files(project: Path, names=STATIONS) -> list[Path]:
@@ -120,6 +114,131 @@ def test_two_dask_worker_processes_give_the_same_poses(first, project, tmp_path)
     assert [(e["target"], e["source"], e["status"]) for e in doc["links"]] == [
         (e["target"], e["source"], e["status"]) for e in before["links"]
     ]
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def dask_cluster(tmp_path):
+    """A real Dask cluster on loopback, as a user starts one: a ``dask scheduler`` process and
+    two ``dask worker`` processes of one thread each (no dashboards). Yields the address."""
+    import subprocess
+    import sys
+
+    from distributed import Client
+
+    dask = Path(sys.executable).with_name("dask")
+    if not dask.exists():
+        pytest.skip("the dask command is not installed beside this Python")
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    logs = tmp_path / "cluster-logs"
+    logs.mkdir()
+    procs = []
+
+    def start(name: str, *args: str) -> None:
+        log = (logs / f"{name}.log").open("w")
+        procs.append(
+            subprocess.Popen([str(dask), *args], stdout=log, stderr=subprocess.STDOUT, cwd=logs)
+        )
+
+    try:
+        start("scheduler", "scheduler", "--host", "127.0.0.1", "--port",
+              address.rsplit(":", 1)[1], "--no-dashboard", "--no-show")  # fmt: skip
+        for k in range(2):
+            start(f"worker{k}", "worker", address, "--nthreads", "1", "--nworkers", "1",
+                  "--no-dashboard", "--host", "127.0.0.1", "--name", f"w{k}",
+                  "--local-directory", str(logs / f"w{k}"))  # fmt: skip
+        with Client(address, timeout="60s") as c:
+            c.wait_for_workers(2, timeout=120)
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def test_a_dask_cluster_by_address_gives_the_same_poses(first, project, tmp_path, dask_cluster):
+    """`flexreg survey --scheduler`, on real scheduler and worker processes: the links run on
+    the workers and every pose is bit for bit the one of ``--workers 1``."""
+    out = _with_cache(first[3], tmp_path / "out", links=False)
+    rc, _, err = run_cli(
+        ["--overwrite", "survey", *_files(project), "--out", out, "--scheduler", dask_cluster]
+    )
+    assert rc == first[0], err
+    doc, before = _doc(out), _doc(first[3])
+    assert doc["summary"]["links_from_cache"] == 0 and doc["summary"]["workers"] == 2
+    for stem in STATIONS:
+        assert (
+            doc["stations"][stem]["T_reference_station"]
+            == before["stations"][stem]["T_reference_station"]
+        )
+    assert [(e["target"], e["source"], e["status"]) for e in doc["links"]] == [
+        (e["target"], e["source"], e["status"]) for e in before["links"]
+    ]
+
+
+@pytest.mark.parametrize(
+    "address, message",
+    [
+        ("DEAD", "cannot reach"),
+        ("udp://127.0.0.1:8786", "the scheme must be tcp:// or tls://"),
+        ("tcp://127.0.0.1", "is not tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:99999", "is not tcp://HOST:PORT"),
+    ],
+)
+def test_a_bad_scheduler_address_is_one_line_exit_1_nothing_written(
+    address, message, project, tmp_path
+):
+    if address == "DEAD":
+        address = f"tcp://127.0.0.1:{_free_port()}"  # nothing listens there
+    out = tmp_path / "out"
+    rc, _, err = run_cli(["survey", *_files(project), "--out", out, "--scheduler", address])
+    assert rc == 1
+    line = one_error_line(err)
+    assert "--scheduler" in line and message in line, line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("service", ["web server", "greeting server"])
+def test_another_service_is_no_scheduler(service, project, tmp_path):
+    """Another service on the port: a web server (it waits for a request, as the client
+    waits for a handshake) or one that greets first (an SSH banner, whose bytes read as a
+    Dask message size are exabytes): one line, exit 1, within the probe's 10 s."""
+    import socketserver
+    import threading
+
+    class WebServer(socketserver.StreamRequestHandler):
+        def handle(self):
+            self.rfile.readline()  # waits for a request line that never comes
+
+    class Greeter(socketserver.StreamRequestHandler):
+        def handle(self):
+            self.wfile.write(b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n")
+
+    handler = WebServer if service == "web server" else Greeter
+    server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), handler)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        address = f"tcp://127.0.0.1:{server.server_address[1]}"
+        out = tmp_path / "out"
+        rc, _, err = run_cli(["survey", *_files(project), "--out", out, "--scheduler", address])
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert rc == 1
+    assert "does not answer as a Dask scheduler" in one_error_line(err)
+    assert not out.exists()
 
 
 def test_an_unreadable_station_is_reported_the_rest_registered_exit_3(first, project, tmp_path):

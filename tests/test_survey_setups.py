@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
+from conftest import room_project, run_cli
 
 from flexreg.core.transforms import make_transform, rotation_about_axis
 from flexreg.io import read_scan, write_scan
@@ -60,12 +60,7 @@ def test_ptx_headers_count_lines_and_refuse_a_short_file(tmp_path):
 @pytest.fixture(scope="module")
 def project_e57(tmp_path_factory) -> tuple[Path, dict]:
     """Three synthetic stations in one E57; stored poses from the truth, station 2's wrong."""
-    folder = tmp_path_factory.mktemp("setups")
-    rc, _, err = run_cli(
-        ["synth", "--scene", "room", "--stations", "3", "--resolution", "512x256", "--seed", "0",
-         "--out", folder]
-    )  # fmt: skip
-    assert rc == 0, err
+    folder = room_project(tmp_path_factory.mktemp("setups"), 3)
     gt = json.loads((folder / "gt.json").read_text())
     scans = []
     for i, st in enumerate(gt["stations"]):

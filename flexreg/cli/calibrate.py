@@ -92,7 +92,7 @@ def _check_mode(
                 raise ConfigError(f"{option}: needs a calibration: give --pairs and/or --auto")
 
 
-def _parse_distortion(text: str | None) -> list[float]:
+def parse_distortion(text: str | None) -> list[float]:
     if text is None:
         return []
     try:
@@ -132,7 +132,7 @@ def read_image(path: Path) -> NDArray[np.uint8]:
     return np.asarray(img, dtype=np.uint8)
 
 
-def _intrinsics(
+def intrinsics_from_options(
     camera: Path | None,
     pinhole: tuple[float, float, float, float] | None,
     distortion: list[float],
@@ -175,12 +175,12 @@ def _png_writer(path: Path, image: NDArray[np.uint8]) -> Any:
     return lambda: atomic_write(path, write_png)
 
 
-_ImageOption = Annotated[Path, typer.Option("--image", help="Camera image (PNG, JPEG, ...).")]
-_ScanOption = Annotated[
+ImageOption = Annotated[Path, typer.Option("--image", help="Camera image (PNG, JPEG, ...).")]
+ScanOption = Annotated[
     Path,
     typer.Option("--scan", help="Lidar scan in any readable format (KITTI .bin, .pcd, .ply, ...)."),
 ]
-_CameraOption = Annotated[
+CameraOption = Annotated[
     Path | None,
     typer.Option(
         "--camera",
@@ -188,7 +188,7 @@ _CameraOption = Annotated[
         "intrinsic JSON) or a KITTI calib .txt (P2, rectified, no distortion).",
     ),
 ]
-_PinholeOption = Annotated[
+PinholeOption = Annotated[
     tuple[float, float, float, float] | None,
     typer.Option(
         "--pinhole",
@@ -196,7 +196,7 @@ _PinholeOption = Annotated[
         help="Intrinsics as options instead of --camera (pixels; size from the image).",
     ),
 ]
-_DistortionOption = Annotated[
+DistortionOption = Annotated[
     str | None,
     typer.Option(
         "--distortion",
@@ -234,7 +234,7 @@ _AutoOption = Annotated[
         "initial guess; --pairs, if given, join them.",
     ),
 ]
-_InitOption = Annotated[
+InitOption = Annotated[
     Path | None,
     typer.Option(
         "--init",
@@ -251,13 +251,13 @@ _ExportViewsOption = Annotated[
         "flexion-view.png (with --init) and pairs-template.csv.",
     ),
 ]
-_SeedOption = Annotated[
+SeedOption = Annotated[
     int | None,
     typer.Option(
         "--seed", help=with_default(_C, "seed", "RANSAC seed; the same seed gives the same result.")
     ),
 ]
-_ThresholdPxOption = Annotated[
+ThresholdPxOption = Annotated[
     float | None,
     typer.Option(
         "--threshold-px",
@@ -266,7 +266,7 @@ _ThresholdPxOption = Annotated[
         ),
     ),
 ]
-_KittiCameraOption = Annotated[
+KittiCameraOption = Annotated[
     int,
     typer.Option("--kitti-camera", help="Camera of a KITTI calib file (2: left colour, image_2)."),
 ]
@@ -282,20 +282,20 @@ _TruthOption = Annotated[
 
 @app.command("calibrate")
 def calibrate_command(
-    image: _ImageOption,
-    scan: _ScanOption,
-    camera: _CameraOption = None,
-    pinhole: _PinholeOption = None,
-    distortion: _DistortionOption = None,
+    image: ImageOption,
+    scan: ScanOption,
+    camera: CameraOption = None,
+    pinhole: PinholeOption = None,
+    distortion: DistortionOption = None,
     pairs: _PairsOption = None,
     out: _OutOption = None,
     overlay: _OverlayOption = None,
     auto: _AutoOption = False,
-    init: _InitOption = None,
+    init: InitOption = None,
     export_views: _ExportViewsOption = None,
-    seed: _SeedOption = None,
-    threshold_px: _ThresholdPxOption = None,
-    kitti_camera: _KittiCameraOption = 2,
+    seed: SeedOption = None,
+    threshold_px: ThresholdPxOption = None,
+    kitti_camera: KittiCameraOption = 2,
     truth: _TruthOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
@@ -343,12 +343,12 @@ def calibrate_command(
     ]
     check_outputs([("--out", out, ".json"), ("--overlay", overlay, ".png")], inputs=inputs)
     check_out_folder("--export-views", export_views)
-    dist = _parse_distortion(distortion)
+    dist = parse_distortion(distortion)
 
     with stage(f"Reading {image.name}"):
         img = read_image(image)
     H, W = img.shape[:2]
-    intr = _intrinsics(camera, pinhole, dist, kitti_camera, image, W, H)
+    intr = intrinsics_from_options(camera, pinhole, dist, kitti_camera, image, W, H)
     T_init = None if init is None else read_extrinsic(init, kitti_camera=kitti_camera)
     T_true = None if truth is None else read_extrinsic(truth, kitti_camera=kitti_camera)
     with stage(f"Reading {scan.name}"):

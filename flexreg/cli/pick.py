@@ -13,17 +13,17 @@ from flexreg.cli._common import console, err_console, stage
 from flexreg.cli.app import app
 from flexreg.cli.calibrate import (
     OPTIONS,
-    _CameraOption,
-    _DistortionOption,
-    _ImageOption,
-    _InitOption,
-    _intrinsics,
-    _KittiCameraOption,
-    _parse_distortion,
-    _PinholeOption,
-    _ScanOption,
-    _SeedOption,
-    _ThresholdPxOption,
+    CameraOption,
+    DistortionOption,
+    ImageOption,
+    InitOption,
+    KittiCameraOption,
+    PinholeOption,
+    ScanOption,
+    SeedOption,
+    ThresholdPxOption,
+    intrinsics_from_options,
+    parse_distortion,
     read_image,
 )
 from flexreg.cli.options import ConfigFileOption, SetOption, build_config, check_outputs
@@ -73,21 +73,21 @@ _PreviewOption = Annotated[
 
 @app.command("pick")
 def pick_command(
-    image: _ImageOption,
-    scan: _ScanOption,
+    image: ImageOption,
+    scan: ScanOption,
     out: _PickOutOption,
-    camera: _CameraOption = None,
-    pinhole: _PinholeOption = None,
-    distortion: _DistortionOption = None,
-    init: _InitOption = None,
+    camera: CameraOption = None,
+    pinhole: PinholeOption = None,
+    distortion: DistortionOption = None,
+    init: InitOption = None,
     pairs: _PickPairsOption = None,
     result: _ResultOption = None,
     port: _PortOption = 0,
     no_browser: _NoBrowserOption = False,
     preview_px: _PreviewOption = 2048,
-    seed: _SeedOption = None,
-    threshold_px: _ThresholdPxOption = None,
-    kitti_camera: _KittiCameraOption = 2,
+    seed: SeedOption = None,
+    threshold_px: ThresholdPxOption = None,
+    kitti_camera: KittiCameraOption = 2,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -115,12 +115,12 @@ def pick_command(
     result = result if result is not None else out.with_name(out.stem + "-calib.json")
     inputs = [p for p in (image, camera, scan, init) if p is not None]
     check_outputs([("--out", out, ".csv"), ("--result", result, ".json")], inputs=inputs)
-    dist = _parse_distortion(distortion)
+    dist = parse_distortion(distortion)
 
     with stage(f"Reading {image.name}"):
         img = read_image(image)
     H, W = img.shape[:2]
-    intr = _intrinsics(camera, pinhole, dist, kitti_camera, image, W, H)
+    intr = intrinsics_from_options(camera, pinhole, dist, kitti_camera, image, W, H)
     T_init = None if init is None else read_extrinsic(init, kitti_camera=kitti_camera)
     with stage(f"Reading {scan.name}"):
         lidar = read_scan(scan)

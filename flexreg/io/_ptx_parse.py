@@ -1,5 +1,5 @@
 """The PTX text parser: a parallel numba kernel over the raw bytes of whole lines
-(:func:`_parse_all`), used by :mod:`flexreg.io.ptx`, which validates what it returns."""
+(:func:`parse_all`), used by :mod:`flexreg.io.ptx`, which validates what it returns."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from numba import prange
 from numpy.typing import NDArray
 
 _MAX_VALUES = 7
-_POW10 = np.array([10.0**i for i in range(23)])
+POW10 = np.array([10.0**i for i in range(23)])
 
 # error codes of the line parser
-_OK, _BAD_NUMBER, _TOO_MANY = 0, 1, 2
+_OK, _BAD_NUMBER, TOO_MANY = 0, 1, 2
 
 
 # ------------------------------------------------------------------------------ parsing kernels
@@ -51,7 +51,7 @@ def _parse_line(
         if i >= n or buf[i] == 10:
             return count, _OK, i
         if count >= out.shape[0]:
-            return count, _TOO_MANY, _line_end(buf, i, n)
+            return count, TOO_MANY, _line_end(buf, i, n)
         neg = False
         if buf[i] == 45 or buf[i] == 43:  # - +
             neg = buf[i] == 45
@@ -117,7 +117,7 @@ def _parse_line(
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _parse_all(
+def parse_all(
     buf: NDArray[np.uint8], n_chunks: int, pow10: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]:
     """Parse every line of ``buf`` in one parallel pass.

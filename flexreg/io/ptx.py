@@ -37,7 +37,7 @@ from flexreg.core.range_image import RangeImage, working_stride
 from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import InputError
-from flexreg.io._ptx_parse import _POW10, _TOO_MANY, _parse_all
+from flexreg.io._ptx_parse import POW10, TOO_MANY, parse_all
 
 log = logging.getLogger(__name__)
 
@@ -84,13 +84,13 @@ _PARSE_LOCK = threading.Lock()
 def _parse(buf: NDArray[np.uint8]) -> Lines:
     n_chunks = numba.get_num_threads() * max(1, min(64, buf.shape[0] >> 22))
     with _PARSE_LOCK:
-        return _parse_all(buf, n_chunks, _POW10)
+        return parse_all(buf, n_chunks, POW10)
 
 
 def _chunks(path: Path, size: int, chunk: int | None = None) -> Iterator[tuple[int, Lines]]:
     """The file's lines parsed about :data:`_CHUNK_BYTES` at a time (whole lines only):
     ``(offset of the chunk's first byte, (head, tail, counts, errors))`` of
-    :func:`_parse_all`. One buffer is reused; it grows only for a line longer than a chunk.
+    :func:`parse_all`. One buffer is reused; it grows only for a line longer than a chunk.
     ``chunk``: bytes per chunk instead of :func:`_chunk_bytes`."""
     buf = np.empty(min(chunk or _chunk_bytes(size), max(size, 1)), dtype=np.uint8)
     filled, offset = 0, 0
@@ -308,7 +308,7 @@ class _Cloud:
         path = self.path
         if self.bad is not None:
             k, err = self.bad
-            what = "more than 7 values" if err == _TOO_MANY else "not a valid number"
+            what = "more than 7 values" if err == TOO_MANY else "not a valid number"
             raise InputError(path, f"line {k + 1}: {what}")
         if self.ncol not in (3, 4, 7):
             raise InputError(
@@ -379,7 +379,7 @@ def _header_cloud(
         raise InputError(
             path, f"cloud {index}: grid size {cols_f:g} x {rows_f:g} is not valid (too large)"
         )
-    M = _header_pose(np.stack(head[2:10])[:, :4])
+    M = header_pose(np.stack(head[2:10])[:, :4])
     cap = min(rows * cols, bytes_left // _MIN_LINE_BYTES + 1)
     stride = None if max_pixels is None else working_stride(rows, cols, max_pixels)
     cloud = _Cloud(path, index, line + _HEADER_LINES, rows, cols, cap, dtype, intensity, stride)
@@ -515,7 +515,7 @@ def _read(
     return scans
 
 
-def _header_pose(rows: NDArray[np.float64]) -> NDArray[np.float64]:
+def header_pose(rows: NDArray[np.float64]) -> NDArray[np.float64]:
     """``T_world_scanner`` of a cloud's header lines 3-10: the 4x4 transform (written
     transposed), or, when that is the identity and the scanner registration lines are not,
     the pose those give (position; the scanner's x, y, z axes as rows)."""

@@ -27,7 +27,7 @@ from flexreg.core.transforms import invert, is_rigid
 from flexreg.errors import InputError
 from flexreg.io.e57 import headers
 from flexreg.io.formats import detect_format
-from flexreg.io.ptx import _header_pose
+from flexreg.io.ptx import header_pose
 from flexreg.io.scans import check_file, read_scans
 from flexreg.io.selector import ScanRef, parse_scan_ref, pick, select_setup, setup_choices
 
@@ -200,7 +200,7 @@ def ptx_headers(path: Path) -> list[tuple[str, int, NDArray[np.float64]]]:
             for i, r in enumerate(rows[2:]):
                 pose[i, : len(r)] = r
             name = path.stem if not out else f"{path.stem}#{len(out)}"
-            out.append((name, n, _header_pose(pose)))
+            out.append((name, n, header_pose(pose)))
             if not _skip_lines(f, n):
                 raise InputError(
                     path, f"cloud {len(out) - 1}: header announces {n} points; the file ends early"

@@ -55,15 +55,15 @@ from flexreg.registration.fullres import FullPair, full_pair_of
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
+    Run,
     ScanView,
-    _keypoints,
-    _plans_of,
-    _range_images,
-    _refine_sample,
-    _Run,
-    _timed,
-    _views,
     feature_image,
+    keypoints_of,
+    plans_of,
+    range_images_of,
+    refinement_sample,
+    scan_views,
+    timed_stage,
 )
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
@@ -106,7 +106,7 @@ def _plan_priors(
 
 
 def _pair_plan_priors(images: list[RangeImage], config: RegistrationConfig) -> PlanPriors:
-    t, s = _plans_of(images, config)
+    t, s = plans_of(images, config)
     return _plan_priors(t, s, config)
 
 
@@ -151,7 +151,7 @@ def _descriptor_prior(
 
 
 def _match(
-    images: list[RangeImage], kps: list[Keypoints3D], config: RegistrationConfig, run: _Run
+    images: list[RangeImage], kps: list[Keypoints3D], config: RegistrationConfig, run: Run
 ) -> _Matched:
     """The inlier threshold, descriptor matching and RANSAC (the descriptor prior)."""
     (ti, si), (kt, ks) = images, kps
@@ -190,7 +190,7 @@ def _match(
 def _plan_candidates(
     job: Future[PlanPriors] | None,
     config: RegistrationConfig,
-    run: _Run,
+    run: Run,
     notes: list[str],
 ) -> tuple[list[Candidate], Aliases | None]:
     """The plan overlays of the background job and the scans' symmetries, or none (the
@@ -229,7 +229,7 @@ def _refine(
     thr: float,
     check: Check,
     config: RegistrationConfig,
-    run: _Run,
+    run: Run,
 ) -> Any:
     """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`)."""
     vt, vs = views
@@ -324,7 +324,7 @@ def _finish(
     m: _Matched,
     plan_priors: list[Candidate],
     config: RegistrationConfig,
-    run: _Run,
+    run: Run,
     init: NDArray[np.float64] | None = None,
     aliases: Aliases | None = None,
 ) -> RegistrationResult:
@@ -511,7 +511,7 @@ def register(
     """
     _check_upright(config)
     init = _check_init(config, init)
-    run = _Run(progress)
+    run = Run(progress)
     scans = [target, source]
     given: list[Scan | RangeImage] = [
         x if i is None else i
@@ -519,7 +519,7 @@ def register(
     ]
     images = None  # the working images made below replace the given ones
     with run.stage("range images"):
-        images = _range_images(given, config)
+        images = range_images_of(given, config)
     del given
     roles = [(True, False), (False, True)]
     with _single_threaded(2) as pool:
@@ -528,8 +528,10 @@ def register(
             if _plan_wanted(config, images) and not config.icp_only
             else None
         )
-        view_job = pool.submit(run.background("preparation", _views, scans, images, config, roles))
-        kps = _keypoints(images, config, run)
+        view_job = pool.submit(
+            run.background("preparation", scan_views, scans, images, config, roles)
+        )
+        kps = keypoints_of(images, config, run)
         matched = _match(images, kps, config, run)
         plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
@@ -579,27 +581,27 @@ class Registration:
         builds it while reading, :func:`flexreg.io.read_working_scan`); the scan then serves
         only for the refinement's sample.
         """
-        config, run = self.config, _Run(progress)
+        config, run = self.config, Run(progress)
         with run.stage("range images"):
-            images = _range_images([scan if image is None else image], config)
+            images = range_images_of([scan if image is None else image], config)
         image = None  # the caller's working image, holes unfilled, is no longer needed
         refine_sample = None
         if not keep_scan:
-            with _timed(run.timings, "preparation"):
-                refine_sample = _refine_sample(scan, config)
+            with timed_stage(run.timings, "preparation"):
+                refine_sample = refinement_sample(scan, config)
             scan = images[0]
         views_of = [None] if not keep_scan else [scan]
         with _single_threaded(2) as pool:
             submit = pool.submit if overlap else (lambda job: SimpleNamespace(result=job))
             plan_job = (
-                submit(run.background("plan views", _plans_of, images, config))
+                submit(run.background("plan views", plans_of, images, config))
                 if _plan_wanted(config, images)
                 else None
             )
             view_job = submit(
-                run.background("preparation", _views, views_of, images, config, [(True, True)])
+                run.background("preparation", scan_views, views_of, images, config, [(True, True)])
             )
-            (kp,) = _keypoints(images, config, run)
+            (kp,) = keypoints_of(images, config, run)
             plan = None
             if plan_job is not None:
                 run.wait("plan views")
@@ -624,7 +626,7 @@ class Registration:
         init = _check_init(config, init)
         if target.config != config or source.config != config:
             raise ConfigError("align needs scans prepared with the same configuration")
-        run = _Run(progress)
+        run = Run(progress)
         for p in (target, source):
             for name, s in p.timings_s.items():
                 run.timings[name] = run.timings.get(name, 0.0) + s

@@ -127,14 +127,14 @@ class PreparedScan:
 
 
 @contextmanager
-def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
+def timed_stage(timings: dict[str, float], name: str) -> Iterator[None]:
     t = time.perf_counter()
     yield
     timings[name] = timings.get(name, 0.0) + time.perf_counter() - t
 
 
 @dataclass(eq=False)
-class _Run:
+class Run:
     """Timings and progress of one call."""
 
     progress: Progress
@@ -143,7 +143,7 @@ class _Run:
 
     def stage(self, name: str) -> Any:
         self.wait(name)
-        return _timed(self.timings, name)
+        return timed_stage(self.timings, name)
 
     def wait(self, name: str) -> None:
         if self.progress is not None:
@@ -155,13 +155,13 @@ class _Run:
 
         def job() -> Any:
             numba.set_num_threads(1)
-            with _timed(self.timings, name), fft.set_workers(-1):
+            with timed_stage(self.timings, name), fft.set_workers(-1):
                 return fn(*args)
 
         return job
 
 
-def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) -> list[RangeImage]:
+def range_images_of(scans: list[Scan | RangeImage], config: RegistrationConfig) -> list[RangeImage]:
     """The working images: no stage maps their pixels back to point numbers, so their
     ``index`` is not kept (a read-only -1 view: 8 bytes per pixel less, 16 MB per
     2048 x 1024 image), nor their intensity unless the feature image reads it."""
@@ -177,8 +177,8 @@ def _range_images(scans: list[Scan | RangeImage], config: RegistrationConfig) ->
     return [fill_holes(i) for i in images] if config.fill_holes else images
 
 
-def _keypoints(
-    images: list[RangeImage], config: RegistrationConfig, run: _Run
+def keypoints_of(
+    images: list[RangeImage], config: RegistrationConfig, run: Run
 ) -> list[Keypoints3D]:
     """Feature images, keypoints and descriptors, and their 3D points, stage by stage."""
     with run.stage("feature images"):
@@ -208,11 +208,11 @@ def _plan_view(image: RangeImage, config: RegistrationConfig) -> PlanView | str:
         return str(e)
 
 
-def _plans_of(images: list[RangeImage], config: RegistrationConfig) -> list[PlanView | str]:
+def plans_of(images: list[RangeImage], config: RegistrationConfig) -> list[PlanView | str]:
     return [_plan_view(img, config) for img in images]
 
 
-def _refine_sample(
+def refinement_sample(
     scan: Scan | RangeImage, config: RegistrationConfig
 ) -> tuple[float, NDArray[np.float64]] | None:
     """The projective refinement's even sample of the whole scan and its cell (None when the
@@ -245,11 +245,11 @@ def _scan_view(
     if source:
         v.polish_sample = area_sample_image(image.xyz, image.valid, POLISH_POINTS)
     if scan is not None:
-        v.refine_sample = _refine_sample(scan, config)
+        v.refine_sample = refinement_sample(scan, config)
     return v
 
 
-def _views(
+def scan_views(
     scans: list[Scan | RangeImage] | list[None],
     images: list[RangeImage],
     config: RegistrationConfig,

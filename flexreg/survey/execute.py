@@ -17,6 +17,7 @@ import logging
 import os
 import pickle
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -83,6 +84,66 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def scheduler_address(address: str) -> tuple[str, int]:
+    """Host and port of a Dask scheduler address, ``tcp://HOST:PORT`` or ``tls://HOST:PORT``
+    (``HOST:PORT`` means tcp).
+
+    Raises
+    ------
+    ConfigError
+        Another scheme, no host, or no port in 1-65535.
+    """
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    if scheme not in ("tcp", "tls"):
+        raise ConfigError(
+            f"--scheduler: {address!r}: the scheme must be tcp:// or tls:// (got {scheme}://)"
+        )
+    host, colon, port = rest.rpartition(":")
+    host = host.strip("[]")
+    if not colon or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigError(f"--scheduler: {address!r} is not {scheme}://HOST:PORT")
+    return host, int(port)
+
+
+#: bytes a Dask scheduler's first message (its handshake) may announce; another server's
+#: greeting read as a Dask frame header announces far more (or nothing at all)
+_HANDSHAKE_MAX_BYTES = 1 << 24
+
+
+def _probe_scheduler(address: str, timeout_s: float = 10.0) -> None:
+    """Refuse, in one line and within ``timeout_s``, an address where no Dask scheduler
+    listens: a closed port at once, instead of after the client's retries; another service
+    (a web server waits for a request, so the client would wait for ever; a server that
+    greets first would have its greeting read as a message size of exabytes). A Dask
+    scheduler greets every connection with its handshake, a message whose size leads it as
+    8 little-endian bytes (TLS is only checked for a listening port)."""
+    host, port = scheduler_address(address)
+    try:
+        conn = socket.create_connection((host, port), timeout=timeout_s)
+    except OSError as e:
+        raise ConfigError(f"--scheduler: cannot reach {address}: {e}") from None
+    with conn:
+        if address.startswith("tls://"):
+            return
+        head = b""
+        try:
+            while len(head) < 8:
+                got = conn.recv(8 - len(head))
+                if not got:
+                    break
+                head += got
+        except OSError:
+            pass
+    size = int.from_bytes(head, "little") if len(head) == 8 else 0
+    if not 0 < size <= _HANDSHAKE_MAX_BYTES:
+        raise ConfigError(
+            f"--scheduler: {address} does not answer as a Dask scheduler (is it the "
+            "scheduler's port, 8786 by default?)"
+        )
+
+
 @contextmanager
 def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     """A Dask client (a local cluster of ``workers`` processes, or the cluster at
@@ -101,10 +162,15 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
+        _probe_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout="20s")
         except (OSError, TimeoutError) as e:
             raise ConfigError(f"--scheduler: cannot reach {scheduler}: {e}") from None
+        except Exception as e:  # another server answers with bytes Dask misreads
+            raise ConfigError(
+                f"--scheduler: {scheduler} does not answer as a Dask scheduler ({type(e).__name__})"
+            ) from None
         try:
             yield client
         finally:
@@ -296,4 +362,5 @@ __all__ = [
     "default_workers",
     "link_cache_path",
     "run_tasks",
+    "scheduler_address",
 ]

@@ -19,17 +19,17 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from flexreg._version import __version__
-from flexreg.core.transforms import invert
+from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import ConfigError, InputError
 from flexreg.io import atomic_write, write_scan
 from flexreg.synth.config import RGBDConfig, SynthConfig, TLSConfig
@@ -311,10 +311,45 @@ def _write_json(path: Path, doc: dict[str, Any]) -> None:
     atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
+def _place(
+    scene: Scene, cfg: SynthConfig, tls: TLSConfig, poses: Sequence[ArrayLike] | None
+) -> tuple[list[NDArray[np.float64]], ProjectPlacement | None]:
+    """The stations' ``T_world_scanner``: the given ones, a project's or a seeded placement."""
+    plan: ProjectPlacement | None = None
+    placed: list[NDArray[np.float64]]
+    if poses is not None:
+        placed = [as_transform(T) for T in poses]
+        if len(placed) != cfg.stations:
+            raise ConfigError(f"poses: {len(placed)} given for {cfg.stations} stations")
+    elif cfg.is_project:
+        plan = place_project(
+            scene,
+            cfg.stations,
+            min_overlap=cfg.min_overlap,
+            distance_range_m=cfg.distance_range_m,
+            max_tilt_rad=cfg.max_tilt_rad,
+            config=tls,
+            rng=stream(cfg.seed, _PLACEMENT),
+        )
+        placed = plan.poses
+    else:
+        placed = place_stations(
+            scene,
+            cfg.stations,
+            min_overlap=cfg.min_overlap,
+            distance_range_m=cfg.distance_range_m,
+            max_tilt_rad=cfg.max_tilt_rad,
+            config=tls,
+            rng=stream(cfg.seed, _PLACEMENT),
+        )
+    return placed, plan
+
+
 def synthesize(
     out_dir: str | PathLike[str],
     config: SynthConfig | None = None,
     *,
+    poses: Sequence[ArrayLike] | None = None,
     progress: Progress | None = None,
 ) -> SynthResult:
     """Generate a scene, place and simulate stations, and write everything to ``out_dir``.
@@ -327,6 +362,10 @@ def synthesize(
     out_dir : path-like
         Output folder (created; existing files of the same names are replaced).
     config : SynthConfig
+    poses : sequence of (4, 4) float64, optional
+        ``T_world_scanner`` of every station (metres), one per ``config.stations``, instead
+        of placing them: a fixed view whatever the CPU (seeded placement depends on ray-cast
+        ties between coplanar faces, see docs/determinism.md).
     progress : callable, optional
         ``progress(stage, done, total)`` after each station / frame.
 
@@ -348,28 +387,7 @@ def synthesize(
     scene = build_scene(cfg)
     secs["scene"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    plan: ProjectPlacement | None = None
-    if cfg.is_project:
-        plan = place_project(
-            scene,
-            cfg.stations,
-            min_overlap=cfg.min_overlap,
-            distance_range_m=cfg.distance_range_m,
-            max_tilt_rad=cfg.max_tilt_rad,
-            config=tls,
-            rng=stream(cfg.seed, _PLACEMENT),
-        )
-        poses = plan.poses
-    else:
-        poses = place_stations(
-            scene,
-            cfg.stations,
-            min_overlap=cfg.min_overlap,
-            distance_range_m=cfg.distance_range_m,
-            max_tilt_rad=cfg.max_tilt_rad,
-            config=tls,
-            rng=stream(cfg.seed, _PLACEMENT),
-        )
+    placed, plan = _place(scene, cfg, tls, poses)
     secs["placement"] = time.perf_counter() - t0
     traj: list[NDArray[np.float64]] = []
     rgbd_cfg = RGBDConfig()
@@ -390,15 +408,15 @@ def synthesize(
     t0 = time.perf_counter()
     files.append(scene.write(out / "scene.ply"))
     secs["mesh"] = time.perf_counter() - t0
-    stations = _write_stations(out, scene, poses, cfg, tls, files, progress)
+    stations = _write_stations(out, scene, placed, cfg, tls, files, progress)
     secs["stations"] = sum(s.seconds for s in stations)
     t0 = time.perf_counter()
     project_doc: dict[str, Any] = {}
     if plan is None:
-        pairs = _station_pairs(scene, poses, stations, cfg, tls)
+        pairs = _station_pairs(scene, placed, stations, cfg, tls)
     else:
-        overlap = overlap_matrix(scene, poses, config=tls)
-        pairs = _project_pairs(overlap, poses, stations, cfg)
+        overlap = overlap_matrix(scene, placed, config=tls)
+        pairs = _project_pairs(overlap, placed, stations, cfg)
         names = [s.name for s in stations]
         project_doc = project_ground_truth(plan, overlap, names, cfg.min_overlap)
     secs["pairs"] = time.perf_counter() - t0

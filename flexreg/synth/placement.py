@@ -102,7 +102,7 @@ def free_map(
     return fm
 
 
-def _coarse_config(config: TLSConfig) -> TLSConfig:
+def coarse_config(config: TLSConfig) -> TLSConfig:
     w, h = OVERLAP_GRID
     return config.replace(
         width=w,
@@ -120,19 +120,19 @@ def _coarse_hits(
     scene: Scene, T: NDArray[np.float64], config: TLSConfig
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """World points and normals a station sees on the coarse overlap grid."""
-    cfg = _coarse_config(config)
+    cfg = coarse_config(config)
     key = ("coarse", T.tobytes(), cfg)
     cache = scene._cache.setdefault("coarse_hits", {})
     if key in cache:
         return cache[key]
-    pw, n = _coarse_points(scene, T, cfg)
+    pw, n = coarse_points(scene, T, cfg)
     if len(cache) > 32:  # ~0.8 MB per entry
         cache.clear()
     cache[key] = (pw, n)
     return pw, n
 
 
-def _coarse_points(
+def coarse_points(
     scene: Scene, T: NDArray[np.float64], cfg: TLSConfig
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """World points and normals of a station on the coarse grid ``cfg`` (uncached)."""
@@ -166,10 +166,10 @@ def visible_fraction(
     Ta = as_transform(T_world_from, name="T_world_from")
     Tb = as_transform(T_world_to, name="T_world_to")
     pts, normals = _coarse_hits(scene, Tb, cfg)
-    return _seen_share(scene, Ta, pts, normals, cfg)
+    return seen_share(scene, Ta, pts, normals, cfg)
 
 
-def _seen_share(
+def seen_share(
     scene: Scene,
     Ta: NDArray[np.float64],
     pts: NDArray[np.float64],
@@ -180,26 +180,26 @@ def _seen_share(
     ``Ta`` sees (the test of :func:`visible_fraction`)."""
     if len(pts) == 0:
         return 0.0
-    ok, d, dist = _seen_rays(Ta, pts, normals, cfg)
+    ok, d, dist = seen_rays(Ta, pts, normals, cfg)
     idx = np.flatnonzero(ok)
     if len(idx):
         t = scene.cast(Ta[:3, 3], d[idx]).t
-        ok[idx] = _unblocked(t, dist[idx])
+        ok[idx] = unblocked(t, dist[idx])
     return float(np.count_nonzero(ok)) / len(pts)
 
 
-def _unblocked(t: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.bool_]:
+def unblocked(t: NDArray[np.float64], dist: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Whether rays that first hit at ``t`` reach points at ``dist`` (2 cm + 0.5 %)."""
     return t >= dist - (0.02 + 0.005 * dist)
 
 
-def _seen_rays(
+def seen_rays(
     Ta: NDArray[np.float64],
     pts: NDArray[np.float64],
     normals: NDArray[np.float64],
     cfg: TLSConfig,
 ) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
-    """The tests of :func:`_seen_share` before the line of sight: ``(ok, directions,
+    """The tests of :func:`seen_share` before the line of sight: ``(ok, directions,
     distances)`` of every point from the station at ``Ta``."""
     o = Ta[:3, 3]
     v = pts - o
@@ -225,7 +225,7 @@ def station_overlap(
     )
 
 
-def _random_rotation(rng: np.random.Generator, max_tilt_rad: float) -> NDArray[np.float64]:
+def random_rotation(rng: np.random.Generator, max_tilt_rad: float) -> NDArray[np.float64]:
     """Any yaw, and a tilt of up to ``max_tilt_rad`` about a random horizontal axis."""
     yaw = rng.uniform(-math.pi, math.pi)
     axis_angle = rng.uniform(0.0, 2.0 * math.pi)
@@ -235,7 +235,7 @@ def _random_rotation(rng: np.random.Generator, max_tilt_rad: float) -> NDArray[n
     return Rt @ Rz
 
 
-def _check_positions(scene: Scene, P: NDArray[np.float64], clearance_m: float) -> NDArray[np.bool_]:
+def check_positions(scene: Scene, P: NDArray[np.float64], clearance_m: float) -> NDArray[np.bool_]:
     """Clearance from every surface, and not inside a closed object (back faces all around)."""
     ok = scene.distance(P) >= clearance_m
     dirs = np.array(
@@ -359,7 +359,7 @@ def place_stations(
                 base = np.array([poses[p][:2, 3] for p in parents])
                 xy = base + dist[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
             heights = gen.uniform(h0, h1, size=batch)
-            rots = [_random_rotation(gen, max_tilt_rad) for _ in range(batch)]
+            rots = [random_rotation(gen, max_tilt_rad) for _ in range(batch)]
             tries += batch
             free, gz = fm.lookup(xy)
             P = np.column_stack([xy, gz + heights])
@@ -373,7 +373,7 @@ def place_stations(
                     ok[i] = dmin <= d3 <= dmax
             idx = np.flatnonzero(ok)
             if len(idx):
-                ok[idx] = _check_positions(scene, P[idx], clearance_m)
+                ok[idx] = check_positions(scene, P[idx], clearance_m)
             for i in np.flatnonzero(ok):
                 T = np.eye(4)
                 T[:3, :3] = rots[i]
@@ -447,6 +447,7 @@ def station_pair(
     min_overlap: float = 0.5,
     max_tilt_rad: float = math.radians(5.0),
     config: TLSConfig | None = None,
+    poses: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> StationPair:
     """Two TLS stations of a scene with their exact ``T_target_source``, in one call.
 
@@ -466,6 +467,10 @@ def station_pair(
         See :func:`place_stations`.
     config : TLSConfig, optional
         Full sensor model.
+    poses : two (4, 4) float64, optional
+        ``T_world_scanner`` of the target and the source (metres) instead of placing them:
+        the same views on every CPU (seeded placement depends on ray-cast ties between
+        coplanar faces, see docs/determinism.md); ``seed`` still seeds the scene and noise.
     """
     if isinstance(seed, np.random.Generator):
         seed = int(seed.integers(0, 2**63 - 1))
@@ -476,15 +481,18 @@ def station_pair(
     cfg = config or TLSConfig(
         width=int(resolution[0]), height=int(resolution[1]), range_noise_m=noise_m
     )
-    Ta, Tb = place_stations(
-        sc,
-        2,
-        min_overlap=min_overlap,
-        distance_range_m=distance_range_m,
-        max_tilt_rad=max_tilt_rad,
-        config=cfg,
-        rng=stream(seed, 0),
-    )
+    if poses is not None:
+        Ta, Tb = (as_transform(T) for T in poses)
+    else:
+        Ta, Tb = place_stations(
+            sc,
+            2,
+            min_overlap=min_overlap,
+            distance_range_m=distance_range_m,
+            max_tilt_rad=max_tilt_rad,
+            config=cfg,
+            rng=stream(seed, 0),
+        )
     target = scan_tls(sc, Ta, config=cfg, rng=stream(seed, 100), name="station_00")
     source = scan_tls(sc, Tb, config=cfg, rng=stream(seed, 101), name="station_01")
     return StationPair(

@@ -32,15 +32,15 @@ from flexreg.errors import ConfigError, DegenerateGeometryError
 from flexreg.synth.config import TLSConfig
 from flexreg.synth.placement import (
     FreeMap,
-    _check_positions,
-    _coarse_config,
-    _coarse_points,
-    _random_rotation,
-    _seen_rays,
-    _seen_share,
-    _unblocked,
+    check_positions,
+    coarse_config,
+    coarse_points,
     free_map,
+    random_rotation,
+    seen_rays,
+    seen_share,
     station_overlap,
+    unblocked,
 )
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import group_sizes
@@ -212,7 +212,7 @@ class _Walk:
 
     def _pose(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         T = np.eye(4)
-        T[:3, :3] = _random_rotation(self.gen, self.max_tilt_rad)
+        T[:3, :3] = random_rotation(self.gen, self.max_tilt_rad)
         T[:3, 3] = p
         return T
 
@@ -233,7 +233,7 @@ class _Walk:
             xy[0] = self.stand[0]
             P = self._candidates(xy)
             idx = np.flatnonzero(np.isfinite(P[:, 2]))
-            idx = idx[_check_positions(self.scene, P[idx], self.clearance_m)]
+            idx = idx[check_positions(self.scene, P[idx], self.clearance_m)]
             if len(idx):
                 return self._pose(P[idx[0]])
         for _ in range(40):
@@ -242,7 +242,7 @@ class _Walk:
             xy += self.gen.uniform(-0.5, 0.5, size=(_BATCH, 2)) * fm.cell_m
             P = self._candidates(xy)
             idx = np.flatnonzero(np.isfinite(P[:, 2]))
-            idx = idx[_check_positions(self.scene, P[idx], self.clearance_m)]
+            idx = idx[check_positions(self.scene, P[idx], self.clearance_m)]
             if len(idx):
                 return self._pose(P[idx[0]])
         raise DegenerateGeometryError(f"{label}: found no clear spot for the first station")
@@ -283,7 +283,7 @@ class _Walk:
             dist = np.linalg.norm(v, axis=1)
             idx = idx[self.scene.cast(Pp, v / dist[:, None]).t >= dist - 0.05]
         if len(idx):
-            idx = idx[_check_positions(self.scene, P[idx], self.clearance_m)]
+            idx = idx[check_positions(self.scene, P[idx], self.clearance_m)]
         # hug the stations already placed: the walk fills the site without leaving holes
         key = d_all if hug else d_par
         for i in idx[np.argsort(key[idx], kind="stable")][:_OVERLAP_TRIES]:
@@ -298,14 +298,14 @@ class _Walk:
 
     def _quick_overlap(self, parent: int, T: NDArray[np.float64]) -> float:
         """The overlap of ``parent`` and a candidate on a 6 degree grid (a cheap estimate)."""
-        cfg = _coarse_config(self.cfg).replace(width=_QUICK_GRID[0], height=_QUICK_GRID[1])
+        cfg = coarse_config(self.cfg).replace(width=_QUICK_GRID[0], height=_QUICK_GRID[1])
         if parent not in self.quick:
-            self.quick[parent] = _coarse_points(self.scene, self.poses[parent], cfg)
-        pts, nrm = _coarse_points(self.scene, T, cfg)
+            self.quick[parent] = coarse_points(self.scene, self.poses[parent], cfg)
+        pts, nrm = coarse_points(self.scene, T, cfg)
         Tp = self.poses[parent]
         return min(
-            _seen_share(self.scene, Tp, pts, nrm, self.cfg),
-            _seen_share(self.scene, T, *self.quick[parent], self.cfg),
+            seen_share(self.scene, Tp, pts, nrm, self.cfg),
+            seen_share(self.scene, T, *self.quick[parent], self.cfg),
         )
 
     def run(
@@ -374,15 +374,15 @@ def overlap_matrix(
     """
     cfg = config or TLSConfig()
     Ts = [np.asarray(T, dtype=np.float64) for T in poses]
-    coarse = _coarse_config(cfg)
-    hits = [_coarse_points(scene, T, coarse) for T in Ts]
+    coarse = coarse_config(cfg)
+    hits = [coarse_points(scene, T, coarse) for T in Ts]
     n = len(Ts)
     S = np.eye(n)
     C = np.array([T[:3, 3] for T in Ts]).reshape(n, 3)
     for i in range(n):
         # the tests of station_overlap, point by point, with one ray cast for all stations j
         js = [j for j in range(n) if j != i and np.linalg.norm(C[i] - C[j]) <= 2 * cfg.max_range_m]
-        tests = [_seen_rays(Ts[i], hits[j][0], hits[j][1], cfg) for j in js]
+        tests = [seen_rays(Ts[i], hits[j][0], hits[j][1], cfg) for j in js]
         sel = [np.flatnonzero(ok) for ok, _d, _dist in tests]
         if not any(len(k) for k in sel):
             continue
@@ -391,7 +391,7 @@ def overlap_matrix(
         ).t
         start = 0
         for j, (ok, _d, dist), k in zip(js, tests, sel, strict=True):
-            ok[k] = _unblocked(t[start : start + len(k)], dist[k])
+            ok[k] = unblocked(t[start : start + len(k)], dist[k])
             start += len(k)
             S[i, j] = float(np.count_nonzero(ok)) / len(ok) if len(ok) else 0.0
     return S

@@ -1,5 +1,5 @@
 """The outdoor street/courtyard scene, built in steps that draw from one ``rng`` in a fixed
-order; :func:`_building` makes each facade."""
+order; :func:`add_building` makes each facade."""
 
 from __future__ import annotations
 
@@ -57,14 +57,14 @@ def courtyard(
     stands, planters and a shelter furnish the street.
     """
     rng, seed = as_rng(rng)
-    site = _road(rng, size_m)
+    site = add_road(rng, size_m)
     _facades(site)
-    _street_furniture(site)
-    _parked_cars(site)
+    add_street_furniture(site)
+    add_parked_cars(site)
     return finish(site.b, "courtyard", seed, site.Lx, site.Ly, margin_m=0.5)
 
 
-def _road(rng: np.random.Generator, size_m: tuple[float, float] | None) -> _Street:
+def add_road(rng: np.random.Generator, size_m: tuple[float, float] | None) -> _Street:
     """Size; pavement, road with kerbs, markings and manhole covers; the road kept free."""
     if size_m is None:
         Lx, Ly = rng.uniform(30.0, 60.0), rng.uniform(22.0, 40.0)
@@ -116,13 +116,13 @@ def _facades(site: _Street) -> None:
             w = rng.uniform(8.0, 22.0)
             depth = rng.uniform(8.0, 14.0)
             if side == 0:
-                _building(b, rng, origin=(x, 0.0), yaw=0.0, width=w, depth=depth)
+                add_building(b, rng, origin=(x, 0.0), yaw=0.0, width=w, depth=depth)
             else:
-                _building(b, rng, origin=(x + w, Ly), yaw=np.pi, width=w, depth=depth)
+                add_building(b, rng, origin=(x + w, Ly), yaw=np.pi, width=w, depth=depth)
             x += w + (rng.uniform(2.0, 5.0) if rng.random() < 0.35 else 0.0)
     if rng.random() < 0.7:  # cross building closing the east end over the road
         w = Ly + 10.0
-        _building(
+        add_building(
             b,
             rng,
             origin=(Lx + 0.5, -5.0),
@@ -158,7 +158,7 @@ def _sidewalk_spot(
     return None
 
 
-def _street_furniture(site: _Street) -> None:
+def add_street_furniture(site: _Street) -> None:
     """Street lamps alternating sides, trees in grates, benches, bollards, signs,
     bins, bike stands, planters, shelters, fences and kiosks."""
     rng, b, plan, Lx, walks = site.rng, site.b, site.plan, site.Lx, site.walks
@@ -192,7 +192,7 @@ def _street_furniture(site: _Street) -> None:
                 put(b, make(rng), *spot)
 
 
-def _parked_cars(site: _Street) -> None:
+def add_parked_cars(site: _Street) -> None:
     """Parked cars along both road edges, none on the crossing."""
     rng, b, Lx, yr0, yr1, kerb = site.rng, site.b, site.Lx, site.yr0, site.yr1, site.kerb
     xc = site.xc
@@ -215,7 +215,7 @@ def _parked_cars(site: _Street) -> None:
 
 @dataclass
 class _Building:
-    """What the steps of :func:`_building` build on, in the facade's frame: ``floors`` floors of
+    """What the steps of :func:`add_building` build on, in the facade's frame: ``floors`` floors of
     height ``fh`` over a ground floor of height ``gh`` (total ``height``), window recess depth
     ``recess``, wall and trim materials, and the open ``gate`` interval (metres)."""
 
@@ -233,7 +233,7 @@ class _Building:
     gate: tuple[float, float] | None
 
 
-def _building(
+def add_building(
     b: MeshBuilder,
     rng: np.random.Generator,
     *,

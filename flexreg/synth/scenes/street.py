@@ -18,7 +18,12 @@ from flexreg.synth import objects as ob
 from flexreg.synth.mesh import MeshBuilder
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes._plan import finish, put
-from flexreg.synth.scenes.courtyard import _building, _parked_cars, _road, _street_furniture
+from flexreg.synth.scenes.courtyard import (
+    add_building,
+    add_parked_cars,
+    add_road,
+    add_street_furniture,
+)
 from flexreg.synth.seeding import as_rng
 
 #: ground area per station the street is sized for, m^2 (stations about 6-9 m apart)
@@ -59,7 +64,7 @@ def street(
         Ls = max(20.0, 0.25 * area / ws) if side else 0.0
     else:
         Lx, Ls = max(30.0, float(size_m[0])), 40.0
-    site = _road(rng, (Lx, max(16.0, Ly)))
+    site = add_road(rng, (Lx, max(16.0, Ly)))
     Ly = site.Ly
     xs = float(rng.uniform(0.35, 0.65)) * Lx if side else -1e9
     gap = (xs - ws / 2, xs + ws / 2)
@@ -67,14 +72,14 @@ def street(
     _facade_row(b, rng, 0.0, Lx, y=0.0, facing=+1, gap=None)
     _facade_row(b, rng, 0.0, Lx, y=Ly, facing=-1, gap=gap if side else None)
     if rng.random() < 0.6:  # a cross building closing the east end, with an arcade over the road
-        _building(
+        add_building(
             b, rng, origin=(Lx + 0.5, -5.0), yaw=np.pi / 2, width=Ly + 10.0, depth=10.0,
             gate=(site.yr0 + 5.0 - 0.5, site.yr1 + 5.0 + 0.5),
         )  # fmt: skip
     if side:
         site.plan.mark([gap[0], Ly - 0.5], [gap[1], Ly + 0.5])
-    _street_furniture(site)
-    _parked_cars(site)
+    add_street_furniture(site)
+    add_parked_cars(site)
     zones: list[tuple[float, float, float, float, int]] = [(0.5, 0.5, Lx - 0.5, Ly - 0.5, 0)]
     if side:
         _lane(b, rng, gap, Ly, Ls)
@@ -110,9 +115,9 @@ def _facade_row(
                 continue
         depth = float(rng.uniform(8.0, 14.0))
         if facing > 0:
-            _building(b, rng, origin=(x, y), yaw=0.0, width=w, depth=depth)
+            add_building(b, rng, origin=(x, y), yaw=0.0, width=w, depth=depth)
         else:
-            _building(b, rng, origin=(x + w, y), yaw=np.pi, width=w, depth=depth)
+            add_building(b, rng, origin=(x + w, y), yaw=np.pi, width=w, depth=depth)
         x += w + (float(rng.uniform(2.0, 5.0)) if rng.random() < 0.35 else 0.0)
         if gap is not None and gap[0] <= x < gap[1]:
             x = gap[1]
@@ -134,11 +139,11 @@ def _lane(
                 break
             depth = float(rng.uniform(8.0, 12.0))
             if side == 0:  # west row, facade facing +x
-                _building(b, rng, origin=(xf, y + w), yaw=-np.pi / 2, width=w, depth=depth)
+                add_building(b, rng, origin=(xf, y + w), yaw=-np.pi / 2, width=w, depth=depth)
             else:
-                _building(b, rng, origin=(xf, y), yaw=np.pi / 2, width=w, depth=depth)
+                add_building(b, rng, origin=(xf, y), yaw=np.pi / 2, width=w, depth=depth)
             y += w
-    _building(b, rng, origin=(xb + 1.0, y0 + Ls), yaw=np.pi, width=xb - xa + 2.0, depth=10.0)
+    add_building(b, rng, origin=(xb + 1.0, y0 + Ls), yaw=np.pi, width=xb - xa + 2.0, depth=10.0)
     b.count("side street")
     for y in np.arange(
         y0 + float(rng.uniform(3.0, 8.0)), y0 + Ls - 2.0, float(rng.uniform(10, 16))

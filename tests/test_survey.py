@@ -151,20 +151,16 @@ def dask_cluster(tmp_path):
         start("scheduler", "scheduler", "--host", "127.0.0.1", "--port",
               address.rsplit(":", 1)[1], "--no-dashboard", "--no-show")  # fmt: skip
         for k in range(2):
-            start(f"worker{k}", "worker", address, "--nthreads", "1", "--nworkers", "1",
+            start(f"worker{k}", "worker", address, "--nthreads", "1", "--no-nanny",
                   "--no-dashboard", "--host", "127.0.0.1", "--name", f"w{k}",
                   "--local-directory", str(logs / f"w{k}"))  # fmt: skip
         with Client(address, timeout="60s") as c:
             c.wait_for_workers(2, timeout=120)
         yield address
-    finally:
-        for p in reversed(procs):
-            p.terminate()
+    finally:  # throwaway processes without children (no nannies): no graceful shutdown
         for p in procs:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
+            p.kill()
+            p.wait()
 
 
 def test_a_dask_cluster_by_address_gives_the_same_poses(first, project, tmp_path, dask_cluster):
@@ -210,10 +206,11 @@ def test_a_bad_scheduler_address_is_one_line_exit_1_nothing_written(
 
 
 @pytest.mark.parametrize("service", ["web server", "greeting server"])
-def test_another_service_is_no_scheduler(service, project, tmp_path):
+def test_another_service_is_no_scheduler(service, project, tmp_path, monkeypatch):
     """Another service on the port: a web server (it waits for a request, as the client
     waits for a handshake) or one that greets first (an SSH banner, whose bytes read as a
-    Dask message size are exabytes): one line, exit 1, within the probe's 10 s."""
+    Dask message size are exabytes): one line, exit 1, within the probe's wait."""
+    monkeypatch.setattr("flexreg.survey.execute.SCHEDULER_PROBE_S", 1.0)
     import socketserver
     import threading
 

@@ -112,8 +112,12 @@ def scheduler_address(address: str) -> tuple[str, int]:
 _HANDSHAKE_MAX_BYTES = 1 << 24
 
 
-def _probe_scheduler(address: str, timeout_s: float = 10.0) -> None:
-    """Refuse, in one line and within ``timeout_s``, an address where no Dask scheduler
+#: seconds the scheduler probe waits for a connection and for the scheduler's greeting
+SCHEDULER_PROBE_S = 10.0
+
+
+def _probe_scheduler(address: str) -> None:
+    """Refuse, in one line and within :data:`SCHEDULER_PROBE_S`, an address where no Dask scheduler
     listens: a closed port at once, instead of after the client's retries; another service
     (a web server waits for a request, so the client would wait for ever; a server that
     greets first would have its greeting read as a message size of exabytes). A Dask
@@ -121,7 +125,7 @@ def _probe_scheduler(address: str, timeout_s: float = 10.0) -> None:
     8 little-endian bytes (TLS is only checked for a listening port)."""
     host, port = scheduler_address(address)
     try:
-        conn = socket.create_connection((host, port), timeout=timeout_s)
+        conn = socket.create_connection((host, port), timeout=SCHEDULER_PROBE_S)
     except OSError as e:
         raise ConfigError(f"--scheduler: cannot reach {address}: {e}") from None
     with conn:
@@ -355,6 +359,7 @@ def align_link(
 
 __all__ = [
     "AXES",
+    "SCHEDULER_PROBE_S",
     "Progress",
     "ProgressEvent",
     "align_link",

@@ -84,6 +84,15 @@ _SchedulerOption = Annotated[
         "flexreg, the scans and DIR at the same paths).",
     ),
 ]
+_DashboardOption = Annotated[
+    str | None,
+    typer.Option(
+        "--dashboard",
+        metavar="[HOST:]PORT",
+        help="Serve the local Dask cluster's dashboard (not authenticated) at this address, "
+        "on loopback unless a host is named [default: no dashboard].",
+    ),
+]
 _ReferenceOption = Annotated[
     str | None,
     typer.Option(
@@ -253,6 +262,7 @@ def survey_command(
     pairs: _PairsOption = None,
     workers: _WorkersOption = None,
     scheduler: _SchedulerOption = None,
+    dashboard: _DashboardOption = None,
     reference: _ReferenceOption = None,
     refine: _RefineOption = None,
     merged: _MergedOption = None,
@@ -273,9 +283,12 @@ def survey_command(
       1  failed: nothing could be registered (one error line; nothing written
          but the cache)
     """
+    from flexreg.survey.execute import check_workers, dashboard_address
     from flexreg.survey.outputs import write_outputs
     from flexreg.survey.project import run_survey
 
+    check_workers(workers, scheduler)  # before reading anything
+    dashboard_address(dashboard)
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
@@ -292,6 +305,7 @@ def survey_command(
             cfg,
             workers=workers,
             scheduler=scheduler,
+            dashboard=dashboard,
             reference=reference,
             pairs_file=pairs_file,
             progress=_Bars(bar),

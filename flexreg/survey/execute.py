@@ -148,18 +148,60 @@ def _probe_scheduler(address: str) -> None:
         )
 
 
-@contextmanager
-def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
-    """A Dask client (a local cluster of ``workers`` processes, or the cluster at
-    ``scheduler``), or None to run in this process (one worker, no scheduler).
+def check_workers(workers: int | None, scheduler: str | None) -> None:
+    """Refuse a local cluster that would only crowd the machine: ``workers`` from 1 to twice
+    the cores this process may use (every worker is a process holding a station or two;
+    more of them than cores only waits, and a thousand would exhaust the memory before any
+    work). With a scheduler the cluster is the user's, and ``workers`` is ignored.
 
     Raises
     ------
     ConfigError
-        ``workers`` below 1, or the scheduler cannot be reached.
     """
-    if workers is not None and workers < 1:
-        raise ConfigError(f"--workers: must be at least 1 (got {workers})")
+    if workers is None or scheduler is not None:
+        return
+    most = 2 * default_workers()
+    if not 1 <= workers <= most:
+        raise ConfigError(
+            f"--workers: must be from 1 to {most} (twice this machine's {most // 2} cores; "
+            f"got {workers}); a larger cluster: --scheduler"
+        )
+
+
+def dashboard_address(address: str | None) -> str | None:
+    """Where the local cluster's dashboard listens: nowhere by default (it is not
+    authenticated); ``PORT`` or ``:PORT`` on loopback; ``HOST:PORT`` as given.
+
+    Raises
+    ------
+    ConfigError
+        Not ``[HOST]:PORT`` with a port in 0-65535 (0: any free port).
+    """
+    if address is None:
+        return None
+    host, _, port = address.rpartition(":")
+    if not port.isdigit() or int(port) > 65535:
+        raise ConfigError(f"--dashboard: {address!r} is not [HOST:]PORT")
+    return f"{host or '127.0.0.1'}:{int(port)}"
+
+
+@contextmanager
+def dask_client(
+    workers: int | None, scheduler: str | None, *, dashboard: str | None = None
+) -> Iterator[Any]:
+    """A Dask client (a local cluster of ``workers`` processes, or the cluster at
+    ``scheduler``), or None to run in this process (one worker, no scheduler).
+
+    ``dashboard``: the local cluster's dashboard address (:func:`dashboard_address`; off
+    when None).
+
+    Raises
+    ------
+    ConfigError
+        ``workers`` out of range (:func:`check_workers`), or the scheduler cannot be reached.
+    """
+    check_workers(workers, scheduler)
+    dashboard = dashboard_address(dashboard)
     if scheduler is None and (workers or default_workers()) == 1:
         yield None
         return
@@ -191,9 +233,12 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     try:
         cluster = LocalCluster(
             n_workers=n,
+            host="127.0.0.1",  # the scheduler, its web server and the workers: loopback only
             threads_per_worker=1,
             processes=True,
-            dashboard_address=":0",
+            # an unauthenticated web page: off unless asked for, and then on loopback
+            # unless a host is named
+            dashboard_address=dashboard,
             # the workers' own logs: a heartbeat that loses the scheduler while the cluster
             # closes (Ctrl-C) is logged as an error with a traceback; task failures reach the
             # survey through their futures, so only critical worker logs are shown
@@ -363,6 +408,8 @@ __all__ = [
     "Progress",
     "ProgressEvent",
     "align_link",
+    "check_workers",
+    "dashboard_address",
     "dask_client",
     "default_workers",
     "link_cache_path",

@@ -453,6 +453,7 @@ def run_survey(
     *,
     workers: int | None = None,
     scheduler: str | None = None,
+    dashboard: str | None = None,
     reference: str | None = None,
     pairs_file: Path | None = None,
     progress: Progress = None,
@@ -472,6 +473,9 @@ def run_survey(
         Dask). Ignored with ``scheduler``.
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``).
+    dashboard : str, optional
+        ``[HOST:]PORT`` of the local cluster's dashboard (loopback unless a host is named;
+        default: no dashboard).
     reference : str, optional
         The station whose frame the poses are in (default: the best connected).
     pairs_file : Path, optional
@@ -493,7 +497,7 @@ def run_survey(
     cache = out_dir / "cache"
     timings: dict[str, float] = {}
     n_workers = 1 if workers == 1 and scheduler is None else (workers or default_workers())
-    with dask_client(workers, scheduler) as client:
+    with dask_client(workers, scheduler, dashboard=dashboard) as client:
         if client is not None and scheduler is not None:
             n_workers = len(client.scheduler_info().get("workers", {})) or n_workers
         t = time.perf_counter()

@@ -1,0 +1,84 @@
+"""The survey's Dask cluster: bounded worker counts, a dashboard only when asked for (and on
+loopback), scheduler addresses checked before any work."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import one_error_line, run_cli
+
+from flexreg.errors import ConfigError
+from flexreg.survey.execute import (
+    check_workers,
+    dashboard_address,
+    dask_client,
+    default_workers,
+    scheduler_address,
+)
+
+
+def test_workers_are_bounded_by_the_cores_unless_the_cluster_is_the_users():
+    most = 2 * default_workers()
+    check_workers(None, None)
+    check_workers(1, None)
+    check_workers(most, None)
+    for bad in (0, -1, most + 1, 1000):
+        with pytest.raises(ConfigError, match=rf"--workers: must be from 1 to {most}"):
+            check_workers(bad, None)
+    check_workers(1000, "tcp://10.0.0.1:8786")  # ignored with a scheduler
+
+
+def test_a_thousand_workers_are_refused_before_reading(tmp_path):
+    """``--workers 1000`` once spawned dozens of processes and gigabytes in seconds."""
+    scans = [tmp_path / "a.ptx", tmp_path / "b.ptx"]  # not even read
+    out = tmp_path / "out"
+    rc, _, err = run_cli(["survey", *scans, "--out", out, "--workers", "1000"])
+    assert rc == 1 and "--workers: must be from 1 to" in one_error_line(err)
+    assert not out.exists()
+
+
+def test_dashboard_addresses():
+    assert dashboard_address(None) is None
+    assert dashboard_address("8787") == "127.0.0.1:8787"
+    assert dashboard_address(":0") == "127.0.0.1:0"
+    assert dashboard_address("0.0.0.0:8787") == "0.0.0.0:8787"
+    for bad in ("http://x", "host:", "99999", "a:b"):
+        with pytest.raises(ConfigError, match="--dashboard"):
+            dashboard_address(bad)
+
+
+def test_scheduler_addresses():
+    assert scheduler_address("tcp://10.0.0.1:8786") == ("10.0.0.1", 8786)
+    assert scheduler_address("10.0.0.1:8786") == ("10.0.0.1", 8786)
+    assert scheduler_address("tls://[::1]:8786") == ("::1", 8786)
+    for bad in ("http://h:80", "inproc://x", "tcp://h", "tcp://:8786", "tcp://h:0", "tcp://h:x"):
+        with pytest.raises(ConfigError, match="--scheduler"):
+            scheduler_address(bad)
+
+
+def _web(client) -> tuple[set[str], int | None]:
+    """Hosts the scheduler's web server listens on, and the status of its dashboard page."""
+    import urllib.error
+    import urllib.request
+
+    def hosts(dask_scheduler):
+        return {sock.getsockname()[0] for sock in dask_scheduler.http_server._sockets.values()}
+
+    port = client.scheduler_info()["services"]["dashboard"]
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/status", timeout=30) as r:
+            status = r.status
+    except urllib.error.HTTPError as e:
+        status = e.code
+    return client.run_on_scheduler(hosts), status
+
+
+def test_the_local_cluster_serves_no_dashboard_unless_asked_and_then_on_loopback():
+    """An unauthenticated dashboard on every interface while a survey ran was a hole: the
+    local cluster listens on loopback only (scheduler, workers, the web server's health
+    routes) and serves its dashboard page only when asked."""
+    with dask_client(2, None) as client:
+        assert _web(client) == ({"127.0.0.1"}, 404)
+        assert client.scheduler.address.startswith("tcp://127.0.0.1:")
+        assert all(w.startswith("tcp://127.0.0.1:") for w in client.scheduler_info()["workers"])
+    with dask_client(2, None, dashboard=":0") as client:
+        assert _web(client) == ({"127.0.0.1"}, 200)

@@ -37,6 +37,7 @@ import math
 import sys
 import types
 import typing
+import unicodedata
 from collections.abc import Iterable, Mapping
 from os import PathLike
 from pathlib import Path
@@ -62,7 +63,10 @@ else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 __all__ = [
+    "MAX_CONFIG_BYTES",
+    "MAX_CONFIG_DEPTH",
     "MAX_GRID_SIZE",
+    "MAX_RESULT_BYTES",
     "MAX_THRESHOLD_M",
     "MAX_VOXEL_M",
     "MIN_VOXEL_M",
@@ -84,6 +88,17 @@ C = TypeVar("C", bound="Config")
 
 #: Written (and accepted) for "no value": TOML has no null.
 NONE_WORDS = ("none", "null")
+#: Largest settings file read, bytes: ``flexreg config show`` writes about 10 kB; a bigger
+#: file is not a configuration, and parsing it would only cost time and memory.
+MAX_CONFIG_BYTES = 1 << 20
+#: Largest result JSON read for its ``"config"``, bytes (a survey's poses.json lists every
+#: station and link beside the configuration it ran with).
+MAX_RESULT_BYTES = 16 << 20
+#: Deepest nesting of tables and arrays in a configuration (a file or a ``--set`` value):
+#: flexreg's own go three levels deep; deeper ones would only exhaust the parsers' recursion.
+MAX_CONFIG_DEPTH = 32
+#: Characters that break a line (``str.splitlines``): ``--set`` takes one KEY=VALUE per option.
+_LINE_BREAKS = frozenset("\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029")
 
 
 def _allows_none(annotation: Any) -> bool:
@@ -187,6 +202,14 @@ def _message(err: Any, field: str, cls: type[BaseModel] | None) -> str:
     return msg
 
 
+def _shown(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, shortened to about ``limit`` characters (a message stays one line)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 200:
+        return f"a number of {len(str(abs(value)))} digits"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _ctx_bounds(err: Any, got: Any) -> dict[str, Any]:
     names = {"gt": "exclusiveMinimum", "ge": "minimum", "lt": "exclusiveMaximum", "le": "maximum"}
     out = {names[k]: v for k, v in (err.get("ctx") or {}).items() if k in names}
@@ -207,7 +230,7 @@ def _one_line(
     got = err.get("input")
     text = f"{(names or {}).get(field, field)}: {_message(err, field, cls)}"
     if err.get("type") not in _NO_GOT and not isinstance(got, dict):
-        text += f" (got {got!r})"
+        text += f" (got {_shown(got)})"
     if len(e.errors()) > 1:
         text += f"; and {len(e.errors()) - 1} more"
     return f"{where}: {text}" if where else text
@@ -339,19 +362,58 @@ class Config(BaseModel):
         return type(self)(**{**self.model_dump(), **changes})
 
 
+def _depth(value: Any) -> int:
+    """Nesting depth of dicts and lists in ``value`` (a scalar: 0), without recursion."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict):
+            v = list(v.values())
+        elif not isinstance(v, list):
+            continue
+        deepest = max(deepest, d + 1)
+        if deepest > MAX_CONFIG_DEPTH:
+            break
+        stack += [(x, d + 1) for x in v]
+    return deepest
+
+
+def _parse_problem(e: BaseException) -> str:
+    """The reason a parser gave up, in one line (Python's own wording is long or misleading)."""
+    if isinstance(e, RecursionError):
+        return f"nested deeper than {MAX_CONFIG_DEPTH} levels"
+    text = str(e)
+    if "integer string conversion" in text:
+        limit = getattr(sys, "get_int_max_str_digits", lambda: 4300)()
+        return f"a number of more than {limit} digits"
+    return " ".join(text.split())
+
+
 def _read_mapping(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise ConfigError(f"{path}: no such file")
     suffix = path.suffix.lower()
+    if suffix not in (".toml", ".json"):
+        raise ConfigError(f"{path}: a configuration is a .toml or .json file")
+    kind = suffix[1:].upper()
+    limit = MAX_CONFIG_BYTES if suffix == ".toml" else MAX_RESULT_BYTES
     try:
-        if suffix == ".toml":
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        elif suffix == ".json":
-            data = json.loads(path.read_text(encoding="utf-8"))
-        else:
-            raise ConfigError(f"{path}: a configuration is a .toml or .json file")
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{path}: not valid {suffix[1:].upper()}: {e}") from None
+        with path.open("rb") as f:
+            raw = f.read(limit + 1)
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot be read: {e.strerror or e}") from None
+    if len(raw) > limit:
+        raise ConfigError(
+            f"{path}: larger than {limit // (1 << 20)} MiB; not a {kind} configuration"
+        )
+    try:
+        text = raw.decode("utf-8")
+        data = tomllib.loads(text) if suffix == ".toml" else json.loads(text)
+    except (ValueError, RecursionError) as e:  # decode errors, number limits, deep nesting
+        raise ConfigError(f"{path}: not valid {kind}: {_parse_problem(e)}") from None
+    if _depth(data) > MAX_CONFIG_DEPTH:
+        raise ConfigError(f"{path}: not valid {kind}: nested deeper than {MAX_CONFIG_DEPTH} levels")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a table of settings")
     if isinstance(data.get("config"), dict):  # a result file: the configuration it ran with
@@ -405,28 +467,52 @@ def load_config(
         raise ConfigError(line) from None
 
 
-def _parse_value(text: str) -> Any:
-    """A TOML value (``7``, ``0.5``, ``true``, ``"x"``, ``[1, 2]``), else the bare string."""
+def _parse_value(text: str, key: str = "value") -> Any:
+    """A TOML value (``7``, ``0.5``, ``true``, ``"x"``, ``[1, 2]``), else the bare string.
+
+    Raises
+    ------
+    ConfigError
+        ``--set KEY: ...`` for a value that is TOML but unusable: nested deeper than
+        :data:`MAX_CONFIG_DEPTH`, or a number of more digits than Python converts.
+    """
     if text.strip().lower() in NONE_WORDS:
         return text.strip().lower()  # kept as a word: the model maps it to None where allowed
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except (ValueError, RecursionError) as e:
+        raise ConfigError(f"--set {key}: {_parse_problem(e)}") from None
+    if _depth(value) > MAX_CONFIG_DEPTH:
+        raise ConfigError(f"--set {key}: nested deeper than {MAX_CONFIG_DEPTH} levels")
+    return value
 
 
 def parse_sets(items: Iterable[str]) -> dict[str, Any]:
     """``["key=value", ...]`` (repeatable ``--set``) as a dict of typed values.
 
+    One KEY=VALUE per item: line breaks and other control characters are refused (TOML
+    would read a second line as another setting and drop it).
+
     >>> parse_sets(["n=7", "ratio=0.8", "refine=false", "features=orb"])
     {'n': 7, 'ratio': 0.8, 'refine': False, 'features': 'orb'}
+    >>> parse_sets(["ratio=0.8\\nn=9"])
+    Traceback (most recent call last):
+    ...
+    flexreg.errors.ConfigError: --set: one KEY=VALUE per option; got a line break
     """
     out: dict[str, Any] = {}
     for item in items:
+        if any(ch in _LINE_BREAKS for ch in item):
+            raise ConfigError("--set: one KEY=VALUE per option; got a line break")
+        bad = next((ch for ch in item if unicodedata.category(ch) == "Cc"), None)
+        if bad is not None:
+            raise ConfigError(f"--set: got a control character ({bad!r}) in {item!r}")
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not key.strip().isprintable() or " " in key.strip():
-            raise ConfigError(f"--set {item!r}: expected KEY=VALUE")
-        out[key.strip()] = _parse_value(value.strip())
+            raise ConfigError(f"--set {_shown(item)}: expected KEY=VALUE")
+        out[key.strip()] = _parse_value(value.strip(), key.strip())
     return out
 
 

@@ -13,6 +13,7 @@ from conftest import one_error_line, run_cli
 
 from flexreg import read_scans, write_scan
 from flexreg.core.transforms import invert, make_transform
+from flexreg.io.files import MANIFEST
 
 
 @pytest.fixture(scope="module")
@@ -151,7 +152,7 @@ def test_bench_quick_real_suite(shared_data, tmp_path):
         ]
     )
     assert rc == 0, stderr
-    (folder,) = out.iterdir()
+    (folder,) = [p for p in out.iterdir() if p.name != MANIFEST]
     assert folder.name.startswith("bench-")
     names = sorted(p.name for p in folder.iterdir())
     assert names == ["cases.csv", "config.json", "results.json", "summary.csv", "summary.md"]
@@ -182,7 +183,7 @@ def test_bench_quick_synthetic_suite_plots(tmp_path):
         ["bench", "--suite", "synthetic", "--quick", "--methods", "kiss-icp", "--out", out]
     )
     assert rc == 0, stderr
-    (folder,) = out.iterdir()
+    (folder,) = [p for p in out.iterdir() if p.name != MANIFEST]
     for name in (
         "success_vs_distance.png",
         "success_vs_yaw.png",
@@ -231,7 +232,7 @@ def test_bench_pair_that_cannot_be_loaded_is_a_row(shared_data, tmp_path, monkey
         + ["--out", out]
     )
     assert rc == 0, err
-    (folder,) = out.iterdir()
+    (folder,) = [p for p in out.iterdir() if p.name != MANIFEST]
     rows = list(csv.DictReader((folder / "cases.csv").open()))
     assert len(rows) == 2
     assert all(r["status"] == "error" for r in rows)

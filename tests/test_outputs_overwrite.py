@@ -16,6 +16,7 @@ from flexreg import Scan, read_scan, write_scan
 from flexreg.cli.app import hoist_root_flags
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import to_scan
+from flexreg.io.files import MANIFEST, read_manifest
 from flexreg.stages.grid_camera import fit_grid_camera, grid_with_camera
 from flexreg.stages.projection import project, range_image
 
@@ -113,7 +114,8 @@ def test_synth_overwrite_leaves_no_stale_frames_for_odometry(tmp_path):
         "0.000000.png",
         "0.033333.png",
     ]
-    assert not (out / "notes.txt").exists()  # the folder is the result: nothing else stays
+    # the user's file stays: only what the earlier run recorded as its own is removed
+    assert (out / "notes.txt").read_text() == "mine"
     from flexreg.io.sequence import read_sequence
 
     assert len(read_sequence(out)) == 2
@@ -134,6 +136,10 @@ def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
     (tmp_path / "stations" / "old.txt").write_text("old")
     (tmp_path / "poses.json").write_text("old")
     (tmp_path / "scan.ptx").write_text("an input kept in the result folder")
+    (tmp_path / "notes.txt").write_text("the user's, never written by flexreg")
+    # what the earlier run recorded as its own (the input too, as if it had written it)
+    files = ["poses.json", "stations/old.txt", "scan.ptx", "cache/station.npz"]
+    (tmp_path / MANIFEST).write_text(json.dumps({"files": files}))
     set_overwrite(False)
     with pytest.raises(ConfigError, match="give --overwrite"):
         check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
@@ -145,7 +151,49 @@ def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
             atomic_write(tmp_path / "poses.json", lambda tmp: tmp.write_text("{}"))
     finally:
         set_overwrite(False)
-    assert sorted(_snapshot(tmp_path)) == ["cache/station.npz", "poses.json", "scan.ptx"]
+    assert sorted(_snapshot(tmp_path)) == [
+        MANIFEST, "cache/station.npz", "notes.txt", "poses.json", "scan.ptx",
+    ]  # fmt: skip
+    assert read_manifest(tmp_path) == ["poses.json"]
+
+
+def test_overwrite_removes_only_what_an_earlier_run_wrote(tmp_path):
+    """``--overwrite`` into a result folder that also holds the user's own things (notes, a
+    folder of photos, a scan the new run was not given): those stay; the earlier run's files
+    that the new run does not write again go. (Everything not written by the new run used to
+    be removed, recursively.)"""
+    out = tmp_path / "project"
+    base = ["synth", "--scene", "room", "--stations", "1", "--resolution", "64x32", "--seed",
+            "1", "--out", out]  # fmt: skip
+    assert run_cli([*base, "--rgbd-frames", "3"])[0] == 0
+    ours = read_manifest(out)
+    assert "gt.json" in ours and "rgbd/depth/0.066667.png" in ours
+    (out / "notes.txt").write_text("mine")
+    (out / "photos").mkdir()
+    (out / "photos" / "site.jpg").write_bytes(b"\xff\xd8 a photo")
+    (out / "scans").mkdir()
+    (out / "scans" / "station_02.ptx").write_text("a scan of the user's")
+    (out / "rgbd" / "depth" / "README").write_text("the user's, beside the frames")
+    rc, _, err = run_cli([*base, "--rgbd-frames", "1", "--overwrite"])
+    assert rc == 0, err
+    assert (out / "notes.txt").read_text() == "mine"
+    assert (out / "photos" / "site.jpg").is_file() and (out / "scans" / "station_02.ptx").is_file()
+    assert sorted(p.name for p in (out / "rgbd" / "depth").iterdir()) == ["0.000000.png", "README"]
+    assert "rgbd/depth/0.033333.png" not in read_manifest(out)
+
+
+def test_a_damaged_or_hostile_manifest_removes_nothing(tmp_path):
+    """A manifest is data from the folder: unreadable, or naming paths outside it, it gives
+    nothing to remove."""
+    (tmp_path / "keep.txt").write_text("x")
+    (tmp_path / MANIFEST).write_text("{not json")
+    assert read_manifest(tmp_path) == []
+    (tmp_path / MANIFEST).write_text(
+        json.dumps({"files": ["../outside.txt", "/etc/passwd", "a/../../b", 7, "keep.txt"]})
+    )
+    assert read_manifest(tmp_path) == ["keep.txt"]
+    (tmp_path / MANIFEST).write_text("[" * 100_000)
+    assert read_manifest(tmp_path) == []
 
 
 def test_overwrite_into_a_folder_that_is_no_earlier_result_removes_nothing(inputs, tmp_path):
@@ -162,7 +210,7 @@ def test_overwrite_into_a_folder_that_is_no_earlier_result_removes_nothing(input
             atomic_write(tmp_path / "gt.json", lambda tmp: tmp.write_text("{}"))
     finally:
         set_overwrite(False)
-    assert sorted(_snapshot(tmp_path)) == ["gt.json", "mine.txt"]
+    assert sorted(_snapshot(tmp_path)) == [MANIFEST, "gt.json", "mine.txt"]
 
 
 def test_a_failed_overwrite_leaves_the_old_result(inputs, tmp_path):

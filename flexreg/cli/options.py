@@ -212,12 +212,12 @@ def check_out_folder(
     """Refuse an output folder that is a file, one of the inputs, or holds anything (but the
     entries named in ``keep``) unless ``--overwrite`` was given.
 
-    With ``--overwrite``, files of the same names are replaced; and when the folder holds
-    ``marker`` (the file that shows it is an earlier result of the same command, e.g. synth's
-    ``gt.json``), the older run's other files are removed once the new ones are in place
-    (:func:`flexreg.io.files.replace_folder`; never an input of the command, never the
-    ``keep`` entries, nothing at all if the command fails). A folder without the marker is
-    written into, nothing in it removed.
+    With ``--overwrite``, files of the same names are replaced, and the files an earlier run
+    recorded as its own in the folder's manifest that this run does not write again are
+    removed once the new ones are in place (:func:`flexreg.io.files.replace_folder`; never an
+    input of the command, never the ``keep`` entries, nothing at all if the command fails).
+    Anything else in the folder (the user's) is left alone, and said so. Every run records
+    its files in the manifest.
 
     Parameters
     ----------
@@ -227,9 +227,10 @@ def check_out_folder(
     keep : tuple of str
         Top-level entries that are not results and stay (``survey``: its ``cache``).
     marker : str, optional
-        File name that marks an earlier result of the command (None: never remove files).
+        File name that marks an earlier result of the command (kept for the callers; what is
+        removed is decided by the folder's manifest alone).
     """
-    from flexreg.io.files import replace_folder
+    from flexreg.io.files import MANIFEST, replace_folder
 
     if folder is None:
         return
@@ -238,7 +239,6 @@ def check_out_folder(
     for p in inputs:
         if p.resolve() == folder.resolve():
             raise ConfigError(f"{option}: {folder}: is also an input")
-    if folder.is_dir() and any(e.name not in keep for e in folder.iterdir()):
+    if folder.is_dir() and any(e.name not in keep and e.name != MANIFEST for e in folder.iterdir()):
         _refuse_existing(option, folder, "is a folder that is not empty")
-        if marker is not None and (folder / marker).is_file():
-            replace_folder(folder, keep)
+    replace_folder(folder, keep)

@@ -6,8 +6,11 @@
   Ctrl-C) they are removed, and the files already at the targets stay byte-identical. The
   command line runs every command inside one such block.
 - :func:`replace_folder` makes a folder of results the block's own: when the block commits,
-  the files in it that the block did not write (an older run's) are removed, after the new
-  ones are in place; on an error nothing is removed.
+  the files an earlier run recorded as its own in the folder's manifest
+  (:data:`MANIFEST`) and this block did not write again are removed, after the new ones are
+  in place, and the manifest lists this block's files; anything else in the folder (a user's
+  notes, photos, scans; an earlier result without a manifest) is left alone, and said so; on
+  an error nothing is removed.
 - :func:`protect` marks a file as an input of the running command: an output that resolves to
   it (symbolic links, hard links) is refused, whatever the command.
 - :func:`atomic_write` writes one file through a temporary sibling renamed into place (at once
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import json
 import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
@@ -33,17 +37,22 @@ from numpy.typing import NDArray
 from flexreg.errors import InputError
 
 __all__ = [
+    "MANIFEST",
     "Outputs",
     "all_or_nothing",
     "atomic_write",
     "discard",
     "protect",
+    "read_manifest",
     "replace_folder",
     "write_all",
     "write_png",
 ]
 
 log = logging.getLogger(__name__)
+
+#: the file in a folder of results that lists, relative to it, the files flexreg wrote there
+MANIFEST = ".flexreg-outputs.json"
 
 _ACTIVE: ContextVar[Outputs | None] = ContextVar("flexreg_outputs", default=None)
 _COUNTER = itertools.count()
@@ -88,25 +97,42 @@ class Outputs:
         self._owned[Path(os.path.abspath(folder))] = tuple(keep)
 
     def _sweep(self, written: list[Path]) -> None:
+        """In every owned folder: remove what the earlier run's manifest lists and this block
+        did not write again (then the folders that emptied), leave everything else, and
+        record this block's files in a new manifest."""
         keep_files = set(written)
         for folder, keep in self._owned.items():
             if not folder.is_dir():
                 continue
-            for entry in folder.iterdir():
-                if entry.name in keep:
+            ours = sorted(p.relative_to(folder).as_posix() for p in written if folder in p.parents)
+            for rel in sorted(read_manifest(folder), key=lambda r: -r.count("/")):
+                p = folder / rel
+                if rel.split("/", 1)[0] in keep or p in keep_files or self._is_input(p):
                     continue
-                paths = [entry] if not entry.is_dir() or entry.is_symlink() else None
-                if paths is None:
-                    paths = sorted(entry.rglob("*"), key=lambda p: len(p.parts), reverse=True)
-                    paths.append(entry)
-                for p in paths:
-                    with contextlib.suppress(OSError):
-                        if p.is_dir() and not p.is_symlink():
-                            if not any(p.iterdir()):
-                                p.rmdir()
-                        elif p not in keep_files and not self._is_input(p):
-                            p.unlink()
-                            log.info("removed %s (left by an earlier run)", p)
+                with contextlib.suppress(OSError):
+                    if p.is_file() or p.is_symlink():
+                        p.unlink()
+                        log.info("removed %s (written by an earlier run)", p)
+                    parent = p.parent
+                    while parent != folder and not any(parent.iterdir()):
+                        parent.rmdir()
+                        parent = parent.parent
+            others = [
+                e.name
+                for e in sorted(folder.iterdir())
+                if e.name not in keep and e.name != MANIFEST
+                and not any(r == e.name or r.startswith(e.name + "/") for r in ours)
+            ]  # fmt: skip
+            if others:
+                log.warning(
+                    "%s: left %d entr%s flexreg did not write (%s)",
+                    folder, len(others), "y" if len(others) == 1 else "ies",
+                    ", ".join(others[:5]) + (", ..." if len(others) > 5 else ""),
+                )  # fmt: skip
+            with contextlib.suppress(OSError):
+                tmp = _temporary(folder / MANIFEST)
+                tmp.write_text(json.dumps({"files": ours}, indent=1) + "\n", encoding="utf-8")
+                tmp.replace(folder / MANIFEST)
         self._owned.clear()
 
     def _is_input(self, path: Path) -> bool:
@@ -279,6 +305,22 @@ def protect(*paths: str | os.PathLike[str] | None) -> None:
     for p in paths:
         if p is not None:
             outputs.protect(p)
+
+
+def read_manifest(folder: Path) -> list[str]:
+    """The files (relative POSIX paths) an earlier run recorded in ``folder``'s
+    :data:`MANIFEST`; none when there is no manifest or it is unreadable (then nothing is
+    taken as flexreg's). Paths that leave the folder are ignored."""
+    try:
+        doc = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        files = doc["files"] if isinstance(doc, dict) else []
+    except (OSError, ValueError, KeyError, RecursionError):
+        return []
+    return [
+        f
+        for f in files
+        if isinstance(f, str) and f and not f.startswith("/") and ".." not in f.split("/")
+    ]
 
 
 def replace_folder(folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -> None:

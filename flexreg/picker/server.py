@@ -4,8 +4,11 @@ served by uvicorn on 127.0.0.1 only.
 Every request must carry the session's random token (query ``token=`` or header
 ``X-Flexreg-Token``), which is in the URL the command prints: another local user's page cannot
 drive the session without it (403). Requests whose ``Host`` is not the loopback address are
-refused too (DNS rebinding). Bad requests get a JSON error (``{"error": "..."}``, status 400 or
-404); an unexpected failure is logged and answered with status 500; the server keeps running.
+refused too (DNS rebinding), and so are requests that change state (POST, PATCH, PUT, DELETE)
+from a page of another origin (an ``Origin`` header other than the page's own). Request bodies
+are limited to :data:`MAX_BODY_BYTES` (413; a chunked body is read no further than that). Bad
+requests get a JSON error (``{"error": "..."}``, status 400, 403, 404 or 413); an unexpected
+failure is logged and answered with status 500; the server keeps running.
 """
 
 from __future__ import annotations
@@ -18,12 +21,13 @@ import threading
 from collections.abc import Awaitable, Callable
 from importlib import resources
 from typing import Any
+from urllib.parse import urlsplit
 
 from starlette.applications import Starlette
 from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from flexreg.errors import FlexregError, InputError
 from flexreg.picker.session import PickSession
@@ -39,6 +43,10 @@ STATIC = {
     "picker.js": "text/javascript; charset=utf-8",
     "picker.css": "text/css; charset=utf-8",
 }
+#: largest request body accepted (the page's requests are a few hundred bytes of JSON)
+MAX_BODY_BYTES = 1 << 20
+#: methods that change the session's state: refused from a page of another origin
+UNSAFE_METHODS = frozenset({"POST", "PATCH", "PUT", "DELETE"})
 
 
 def new_token() -> str:
@@ -46,28 +54,104 @@ def new_token() -> str:
     return secrets.token_urlsafe(24)
 
 
-class _Guard:
-    """ASGI middleware: the token and a loopback ``Host`` on every HTTP request."""
+def _same_origin(origin: str, scheme: str, host: str) -> bool:
+    """Whether the ``Origin`` header names ``scheme://host`` (the ``Host`` header's name and
+    port, default ports filled in)."""
+    default = {"http": 80, "https": 443}.get(scheme)
+    try:
+        o, h = urlsplit(origin), urlsplit(f"//{host}")
+        return (
+            o.scheme == scheme
+            and o.hostname is not None
+            and o.hostname == h.hostname
+            and (o.port or default) == (h.port or default)
+            and o.path in ("", "/")
+        )
+    except ValueError:  # a malformed port
+        return False
 
-    def __init__(self, app: ASGIApp, token: str, hosts: tuple[str, ...]) -> None:
-        self.app, self.token, self.hosts = app, token, hosts
+
+class _Guard:
+    """ASGI middleware on every HTTP request: a loopback ``Host``, the page's own ``Origin``
+    (when given) on requests that change state, the token, and a body of at most
+    ``max_body`` bytes (read here, then handed on to the application)."""
+
+    def __init__(
+        self, app: ASGIApp, token: str, hosts: tuple[str, ...], max_body: int = MAX_BODY_BYTES
+    ) -> None:
+        self.app, self.token, self.hosts, self.max_body = app, token, hosts, max_body
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         request = Request(scope)
-        host = (request.headers.get("host") or "").rsplit(":", 1)[0].strip("[]")
+        problem, status = self._refusal(request, scope.get("scheme", "http"))
+        if problem is None:
+            body = await self._read_body(receive)
+            if body is None:  # the client went away
+                return
+            if len(body) <= self.max_body:
+                await self.app(scope, _replay(body, receive), send)
+                return
+            problem, status = self._too_large(), 413
+        await JSONResponse({"error": problem}, status_code=status)(scope, receive, send)
+
+    def _refusal(self, request: Request, scheme: str) -> tuple[str | None, int]:
+        """Why the request is refused, from its headers alone, with the status; (None, 200)
+        when it may proceed."""
+        host_header = request.headers.get("host") or ""
+        host = host_header.rsplit(":", 1)[0].strip("[]")
         given = request.query_params.get("token") or request.headers.get("x-flexreg-token") or ""
-        problem = None
+        origin = request.headers.get("origin")
         if host not in self.hosts:
-            problem = f"host {host!r} refused: open the page at 127.0.0.1"
-        elif not secrets.compare_digest(given.encode(), self.token.encode()):
-            problem = "missing or wrong session token: open the URL flexreg pick printed"
-        if problem is not None:
-            await JSONResponse({"error": problem}, status_code=403)(scope, receive, send)
-            return
-        await self.app(scope, receive, send)
+            return f"host {host!r} refused: open the page at 127.0.0.1", 403
+        if (
+            request.method in UNSAFE_METHODS
+            and origin is not None
+            and not _same_origin(origin, scheme, host_header)
+        ):
+            return f"origin {origin!r} refused: only the picker's own page may change it", 403
+        if not secrets.compare_digest(given.encode(), self.token.encode()):
+            return "missing or wrong session token: open the URL flexreg pick printed", 403
+        declared = request.headers.get("content-length")
+        if declared is not None and not (declared.isascii() and declared.strip().isdigit()):
+            return f"invalid Content-Length {declared!r}", 400
+        if declared is not None and int(declared) > self.max_body:
+            return self._too_large(), 413
+        return None, 200
+
+    def _too_large(self) -> str:
+        return f"request body larger than {self.max_body} bytes refused"
+
+    async def _read_body(self, receive: Receive) -> bytes | None:
+        """The request body, read no further than ``max_body + 1`` bytes (a longer one is
+        cut there: the caller refuses it); None when the client disconnects."""
+        chunks: list[bytes] = []
+        size = 0
+        while True:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return None
+            chunk = message.get("body", b"")
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > self.max_body or not message.get("more_body", False):
+                return b"".join(chunks)
+
+
+def _replay(body: bytes, receive: Receive) -> Receive:
+    """An ASGI ``receive`` that gives ``body`` whole once, then defers to ``receive``."""
+    pending = True
+
+    async def replay() -> Message:
+        nonlocal pending
+        if pending:
+            pending = False
+            return {"type": "http.request", "body": body, "more_body": False}
+        return await receive()
+
+    return replay
 
 
 Handler = Callable[[Request], Awaitable[Response]]
@@ -89,6 +173,8 @@ def _json_errors(fn: Callable[[Request], Any]) -> Handler:
                         body = json.loads(raw)
                     except ValueError:
                         raise InputError("request", "the body is not valid JSON") from None
+                    except RecursionError:  # json's decoder recurses once per nesting level
+                        raise InputError("request", "the body is nested too deeply") from None
                     if not isinstance(body, dict):
                         raise InputError("request", "the body must be a JSON object")
             request.state.body = body
@@ -115,7 +201,11 @@ def _static(name: str) -> str:
 
 
 def create_app(
-    session: PickSession, token: str, *, hosts: tuple[str, ...] = LOCAL_HOSTS
+    session: PickSession,
+    token: str,
+    *,
+    hosts: tuple[str, ...] = LOCAL_HOSTS,
+    max_body: int = MAX_BODY_BYTES,
 ) -> ASGIApp:
     """The ASGI application of a picking session.
 
@@ -126,6 +216,8 @@ def create_app(
         Required on every request.
     hosts : tuple of str
         Accepted ``Host`` names.
+    max_body : int, bytes
+        Largest request body accepted (413 beyond).
 
     Returns
     -------
@@ -206,7 +298,7 @@ def create_app(
         Route("/api/suggestions/{sid}/reject", _json_errors(reject), methods=["POST"]),
         Route("/api/save", _json_errors(save), methods=["POST"]),
     ]
-    return _Guard(Starlette(routes=routes), token, hosts)
+    return _Guard(Starlette(routes=routes), token, hosts, max_body)
 
 
 class PickerServer:

@@ -3,15 +3,20 @@
 Every change (a pair added, moved or deleted, a suggestion accepted) re-solves with the solver
 of ``flexreg calibrate --pairs`` (:func:`flexreg.calibration.solve_pnp`: MAGSAC++ RANSAC,
 Levenberg-Marquardt, the verdict) from :data:`~flexreg.stages.camera_pose.MIN_CORRESPONDENCES`
-pairs on. Nothing is written until :meth:`PickSession.save`. A session is shared by the web
-server's worker threads; its public methods hold its lock.
+pairs on. Nothing is written until :meth:`PickSession.save`, which writes its files at once
+(each complete on disk or not replaced), not at the end of the command. A session is shared by
+the web server's worker threads; its public methods hold its lock.
 """
 
 from __future__ import annotations
 
+import contextvars
+import functools
 import logging
 import math
+import os
 import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,7 +39,7 @@ from flexreg.core.transforms import (
 from flexreg.errors import CalibrationError, FlexregError, InputError
 from flexreg.io import write_transform_json
 from flexreg.io.correspondences import write_pairs
-from flexreg.io.files import write_all
+from flexreg.io.files import Outputs, active_outputs
 from flexreg.io.intrinsics import CameraIntrinsics
 from flexreg.picker.views import LidarViews, encode_png, overlay_rgba, preview
 from flexreg.stages.camera_pose import MIN_CORRESPONDENCES, project_points, to_rvec_tvec
@@ -565,13 +570,14 @@ class PickSession:
         return doc
 
     def save(self) -> list[Path]:
-        """Write the pairs (``u,v,X,Y,Z``) and, when solved, the calibration JSON; both or
-        neither (atomic writes).
+        """Write the pairs (``u,v,X,Y,Z``) and, when solved, the calibration JSON, now (also
+        inside the command line's all-or-nothing block: a closed terminal loses nothing
+        saved); both or neither, each complete on disk (:func:`_write_now`).
 
         Raises
         ------
         InputError
-            No pairs yet.
+            No pairs yet; a file cannot be written (the files on disk stay as they were).
         """
         with self._lock:
             if not self.pairs:
@@ -582,8 +588,8 @@ class PickSession:
                 "lidar point X,Y,Z (metres, lidar frame)",
                 *(f"{k}: {v}" for k, v in self.inputs.items() if v is not None),
             ]
-            writers: list[tuple[Path, Any]] = [
-                (self.out, lambda: write_pairs(self.out, c.pixels, xyz=c.points, comments=comments))
+            writers: list[tuple[Path, Callable[[Path], object]]] = [
+                (self.out, lambda p: write_pairs(p, c.pixels, xyz=c.points, comments=comments))
             ]
             if self.result is not None:
                 meta = self.result.to_dict()
@@ -597,15 +603,64 @@ class PickSession:
                 writers.append(
                     (
                         self.result_out,
-                        lambda: write_transform_json(
-                            self.result_out, T, key="T_camera_lidar", **meta
-                        ),
+                        lambda p: write_transform_json(p, T, key="T_camera_lidar", **meta),
                     )
                 )
-            write_all(writers)
+            _write_now(writers)
             self.saved_revision = self.revision
             self.saved = [str(p) for p, _ in writers]
             return [p for p, _ in writers]
+
+
+def _write_now(writers: Sequence[tuple[Path, Callable[[Path], object]]]) -> list[Path]:
+    """Write every ``(path, write)`` at once, all or none, durably: ``write(tmp)`` fills a
+    temporary sibling of ``path``, which is flushed to disk (fsync) before the temporaries are
+    renamed into place together (:class:`~flexreg.io.files.Outputs`, which puts back the
+    earlier files when a rename fails); then the folders are flushed.
+
+    Inside the command line's :func:`~flexreg.io.files.all_or_nothing` block the files are
+    still written now, not at the block's end (the picker's Save must survive the terminal
+    closing); the block's inputs stay protected.
+    """
+    outer = active_outputs()
+    outputs = Outputs()
+    try:
+        for path, write in writers:
+            if outer is not None:
+                outer.check(Path(os.path.abspath(path)))
+            outputs.stage(path, functools.partial(_write_synced, write))
+        written = outputs.commit()
+    except BaseException:
+        outputs.abort()
+        raise
+    for folder in dict.fromkeys(p.parent for p in written):
+        _fsync(folder)
+    return written
+
+
+def _write_synced(write: Callable[[Path], object], tmp: Path) -> None:
+    """``write(tmp)`` outside any all-or-nothing block (its own atomic write lands on ``tmp``
+    at once), then ``tmp`` flushed to disk."""
+    contextvars.Context().run(write, tmp)
+    _fsync(tmp)
+
+
+def _fsync(path: Path) -> None:
+    """Flush a file, or a folder's entries, to disk (folders: where the system allows it)."""
+    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
+    try:
+        fd = os.open(path, flags)
+    except OSError:
+        if path.is_dir():  # folders cannot be opened on every system (Windows)
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not path.is_dir():
+            raise
+    finally:
+        os.close(fd)
 
 
 def _spread(pixels: NDArray[np.float64], k: int) -> list[int]:

@@ -20,6 +20,31 @@ STRETCHES: tuple[str, ...] = ("clahe", "percentile")
 MEDIANS: tuple[int, ...] = (0, 3, 5)
 UPRIGHT: tuple[str, ...] = ("auto", "on", "off")
 
+# Bounds of the knobs that set sizes, steps, cells and counts: each keeps a run's time and
+# memory within what the stage was measured with, and is no finer than anything resolves.
+#: Most keypoints kept per image: the SIFT descriptors (512 bytes each) of 200 000 take 0.1 GB
+#: an image, and matching them takes time quadratic in their number.
+MAX_FEATURES = 200_000
+#: Range images (pixels) the image stages take: at least 128 x 128 (below it no detector finds
+#: enough keypoints), at most 50 megapixels (a 10 000 x 5 000 panorama: its points alone, at
+#: 24 bytes a pixel, take 1.2 GB).
+MIN_IMAGE_PIXELS, MAX_IMAGE_PIXELS = 128 * 128, 50_000_000
+#: RANSAC iteration cap: a million triplets take seconds; the adaptive stop ends runs with
+#: 10 % inliers after about 9 200 at the default confidence (0.9999).
+MAX_RANSAC_ITERATIONS = 1_000_000
+#: Plan-view cell, metres: the fine plan has cells a quarter of it over a 20 m reach and the
+#: coarse one covers 40 m, so 10 cm cells already make 1 600 x 1 600 fine cells; finer ones
+#: draw the levelling error (about 7 cm at 40 m for 0.1 degrees of tilt), not the walls.
+#: 2 m cells leave 40 cells across the coarse plan.
+MIN_PLAN_CELL_M, MAX_PLAN_CELL_M = 0.1, 2.0
+#: Plan overlays tried, each a guided matching and a dense check.
+MAX_PLAN_HYPOTHESES = 50
+#: Sweep and twin slides, metres: a step finer than 5 cm moves the pose by less than the
+#: dense check's tolerance (2.5 inlier thresholds) and the polishing ICP that follow capture,
+#: so finer steps only judge the same pose again; a range beyond 50 m leaves the plan views'
+#: 40 m reach, where no overlap is left to judge.
+MIN_SLIDE_STEP_M, MAX_SLIDE_STEP_M, MAX_SLIDE_RANGE_M = 0.05, 5.0, 50.0
+
 
 class RegistrationConfig(Config):
     """Every knob of :func:`register`; saved with each result.
@@ -37,18 +62,20 @@ class RegistrationConfig(Config):
     features : str
         Detector/descriptor: sift, orb, akaze, kaze, brisk (surf on nonfree OpenCV).
     max_features : int
-        Strongest keypoints kept per image (>= 8).
+        Strongest keypoints kept per image, in [8, :data:`MAX_FEATURES`] (200 000).
     feature_strip_pixels : int
         SIFT on a larger image runs in horizontal strips of about this many pixels each (plus
         margins; :func:`flexreg.stages.keypoints.detect_and_describe` ``strip_rows``), so only
         one strip's scale space is in memory: 0.18 GB instead of 0.47 GB for a 2048 x 1024
-        image, for about 40 % more detection time. 0: always the whole image.
+        image, for about 40 % more detection time. 0: always the whole image. Pixels, at most
+        :data:`MAX_IMAGE_PIXELS` (strips are at least 64 rows high whatever the value).
     feature_tile_pixels : int
         When above 0, SIFT runs in square tiles of at most this many pixels each instead
         (plus margins; :func:`flexreg.stages.keypoints.tiles`): 196 608 keeps about 0.045 GB
         of scale space for a 2048 x 1024 image (0.2 GB less than the strips) and finds 98 % of
         its keypoints. Not the default: it changes the keypoints of 1024 x 512 images too,
-        and the survey and verdict benchmarks were measured with the strips.
+        and the survey and verdict benchmarks were measured with the strips. Pixels, at most
+        :data:`MAX_IMAGE_PIXELS` (tiles are at least 64 pixels a side whatever the value).
     ratio : float
         Lowe's ratio-test threshold, in (0, 1].
     mutual : bool
@@ -62,7 +89,8 @@ class RegistrationConfig(Config):
     min_inliers : int
         Fewer RANSAC inliers raise :class:`RegistrationError` (>= 3).
     confidence, max_iterations : float, int
-        RANSAC stopping: confidence in (0, 1), iteration cap >= 1.
+        RANSAC stopping: confidence in (0, 1), iteration cap (a count of sampled triplets) in
+        [1, :data:`MAX_RANSAC_ITERATIONS`] (1 000 000).
     refine : bool
         Refine with ICP.
     icp : {"point-to-plane", "gicp", "point-to-point"}
@@ -88,18 +116,20 @@ class RegistrationConfig(Config):
         A scan tilted more gets no plan-view prior; the reason, with its measured tilt, is in
         the error message when registration fails (and ``upright="on"`` fails with it).
     plan_cell_m : float, metres
-        Plan-view cell size.
+        Plan-view cell size, in [0.1, 2] m (:data:`MIN_PLAN_CELL_M`, :data:`MAX_PLAN_CELL_M`).
     plan_hypotheses : int
-        Plan overlays tried (best first).
+        Plan overlays tried (best first), in [1, :data:`MAX_PLAN_HYPOTHESES`] (50).
     guided_radius_m, guided_radius_per_m : float
-        Guided matching search radius around a prior's prediction: metres plus metres per
-        metre of range.
+        Guided matching search radius around a prior's prediction: metres, in (0, 5] (a
+        window wider than the largest inlier distance guides nothing), plus metres per metre
+        of range, in [0, 1] (a cone of 45 degrees).
     min_overlap : float
         Smallest share of the source's points the result must explain, in [0, 1] (see
         :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
     max_image_pixels : int
         Larger range images are subsampled (every k-th row and column) before the image
-        stages; ICP still uses every point.
+        stages; ICP still uses every point. Pixels, in [16 384, 50 000 000]
+        (:data:`MIN_IMAGE_PIXELS`, :data:`MAX_IMAGE_PIXELS`).
     open3d_overlap_check : bool
         Also state Open3D's ``evaluate_registration`` fitness and inlier RMSE beside the
         overlap (:mod:`flexreg.stages.overlap`; the same figures computed independently).
@@ -130,7 +160,8 @@ class RegistrationConfig(Config):
     sweep_axis_strength : float
         A translation direction weaker than this (per point, 0-1) is swept.
     sweep_range_m, sweep_step_m : float, metres
-        How far either way and in which steps the sweep slides the pose.
+        How far either way and in which steps the sweep slides the pose: range in (0, 50] m,
+        step in [0.05, 5] m (:data:`MIN_SLIDE_STEP_M` and the others beside it).
     refine_guard : bool
         Keep the ICP refinement only when it scores at least as well as the coarse transform
         in the two-way dense check (:func:`~flexreg.stages.verification.soft_score`), less
@@ -212,7 +243,8 @@ class RegistrationConfig(Config):
         truth lies bays further (warehouse 36, station_10 <- station_27). The wall direction
         the settling swept and won a tournament along is not slid at all.
     twin_range_m, twin_step_m : float, metres
-        How far either way and in which steps the answer is slid.
+        How far either way and in which steps the answer is slid: range in (0, 50] m, step in
+        [0.05, 5] m, as for the sweep.
     verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
         How far a candidate must be from the answer to count as a different pose.
     verdict_max_rmse_ratio : float
@@ -224,9 +256,9 @@ class RegistrationConfig(Config):
     median: Annotated[int, one_of(MEDIANS)] = 3
     stretch: Annotated[str, one_of(STRETCHES)] | None = "clahe"
     features: Annotated[str, one_of(METHODS, "method")] = "sift"
-    max_features: int = Field(8000, ge=8)
-    feature_strip_pixels: int = Field(524_288, ge=0)
-    feature_tile_pixels: int = Field(0, ge=0)
+    max_features: int = Field(8000, ge=8, le=MAX_FEATURES)
+    feature_strip_pixels: int = Field(524_288, ge=0, le=MAX_IMAGE_PIXELS)
+    feature_tile_pixels: int = Field(0, ge=0, le=MAX_IMAGE_PIXELS)
     ratio: float = Field(0.85, gt=0, le=1)
     mutual: bool = True
     threshold_m: ThresholdM | None = None
@@ -234,7 +266,7 @@ class RegistrationConfig(Config):
     consistency: bool = True
     min_inliers: int = Field(10, ge=3)
     confidence: float = Field(0.9999, gt=0, lt=1)
-    max_iterations: int = Field(50_000, ge=1)
+    max_iterations: int = Field(50_000, ge=1, le=MAX_RANSAC_ITERATIONS)
     refine: bool = True
     icp: Annotated[str, one_of(ICP_METHODS, "method")] = "point-to-plane"
     voxel_m: VoxelM | None = None
@@ -243,20 +275,20 @@ class RegistrationConfig(Config):
     icp_only: bool = False
     upright: Annotated[str, one_of(UPRIGHT)] = "auto"
     max_tilt_rad: float = Field(math.radians(25.0), ge=0, lt=math.pi / 2)
-    plan_cell_m: Positive = 0.25
-    plan_hypotheses: int = Field(3, ge=1)
-    guided_radius_m: Positive = 0.25
-    guided_radius_per_m: float = Field(0.02, ge=0, allow_inf_nan=False)
+    plan_cell_m: float = Field(0.25, ge=MIN_PLAN_CELL_M, le=MAX_PLAN_CELL_M, allow_inf_nan=False)
+    plan_hypotheses: int = Field(3, ge=1, le=MAX_PLAN_HYPOTHESES)
+    guided_radius_m: ThresholdM = 0.25
+    guided_radius_per_m: float = Field(0.02, ge=0, le=1, allow_inf_nan=False)
     min_overlap: float = Field(0.1, ge=0, le=1)
-    max_image_pixels: int = Field(2_500_000, ge=1)
+    max_image_pixels: int = Field(2_500_000, ge=MIN_IMAGE_PIXELS, le=MAX_IMAGE_PIXELS)
     open3d_overlap_check: bool = False
     polish: bool = True
     aliases: bool = True
     settle: bool = True
     settle_open_share: float = Field(0.003, gt=0, le=1)
     sweep_axis_strength: float = Field(0.03, ge=0, le=1)
-    sweep_range_m: Positive = 20.0
-    sweep_step_m: Positive = 0.5
+    sweep_range_m: float = Field(20.0, gt=0, le=MAX_SLIDE_RANGE_M, allow_inf_nan=False)
+    sweep_step_m: float = Field(0.5, ge=MIN_SLIDE_STEP_M, le=MAX_SLIDE_STEP_M, allow_inf_nan=False)
     refine_guard: bool = True
     refine_guard_margin: float = Field(0.01, ge=0, le=1)
     verdict_min_overlap: float = Field(0.2, ge=0, le=1)
@@ -278,8 +310,8 @@ class RegistrationConfig(Config):
     verdict_twin_min_ratio: float = Field(0.2, gt=0, le=1)
     verdict_twin_fit_open: float = Field(1e-3, ge=0, le=1)
     verdict_twin_strong_ratio: float = Field(0.4, gt=0, le=1)
-    twin_range_m: Positive = 15.0
-    twin_step_m: Positive = 0.25
+    twin_range_m: float = Field(15.0, gt=0, le=MAX_SLIDE_RANGE_M, allow_inf_nan=False)
+    twin_step_m: float = Field(0.25, ge=MIN_SLIDE_STEP_M, le=MAX_SLIDE_STEP_M, allow_inf_nan=False)
     verdict_distinct_deg: Positive = 3.0
     verdict_distinct_m: Positive = 0.5
     verdict_max_rmse_ratio: Positive = 1.0

@@ -6,11 +6,13 @@ from typing import Literal
 
 from pydantic import Field
 
-from flexreg.config import Config
+from flexreg.config import MAX_VOXEL_M, Config
 from flexreg.registration.config import RegistrationConfig
 
 PairsMode = Literal["auto", "all", "sequential"]
 StoredPoses = Literal["prior", "check", "ignore"]
+#: Finest voxel of the survey's multi-view ICP, metres (1 cm).
+MIN_REFINE_VOXEL_M = 0.01
 
 
 class SurveyConfig(Config):
@@ -69,9 +71,13 @@ class SurveyConfig(Config):
     joint_refine : bool
         Joint multi-view ICP on the accepted links after the graph (``--refine``).
     refine_voxel_m : float, metres
-        Voxel of the clouds the multi-view ICP aligns.
+        Voxel of the clouds the multi-view ICP aligns, in [0.01, 10] m
+        (:data:`MIN_REFINE_VOXEL_M`): every station's cloud is held at once, and voxels
+        finer than 1 cm keep about every point of a survey for millimetres the pairwise
+        ICP already resolves.
     refine_iterations : int
-        Rounds of pairwise ICP + pose-graph optimisation of the multi-view refinement.
+        Rounds of pairwise ICP + pose-graph optimisation of the multi-view refinement, in
+        [1, 10].
     stored_poses : {"prior", "check", "ignore"}
         Poses the files store per setup (E57 ``pose``, PTX header; identity means none):
         ``prior`` seeds every link between two such stations with the stored relative pose
@@ -141,7 +147,7 @@ class SurveyConfig(Config):
     residual_floor_m: float = Field(0.02, gt=0)
     residual_floor_deg: float = Field(0.2, gt=0)
     joint_refine: bool = False
-    refine_voxel_m: float = Field(0.05, gt=0)
+    refine_voxel_m: float = Field(0.05, ge=MIN_REFINE_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)
     refine_iterations: int = Field(2, ge=1, le=10)
     stored_poses: StoredPoses = "prior"
     stored_max_deg: float = Field(1.0, gt=0)
@@ -160,4 +166,4 @@ class SurveyConfig(Config):
     map_join_min_explained: float = Field(0.1, gt=0, le=1)
 
 
-__all__ = ["PairsMode", "StoredPoses", "SurveyConfig"]
+__all__ = ["MIN_REFINE_VOXEL_M", "PairsMode", "StoredPoses", "SurveyConfig"]

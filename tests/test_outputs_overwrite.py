@@ -131,7 +131,7 @@ def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
 
     (tmp_path / "cache").mkdir()
     (tmp_path / "cache" / "station.npz").write_text("prepared")
-    check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+    check_out_folder("--out", tmp_path, keep=("cache",))
     (tmp_path / "stations").mkdir()
     (tmp_path / "stations" / "old.txt").write_text("old")
     (tmp_path / "poses.json").write_text("old")
@@ -142,12 +142,12 @@ def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
     (tmp_path / MANIFEST).write_text(json.dumps({"files": files}))
     set_overwrite(False)
     with pytest.raises(ConfigError, match="give --overwrite"):
-        check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+        check_out_folder("--out", tmp_path, keep=("cache",))
     try:
         set_overwrite(True)
         with all_or_nothing():
             protect(tmp_path / "scan.ptx")
-            check_out_folder("--out", tmp_path, keep=("cache",), marker="poses.json")
+            check_out_folder("--out", tmp_path, keep=("cache",))
             atomic_write(tmp_path / "poses.json", lambda tmp: tmp.write_text("{}"))
     finally:
         set_overwrite(False)
@@ -206,7 +206,7 @@ def test_overwrite_into_a_folder_that_is_no_earlier_result_removes_nothing(input
     try:
         set_overwrite(True)
         with all_or_nothing():
-            check_out_folder("--out", tmp_path, marker="gt.json")
+            check_out_folder("--out", tmp_path)
             atomic_write(tmp_path / "gt.json", lambda tmp: tmp.write_text("{}"))
     finally:
         set_overwrite(False)

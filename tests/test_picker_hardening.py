@@ -2,6 +2,9 @@
 oversized body (declared or chunked), a state change from another origin; and Save writing its
 files at once, complete, even inside the command line's all-or-nothing block."""
 
+# ruff: noqa: F401, F811 - the picker tests' `session` and `client` fixtures, imported below, are
+# this file's too: test arguments of those names are the fixtures, not redefinitions
+
 from __future__ import annotations
 
 import asyncio
@@ -10,7 +13,13 @@ import logging
 import warnings
 
 import pytest
-from test_picker import TOKEN, _h, picker_scene, true_clicks
+from test_picker import (  # the picker tests' scene and fixtures
+    TOKEN,
+    _h,
+    client,
+    session,
+    true_clicks,
+)
 
 from flexreg.calibration import read_correspondences
 from flexreg.errors import InputError
@@ -23,27 +32,10 @@ with warnings.catch_warnings():  # recent Starlette releases prefer httpx2 for t
     warnings.simplefilter("ignore", Warning)
     from starlette.testclient import TestClient
 
-from flexreg.picker import PickSession, create_app
+from flexreg.picker import create_app
 from flexreg.picker.server import MAX_BODY_BYTES
 
 BASE = "http://127.0.0.1:8765"
-
-
-@pytest.fixture()
-def session(tmp_path):
-    s = picker_scene()
-    return PickSession(
-        s["image"],
-        s["scan"],
-        s["intrinsics"],
-        out=tmp_path / "out" / "pairs.csv",
-        result_out=tmp_path / "out" / "pairs-calib.json",
-    )
-
-
-@pytest.fixture()
-def client(session):
-    return TestClient(create_app(session, TOKEN), base_url=BASE)
 
 
 def _call(app, method: str, headers: dict[str, str], chunks: list[bytes]) -> tuple[int, dict, int]:

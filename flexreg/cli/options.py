@@ -207,7 +207,6 @@ def check_out_folder(
     inputs: Iterable[Path] = (),
     *,
     keep: tuple[str, ...] = (),
-    marker: str | None = None,
 ) -> None:
     """Refuse an output folder that is a file, one of the inputs, or holds anything (but the
     entries named in ``keep``) unless ``--overwrite`` was given.
@@ -226,9 +225,6 @@ def check_out_folder(
     inputs : iterable of Path
     keep : tuple of str
         Top-level entries that are not results and stay (``survey``: its ``cache``).
-    marker : str, optional
-        File name that marks an earlier result of the command (kept for the callers; what is
-        removed is decided by the folder's manifest alone).
     """
     from flexreg.io.files import MANIFEST, replace_folder
 

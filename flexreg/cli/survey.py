@@ -283,16 +283,13 @@ def survey_command(
       1  failed: nothing could be registered (one error line; nothing written
          but the cache)
     """
-    from flexreg.survey.execute import check_workers, dashboard_address
     from flexreg.survey.outputs import write_outputs
     from flexreg.survey.project import run_survey
 
-    check_workers(workers, scheduler)  # before reading anything
-    dashboard_address(dashboard)
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
-    check_out_folder("--out", out, scans, keep=("cache",), marker="poses.json")
+    check_out_folder("--out", out, scans, keep=("cache",))
     check_outputs(
         [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
         inputs=[p for p in scans if p.is_file()],

@@ -250,7 +250,7 @@ def synth(
     """
     from flexreg.synth.dataset import synthesize
 
-    check_out_folder("--out", out, marker="gt.json")
+    check_out_folder("--out", out)
     converted = _option_values(resolution, noise_mm, fmt, distance_m, max_tilt_deg, size_m, mesh_up)
     cfg = build_config(
         SynthConfig,

@@ -117,22 +117,21 @@ class Outputs:
                     while parent != folder and not any(parent.iterdir()):
                         parent.rmdir()
                         parent = parent.parent
-            others = [
-                e.name
-                for e in sorted(folder.iterdir())
-                if e.name not in keep and e.name != MANIFEST
-                and not any(r == e.name or r.startswith(e.name + "/") for r in ours)
-            ]  # fmt: skip
+            mine = {*keep, MANIFEST, *(r.split("/", 1)[0] for r in ours)}
+            others = [e.name for e in sorted(folder.iterdir()) if e.name not in mine]
             if others:
                 log.warning(
                     "%s: left %d entr%s flexreg did not write (%s)",
                     folder, len(others), "y" if len(others) == 1 else "ies",
                     ", ".join(others[:5]) + (", ..." if len(others) > 5 else ""),
                 )  # fmt: skip
-            with contextlib.suppress(OSError):
-                tmp = _temporary(folder / MANIFEST)
+            tmp = _temporary(folder / MANIFEST)
+            try:
                 tmp.write_text(json.dumps({"files": ours}, indent=1) + "\n", encoding="utf-8")
                 tmp.replace(folder / MANIFEST)
+            except OSError as e:  # the results are in place; a later run then removes less
+                tmp.unlink(missing_ok=True)
+                log.warning("%s: cannot record the files written (%s)", folder / MANIFEST, e)
         self._owned.clear()
 
     def _is_input(self, path: Path) -> bool:

@@ -23,6 +23,8 @@ from flexreg.survey.execute import (
     Progress,
     ProgressEvent,
     align_link,
+    check_workers,
+    dashboard_address,
     dask_client,
     default_workers,
     run_tasks,
@@ -431,8 +433,16 @@ def _register(
 
 
 def _check_inputs(
-    paths: list[Path], reference: str | None, pairs_file: Path | None
+    paths: list[Path],
+    reference: str | None,
+    pairs_file: Path | None,
+    cluster: tuple[int | None, str | None, str | None],
 ) -> list[Station]:
+    """What a survey refuses before any work: the cluster's options ``(workers, scheduler,
+    dashboard)`` first (nothing read yet), then the stations, the reference and the pairs."""
+    workers, scheduler, dashboard = cluster
+    check_workers(workers, scheduler)
+    dashboard_address(dashboard)
     stations = stations_of(find_scans(paths))
     if not stations:
         raise InputError(paths[0] if paths else "SCAN", "no scan files given")
@@ -488,12 +498,15 @@ def run_survey(
     InputError
         A missing path, a folder without scans, one scan only, duplicate station names, an
         unknown ``reference``, a bad pairs file; all before any work.
+    ConfigError
+        ``workers`` out of range, a bad ``dashboard`` or ``scheduler`` address (before any
+        work), or a scheduler that cannot be reached.
     RegistrationError
         Fewer than two readable stations.
     """
     config = config if config is not None else SurveyConfig()
     t_start = time.perf_counter()
-    stations = _check_inputs(paths, reference, pairs_file)
+    stations = _check_inputs(paths, reference, pairs_file, (workers, scheduler, dashboard))
     cache = out_dir / "cache"
     timings: dict[str, float] = {}
     n_workers = 1 if workers == 1 and scheduler is None else (workers or default_workers())

@@ -314,35 +314,26 @@ def _write_json(path: Path, doc: dict[str, Any]) -> None:
 def _place(
     scene: Scene, cfg: SynthConfig, tls: TLSConfig, poses: Sequence[ArrayLike] | None
 ) -> tuple[list[NDArray[np.float64]], ProjectPlacement | None]:
-    """The stations' ``T_world_scanner``: the given ones, a project's or a seeded placement."""
-    plan: ProjectPlacement | None = None
-    placed: list[NDArray[np.float64]]
+    """The stations' ``T_world_scanner``: the given ones, a project's or a seeded placement
+    (and the project's placement record)."""
     if poses is not None:
         placed = [as_transform(T) for T in poses]
         if len(placed) != cfg.stations:
             raise ConfigError(f"poses: {len(placed)} given for {cfg.stations} stations")
-    elif cfg.is_project:
-        plan = place_project(
-            scene,
-            cfg.stations,
-            min_overlap=cfg.min_overlap,
-            distance_range_m=cfg.distance_range_m,
-            max_tilt_rad=cfg.max_tilt_rad,
-            config=tls,
-            rng=stream(cfg.seed, _PLACEMENT),
-        )
-        placed = plan.poses
-    else:
-        placed = place_stations(
-            scene,
-            cfg.stations,
-            min_overlap=cfg.min_overlap,
-            distance_range_m=cfg.distance_range_m,
-            max_tilt_rad=cfg.max_tilt_rad,
-            config=tls,
-            rng=stream(cfg.seed, _PLACEMENT),
-        )
-    return placed, plan
+        return placed, None
+    place = place_project if cfg.is_project else place_stations
+    result = place(
+        scene,
+        cfg.stations,
+        min_overlap=cfg.min_overlap,
+        distance_range_m=cfg.distance_range_m,
+        max_tilt_rad=cfg.max_tilt_rad,
+        config=tls,
+        rng=stream(cfg.seed, _PLACEMENT),
+    )
+    if isinstance(result, ProjectPlacement):
+        return result.poses, result
+    return result, None
 
 
 def synthesize(

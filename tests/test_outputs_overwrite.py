@@ -16,7 +16,7 @@ from flexreg import Scan, read_scan, write_scan
 from flexreg.cli.app import hoist_root_flags
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import to_scan
-from flexreg.io.files import MANIFEST, read_manifest
+from flexreg.io.files import LOCK, MANIFEST, read_manifest
 from flexreg.stages.grid_camera import fit_grid_camera, grid_with_camera
 from flexreg.stages.projection import project, range_image
 
@@ -339,3 +339,50 @@ def test_project_resamples_an_irregular_grid_with_a_sidecar(shared_data, tmp_pat
     assert rc == 0, err
     assert (tmp_path / "k.camera.json").is_file()
     assert "resampled through a fitted equirectangular camera" in " ".join(stdout.split())
+
+
+def test_a_second_run_into_a_folder_being_written_is_refused(tmp_path):
+    """Two runs writing into one --out at once both used to "succeed", the later silently
+    replacing the earlier: the first holds the folder (a lock file in it) while it runs."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "sim"
+    out.mkdir()
+    hold = (
+        "import fcntl, os, sys, time\n"
+        f"fd = os.open({str(out / LOCK)!r}, os.O_RDWR | os.O_CREAT)\n"
+        "fcntl.flock(fd, fcntl.LOCK_EX)\n"
+        "os.write(fd, str(os.getpid()).encode())\n"
+        "print('held', flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    other = subprocess.Popen([sys.executable, "-c", hold], stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline().strip() == "held"
+        argv = ["synth", "--scene", "room", "--stations", "1", "--resolution", "64x32",
+                "--out", out]  # fmt: skip
+        rc, _, err = run_cli(argv)
+        line = one_error_line(err)
+        assert rc == 1 and f"another flexreg run (process {other.pid})" in line, line
+        assert sorted(p.name for p in out.iterdir()) == [LOCK]  # nothing written
+    finally:
+        other.kill()
+        other.wait()
+    t0 = time.monotonic()
+    rc, _, err = run_cli(argv)  # the holder is gone: its lock file is no obstacle
+    assert rc == 0, err
+    assert (out / "gt.json").is_file() and not (out / LOCK).exists()  # released at the end
+    assert run_cli([*argv, "--overwrite"])[0] == 0  # and a later run in this process holds it
+    assert time.monotonic() - t0 < 60
+
+
+def test_a_failed_run_into_a_new_folder_leaves_no_folder(tmp_path):
+    out = tmp_path / "new" / "sim"
+    """The folder a run holds is made when it starts; a run that fails after that (here:
+    stations that cannot be placed) leaves no folder behind."""
+    rc, _, err = run_cli(["synth", "--scene", "room", "--stations", "2", "--resolution", "64x32",
+                          "--distance-m", "40,50", "--out", out])  # fmt: skip
+    assert rc == 1 and "could not place station" in one_error_line(err)
+    assert not (tmp_path / "new").exists()

@@ -82,3 +82,42 @@ def test_the_local_cluster_serves_no_dashboard_unless_asked_and_then_on_loopback
         assert all(w.startswith("tcp://127.0.0.1:") for w in client.scheduler_info()["workers"])
     with dask_client(2, None, dashboard=":0") as client:
         assert _web(client) == ({"127.0.0.1"}, 200)
+
+
+def test_a_tasks_io_error_on_a_worker_is_one_line_naming_its_file(tmp_path):
+    """A full disk or a read-only cache on a worker used to surface as an OSError traceback
+    from inside a Dask task."""
+    import os
+
+    from flexreg.errors import InputError
+    from flexreg.survey.execute import run_tasks
+
+    gone = str(tmp_path / "cache" / "station.prepared")
+    for workers in (1, 2):
+        with dask_client(workers, None) as client:
+            with pytest.raises(InputError, match=r"station\.prepared: No such file") as e:
+                run_tasks(client, os.stat, [(str(tmp_path),), (gone,)])
+            assert str(e.value).count("\n") == 0
+
+
+def test_a_full_disk_while_preparing_is_one_line_exit_1(tmp_path, monkeypatch):
+    import errno
+
+    from conftest import room_project
+
+    from flexreg.survey import stations
+
+    project = room_project(tmp_path / "p", 2, width=128, height=64)
+
+    def full(path, write):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(stations, "_atomic_bytes", full)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(
+        ["survey", project / "station_00.ptx", project / "station_01.ptx", "--out", out,
+         "--workers", "1"]
+    )  # fmt: skip
+    line = one_error_line(err)
+    assert rc == 1 and "No space left on device" in line and ".partial" not in line, line
+    assert not (out / "poses.json").exists()

@@ -216,7 +216,8 @@ def check_out_folder(
     removed once the new ones are in place (:func:`flexreg.io.files.replace_folder`; never an
     input of the command, never the ``keep`` entries, nothing at all if the command fails).
     Anything else in the folder (the user's) is left alone, and said so. Every run records
-    its files in the manifest.
+    its files in the manifest, and holds the folder while it runs: a second run writing
+    into it meanwhile is refused in one line.
 
     Parameters
     ----------
@@ -226,7 +227,7 @@ def check_out_folder(
     keep : tuple of str
         Top-level entries that are not results and stay (``survey``: its ``cache``).
     """
-    from flexreg.io.files import MANIFEST, replace_folder
+    from flexreg.io.files import LOCK, MANIFEST, replace_folder
 
     if folder is None:
         return
@@ -235,6 +236,7 @@ def check_out_folder(
     for p in inputs:
         if p.resolve() == folder.resolve():
             raise ConfigError(f"{option}: {folder}: is also an input")
-    if folder.is_dir() and any(e.name not in keep and e.name != MANIFEST for e in folder.iterdir()):
+    ours = (*keep, MANIFEST, LOCK)  # a cache, and flexreg's records of the folder
+    if folder.is_dir() and any(e.name not in ours for e in folder.iterdir()):
         _refuse_existing(option, folder, "is a folder that is not empty")
     replace_folder(folder, keep)

@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import itertools
 import json
 import logging
@@ -37,6 +38,7 @@ from numpy.typing import NDArray
 from flexreg.errors import InputError
 
 __all__ = [
+    "LOCK",
     "MANIFEST",
     "Outputs",
     "all_or_nothing",
@@ -53,6 +55,8 @@ log = logging.getLogger(__name__)
 
 #: the file in a folder of results that lists, relative to it, the files flexreg wrote there
 MANIFEST = ".flexreg-outputs.json"
+#: the file a run holds locked in its folder of results while it writes there
+LOCK = ".flexreg.lock"
 
 _ACTIVE: ContextVar[Outputs | None] = ContextVar("flexreg_outputs", default=None)
 _COUNTER = itertools.count()
@@ -84,6 +88,7 @@ class Outputs:
         self._created: list[Path] = []  # folders made for the targets, outermost first
         self._inputs: dict[tuple[int, int] | Path, Path] = {}
         self._owned: dict[Path, tuple[str, ...]] = {}  # folder -> top-level names to keep
+        self._locks: dict[Path, int] = {}  # folder -> descriptor of its held LOCK file
 
     @property
     def targets(self) -> list[Path]:
@@ -91,10 +96,54 @@ class Outputs:
         return list(self._staged)
 
     def own(self, folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -> None:
-        """At :meth:`commit`, remove the files under ``folder`` that this block did not write
-        (except the top-level entries named in ``keep`` and the command's inputs), and then
-        the emptied folders."""
-        self._owned[Path(os.path.abspath(folder))] = tuple(keep)
+        """Hold ``folder`` (:meth:`lock`) and, at :meth:`commit`, remove the files its
+        manifest lists that this block did not write (never the top-level entries named in
+        ``keep`` or the command's inputs), then the emptied folders."""
+        path = Path(os.path.abspath(folder))
+        self.lock(path)
+        self._owned[path] = tuple(keep)
+
+    def lock(self, folder: Path) -> None:
+        """Hold ``folder`` for this block: an exclusive lock on its :data:`LOCK` file (the
+        folder made if missing, as for an output), released when the block ends. Another run
+        writing into the same folder meanwhile is refused.
+
+        Raises
+        ------
+        InputError
+            Another process holds the folder, or the lock file cannot be made.
+        """
+        if folder in self._locks:
+            return
+        path = folder / LOCK
+        self._make_parent(path)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise InputError(folder, f"cannot write here: {e.strerror or e}") from e
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.fstat(fd).st_ino != os.stat(path).st_ino:  # released and removed meanwhile
+                raise BlockingIOError
+        except OSError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise InputError(
+                folder,
+                f"another flexreg run (process {holder}) is writing its results here; wait "
+                "for it to end or choose another output folder",
+            ) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._locks[folder] = fd
+
+    def _unlock(self) -> None:
+        """Release every held folder (the lock file removed while still held)."""
+        for folder, fd in self._locks.items():
+            with contextlib.suppress(OSError):
+                (folder / LOCK).unlink()
+            os.close(fd)
+        self._locks.clear()
 
     def _sweep(self, written: list[Path]) -> None:
         """In every owned folder: remove what the earlier run's manifest lists and this block
@@ -117,7 +166,7 @@ class Outputs:
                     while parent != folder and not any(parent.iterdir()):
                         parent.rmdir()
                         parent = parent.parent
-            mine = {*keep, MANIFEST, *(r.split("/", 1)[0] for r in ours)}
+            mine = {*keep, MANIFEST, LOCK, *(r.split("/", 1)[0] for r in ours)}
             others = [e.name for e in sorted(folder.iterdir()) if e.name not in mine]
             if others:
                 log.warning(
@@ -238,10 +287,12 @@ class Outputs:
         self._staged.clear()
         self._created.clear()
         self._sweep(written)
+        self._unlock()
         return written
 
     def abort(self) -> None:
         """Remove the temporaries and the folders made for them (when empty)."""
+        self._unlock()
         for tmp in self._staged.values():
             with contextlib.suppress(OSError):
                 tmp.unlink(missing_ok=True)

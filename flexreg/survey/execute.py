@@ -262,11 +262,21 @@ def run_tasks(
     on_result: Callable[[int, Any], None] | None = None,
 ) -> list[Any]:
     """``fn(*item)`` for every item, on the client's workers (or here when ``client`` is
-    None); results in item order, ``on_result(i, result)`` as each finishes."""
+    None); results in item order, ``on_result(i, result)`` as each finishes.
+
+    Raises
+    ------
+    InputError
+        A task's ``OSError`` (a full disk, a read-only or vanished cache folder, on any
+        worker), naming its file; the other tasks are cancelled.
+    """
     out: list[Any] = [None] * len(items)
     if client is None:
         for i, args in enumerate(items):
-            out[i] = fn(*args)
+            try:
+                out[i] = fn(*args)
+            except OSError as e:
+                raise _io_error(e) from e
             if on_result is not None:
                 on_result(i, out[i])
         return out
@@ -274,13 +284,22 @@ def run_tasks(
 
     futures = [client.submit(fn, *args, pure=False) for args in items]
     index = {f.key: i for i, f in enumerate(futures)}
-    for fut in as_completed(futures):
-        i = index[fut.key]
-        out[i] = fut.result()
-        if on_result is not None:
-            on_result(i, out[i])
-        fut.release()
+    try:
+        for fut in as_completed(futures):
+            i = index[fut.key]
+            out[i] = fut.result()
+            if on_result is not None:
+                on_result(i, out[i])
+            fut.release()
+    except OSError as e:
+        client.cancel(futures)
+        raise _io_error(e) from e
     return out
+
+
+def _io_error(e: OSError) -> InputError:
+    """A task's I/O error as the one line the command line prints."""
+    return InputError(e.filename or "cache", f"{e.strerror or e}")
 
 
 def _strength(evidence: dict[str, Any]) -> dict[str, float]:

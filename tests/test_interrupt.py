@@ -164,12 +164,12 @@ def test_survey_interrupted_resumes_from_its_cache(tmp_path):
     cache = out / "cache"
 
     def some_cached() -> bool:
-        return len(list(cache.glob("*.pkl"))) >= 2
+        return len(list(cache.glob("*.prepared.npz"))) >= 2
 
     wait_until(proc, some_cached, "caching two stations")
     rc, _, err = interrupt(proc, signal.SIGINT)
     check_one_line(rc, err, signal.SIGINT)
-    cached = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.pkl")}
+    cached = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.prepared.npz")}
     assert 2 <= len(cached) < len(offsets), f"{len(cached)} cached: interrupt came too late"
     left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     assert all(p.startswith("cache/") for p in left), left  # no result file, only the cache
@@ -181,7 +181,7 @@ def test_survey_interrupted_resumes_from_its_cache(tmp_path):
     )  # fmt: skip
     assert done.returncode in (0, 3), done.stderr[-3000:]
     assert (out / "poses.json").is_file()
-    again = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.pkl")}
+    again = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.prepared.npz")}
     assert len(again) == len(offsets)
     assert all(again[name] == t for name, t in cached.items())  # not prepared again
     n_new = len(offsets) - len(cached)
@@ -253,7 +253,7 @@ def test_survey_on_dask_workers_interrupted_is_one_line(tmp_path):
         write_station(scans / f"st{i}.npz", 256, 512, o, i)
     out = tmp_path / "out"
     proc = start(["survey", str(scans), "--out", str(out), "--workers", "2"], tmp_path)
-    wait_until(proc, lambda: any((out / "cache").glob("*.pkl")), "caching a station")
+    wait_until(proc, lambda: any((out / "cache").glob("*.prepared.npz")), "caching a station")
     rc, _, err = interrupt(proc, signal.SIGINT)
     check_one_line(rc, err, signal.SIGINT)
     left = [p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()]

@@ -128,10 +128,9 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     ratios of the two shares, which the geometry sets (not one machine's output): at the
     truth the explained share is above 4x the conflicting one (about 17x here), at the wrong
     pose the conflicting share is above 3x the explained one (about 7x here)."""
-    import pickle
-
     from flexreg.registration.pipeline import Registration
     from flexreg.survey.mapcheck import PairJudge, look_from, write_glance
+    from flexreg.survey.stations import save_prepared
     from flexreg.synth import TLSConfig, make_scene, scan_tls
 
     scene = make_scene("room", 1)  # a furnished room of about 14.5 x 13 m, floor at z = 0
@@ -143,9 +142,8 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     files = {}
     for k, (name, pose) in enumerate(W.items()):
         scan = scan_tls(scene, pose, config=TLSConfig(width=512, height=256), rng=k)
-        f = tmp_path / f"{name}.prepared.pkl"
-        with f.open("wb") as fh:
-            pickle.dump(reg.prepare(scan), fh)
+        f = tmp_path / f"{name}.prepared.npz"
+        save_prepared(reg.prepare(scan), f)
         files[name] = str(f)
     glances = {n: write_glance(f) for n, f in files.items()}
     assert all(g is not None and g.endswith(".glance.npz") for g in glances.values())

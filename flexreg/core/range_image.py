@@ -68,8 +68,9 @@ class RangeImage:
     def __getstate__(self) -> dict[str, Any]:
         """Pickled as it is, except an ``index`` that is one value repeated (a working image
         that keeps no point numbers: a read-only broadcast view), which is stored as that
-        value and unpickled as the same view (no pixel-sized array in a cache file or in the
-        memory of the process that loads it)."""
+        value and unpickled as the same view (no pixel-sized array in what travels between
+        processes or in the memory of the process that loads it; the survey's cache stores it
+        the same way, as data)."""
         state = dict(self.__dict__)
         ix = self.index
         if ix.size and not any(ix.strides):

@@ -116,6 +116,7 @@ def declared_scans(path: Path) -> list[DeclaredScan]:
         data3d = next((c for c in root if _local(c.tag) == "data3D"), None)
         scans: list[DeclaredScan] = []
         for i, child in enumerate([] if data3d is None else list(data3d)):
+            _check_pose(path, i, child)
             try:
                 scans.append(_declared(f, path, i, child, size))
             except ValueError as e:
@@ -125,6 +126,28 @@ def declared_scans(path: Path) -> list[DeclaredScan]:
                     path, f"scan {i}: E57 XML holds a non-numeric limit ({e})"
                 ) from None
     return scans
+
+
+def _check_pose(path: Path, i: int, scan: ET.Element) -> None:
+    """Refuse a pose number that is not a finite number (``nan``, ``inf``, ``1e400``, a
+    word): libE57 reads such text as 0 (or the largest double) without a word, so a NaN pose
+    would become a wrong one. Empty elements are 0 by the standard and stay accepted."""
+    by = {_local(c.tag): c for c in scan}
+    name = (by["name"].text or "").strip() if "name" in by else ""
+    pose = by.get("pose")
+    for part in [] if pose is None else list(pose):
+        for axis in part:
+            text = (axis.text or "").strip()
+            try:
+                finite = not text or math.isfinite(float(text))
+            except ValueError:
+                finite = False
+            if not finite:
+                raise InputError(
+                    path,
+                    f"scan {i} ({name or f'scan {i}'}): pose {_local(part.tag)} "
+                    f"{_local(axis.tag)} is {text!r}, not a finite number",
+                )
 
 
 def _declared(f: object, path: Path, i: int, scan: ET.Element, size: int) -> DeclaredScan:

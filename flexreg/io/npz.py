@@ -39,6 +39,7 @@ FORMAT_VERSION = 1
 def _from_array(path: Path, a: NDArray[Any], name: str) -> Scan:
     if not np.issubdtype(a.dtype, np.number):
         raise InputError(path, f"array {name!r} is not numeric ({a.dtype})")
+    _check_real(path, name, a.dtype)
     if a.ndim == 3 and a.shape[2] == 3:
         return Scan.from_organized(a.astype(np.float64), path=path, name=path.stem)
     if a.ndim == 2 and a.shape[1] >= 3:
@@ -51,6 +52,12 @@ def _from_array(path: Path, a: NDArray[Any], name: str) -> Scan:
             name=path.stem,
         )
     raise InputError(path, f"array {name!r} of shape {a.shape} is neither (N, 3+) nor (H, W, 3)")
+
+
+def _check_real(path: Path, name: str, dtype: np.dtype[Any]) -> None:
+    """Refuse complex arrays: casting them to coordinates would drop their imaginary part."""
+    if dtype.kind == "c":
+        raise InputError(path, f"{name}: holds complex numbers ({dtype}); scans need real values")
 
 
 def _array_bytes(path: Path, name: str, fh: Any, stored: int) -> int:
@@ -68,6 +75,7 @@ def _array_bytes(path: Path, name: str, fh: Any, stored: int) -> int:
         raise InputError(path, f"not a readable NumPy file ({name}: {e})") from None
     if dtype.hasobject:
         raise InputError(path, f"{name}: holds Python objects, which are never loaded")
+    _check_real(path, name, dtype)
     nbytes = math.prod(shape) * dtype.itemsize
     if nbytes > stored:
         raise InputError(
@@ -213,7 +221,7 @@ def _scan_from_npz(path: Path, data: Any, p: str) -> Scan:
     def get(k: str) -> Any:
         return data[p + k] if p + k in keys else None
 
-    grid_shape = get("grid_shape")
+    grid_shape = _grid_shape(path, p + "grid_shape", get("grid_shape"))
     camera = get("camera")
     name = get("name")
     pose = get("T_world_scanner")
@@ -221,13 +229,23 @@ def _scan_from_npz(path: Path, data: Any, p: str) -> Scan:
         points=data[p + "points"],
         intensity=get("intensity"),
         colors=get("colors"),
-        grid_shape=None if grid_shape is None else (int(grid_shape[0]), int(grid_shape[1])),
+        grid_shape=grid_shape,
         grid_index=get("grid_index"),
         T_world_scanner=np.eye(4) if pose is None else pose,
         camera=None if camera is None else camera_from_dict(json.loads(str(camera))),
         path=path,
         name=str(name) if name is not None else path.stem,
     )
+
+
+def _grid_shape(path: Path, key: str, a: Any) -> tuple[int, int] | None:
+    """``(rows, cols)`` from a ``grid_shape`` member (None when absent); refuses anything but
+    two integers."""
+    if a is None:
+        return None
+    if a.shape != (2,) or not np.issubdtype(a.dtype, np.integer):
+        raise InputError(path, f"{key} must be two integers (rows, cols), got {a.dtype} {a.shape}")
+    return int(a[0]), int(a[1])
 
 
 def write(path: Path, scans: list[Scan], *, compress: bool = True, **_: Any) -> None:

@@ -124,7 +124,12 @@ def _ground_truth_entry(p: Path, target: str | None, source: str | None) -> tupl
     except json.JSONDecodeError as e:
         raise InputError(p, f"invalid JSON: {e.msg} (line {e.lineno})") from None
     if isinstance(doc, dict) and "T_target_source" not in doc and "pairs" in doc:
-        for pair in doc["pairs"]:
+        pairs = doc["pairs"]
+        if not isinstance(pairs, list) or not all(isinstance(q, dict) for q in pairs):
+            raise InputError(
+                p, "'pairs' must be a list of objects with 'target', 'source' and 'T_target_source'"
+            )
+        for pair in pairs:
             names = (pair.get("target"), pair.get("source"))
             if names == (target, source):
                 return pair.get("T_target_source"), False

@@ -8,10 +8,12 @@ functions for its two scans.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path, PurePath
 from typing import Any
 
 import numba
@@ -19,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft
 
+from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan, as_points
 from flexreg.errors import DegenerateGeometryError, FlexregError
@@ -27,10 +30,11 @@ from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
 from flexreg.stages import feature_images
 from flexreg.stages.correspondences import lift
-from flexreg.stages.keypoints import detect_and_describe, strip_rows
+from flexreg.stages.keypoints import Features, detect_and_describe, strip_rows
+from flexreg.stages.levelling import Levelling
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.overlap import keep_overlap_inputs
-from flexreg.stages.priors import PlanView, plan_view
+from flexreg.stages.priors import PlanView, TopView, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
 from flexreg.stages.sampling import area_sample_cell, area_sample_image
@@ -97,7 +101,8 @@ class ScanView:
 
 @dataclass(eq=False)
 class PreparedScan:
-    """One scan prepared for :meth:`Registration.align` (numpy arrays only, picklable).
+    """One scan prepared for :meth:`Registration.align` (numpy arrays only: picklable for
+    Dask, and stored as plain data by :func:`prepared_to_arrays`).
 
     Attributes
     ----------
@@ -281,3 +286,169 @@ def _keep_overlap_inputs(scans: list[Scan | RangeImage]) -> None:
         )
     except FlexregError as e:
         log.debug("overlap inputs not computed ahead: %s", e)
+
+
+# ------------------------------------------------------------------------------ as plain data
+
+#: the classes a prepared scan is made of, by name (nothing else is rebuilt from a file)
+_PLAIN_TYPES: dict[str, Any] = {
+    c.__name__: c
+    for c in (
+        PreparedScan,
+        ScanView,
+        RangeImage,
+        Scan,
+        Keypoints3D,
+        Features,
+        PlanView,
+        TopView,
+        Levelling,
+        PinholeCamera,
+        SphericalCamera,
+    )
+}
+
+
+def prepared_to_arrays(prepared: PreparedScan) -> tuple[Any, dict[str, NDArray[Any]]]:
+    """A prepared scan as plain data: a JSON-ready tree and the numpy arrays it names.
+
+    The tree holds the scalars, strings, the configuration (as
+    :meth:`~flexreg.config.Config.to_dict`) and the class of each part, by name; every array
+    is one entry of the dict (``a0``, ``a1``, ...). An array or part shared by several fields
+    is stored once and shared again on reading; an array that is one value repeated (a
+    working image's ``index``: a read-only broadcast view) is stored as that value.
+    :func:`prepared_from_arrays` rebuilds the same scan, bit for bit, without unpickling
+    anything.
+
+    Raises
+    ------
+    TypeError
+        A part of a type this layout does not know (an object array, a foreign class).
+    """
+    arrays: dict[str, NDArray[Any]] = {}
+    memo: dict[int, Any] = {}
+    keep: list[Any] = []  # the parts seen, alive while their ids are the memo's keys
+    count = [0]  # parts numbered in the order they start
+
+    def enc(x: Any) -> Any:
+        if x is None or isinstance(x, bool | int | str):
+            return x
+        if isinstance(x, float):
+            return x if math.isfinite(x) else {"float": repr(x)}
+        if isinstance(x, tuple):
+            return {"tuple": [enc(v) for v in x]}
+        if isinstance(x, list):
+            return {"list": [enc(v) for v in x]}
+        if isinstance(x, dict) and all(isinstance(k, str) for k in x):
+            return {"dict": {k: enc(v) for k, v in x.items()}}
+        if isinstance(x, PurePath):
+            return {"path": str(x)}
+        if isinstance(x, RegistrationConfig):
+            return {"config": x.to_dict()}
+        if isinstance(x, np.generic):
+            return {"scalar": enc(np.asarray(x))["array"]}
+        if id(x) in memo:
+            return memo[id(x)]
+        keep.append(x)
+        if isinstance(x, np.ndarray):
+            if x.dtype.hasobject:
+                raise TypeError("an object array cannot be stored as plain data")
+            key = f"a{len(arrays)}"
+            if x.size and not any(x.strides):  # one value repeated: a broadcast view
+                arrays[key] = np.array(x.flat[0], dtype=x.dtype)
+                memo[id(x)] = {"broadcast": key, "shape": list(x.shape)}
+            else:
+                arrays[key] = x
+                memo[id(x)] = {"array": key}
+            return memo[id(x)]
+        name = type(x).__name__
+        if _PLAIN_TYPES.get(name) is not type(x):
+            raise TypeError(f"{type(x).__qualname__} cannot be stored as plain data")
+        kinds: Any = type(x)  # one of the dataclasses above
+        extra = set(vars(x)) - {f.name for f in fields(kinds)}
+        if extra:
+            raise TypeError(f"{name} holds more than its fields ({', '.join(sorted(extra))})")
+        ref = count[0]
+        count[0] += 1
+        tree = {
+            "type": name,
+            "id": ref,
+            "fields": {f.name: enc(getattr(x, f.name)) for f in fields(kinds)},
+        }
+        memo[id(x)] = {"ref": ref}
+        return tree
+
+    return enc(prepared), arrays
+
+
+def prepared_from_arrays(tree: Any, arrays: dict[str, NDArray[Any]]) -> PreparedScan:
+    """The prepared scan :func:`prepared_to_arrays` made ``tree`` and ``arrays`` of.
+
+    Only the classes of a prepared scan are rebuilt, through their own constructors (which
+    check shapes); nothing in the data names code to run.
+
+    Raises
+    ------
+    ValueError
+        The tree is not such a layout (an unknown class or tag, a missing array or part, a
+        part that its class refuses).
+    """
+    parts: dict[int, Any] = {}
+
+    def dec(x: Any) -> Any:
+        if x is None or isinstance(x, bool | int | float | str):
+            return x
+        if not isinstance(x, dict) or len(x) not in (1, 2, 3):
+            raise ValueError(f"not a stored value: {str(x)[:60]}")
+        if "type" in x:
+            cls = _PLAIN_TYPES.get(x["type"]) if isinstance(x["type"], str) else None
+            given = x.get("fields")
+            if cls is None or not isinstance(given, dict):
+                raise ValueError(f"not a part of a prepared scan: {str(x['type'])[:60]}")
+            names = {f.name for f in fields(cls)}
+            if set(given) != names:
+                raise ValueError(
+                    f"{cls.__name__}: fields {sorted(given)}, expected {sorted(names)}"
+                )
+            try:
+                obj = cls(**{k: dec(v) for k, v in given.items()})
+            except (TypeError, FlexregError) as e:
+                raise ValueError(f"{cls.__name__}: {e}") from None
+            parts[int(x["id"])] = obj
+            return obj
+        ((tag, v),) = list(x.items())[:1]
+        if tag == "ref":
+            return parts[int(v)]
+        if tag == "array":
+            return arrays[v]
+        if tag == "broadcast":
+            return np.broadcast_to(arrays[v], tuple(int(n) for n in x["shape"]))
+        if tag == "scalar":
+            return arrays[v][()]
+        if tag == "float":
+            return float(v)
+        if tag == "tuple":
+            return tuple(dec(e) for e in v)
+        if tag == "list":
+            return [dec(e) for e in v]
+        if tag == "dict":
+            return {str(k): dec(e) for k, e in v.items()}
+        if tag == "path":
+            return Path(v)
+        if tag == "config":
+            return RegistrationConfig(**v)
+        raise ValueError(f"unknown tag {tag!r}")
+
+    try:
+        out = dec(tree)
+    except (KeyError, TypeError, AttributeError, RecursionError, FlexregError) as e:
+        raise ValueError(f"not a stored prepared scan ({type(e).__name__}: {e})") from None
+    if not isinstance(out, PreparedScan) or not (
+        isinstance(out.image, RangeImage)
+        and isinstance(out.scan, Scan | RangeImage)
+        and isinstance(out.keypoints, Keypoints3D)
+        and isinstance(out.view, ScanView)
+        and isinstance(out.config, RegistrationConfig)
+    ):
+        raise ValueError("not a stored prepared scan")
+    return out

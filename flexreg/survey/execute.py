@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import logging
 import os
-import pickle
 import signal
 import socket
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,13 @@ from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import Registration
 from flexreg.survey.graph import Link
 from flexreg.survey.pairs import Candidate
-from flexreg.survey.stations import load_prepared
+from flexreg.survey.stations import (
+    PREPARED_SUFFIX,
+    CacheEntryError,
+    load_prepared,
+    read_entry,
+    write_entry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -323,19 +328,27 @@ def link_cache_path(target_file: str, source_file: str, *, prior: bool = False) 
     """Where a link's result is cached: beside the prepared stations, named by both
     stations' cache keys (file content, setup and configuration) and whether the stored
     poses seeded it."""
-    t = Path(target_file).name.removesuffix(".prepared.pkl")
-    s = Path(source_file).name.removesuffix(".prepared.pkl")
+    t = Path(target_file).name.removesuffix(PREPARED_SUFFIX)
+    s = Path(source_file).name.removesuffix(PREPARED_SUFFIX)
     tag = ".stored" if prior else ""
-    return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.pkl"
+    return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.npz"
+
+
+#: a link's fields stored as arrays in its cache entry (the rest as JSON)
+_LINK_ARRAYS = ("T_target_source", "information")
 
 
 def _cached_link(path: Path, cand: Candidate) -> Link | None:
+    """The link cached at ``path`` (a data-only entry, :func:`~flexreg.survey.stations.
+    read_entry`), or None: none yet, or damaged or foreign (then one warning, and the link
+    is registered again)."""
     try:
-        with path.open("rb") as f:
-            link = pickle.load(f)
-    except (OSError, pickle.UnpicklingError, EOFError, AttributeError):
-        return None
-    if not isinstance(link, Link):
+        meta, arrays = read_entry(path, "link")
+        given: dict[str, Any] = {k: arrays[k] for k in _LINK_ARRAYS if k in arrays}
+        link = Link(**meta["link"], **given)
+    except (CacheEntryError, KeyError, TypeError) as e:
+        if path.exists():
+            log.warning("%s: unusable cache entry (%s); registering the link again", path, e)
         return None
     if link.T_target_source is not None and link.doubt is None:
         return None  # cached before links kept their free-space doubt: register again
@@ -344,13 +357,9 @@ def _cached_link(path: Path, cand: Candidate) -> Link | None:
 
 def _store_link(path: Path, link: Link) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial")
-    try:
-        with tmp.open("wb") as f:
-            pickle.dump(link, f, protocol=pickle.HIGHEST_PROTOCOL)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    values = {f.name: getattr(link, f.name) for f in fields(Link)}
+    arrays = {k: np.asarray(values.pop(k), dtype=np.float64) for k in _LINK_ARRAYS}
+    write_entry(path, "link", {k: a for k, a in arrays.items() if a.ndim}, {"link": values})
 
 
 def align_link(

@@ -37,8 +37,6 @@ graph solved again; the map is checked again until no pair conflicts.
 from __future__ import annotations
 
 import logging
-import os
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,7 +50,13 @@ from flexreg.registration.candidates import Check
 from flexreg.registration.verdict import check_masks
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.survey.config import SurveyConfig
-from flexreg.survey.stations import load_prepared
+from flexreg.survey.stations import (
+    PREPARED_SUFFIX,
+    CacheEntryError,
+    load_prepared,
+    read_entry,
+    write_entry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -135,17 +139,22 @@ class PairLook:
 def glance_path(cache_file: str) -> Path:
     """Where a station's sample and inlier threshold are kept beside its prepared file."""
     p = Path(cache_file)
-    return p.with_name(p.name.removesuffix(".prepared.pkl") + ".glance.npz")
+    return p.with_name(p.name.removesuffix(PREPARED_SUFFIX) + ".glance.npz")
 
 
 def write_glance(cache_file: str) -> str | None:
     """Write (once) what other stations need to score this one: its even sample, (N, 3)
     float64 metres, and its inlier threshold (metres, as the registration derives it from
     the keypoints' pixel footprints). Runs on a worker; returns the file, or None when the
-    station has no sample."""
+    station has no sample. A glance already written is used when it reads back whole
+    (:func:`~flexreg.survey.stations.read_entry`), else written again after one warning."""
     path = glance_path(cache_file)
     if path.exists():
-        return str(path)
+        try:
+            _read_glance_entry(path, cache_file)
+            return str(path)
+        except CacheEntryError as e:
+            log.warning("%s: unusable cache entry (%s); writing it again", path, e)
     p = load_prepared(cache_file)
     sample = p.view.sample
     if sample is None or len(sample) == 0:
@@ -157,21 +166,37 @@ def write_glance(cache_file: str) -> str | None:
         kp = p.keypoints
         xy = kp.features.xy[kp.lifted]
         thr = derive_threshold(p.image, p.image, xy, xy[:0], threshold_px=cfg.threshold_px)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{time.monotonic_ns()}.partial.npz")
-    try:
-        np.savez(tmp, sample=np.asarray(sample, dtype=np.float64), threshold_m=thr)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    arrays = {"sample": np.asarray(sample, dtype=np.float64), "threshold_m": np.float64(thr)}
+    write_entry(path, "glance", arrays, {"of": Path(cache_file).name})
     return str(path)
+
+
+def _read_glance_entry(
+    path: Path | str, cache_file: str | None
+) -> tuple[NDArray[np.float64], float]:
+    """A glance's sample and threshold; ``cache_file``: the prepared station it must be of.
+
+    Raises
+    ------
+    CacheEntryError
+    """
+    meta, z = read_entry(path, "glance")
+    if cache_file is not None and meta.get("of") != Path(cache_file).name:
+        raise CacheEntryError("made of another station")
+    try:
+        sample, thr = z["sample"], z["threshold_m"]
+        if sample.dtype != np.float64 or sample.ndim != 2 or sample.shape[1] != 3:
+            raise CacheEntryError("not a station sample")
+        return sample, float(thr)
+    except (KeyError, TypeError, ValueError) as e:
+        raise CacheEntryError(f"not a station sample ({e})") from None
 
 
 def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
     try:
-        with np.load(path) as z:
-            return np.asarray(z["sample"], dtype=np.float64), float(z["threshold_m"])
-    except (OSError, KeyError, ValueError) as e:
-        raise InputError(path, f"unreadable station sample ({e})") from e
+        return _read_glance_entry(path, None)
+    except CacheEntryError as e:
+        raise InputError(path, f"unreadable station sample ({e})") from None
 
 
 def _shares(

@@ -7,6 +7,16 @@ each prepared station the cache holds its *global descriptor* (a few hundred of 
 keypoints with their 3D points, a few kilobytes) for place recognition
 (:mod:`flexreg.survey.pairs`).
 
+The cache holds data only: each entry is an ``.npz`` archive of plain numpy arrays, read with
+``allow_pickle=False``, with JSON metadata (``__meta__``: the layout's :data:`CACHE_SCHEMA`,
+the entry's kind, the scan's content hash and configuration hash) and a SHA-256 digest over
+the metadata and every array (``__digest__``), checked on every read (:func:`write_entry`,
+:func:`read_entry`). A prepared station is stored as the tree and arrays of
+:func:`~flexreg.registration.preparation.prepared_to_arrays`. A missing, damaged
+(truncated, altered, unreadable) or foreign entry is never trusted: the station is prepared
+again, with one warning naming the file and the reason. Nothing in the cache is ever
+unpickled or executed, so a cache on a shared mount cannot run code.
+
 A prepared station is what :meth:`~flexreg.registration.Registration.align` needs and no
 more: the scan's full point list is dropped when the refinement works on the range images
 (the default projective point-to-plane ICP reads only the images and their samples), so a
@@ -21,8 +31,9 @@ import hashlib
 import json
 import logging
 import os
-import pickle
 import time
+import zipfile
+import zlib
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -41,6 +52,7 @@ from flexreg.io.pointcloud import is_mesh
 from flexreg.io.setups import list_setups
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.pipeline import PreparedScan, Registration
+from flexreg.registration.preparation import prepared_from_arrays, prepared_to_arrays
 from flexreg.stages.refinement import uses_projective
 
 log = logging.getLogger(__name__)
@@ -52,7 +64,11 @@ GLOBAL_KEYPOINTS = 300
 #: prepared stations a worker keeps loaded (a link needs two; neighbours share stations)
 KEEP_LOADED = 4
 #: bumped when the cached layout changes (old entries are then ignored)
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
+#: the layout of a cache entry (its ``__meta__`` names it; any other is not read)
+CACHE_SCHEMA = "flexreg.cache/1"
+#: suffixes of a prepared station's entry and of its global descriptor's
+PREPARED_SUFFIX, GLOBAL_SUFFIX = ".prepared.npz", ".global.npz"
 
 #: file suffixes that may hold several setups (each becomes a station)
 MULTI_SETUP_SUFFIXES = (".e57", ".ptx")
@@ -246,12 +262,13 @@ def config_hash(config: RegistrationConfig) -> str:
 def cache_paths(
     cache_dir: Path, content: str, config: str, setup: int | None = None
 ) -> tuple[Path, Path]:
-    """The prepared station's pickle and its global descriptor's npz (one per setup of a
-    multi-setup file)."""
+    """The prepared station's entry and its global descriptor's (one per setup of a
+    multi-setup file): ``.prepared.npz`` and ``.global.npz`` archives of plain arrays
+    (:func:`write_entry`)."""
     base = cache_dir / f"{content[:24]}-{config[:12]}"
     if setup is not None:
         base = base.with_name(f"{base.name}-s{setup}")
-    return base.with_name(base.name + ".prepared.pkl"), base.with_name(base.name + ".global.npz")
+    return base.with_name(base.name + PREPARED_SUFFIX), base.with_name(base.name + GLOBAL_SUFFIX)
 
 
 def _compact(p: PreparedScan) -> PreparedScan:
@@ -289,6 +306,104 @@ def _atomic_bytes(path: Path, write: Any) -> None:
         tmp.unlink(missing_ok=True)
 
 
+class CacheEntryError(ValueError):
+    """A cache entry that cannot be used: unreadable, truncated, altered, of another layout
+    or of another station (the message says which, in a few words)."""
+
+
+def _digest(meta: bytes, arrays: dict[str, NDArray[Any]]) -> str:
+    """SHA-256 (hex) over the metadata and every array (name, type, shape and bytes), in
+    name order."""
+    h = hashlib.sha256(meta)
+    for key in sorted(arrays):
+        a = arrays[key]
+        h.update(f"\0{key}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.data if a.flags.c_contiguous else np.ascontiguousarray(a).data)
+    return h.hexdigest()
+
+
+def write_entry(
+    path: Path, kind: str, arrays: dict[str, NDArray[Any]], meta: dict[str, Any]
+) -> None:
+    """Store a cache entry: ``arrays`` (plain numpy arrays, no objects) in an ``.npz``
+    archive with ``__meta__`` (UTF-8 JSON: :data:`CACHE_SCHEMA`, ``kind`` and ``meta``) and
+    ``__digest__`` (SHA-256 hex over both), written atomically."""
+    if any(k.startswith("__") for k in arrays):
+        raise ValueError("array names starting with __ are the entry's own")
+    info = json.dumps(
+        {**meta, "schema": CACHE_SCHEMA, "kind": kind}
+    ).encode()  # in order: parts precede refs
+    digest = _digest(info, arrays).encode()
+    own = {
+        "__meta__": np.frombuffer(info, dtype=np.uint8),
+        "__digest__": np.frombuffer(digest, dtype=np.uint8),
+    }
+    _atomic_bytes(path, lambda f: np.savez(f, allow_pickle=False, **arrays, **own))
+
+
+def read_entry(path: Path | str, kind: str) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
+    """A cache entry's metadata and arrays (:func:`write_entry`), its digest checked.
+
+    Read with ``allow_pickle=False``: a pickle, or an archive holding object arrays, is
+    refused, never unpickled.
+
+    Raises
+    ------
+    CacheEntryError
+        Missing, unreadable or truncated; not an entry of this layout or of this ``kind``;
+        or its digest does not match its content.
+    """
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise CacheEntryError("not an npz archive")
+        with z:
+            arrays = {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise CacheEntryError("missing") from None
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
+        if isinstance(e, CacheEntryError):
+            raise
+        raise CacheEntryError(f"unreadable: {' '.join(str(e).split())[:120]}") from None
+    info, digest = arrays.pop("__meta__", None), arrays.pop("__digest__", None)
+    if info is None or digest is None or info.dtype != np.uint8 or digest.dtype != np.uint8:
+        raise CacheEntryError("not a flexreg cache entry")
+    try:
+        meta = json.loads(info.tobytes().decode())
+    except ValueError:
+        raise CacheEntryError("unreadable metadata") from None
+    if not isinstance(meta, dict) or meta.get("schema") != CACHE_SCHEMA:
+        raise CacheEntryError("another cache layout")
+    if meta.get("kind") != kind:
+        raise CacheEntryError(f"a {str(meta.get('kind'))[:20]} entry, not a {kind} one")
+    if _digest(info.tobytes(), arrays) != digest.tobytes().decode(errors="replace"):
+        raise CacheEntryError("digest mismatch (altered or damaged)")
+    return meta, arrays
+
+
+def save_prepared(prepared: PreparedScan, path: Path, **meta: Any) -> None:
+    """Store a prepared station as a cache entry of plain arrays (:func:`write_entry`;
+    :func:`~flexreg.registration.preparation.prepared_to_arrays`); ``meta`` (JSON values)
+    is kept beside it."""
+    tree, arrays = prepared_to_arrays(prepared)
+    write_entry(path, "prepared", arrays, {**meta, "tree": tree})
+
+
+def read_prepared(path: Path | str) -> tuple[PreparedScan, dict[str, Any]]:
+    """A prepared station stored by :func:`save_prepared`, and its metadata.
+
+    Raises
+    ------
+    CacheEntryError
+        The entry cannot be used (:func:`read_entry`), or does not hold a prepared station.
+    """
+    meta, arrays = read_entry(path, "prepared")
+    try:
+        return prepared_from_arrays(meta.pop("tree", None), arrays), meta
+    except ValueError as e:
+        raise CacheEntryError(str(e)[:160]) from None
+
+
 def _read_and_prepare(
     station: Station, config: RegistrationConfig
 ) -> tuple[PreparedScan, int, NDArray[np.float64]]:
@@ -319,7 +434,10 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     """Prepare one station unless the cache holds it; store it and its global descriptor.
 
     Runs on a Dask worker (or in the calling process). An unreadable station is returned with
-    its error, not raised, so the rest of the project goes on.
+    its error, not raised, so the rest of the project goes on. A cache entry is used only
+    when both of the station's entries read back whole, with matching digests, and were made
+    of this file's content and this configuration; else the station is prepared again (one
+    warning per unusable entry that exists) and its entries rewritten.
     """
     t0 = time.perf_counter()
     folder = Path(cache_dir)
@@ -327,33 +445,72 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         content = file_hash(station.path)
     except OSError as e:
         return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
-    pkl, npz = cache_paths(folder, content, config_hash(config), station.setup)
-    if pkl.exists() and npz.exists():
-        with np.load(npz) as z:
-            n = int(z["n_points"])
-            stored = _stored_pose(z["T_world_scanner"]) if "T_world_scanner" in z else None
-        return Prepared(station.stem, str(pkl), n, False, time.perf_counter() - t0, None, stored)
+    conf = config_hash(config)
+    key = {"content": content, "config": conf, "setup": station.setup}
+    entry, npz = cache_paths(folder, content, conf, station.setup)
+    hit = _cached(entry, npz, key)
+    if hit is not None:
+        n, T_stored = hit
+        return Prepared(
+            station.stem, str(entry), n, False, time.perf_counter() - t0, None, T_stored
+        )
     try:
         prepared, n, T_world = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
     g = global_descriptor(prepared)
     folder.mkdir(parents=True, exist_ok=True)
-    _atomic_bytes(
-        npz,
-        lambda f: np.savez(
-            f,
-            descriptors=g.descriptors,
-            points=g.points,
-            binary=np.bool_(g.binary),
-            n_points=np.int64(n),
-            T_world_scanner=T_world,
-        ),
-    )
-    _atomic_bytes(pkl, lambda f: pickle.dump(prepared, f, protocol=pickle.HIGHEST_PROTOCOL))
+    arrays = {
+        "descriptors": g.descriptors,
+        "points": g.points,
+        "binary": np.bool_(g.binary),
+        "n_points": np.int64(n),
+        "T_world_scanner": T_world,
+    }
+    write_entry(npz, "global", {k: np.asarray(v) for k, v in arrays.items()}, key)
+    save_prepared(prepared, entry, **key)
     log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
     dt = time.perf_counter() - t0
-    return Prepared(station.stem, str(pkl), n, True, dt, None, _stored_pose(T_world))
+    return Prepared(station.stem, str(entry), n, True, dt, None, _stored_pose(T_world))
+
+
+def _cached(
+    entry: Path, npz: Path, key: dict[str, Any]
+) -> tuple[int, NDArray[np.float64] | None] | None:
+    """The number of points and stored pose of a station whose cache entries are usable
+    (the prepared station then stays loaded, :data:`KEEP_LOADED`); None, after one warning
+    naming the first unusable entry that exists, when it must be prepared again."""
+    _loaded.pop(str(entry), None)
+    try:
+        meta, z = read_entry(npz, "global")
+        if {k: meta.get(k) for k in key} != key:
+            raise CacheEntryError("made of another scan or configuration")
+        n = int(z["n_points"])
+        stored = _stored_pose(z["T_world_scanner"])
+        if z["points"].shape != (len(z["descriptors"]), 3) or z["binary"].shape != ():
+            raise CacheEntryError("not a global descriptor")
+        found = (n, stored)
+    except (CacheEntryError, KeyError, TypeError, ValueError) as e:
+        if npz.exists():
+            log.warning("%s: unusable cache entry (%s); preparing the station again", npz, e)
+        return None
+    try:
+        prepared, meta = read_prepared(entry)
+        if {k: meta.get(k) for k in key} != key:
+            raise CacheEntryError("made of another scan or configuration")
+    except CacheEntryError as e:
+        if entry.exists():
+            log.warning("%s: unusable cache entry (%s); preparing the station again", entry, e)
+        return None
+    _keep(str(entry), prepared)
+    return found
+
+
+def _keep(cache_file: str, prepared: PreparedScan) -> None:
+    _loaded[cache_file] = prepared
+    _loaded.move_to_end(cache_file)
+    while len(_loaded) > KEEP_LOADED:
+        _loaded.popitem(last=False)
 
 
 def _stored_pose(T: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -366,44 +523,55 @@ def _stored_pose(T: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 
 def load_descriptor(cache_file: str) -> GlobalDescriptor:
-    """The global descriptor stored beside a prepared station."""
-    npz = Path(cache_file.removesuffix(".prepared.pkl") + ".global.npz")
-    with np.load(npz) as z:
-        return GlobalDescriptor(z["descriptors"], z["points"], bool(z["binary"]))
-
-
-def load_prepared(cache_file: str) -> PreparedScan:
-    """A prepared station from the cache; the last :data:`KEEP_LOADED` stay in memory.
+    """The global descriptor stored beside a prepared station.
 
     Raises
     ------
     InputError
-        The cache file is missing or unreadable (another run cleared it, or the cache is not
-        on a path every worker sees).
+        The entry is missing or unusable (:func:`read_entry`).
+    """
+    npz = Path(cache_file.removesuffix(PREPARED_SUFFIX) + GLOBAL_SUFFIX)
+    try:
+        _, z = read_entry(npz, "global")
+        return GlobalDescriptor(z["descriptors"], z["points"], bool(z["binary"]))
+    except (CacheEntryError, KeyError, TypeError, ValueError) as e:
+        raise InputError(npz, f"cannot read the global descriptor ({e})") from None
+
+
+def load_prepared(cache_file: str) -> PreparedScan:
+    """A prepared station from the cache (:func:`read_prepared`); the last
+    :data:`KEEP_LOADED` stay in memory.
+
+    Raises
+    ------
+    InputError
+        The cache entry is missing or unusable (another run cleared it, the cache is not on
+        a path every worker sees, or it was damaged since this run prepared it).
     """
     hit = _loaded.get(cache_file)
     if hit is not None:
         _loaded.move_to_end(cache_file)
         return hit
     try:
-        with open(cache_file, "rb") as f:
-            prepared: PreparedScan = pickle.load(f)
-    except (OSError, pickle.UnpicklingError, EOFError) as e:
+        prepared, _ = read_prepared(cache_file)
+    except CacheEntryError as e:
         raise InputError(
             cache_file, f"cannot read the prepared station ({e}); is the cache shared?"
         ) from None
-    _loaded[cache_file] = prepared
-    while len(_loaded) > KEEP_LOADED:
-        _loaded.popitem(last=False)
+    _keep(cache_file, prepared)
     return prepared
 
 
 __all__ = [
     "CACHE_FORMAT",
+    "CACHE_SCHEMA",
     "FOLDER_SUFFIXES",
     "GLOBAL_KEYPOINTS",
+    "GLOBAL_SUFFIX",
     "KEEP_LOADED",
     "MULTI_SETUP_SUFFIXES",
+    "PREPARED_SUFFIX",
+    "CacheEntryError",
     "GlobalDescriptor",
     "Prepared",
     "Station",
@@ -415,5 +583,9 @@ __all__ = [
     "load_descriptor",
     "load_prepared",
     "prepare_station",
+    "read_entry",
+    "read_prepared",
+    "save_prepared",
     "stations_of",
+    "write_entry",
 ]

@@ -453,15 +453,30 @@ def _transforms(c: Corpus) -> None:
             files={name: text},
             covers=["4x4 transform (--truth)"],
         )
+    cmp = ["compare", "{d}/room.ptx", "{d}/room2.ptx", "--out", "{d}/cmp"]
     c.case(
         "compare-gt-not-rigid",
         "broken",
-        ["compare", "{d}/room.ptx", "{d}/room2.ptx", "--out", "{d}/cmp", "--gt", "{d}/gt.txt"],
+        [*cmp, "--gt", "{d}/gt.txt"],
         ["gt.txt"],
         good=PAIR,
         files={"gt.txt": "1 0.5 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"},
         covers=["4x4 transform (--truth)"],
     )
+    eye = np.eye(4).tolist()
+    for label, pairs in (
+        ("pairs-are-lists", [["room", "room2", eye]]),
+        ("pairs-not-a-list", {"room": eye}),
+    ):
+        c.case(
+            f"compare-gt-{label}",
+            "broken",
+            [*cmp, "--gt", "{d}/gt.json"],
+            ["gt.json"],
+            good=PAIR,
+            files={"gt.json": json.dumps({"pairs": pairs})},
+            covers=["4x4 transform (--truth)"],
+        )
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -532,6 +547,42 @@ def _outputs(c: Corpus) -> None:
         ["camera.png"],
         good=("room.ptx",),
         files={"camera.png": _camera_png(), "pairs.csv": GOOD_PAIRS},
+        covers=["output path"],
+    )
+    c.case(
+        "project-sidecar-is-a-folder",
+        "partial",
+        ["project", "{d}/room.ptx", "--out", "{d}/r.png"],
+        ["r.camera.json"],
+        good=("room.ptx",),
+        setup=lambda d: (d / "r.camera.json").mkdir(),
+        covers=["output path"],
+    )
+    c.case(
+        "project-sidecar-is-a-folder-overwrite",
+        "partial",
+        ["project", "{d}/room.ptx", "--out", "{d}/r.png", "--overwrite"],
+        ["r.camera.json"],
+        good=("room.ptx",),
+        setup=lambda d: (d / "r.camera.json").mkdir(),
+        covers=["output path"],
+    )
+    c.case(
+        "convert-keep-float-npz-is-a-folder",
+        "partial",
+        [
+            "convert",
+            "{d}/room.ptx",
+            "--kind",
+            "flexion",
+            "--keep-float",
+            "--out",
+            "{d}/f.png",
+            "--overwrite",
+        ],
+        ["f.npz"],
+        good=("room.ptx",),
+        setup=lambda d: (d / "f.npz").mkdir(),
         covers=["output path"],
     )
     c.case(

@@ -168,6 +168,23 @@ def _e57(c: Corpus) -> None:
     _info(c, "e57-truncated", "cut.e57", good[: len(good) // 2], "E57", "halfread")
     _info(c, "e57-empty", "empty.e57", b"", "E57")
     _info(c, "e57-signature-only", "sig.e57", b"ASTM-E57" + bytes(40), "E57")
+    # libE57 reads a pose number it cannot parse as 0 (and 1e400 as the largest double)
+    for label, old, new in (
+        ("translation-nan", "<translation type=\"Structure\">\n          <x type=\"Float\"/>",
+         "<translation type=\"Structure\">\n          <x type=\"Float\">nan</x>"),
+        ("rotation-nan", "<x type=\"Float\"/>", "<x type=\"Float\">NaN</x>"),
+        ("translation-overflow", "<translation type=\"Structure\">\n          <x type=\"Float\"/>",
+         "<translation type=\"Structure\">\n          <x type=\"Float\">1e400</x>"),
+    ):  # fmt: skip
+        c.case(
+            f"e57-pose-{label}",
+            "broken",
+            ["info", "{d}/pose.e57"],
+            ["pose.e57"],
+            files={"pose.e57": e57_edit_xml(good, lambda x, o=old, n=new: _replace(x, o, n))},
+            memory_limit=True,
+            covers=["E57"],
+        )
     c.case(
         "e57-setup-out-of-range",
         "broken",
@@ -177,6 +194,11 @@ def _e57(c: Corpus) -> None:
         memory_limit=True,
         covers=["E57", "setup selector"],
     )
+
+
+def _replace(text: str, old: str, new: str) -> str:
+    assert old in text, old
+    return text.replace(old, new, 1)
 
 
 # ------------------------------------------------------------------------------ PLY and PCD
@@ -300,6 +322,21 @@ def _npz(c: Corpus) -> None:
     buf = BytesIO()
     np.save(buf, np.array({"points": 1}, dtype=object), allow_pickle=True)
     _info(c, "npy-pickled-object", "pickle.npy", buf.getvalue(), "npz")
+    buf = BytesIO()
+    np.save(buf, c.flat + 1j)  # casting to coordinates would drop the imaginary part
+    _info(c, "npy-complex-points", "complex.npy", buf.getvalue(), "npz")
+    buf = BytesIO()
+    np.save(buf, np.zeros((10, 3), np.complex128))  # was an IndexError deep in projection
+    _info(c, "npy-complex-zeros", "zeros.npy", buf.getvalue(), "npz")
+    good = dict(np.load(BytesIO(c.good["room.npz"])))
+    for label, key, value in (
+        ("grid-shape-scalar", "grid_shape", np.array(48)),
+        ("grid-shape-three", "grid_shape", np.array([48, 96, 1])),
+        ("grid-shape-float", "grid_shape", np.array([48.0, 96.0])),
+    ):
+        buf = BytesIO()
+        np.savez(buf, **{**good, key: value})
+        _info(c, f"npz-{label}", f"{label}.npz", buf.getvalue(), "npz")
 
 
 # ---------------------------------------------------------------- depth PNG + camera sidecar

@@ -238,6 +238,31 @@ def test_another_service_is_no_scheduler(service, project, tmp_path, monkeypatch
     assert not out.exists()
 
 
+def test_a_station_file_replaced_during_the_run_is_never_merged(first, project, tmp_path):
+    """Stations are fingerprinted when prepared; the merged cloud and the E57 read them again
+    only if they still hold what was registered (a file replaced meanwhile gave a merged
+    cloud with a third of its points 5 cm and more off, exit 0). A file rewritten with the
+    same content (a copy, a touch) still merges."""
+    import os
+
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for f in _files(project):
+        shutil.copy(f, scans / f.name)
+    out = _with_cache(first[3], tmp_path / "out")
+    result = run_survey(sorted(scans.iterdir()), out, workers=1)
+    assert all(p.fingerprint is not None for p in result.prepared.values())
+    st = scans / "station_01.ptx"
+    os.utime(st, ns=(st.stat().st_atime_ns, st.stat().st_mtime_ns + 10**9))  # same content
+    write_outputs(result, out, merged=out / "merged.ply", voxel_m=0.1, report=False)
+    assert (out / "merged.ply").is_file()
+    shutil.copy(project / "station_02.ptx", st)  # another scan under the registered name
+    for kw in ({"merged": out / "again.ply"}, {"e57": out / "again.e57"}):
+        with pytest.raises(InputError, match=r"station_01\.ptx: changed since the survey"):
+            write_outputs(result, out, voxel_m=0.1, report=False, **kw)
+    assert not (out / "again.ply").exists() and not (out / "again.e57").exists()
+
+
 def test_an_unreadable_station_is_reported_the_rest_registered_exit_3(first, project, tmp_path):
     folder = tmp_path / "scans"
     folder.mkdir()

@@ -32,6 +32,7 @@ from flexreg.io.e57 import write as write_e57
 from flexreg.io.files import write_all
 from flexreg.survey.project import SurveyResult
 from flexreg.survey.report import write_report
+from flexreg.survey.stations import unchanged
 
 log = logging.getLogger(__name__)
 
@@ -176,6 +177,28 @@ class _LazyScans(Sequence[Scan]):
             yield self[i]
 
 
+def _check_unchanged(result: SurveyResult) -> None:
+    """Refuse to read a placed station again from a file that no longer holds what was
+    prepared (replaced or rewritten during the run): its points would be merged at a pose
+    registered for other points.
+
+    Raises
+    ------
+    InputError
+        Naming the file.
+    """
+    placed = set(result.placed)
+    for st in result.stations:
+        p = result.prepared.get(st.stem)
+        if st.stem in placed and p is not None and p.fingerprint is not None:
+            if not unchanged(st.path, p.fingerprint):
+                raise InputError(
+                    st.path,
+                    "changed since the survey prepared it: its points would be merged at a pose "
+                    "registered for others; survey again to register what it holds now",
+                )
+
+
 def write_outputs(
     result: SurveyResult,
     out_dir: Path,
@@ -193,6 +216,8 @@ def write_outputs(
     """
     doc = _finite(result.to_dict())
     placed = result.placed
+    if merged is not None or e57 is not None:  # the placed stations are read again
+        _check_unchanged(result)
     poses = {s: np.asarray(doc["stations"][s]["T_reference_station"]) for s in placed}
     paths: dict[str, Path | str] = {st.stem: st.ref for st in result.stations}
     writers: list[tuple[Path, Callable[[], Any]]] = []

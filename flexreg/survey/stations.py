@@ -143,6 +143,9 @@ class Prepared:
     T_world_scanner : (4, 4) float64 or None
         The pose the file stores for this setup (E57 ``pose``, PTX header); None when it
         stores none (identity).
+    fingerprint : (int, int, str) or None
+        The file as it was prepared: size (bytes) and modification time (ns), taken before
+        its content was hashed, and that SHA-256 (:func:`unchanged` checks a later read).
     """
 
     stem: str
@@ -152,6 +155,7 @@ class Prepared:
     seconds: float
     error: str | None = None
     T_world_scanner: NDArray[np.float64] | None = None
+    fingerprint: tuple[int, int, str] | None = None
 
 
 def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
@@ -442,7 +446,9 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     t0 = time.perf_counter()
     folder = Path(cache_dir)
     try:
+        st = station.path.stat()  # before the hash: a later change shows in one or the other
         content = file_hash(station.path)
+        fingerprint = (st.st_size, st.st_mtime_ns, content)
     except OSError as e:
         return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
     conf = config_hash(config)
@@ -451,9 +457,8 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     hit = _cached(entry, npz, key)
     if hit is not None:
         n, T_stored = hit
-        return Prepared(
-            station.stem, str(entry), n, False, time.perf_counter() - t0, None, T_stored
-        )
+        dt = time.perf_counter() - t0
+        return Prepared(station.stem, str(entry), n, False, dt, None, T_stored, fingerprint)
     try:
         prepared, n, T_world = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
@@ -471,7 +476,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     save_prepared(prepared, entry, **key)
     log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
     dt = time.perf_counter() - t0
-    return Prepared(station.stem, str(entry), n, True, dt, None, _stored_pose(T_world))
+    return Prepared(station.stem, str(entry), n, True, dt, None, _stored_pose(T_world), fingerprint)
 
 
 def _cached(
@@ -511,6 +516,18 @@ def _keep(cache_file: str, prepared: PreparedScan) -> None:
     _loaded.move_to_end(cache_file)
     while len(_loaded) > KEEP_LOADED:
         _loaded.popitem(last=False)
+
+
+def unchanged(path: Path, fingerprint: tuple[int, int, str]) -> bool:
+    """Whether ``path`` still holds what was prepared (:attr:`Prepared.fingerprint`): the same
+    size and modification time, or else the same content (hashed again)."""
+    try:
+        st = path.stat()
+        if (st.st_size, st.st_mtime_ns) == fingerprint[:2]:
+            return True
+        return file_hash(path) == fingerprint[2]
+    except OSError:
+        return False
 
 
 def _stored_pose(T: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -587,5 +604,6 @@ __all__ = [
     "read_prepared",
     "save_prepared",
     "stations_of",
+    "unchanged",
     "write_entry",
 ]

@@ -100,7 +100,11 @@ def test_a_tasks_io_error_on_a_worker_is_one_line_naming_its_file(tmp_path):
             assert str(e.value).count("\n") == 0
 
 
-def test_a_full_disk_while_preparing_is_one_line_exit_1(tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    "code, text", [("ENOSPC", "No space left on device"), ("EROFS", "Read-only file system")]
+)
+def test_a_full_disk_while_preparing_is_one_line_exit_1(code, text, tmp_path, monkeypatch):
+    """A full disk or an --out that turned read-only while the survey writes its cache."""
     import errno
 
     from conftest import room_project
@@ -110,7 +114,7 @@ def test_a_full_disk_while_preparing_is_one_line_exit_1(tmp_path, monkeypatch):
     project = room_project(tmp_path / "p", 2, width=128, height=64)
 
     def full(path, write):
-        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        raise OSError(getattr(errno, code), text, str(path))
 
     monkeypatch.setattr(stations, "_atomic_bytes", full)
     out = tmp_path / "out"
@@ -119,5 +123,5 @@ def test_a_full_disk_while_preparing_is_one_line_exit_1(tmp_path, monkeypatch):
          "--workers", "1"]
     )  # fmt: skip
     line = one_error_line(err)
-    assert rc == 1 and "No space left on device" in line and ".partial" not in line, line
+    assert rc == 1 and text in line and ".partial" not in line, line
     assert not (out / "poses.json").exists()

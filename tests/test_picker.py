@@ -314,7 +314,9 @@ def test_move_delete_and_reload(client, session, tmp_path):
     assert st2["saved"] and st2["solution"]["source"] == "solution"
 
 
-def test_initial_guess_gives_a_pose_views_and_suggestions(tmp_path):
+def _guessed(tmp_path):
+    """A session started from an initial guess 0.5 degrees and 1 cm off the truth, and its
+    client."""
     s = picker_scene()
     guess = (
         make_transform(rotation_about_axis([1.0, 0.3, 0.0], math.radians(0.5)), [0.01, 0, 0])
@@ -324,7 +326,11 @@ def test_initial_guess_gives_a_pose_views_and_suggestions(tmp_path):
         s["image"], s["scan"], s["intrinsics"], out=tmp_path / "p.csv",
         result_out=tmp_path / "p.json", T_init=guess,
     )  # fmt: skip
-    c = TestClient(create_app(session, TOKEN), base_url="http://127.0.0.1:1")
+    return session, TestClient(create_app(session, TOKEN), base_url="http://127.0.0.1:1")
+
+
+def test_initial_guess_gives_a_pose_views_and_suggestions(tmp_path):
+    session, c = _guessed(tmp_path)
     st = c.get("/api/state", headers=_h()).json()
     assert "perspective" in st["lidar"]["modes"] and st["solution"]["source"] == "initial guess"
     # the panorama's columns turn against the camera's u: shown mirrored, with or without a pose
@@ -362,15 +368,7 @@ def test_suggestions_are_accepted_and_rejected_one_by_one(tmp_path, monkeypatch)
     seen = np.flatnonzero(s["visible"])[::7][:200]
     exact = Correspondences2D3D(s["uv"][seen], s["scan"].points[seen].astype(np.float64))
     monkeypatch.setattr(picker_session, "propose_correspondences", lambda *a, **k: (exact, None))
-    guess = (
-        make_transform(rotation_about_axis([1.0, 0.3, 0.0], math.radians(0.5)), [0.01, 0, 0])
-        @ s["T"]
-    )
-    session = PickSession(
-        s["image"], s["scan"], s["intrinsics"], out=tmp_path / "p.csv",
-        result_out=tmp_path / "p.json", T_init=guess,
-    )  # fmt: skip
-    c = TestClient(create_app(session, TOKEN), base_url="http://127.0.0.1:1")
+    _, c = _guessed(tmp_path)
     r = c.post("/api/suggestions", headers=_h())
     assert r.status_code == 200, r.text
     sugg = r.json()["suggestions"]

@@ -12,7 +12,7 @@ from conftest import one_error_line, run_cli
 from test_setups_register import T_TRUE, _stations
 
 from flexreg import Scan, read_scan, write_scan
-from flexreg.core.transforms import apply, make_transform, rotation_error_deg
+from flexreg.core.transforms import apply, make_transform, rotation_about_axis, rotation_error_deg
 from flexreg.io.origin import centring_problem, recentre
 
 #: a UTM-sized position of the first station (easting, northing, height), metres
@@ -93,3 +93,69 @@ def test_a_recentred_cloud_is_float32_near_its_scanner(laz):
     assert near.points.dtype == np.float32
     np.testing.assert_array_equal(near.points, (utm.points - o).astype(np.float32))
     np.testing.assert_array_equal(near.T_world_scanner[:3, 3], o)
+
+
+def test_file_frame_of_a_shift_is_the_identity_in_float64():
+    """Two scans already in one project frame: the registration between the clouds moved to
+    their scanners is the offset of the positions, and the same in the files' coordinates is
+    the identity to float64 rounding, UTM-sized origins notwithstanding."""
+    from flexreg.io.origin import in_file_frame
+
+    o_t, o_s = UTM, UTM + [3.125, -1.75, 0.5]
+    T = make_transform(np.eye(3), o_s - o_t)
+    np.testing.assert_allclose(in_file_frame(T, o_t, o_s), np.eye(4), rtol=0, atol=1e-9)
+    R = make_transform(rotation_about_axis([0, 0, 1], np.radians(30.0)), [1.0, 2.0, 0.0])
+    T_file = in_file_frame(R, o_t, o_s)  # = O_t R O_s^-1, and maps o_s + p to o_t + R p
+    p = np.array([[1.0, -2.0, 0.5], [10.0, 4.0, -1.0]])
+    np.testing.assert_allclose(apply(T_file, p + o_s), apply(R, p) + o_t, rtol=0, atol=1e-8)
+    assert in_file_frame(R, None, None).tolist() == R.tolist()
+
+
+def test_register_txt_in_the_files_coordinates(laz, tmp_path):
+    """`--txt` of a run with origins holds the correction in the files' coordinates (by
+    default): for two co-registered georeferenced clouds it is the identity within the
+    registration's accuracy; `--txt-frame scanner` gives the JSON's matrix; the JSON and the
+    console say which is which."""
+    t, s, o_t, o_s = laz
+    truth = make_transform(np.eye(3), o_s - o_t)
+    np.savetxt(tmp_path / "init.txt", truth @ make_transform(np.eye(3), [0.05, -0.05, 0.02]))
+    argv = ["register", t, s, "--init", tmp_path / "init.txt", "--icp-only"]
+    argv += ["--target-origin", *map(repr, map(float, o_t))]
+    argv += ["--source-origin", *map(repr, map(float, o_s))]
+    rc, stdout, err = run_cli([*argv, "--out", tmp_path / "T.json", "--txt", tmp_path / "T.txt"])
+    assert rc == 0, err
+    assert "T.txt (in the files' coordinates" in stdout and "moves its points by" in stdout
+    T_file = np.loadtxt(tmp_path / "T.txt")
+    assert rotation_error_deg(T_file, np.eye(4)) < 0.3
+    points = read_scan(s).points  # UTM coordinates, float64
+    moved = np.linalg.norm(apply(T_file, points) - points, axis=1)
+    assert np.median(moved) < 0.03  # the files are registered already: (almost) no motion
+    doc = json.loads((tmp_path / "T.json").read_text())
+    assert doc["txt"]["frame"] == "file" and doc["origins"]["target"] == list(o_t)
+    np.testing.assert_allclose(doc["T_target_source_in_files"], T_file, rtol=0, atol=1e-9)
+    T = np.asarray(doc["T_target_source"])
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.03  # the scanners' frames: the offset
+
+    rc, stdout, err = run_cli(
+        [*argv, "--out", tmp_path / "S.json", "--txt", tmp_path / "S.txt", "--txt-frame", "scanner"]
+    )
+    assert rc == 0, err
+    assert "not the files' coordinates" in stdout
+    S = json.loads((tmp_path / "S.json").read_text())
+    assert S["txt"]["frame"] == "scanner"
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "S.txt"), S["T_target_source"], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--txt-frame", "scanner"], "give --txt as well"),
+        (["--txt", "x.txt", "--txt-frame", "world"], "must be file or scanner"),
+    ],
+)
+def test_txt_frame_refused_one_line(laz, tmp_path, extra, message):
+    t, s, *_ = laz
+    extra = [str(tmp_path / e) if e.endswith(".txt") else e for e in extra]
+    rc, _, err = run_cli(["register", t, s, "--out", tmp_path / "T.json", *extra])
+    assert rc == 1 and message in one_error_line(err)
+    assert not (tmp_path / "T.json").exists()

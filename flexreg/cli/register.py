@@ -154,6 +154,18 @@ _TxtOption = Annotated[
     Path | None,
     typer.Option("--txt", help="Also write the 4x4 matrix as text (CloudCompare style)."),
 ]
+_TxtFrameOption = Annotated[
+    str | None,
+    typer.Option(
+        "--txt-frame",
+        metavar="file|scanner",
+        help="Coordinates of the --txt matrix when --target-origin/--source-origin are given: "
+        "'file' maps the source file's points onto the target file's, to apply to the files "
+        "as they are (identity for two files already in one project frame); 'scanner' is "
+        "T_target_source between the clouds moved to their origins (the JSON's matrix). "
+        "Without origins both are the same. [default: file]",
+    ),
+]
 _ImageOption = Annotated[
     str | None,
     typer.Option(
@@ -287,6 +299,7 @@ def register_command(
     source: _SourceArgument,
     out: _OutOption,
     txt: _TxtOption = None,
+    txt_frame: _TxtFrameOption = None,
     image: _ImageOption = None,
     n: _NOption = None,
     features: _FeaturesOption = None,
@@ -334,8 +347,7 @@ def register_command(
         upright=upright,
         icp_only=icp_only,
     )
-    if config.icp_only and init is None:
-        raise InputError("--icp-only", "needs --init T.txt or --init stored")
+    frame = _check_options(config, init, txt, txt_frame)
     outputs = [
         ("--out", out, ".json"),
         ("--txt", txt, None),
@@ -371,22 +383,88 @@ def register_command(
         )
     errors = None if T_true is None else _errors(result, T_true)
     check = None if stored is None or init is not None else _stored_check(result, stored)
-    meta = {
+    meta: dict[str, Any] = {
         "target": str(target),
         "source": str(source),
         "truth": truth,
         "errors": errors,
         "init": None if init is None else {"from": init, "T_target_source": T_init},
         "stored_pose_check": check,
+        "origins": (target_origin, source_origin),
+        "txt_frame": frame,
     }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
     write_all(writers)
     _print_summary(result, config, target, source, errors, check)
     print_verdict(result.verdict, result.T_target_source)
+    note = "" if txt is None else _txt_note(frame, result.T_target_source, scans[1], meta)
     for path, _ in writers:
-        console.print(f"wrote {path}", markup=False, soft_wrap=True)
+        console.print(f"wrote {path}{note if path == txt else ''}", markup=False, soft_wrap=True)
     look = f"{merged} shows" if merged is not None else "--merged merged.ply would show"
     exit_for(result.verdict, out, extra=f"; {look} both clouds as registered")
+
+
+#: what the --txt matrix maps, said after its "wrote" line in a run with scanner origins
+_FRAME_NOTE = {
+    "file": " (in the files' coordinates: apply it to the source file as it is)",
+    "scanner": (
+        " (between the clouds moved to --target-origin/--source-origin, not the files' "
+        "coordinates: --txt-frame file gives those)"
+    ),
+}
+
+
+def _txt_note(frame: str, T: NDArray[np.float64], source: Scan, meta: dict[str, Any]) -> str:
+    """What the --txt matrix of a run with scanner origins maps, after its "wrote" line: in the
+    files' coordinates, with how far it moves the source file's points (median over at most
+    10^5 of them)."""
+    import numpy as np
+
+    from flexreg.core.transforms import apply
+    from flexreg.io.origin import in_file_frame
+
+    origins = meta["origins"]
+    if not any(origins):
+        return ""
+    if frame != "file" or len(source) == 0:
+        return _FRAME_NOTE[frame]
+    o_s = np.zeros(3) if origins[1] is None else np.asarray(origins[1], dtype=np.float64)
+    points = source.points[:: max(1, len(source) // 100_000)].astype(np.float64) + o_s
+    moved = np.linalg.norm(apply(in_file_frame(T, *origins), points) - points, axis=1)
+    return f"{_FRAME_NOTE[frame][:-1]}; it moves its points by {np.median(moved):.3f} m)"
+
+
+def _check_options(
+    config: RegistrationConfig, init: str | None, txt: Path | None, frame: str | None
+) -> str:
+    """Refuse options that do not go together (before any file is read); the frame of the
+    ``--txt`` matrix: ``file`` (the default) or ``scanner``."""
+    if config.icp_only and init is None:
+        raise InputError("--icp-only", "needs --init T.txt or --init stored")
+    if frame is None:
+        return "file"
+    if frame not in _FRAME_NOTE:
+        raise InputError("--txt-frame", f"must be file or scanner, got {frame!r}")
+    if txt is None:
+        raise InputError("--txt-frame", "applies to the --txt matrix: give --txt as well")
+    return frame
+
+
+def _origins_meta(T: NDArray[np.float64], inputs: dict[str, Any]) -> dict[str, Any]:
+    """The JSON's account of a run with scanner origins: the origins, what its matrix maps,
+    the same transform in the files' coordinates, and the frame of the --txt matrix."""
+    from flexreg.io.origin import in_file_frame
+
+    o_t, o_s = inputs["origins"]
+    return {
+        "origins": {
+            "target": None if o_t is None else list(o_t),
+            "source": None if o_s is None else list(o_s),
+        },
+        "frame": "T_target_source maps source points relative to the source origin onto target "
+        "points relative to the target origin (the files' coordinates minus each origin)",
+        "T_target_source_in_files": in_file_frame(T, o_t, o_s).tolist(),
+    }
 
 
 def _read(
@@ -423,6 +501,12 @@ def _writers(
     from flexreg.io import atomic_write, write_scan, write_transform_json, write_transform_txt
 
     T = result.T_target_source
+    moved = any(inputs["origins"])
+    T_txt = T
+    if moved and inputs["txt_frame"] == "file":
+        from flexreg.io.origin import in_file_frame
+
+        T_txt = in_file_frame(T, *inputs["origins"])
     writers: list[tuple[Path, Any]] = []
     if merged is not None:
         with stage("Merging clouds"):
@@ -436,7 +520,7 @@ def _writers(
             fig = _match_figure(tscan, sscan, result, names)
         writers.append((matches, lambda: atomic_write(matches, lambda tmp: save_figure(fig, tmp))))
     if txt is not None:
-        writers.append((txt, lambda: write_transform_txt(txt, T)))
+        writers.append((txt, lambda: write_transform_txt(txt, T_txt)))
     meta = result.to_dict()
     meta.pop("T_target_source", None)
     meta = {"target": inputs["target"], "source": inputs["source"], **meta}
@@ -451,6 +535,11 @@ def _writers(
         }
     if inputs["stored_pose_check"] is not None:
         meta["stored_pose_check"] = inputs["stored_pose_check"]
+    if moved:
+        meta.update(_origins_meta(T, inputs))
+    if txt is not None:
+        frame = inputs["txt_frame"] if moved else "file"  # without origins: one and the same
+        meta["txt"] = {"path": str(txt), "frame": frame}
     writers.append((out, lambda: write_transform_json(out, T, **meta)))
     return writers
 

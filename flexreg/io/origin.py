@@ -16,13 +16,13 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import make_transform
 from flexreg.errors import InputError
 
-__all__ = ["GEOREFERENCED_M", "centring_problem", "recentre"]
+__all__ = ["GEOREFERENCED_M", "centring_problem", "in_file_frame", "origin_hint", "recentre"]
 
 #: a cloud whose centre lies this far from the origin has georeferenced (project) coordinates
 GEOREFERENCED_M = 10_000.0
@@ -101,3 +101,55 @@ def recentre(scan: Scan, origin: ArrayLike) -> Scan:
         raise InputError("origin", f"must be three finite numbers X Y Z, got {o.tolist()}")
     T = scan.T_world_scanner @ make_transform(np.eye(3), o)
     return replace(scan, points=scan.points - o, T_world_scanner=T)
+
+
+def origin_hint(why: str, option: str) -> str:
+    """The advice for a cloud that is not centred on its scanner (``why`` from
+    :func:`centring_problem`), naming the ``option`` that gives the scanner position."""
+    return (
+        f"not centred on its scanner: {why}; give the scanner position in the file's frame "
+        f"with {option} X Y Z (metres)"
+    )
+
+
+def in_file_frame(
+    T_target_source: ArrayLike,
+    target_origin: ArrayLike | None,
+    source_origin: ArrayLike | None,
+) -> NDArray[np.float64]:
+    """A transform between clouds moved to their scanners (:func:`recentre`), expressed in the
+    files' own coordinates: ``O_t @ T @ inv(O_s)``, ``O`` the translation by each origin.
+
+    Applied to the source file's points it maps them onto the target file's; two files
+    already in one project frame give the identity. The translation is summed as
+    ``(o_t - o_s) + t - (R - I) o_s`` so that georeferenced origins (10^6 m) cancel before
+    they are added to the correction (float64 keeps ~10^-9 m of it).
+
+    Parameters
+    ----------
+    T_target_source : (4, 4) float, metres
+        Maps source points relative to ``source_origin`` onto target points relative to
+        ``target_origin``.
+    target_origin, source_origin : (3,) float or None, metres
+        The scanner positions in each file's frame; None: the file's origin.
+
+    Returns
+    -------
+    (4, 4) float64
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> o = [455013.02, 5455000.84, 121.71]
+    >>> T = np.eye(4); T[:3, 3] = [0.0, 7.0, 0.0]          # from o to o + (0, 7, 0)
+    >>> in_file_frame(T, o, np.add(o, [0.0, 7.0, 0.0]))[:3, 3].tolist()
+    [0.0, 0.0, 0.0]
+    """
+    T = np.asarray(T_target_source, dtype=np.float64)
+    o_t = np.zeros(3) if target_origin is None else np.asarray(target_origin, dtype=np.float64)
+    o_s = np.zeros(3) if source_origin is None else np.asarray(source_origin, dtype=np.float64)
+    R, t = T[:3, :3], T[:3, 3]
+    out = np.eye(4)
+    out[:3, :3] = R
+    out[:3, 3] = (o_t - o_s) + t - (R - np.eye(3)) @ o_s
+    return out

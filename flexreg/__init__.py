@@ -18,6 +18,11 @@ module inside flexreg imports it. The applications (``register``, ``calibrate``,
 import logging
 import os
 
+from flexreg.core.jit import cache_env
+
+# numba reads its cache folder at import: a read-only install caches in the user's cache folder
+os.environ.update(cache_env())
+
 import numba
 
 # open3d ships an older TBB than numba's TBB layer accepts; prefer OpenMP, then workqueue.

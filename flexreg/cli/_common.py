@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,24 +25,60 @@ from flexreg.io.files import write_all as write_all  # re-exported for the comma
 if TYPE_CHECKING:
     from flexreg.core.results import Verdict
 
-console = Console(highlight=False)
-err_console = Console(stderr=True, highlight=False)
+#: console width when the output is not a terminal (a pipe, a log file) and COLUMNS is not set:
+#: wide enough that progress lines and tables are not cut at 80 columns
+PIPED_WIDTH = 160
+
+
+def make_console(*, stderr: bool = False, environ: Mapping[str, str] | None = None) -> Console:
+    """A console on stdout (or stderr): as wide as the terminal, or ``COLUMNS`` when set, or
+    :data:`PIPED_WIDTH` when the output is not a terminal (rich's default would be 80)."""
+    env = os.environ if environ is None else environ
+    wide = Console(stderr=stderr, highlight=False)
+    if wide.is_terminal or env.get("COLUMNS", "").strip().isdigit():
+        return wide
+    return Console(stderr=stderr, highlight=False, width=PIPED_WIDTH)
+
+
+console = make_console()
+err_console = make_console(stderr=True)
+
+
+def compile_notice(cache: Path) -> None:
+    """The one line shown when the first compiled kernel is built (its cache was cold):
+    :func:`flexreg.core.jit.on_first_compile` calls it."""
+    from flexreg.core.jit import PACKAGE_DIR
+
+    where = "" if cache == PACKAGE_DIR else f" (cached in {cache})"
+    err_console.print(
+        f"compiling the image kernels once (~40 s); later runs reuse them{where}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 @contextmanager
 def stage(description: str) -> Iterator[None]:
-    """Show a spinner with elapsed time while a stage runs (on stderr), then a done line."""
+    """Show a spinner with elapsed time while a stage runs (on stderr), then a done line; when
+    stderr is not a terminal, the done line only (never cut: it wraps softly)."""
+    from rich.text import Text
+
     t0 = time.perf_counter()
-    with Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-    ) as progress:
-        progress.add_task(description, total=None)
+    if err_console.is_terminal:
+        with Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}", markup=False),
+            TimeElapsedColumn(),
+            console=err_console,
+            transient=True,
+        ) as progress:
+            progress.add_task(description, total=None)
+            yield
+    else:
         yield
-    err_console.print(f"[green]✓[/green] {description} ({time.perf_counter() - t0:.2f} s)")
+    done = Text.assemble(("✓", "green"), f" {description} ({time.perf_counter() - t0:.2f} s)")
+    err_console.print(done, highlight=False, soft_wrap=True)
 
 
 def progress_bar() -> Progress:
@@ -138,7 +175,7 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     """The scan moved to ``origin``, or as it is when centred (else an error naming
     ``option``)."""
     from flexreg.errors import InputError
-    from flexreg.io.origin import centring_problem, recentre
+    from flexreg.io.origin import centring_problem, origin_hint, recentre
     from flexreg.io.scans import single_precision
 
     if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
@@ -152,11 +189,7 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
         return single_precision(moved)  # near its scanner now: float32, as read_scan gives
     why = centring_problem(scan)
     if why is not None:
-        raise InputError(
-            file,
-            f"not centred on its scanner: {why}; give the scanner position in the file's "
-            f"frame with {option} X Y Z (metres)",
-        )
+        raise InputError(file, origin_hint(why, option))
     return scan
 
 

@@ -14,7 +14,7 @@ import click
 import typer
 
 from flexreg._version import __version__
-from flexreg.cli._common import err_console
+from flexreg.cli._common import compile_notice, err_console
 from flexreg.errors import FlexregError
 
 app = typer.Typer(
@@ -70,9 +70,11 @@ def _root(
 
     from flexreg.cli.options import set_overwrite
     from flexreg.core.budget import set_memory_budget
+    from flexreg.core.jit import on_first_compile
 
     set_memory_budget(memory_budget)
     set_overwrite(overwrite)
+    on_first_compile(compile_notice)  # one line when a kernel's cache is cold
 
     from rich.logging import RichHandler
 

@@ -53,6 +53,7 @@ OPTIONS: dict[str, str | tuple[str, ...]] = {
     "--mesh-up": "mesh_up_axis",
     "--embed-poses": "embed_poses",
     "--groups": "groups",
+    "--rig": "rig",
 }
 _C = SynthConfig
 
@@ -216,6 +217,15 @@ _EmbedPosesOption = Annotated[
         ),
     ),
 ]
+_RigOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--rig",
+        help="A camera-lidar rig: a camera on the first station looking at its most textured "
+        "part (camera.png, camera.json, a rough init.json; the true T_camera_lidar in gt.json, "
+        "for pick, calibrate and calibrate --truth). One station unless --stations says more.",
+    ),
+]
 
 
 @app.command("synth")
@@ -238,6 +248,7 @@ def synth(
     mesh_up: _MeshUpOption = None,
     embed_poses: _EmbedPosesOption = None,
     groups: _GroupsOption = None,
+    rig: _RigOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -246,7 +257,9 @@ def synth(
     Writes scene.ply, one file per station, and gt.json with every station pose
     T_world_scanner and the pairwise T_target_source = inv(T_world_target) @ T_world_source;
     gt.json's configuration reruns it with --config. Project scenes (building, warehouse,
-    street) also get each station's group and the overlap of every pair in gt.json.
+    street) also get each station's group and the overlap of every pair in gt.json. With
+    --rig, a camera on the first station: camera.png, camera.json, init.json and the true
+    T_camera_lidar in gt.json.
     """
     from flexreg.synth.dataset import synthesize
 
@@ -267,6 +280,7 @@ def synth(
         mesh_scale=mesh_scale,
         embed_poses=embed_poses,
         groups=groups,
+        rig=rig,
         **converted,
     )
     t0 = time.perf_counter()
@@ -324,7 +338,7 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
         for pr in res.pairs:
             p.add_row(pr.target, pr.source, f"{pr.distance_m:.2f}", f"{pr.overlap:.2f}")
         console.print(p)
-    else:
+    elif len(res.stations) > 1:
         err_console.print("no station pair within the distance range and overlap")
     if res.project:
         proj = res.project
@@ -334,4 +348,22 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
             f">= {proj['min_overlap']:g}: {len(proj['components'])} component(s); "
             f"{len(proj['overlaps'])} pairs share a view (all listed in gt.json)"
         )
+    if res.rig is not None:
+        _print_rig(res)
     console.print(f"wrote {len(res.files)} files to {res.out_dir} in {seconds:.1f} s")
+
+
+def _print_rig(res: SynthResult) -> None:
+    import numpy as np
+
+    rig = res.rig
+    assert rig is not None
+    T = rig.T_camera_lidar
+    c = rig.camera
+    hfov = math.degrees(2 * math.atan2(c.width / 2, c.fx))
+    console.print(
+        f"rig: a {c.width}x{c.height} camera ({hfov:.0f} deg across) "
+        f"{100 * np.linalg.norm(T[:3, 3]):.0f} cm from {res.stations[0].name}'s centre; the "
+        "true T_camera_lidar in gt.json, a rough guess in init.json",
+        markup=False,
+    )

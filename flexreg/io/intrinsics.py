@@ -10,8 +10,12 @@ file                   content
                        ROS ``camera_info`` YAML (``{rows, cols, data}`` matrices) too
 ``.json``              plain ``{"K", "distortion", "width", "height"}`` (what
                        ``CameraIntrinsics.to_dict()`` writes, also nested under
-                       ``"intrinsics"``), or the PJLab SensorsCalibration intrinsic JSON
-                       (``param.cam_K``, ``param.cam_dist``, ``param.img_dist_w/h``)
+                       ``"intrinsics"``); flexreg's camera description
+                       ``{"model": "pinhole", "fx", "fy", "cx", "cy"[, "skew"], "width",
+                       "height"}`` (``PinholeCamera.to_dict()``), also nested under
+                       ``"camera"`` as in the ``camera.json`` of ``flexreg synth``; or the
+                       PJLab SensorsCalibration intrinsic JSON (``param.cam_K``,
+                       ``param.cam_dist``, ``param.img_dist_w/h``)
 ``.txt``               KITTI calibration (``P0..P3``, ``R0_rect``, ``Tr_velo_to_cam``)
 =====================  ===================================================================
 
@@ -305,6 +309,8 @@ def _intrinsics_from_json(doc: Any, p: Path) -> CameraIntrinsics:
     d: dict[str, Any] = doc
     if "intrinsics" in d and isinstance(d["intrinsics"], dict):  # flexreg calibration JSON
         d = d["intrinsics"]
+    elif _first(d, _K_KEYS) is None and isinstance(d.get("camera"), dict):  # synth camera.json
+        d = {**d, **d["camera"]}
     elif _first(d, _K_KEYS) is None and len(d) == 1:  # PJLab: {"<name>": {"param": {...}}}
         inner = next(iter(d.values()))
         if isinstance(inner, dict):
@@ -312,8 +318,12 @@ def _intrinsics_from_json(doc: Any, p: Path) -> CameraIntrinsics:
             if isinstance(param, dict):
                 d = param
     Kv = _first(d, _K_KEYS)
+    if Kv is None and ("model" in d or "fx" in d):
+        Kv = _pinhole_matrix(d, p)
     if Kv is None:
-        raise InputError(p, f"no camera matrix (one of {', '.join(_K_KEYS[:4])})")
+        raise InputError(
+            p, f"no camera matrix (one of {', '.join(_K_KEYS[:4])}, or fx, fy, cx, cy)"
+        )
     K = _matrix(Kv, p, "K")
     if K.size != 9:
         raise InputError(p, f"K must have 9 numbers, got {K.size}")
@@ -329,6 +339,23 @@ def _intrinsics_from_json(doc: Any, p: Path) -> CameraIntrinsics:
     return CameraIntrinsics(
         K.reshape(3, 3), D, _opt_size(w, p, "width"), _opt_size(h, p, "height"), str(p)
     )
+
+
+def _pinhole_matrix(d: dict[str, Any], p: Path) -> list[list[float]]:
+    """K of flexreg's camera description (``PinholeCamera.to_dict()``: ``fx, fy, cx, cy`` and
+    an optional ``skew``, pixels)."""
+    model = d.get("model", "pinhole")
+    if model != "pinhole":
+        raise InputError(p, f"a {model!r} camera: calibration needs a pinhole camera")
+    missing = [k for k in ("fx", "fy", "cx", "cy") if k not in d]
+    if missing:
+        raise InputError(p, f"pinhole camera without {', '.join(missing)}")
+    v = {k: d[k] for k in ("fx", "fy", "cx", "cy")}
+    skew = d.get("skew", 0.0)
+    for k, x in (*v.items(), ("skew", skew)):
+        if isinstance(x, bool) or not isinstance(x, int | float):
+            raise InputError(p, f"{k} must be a number, got {x!r}")
+    return [[v["fx"], skew, v["cx"]], [0.0, v["fy"], v["cy"]], [0.0, 0.0, 1.0]]
 
 
 def _opt_size(value: Any, p: Path, what: str) -> int | None:

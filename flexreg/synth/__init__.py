@@ -7,7 +7,8 @@ Scenes (:func:`make_scene`: ``room``, ``courtyard``, ``hall``; the ambiguous
 ``symmetric-room``, ``tunnel``, ``bays`` and their ``-cue`` variants; :func:`scene_from_mesh`) are
 triangle meshes with a reflectance and colour per triangle. Sensors ray-cast them:
 :func:`scan_tls` (equirectangular TLS station), :func:`scan_lidar` (spinning lidar),
-:func:`render_rgbd` (pinhole depth + image). :func:`place_stations` finds stations with a
+:func:`render_rgbd` (pinhole depth + image); :func:`place_rig` mounts a camera on a station
+(a camera-lidar rig with its exact extrinsic). :func:`place_stations` finds stations with a
 guaranteed mutual overlap and inter-station distance; :func:`synthesize` writes a whole data set
 (what ``flexreg synth`` runs). Project scenes (:data:`PROJECT_SCENE_KINDS`: ``building``,
 ``warehouse``, ``street``) are sized for many stations, which :func:`place_project` sets up as
@@ -32,6 +33,7 @@ _WHERE = {
     "RGBDConfig": "flexreg.synth.config",
     "RGBDFrame": "flexreg.synth.sensors",
     "RayHits": "flexreg.synth.scene",
+    "Rig": "flexreg.synth.rig",
     "Scene": "flexreg.synth.scene",
     "StationPair": "flexreg.synth.placement",
     "SynthConfig": "flexreg.synth.config",
@@ -53,9 +55,11 @@ _WHERE = {
     "overlap_components": "flexreg.synth.project",
     "overlap_matrix": "flexreg.synth.project",
     "place_project": "flexreg.synth.project",
+    "place_rig": "flexreg.synth.rig",
     "place_stations": "flexreg.synth.placement",
     "read_scene": "flexreg.synth.scene",
     "render_rgbd": "flexreg.synth.sensors",
+    "render_rig": "flexreg.synth.rig",
     "room": "flexreg.synth.scenes",
     "scan_lidar": "flexreg.synth.sensors",
     "scan_tls": "flexreg.synth.sensors",

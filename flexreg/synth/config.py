@@ -234,6 +234,10 @@ class SynthConfig(Config):
     groups : int
         Project kinds only: number of disconnected sites (1..4) sharing the stations, far
         enough apart that no station of one sees anything of another.
+    rig : bool
+        Mount a pinhole camera on the first station (:mod:`flexreg.synth.rig`): its image,
+        intrinsics, a rough initial guess and the true ``T_camera_lidar`` in ``gt.json``; the
+        stations then carry colours, and one station is the default.
     """
 
     scene: str = "room"
@@ -254,12 +258,13 @@ class SynthConfig(Config):
     size_m: tuple[float, float] | None = None
     embed_poses: bool = False
     groups: int = Field(1, ge=1, le=4)
+    rig: bool = False
 
     @model_validator(mode="before")
     @classmethod
     def _tilt_in_degrees(cls, data: Any) -> Any:
         """Accept the ``max_tilt_deg`` that :meth:`to_dict` adds (a result file's config);
-        give project kinds their own default minimal overlap."""
+        give project kinds their own default minimal overlap, and a rig one station."""
         if isinstance(data, dict) and "max_tilt_deg" in data:
             data = dict(data)
             deg = data.pop("max_tilt_deg")
@@ -267,6 +272,8 @@ class SynthConfig(Config):
         if isinstance(data, dict) and data.get("scene") in PROJECT_SCENE_KINDS:
             if data.get("min_overlap") is None:
                 data = {**data, "min_overlap": PROJECT_MIN_OVERLAP}
+        if isinstance(data, dict) and data.get("rig") is True and data.get("stations") is None:
+            data = {**data, "stations": 1}  # a rig is one station and its camera
         return data
 
     @field_validator("groups")
@@ -380,6 +387,7 @@ class SynthConfig(Config):
             height=int(self.height),
             range_noise_m=float(self.noise_m),
             mixed_pixel_prob=0.5 if self.mixed_pixels else 0.0,
+            colors=bool(self.rig),
         )
 
     def to_dict(self) -> dict[str, Any]:

@@ -6,6 +6,8 @@
     station_00.ptx ...     one file per TLS station (.ptx, .e57 or .npz), scanner frame
     gt.json                station poses, pairwise T_target_source, scene and configuration
     rgbd/                  TUM-style RGB-D sequence (with --rgbd-frames N)
+    camera.png ...         a camera on the first station (with --rig: camera.json, init.json
+                           and T_camera_lidar in gt.json; see flexreg.synth.rig)
     lidar/                 spinning-lidar sweeps and poses (with --lidar-frames N)
 
 The station files hold points in each scanner's own frame with an identity pose (as an
@@ -40,6 +42,7 @@ from flexreg.synth.project import (
     place_project,
     project_ground_truth,
 )
+from flexreg.synth.rig import Rig, place_rig, write_rig
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import (
     PROJECT_SCENE_KINDS,
@@ -60,6 +63,7 @@ Progress = Callable[[str, int, int], None]
 
 # stream ids (see placement.stream)
 _PLACEMENT, _TRAJECTORY, _RGBD, _LIDAR_TRAJ, _LIDAR, _STATION = 0, 1, 2, 3, 4, 100
+_RIG, _RIG_IMAGE = 5, 6
 
 
 @dataclass(eq=False)
@@ -104,7 +108,8 @@ class PairInfo:
 @dataclass(eq=False)
 class SynthResult:
     """What :func:`synthesize` wrote (timings are reported here, never written to files);
-    ``project`` is the ``"project"`` part of ``gt.json`` for project scenes (else empty)."""
+    ``project`` is the ``"project"`` part of ``gt.json`` for project scenes (else empty),
+    ``rig`` the camera of ``--rig`` (else None)."""
 
     out_dir: Path
     scene: Scene
@@ -113,6 +118,7 @@ class SynthResult:
     files: list[Path] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     project: dict[str, Any] = field(default_factory=dict)
+    rig: Rig | None = None
 
     def __repr__(self) -> str:
         return (
@@ -129,6 +135,7 @@ class SynthResult:
             "files": [str(f) for f in self.files],
             "seconds": dict(self.seconds),
             "project": dict(self.project),
+            "rig": None if self.rig is None else self.rig.to_dict(),
         }
 
 
@@ -392,6 +399,9 @@ def synthesize(
     lidar_traj: list[NDArray[np.float64]] = []
     if cfg.lidar_frames:
         lidar_traj = lidar_trajectory(scene, cfg.lidar_frames, rng=stream(cfg.seed, _LIDAR_TRAJ))
+    rig: Rig | None = None
+    if cfg.rig:
+        rig = place_rig(scene, placed[0], station_width=cfg.width, rng=stream(cfg.seed, _RIG))
 
     # nothing is written before this point
     out.mkdir(parents=True, exist_ok=True)
@@ -428,6 +438,19 @@ def synthesize(
         lidar_doc = _write_lidar(out, scene, lidar_traj, cfg, files, progress)
         secs["lidar"] = time.perf_counter() - t0
     doc = _ground_truth(cfg, tls, scene, stations, pairs, rgbd_cfg, lidar_doc)
+    if rig is not None:
+        t0 = time.perf_counter()
+        written, entry = write_rig(
+            out, scene, rig, station_file=stations[0].file, rng=stream(cfg.seed, _RIG_IMAGE)
+        )
+        files += written
+        doc["T_camera_lidar"] = entry["T_camera_lidar"]
+        doc["rig"] = entry
+        doc["convention"] += (
+            "; T_camera_lidar = inv(T_world_camera) @ T_world_scanner maps the first station "
+            "file's points into the camera frame (x right, y down, z forward)"
+        )
+        secs["rig"] = time.perf_counter() - t0
     if plan is not None:
         for entry, g, parent in zip(doc["stations"], plan.groups, plan.parents, strict=True):
             entry["T_world_station"] = entry["T_world_scanner"]
@@ -436,7 +459,7 @@ def synthesize(
         doc["project"] = project_doc
     _write_json(out / "gt.json", doc)
     files.append(out / "gt.json")
-    return SynthResult(out, scene, stations, pairs, files, secs, project_doc)
+    return SynthResult(out, scene, stations, pairs, files, secs, project_doc, rig)
 
 
 def _write_stations(

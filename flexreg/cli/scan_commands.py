@@ -40,11 +40,28 @@ def info(
     depth_kind: str | None = DepthKindOpt,
     depth_scale: float | None = DepthScaleOpt,
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    detail: bool = typer.Option(
+        False,
+        "--detail",
+        help="A file with several setups: the full table of each (without it, one line per "
+        "setup; FILE#N shows one setup in full).",
+    ),
+    origin: tuple[float, float, float] | None = typer.Option(
+        None,
+        "--origin",
+        metavar="X Y Z",
+        help="Where the scanner stood, in the file's frame, metres: describe a cloud in "
+        "project or map coordinates as seen from there.",
+    ),
 ) -> None:
-    """Describe a scan file: format, points, grid, field of view, ranges, pose."""
+    """Describe a scan file: format, points, grid, field of view, ranges, pose.
+
+    A file with several setups (E57, PTX) is listed one line per setup: name, points, grid
+    and whether the file stores its pose; FILE#N or --detail shows the full table."""
     import json
 
-    from flexreg.io.info import scan_summary
+    from flexreg.io.info import render_scan_summary, render_setup_list, scan_summary
+    from flexreg.io.selector import parse_scan_ref
 
     with stage(f"Reading {scan.name}"):
         scans = read_input(
@@ -54,16 +71,24 @@ def info(
             depth_kind=depth_kind,
             depth_scale=depth_scale,
             all_scans=True,
+            origin=origin,
+            origin_option=None if origin is None else "--origin",
         )
-    from flexreg.io.info import render_scan_summary
-    from flexreg.io.selector import parse_scan_ref
-
     ref = parse_scan_ref(scan)
     summaries = [scan_summary(s) for s in scans]
     for i, s in enumerate(summaries):  # how to name each setup on the command line
         s["setup"] = str(scan) if ref.selector is not None else f"{ref.path}#{i}"
     if as_json:
         console.print_json(json.dumps(summaries))
+        return
+    if len(summaries) > 1 and not detail:
+        console.print(
+            f"{ref.path}: {len(summaries)} setups ({summaries[0]['format']}); "
+            f"details: flexreg info {ref.path}#N, or --detail for all",
+            markup=False,
+            soft_wrap=True,
+        )
+        console.print(render_setup_list(summaries))
         return
     for s in summaries:
         if len(summaries) > 1:

@@ -15,6 +15,8 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid, rotation_error_deg
 from flexreg.errors import InputError
 from flexreg.io import atomic_write, detect_format
+from flexreg.io.origin import centring_problem, origin_hint
+from flexreg.io.threedtk import pose_file
 
 PNG_SCALES_M = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1)
 
@@ -47,17 +49,41 @@ def field_of_view_deg(scan: Scan) -> dict[str, Any]:
     }
 
 
+def pose_stored(scan: Scan, fmt: str | None = None) -> bool:
+    """Whether the scan's file stores a pose for it.
+
+    A 3DTK scan stores one when its ``.pose`` file exists, identity or not
+    (:func:`flexreg.io.threedtk.pose_file`); other formats write the identity when they store
+    none (E57 without ``pose``, a PTX header of an unregistered setup), so there an identity
+    pose counts as none.
+    """
+    if fmt is None and scan.path is not None:
+        fmt = detect_format(scan.path)[1]
+    if fmt == "3dtk" and scan.path is not None:
+        return pose_file(scan.path) is not None
+    return not np.allclose(scan.T_world_scanner, np.eye(4), rtol=0.0, atol=1e-12)
+
+
 def scan_summary(scan: Scan) -> dict[str, Any]:
-    """JSON-ready facts about a scan (what ``flexreg info`` shows)."""
-    r = np.linalg.norm(scan.points, axis=1)
+    """JSON-ready facts about a scan (what ``flexreg info`` shows).
+
+    A cloud not centred on its scanner (project or map coordinates,
+    :func:`flexreg.io.origin.centring_problem`) has no field of view or ranges worth showing:
+    they are None, and ``not_centred`` says why, with the option to give (``hint``).
+    """
+    fmt = None if scan.path is None else detect_format(scan.path)[1]
+    why = centring_problem(scan)
     d: dict[str, Any] = {
         "path": None if scan.path is None else str(scan.path),
         "name": scan.name,
-        "format": None if scan.path is None else detect_format(scan.path)[1],
+        "format": fmt,
         "points": len(scan),
         "grid": None,
-        "field_of_view": field_of_view_deg(scan) if len(scan) else None,
+        "field_of_view": field_of_view_deg(scan) if len(scan) and why is None else None,
         "range_m": None,
+        "bounds_m": None,
+        "not_centred": why,
+        "hint": None if why is None else origin_hint(why, "--origin"),
         "intensity": None,
         "colors": scan.colors is not None,
         "camera": None if scan.camera is None else scan.camera.to_dict(),
@@ -71,7 +97,10 @@ def scan_summary(scan: Scan) -> dict[str, Any]:
             "valid_fraction": len(scan) / (rows * cols),
         }
     if len(scan):
-        q = np.percentile(r, [0, 1, 50, 99, 100])
+        lo, hi = scan.points.min(axis=0), scan.points.max(axis=0)
+        d["bounds_m"] = {"min": lo.tolist(), "max": hi.tolist()}
+    if len(scan) and why is None:
+        q = np.percentile(np.linalg.norm(scan.points, axis=1), [0, 1, 50, 99, 100])
         d["range_m"] = {"min": q[0], "p1": q[1], "median": q[2], "p99": q[3], "max": q[4]}
     if scan.intensity is not None and len(scan):
         d["intensity"] = {"min": float(scan.intensity.min()), "max": float(scan.intensity.max())}
@@ -81,12 +110,49 @@ def scan_summary(scan: Scan) -> dict[str, Any]:
         "position_m": T[:3, 3].tolist(),
         "rotation_deg": rotation_error_deg(T, np.eye(4)) if is_rigid(T) else None,
         "rigid": is_rigid(T),
+        "stored": pose_stored(scan, fmt),
     }
     return json.loads(json.dumps(d, default=float))
 
 
+def _grid_text(g: dict[str, Any] | None) -> str:
+    return "none" if g is None else f"{g['rows']} x {g['cols']}"
+
+
+def _pose_text(p: dict[str, Any]) -> str:
+    """``no`` (none stored), ``yes`` or ``yes (identity)``: an explicit identity pose."""
+    if not p["stored"]:
+        return "no"
+    identity = np.allclose(p["T_world_scanner"], np.eye(4), rtol=0.0, atol=1e-12)
+    return "yes (identity)" if identity else "yes"
+
+
+def render_setup_list(summaries: list[dict[str, Any]]) -> Any:
+    """A rich table of several :func:`scan_summary` outputs, one line per setup: how to name
+    it, its name, points, grid and whether its file stores a pose."""
+    from rich import box
+    from rich.table import Table
+
+    t = Table(box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
+    for name, justify in (
+        ("setup", "left"),
+        ("name", "left"),
+        ("points", "right"),
+        ("grid", "right"),
+        ("pose", "left"),
+    ):
+        t.add_column(name, justify=justify)  # type: ignore[arg-type]
+    for d in summaries:
+        name = d["name"] if d["not_centred"] is None else f"{d['name']} (not centred)"
+        t.add_row(
+            d["setup"], name, f"{d['points']:,}", _grid_text(d["grid"]), _pose_text(d["pose"])
+        )
+    return t
+
+
 def render_scan_summary(d: dict[str, Any]) -> Any:
-    """A rich table of :func:`scan_summary` output."""
+    """A rich table of :func:`scan_summary` output (and, for a cloud not centred on its
+    scanner, the line that says which option gives the scanner position)."""
     from rich.table import Table  # heavy: rich loads only for the console table
 
     t = Table(title=f"{d['name']}  ({d['format']})", show_header=False, title_justify="left")
@@ -102,6 +168,13 @@ def render_scan_summary(d: dict[str, Any]) -> Any:
         else f"{g['rows']} rows x {g['cols']} cols, {g['valid_cells']:,} valid "
         f"({100 * g['valid_fraction']:.1f} %)",
     )
+    if d["not_centred"] is not None:
+        lo, hi = d["bounds_m"]["min"], d["bounds_m"]["max"]
+        t.add_row(
+            "extent",
+            ", ".join(f"{a} {lo[k]:.3f}..{hi[k]:.3f}" for k, a in enumerate("xyz")) + " m",
+        )
+        t.add_row("scanner", "not at the file's origin: no field of view or ranges (see below)")
     fov = d["field_of_view"]
     if fov:
         extra = ""
@@ -126,10 +199,22 @@ def render_scan_summary(d: dict[str, Any]) -> Any:
     t.add_row("colour", "yes" if d["colors"] else "no")
     p = d["pose"]
     rot = "non-rigid (affine)" if not p["rigid"] else f"rotated {p['rotation_deg']:.3f}°"
-    t.add_row("pose", f"position ({', '.join(f'{v:.3f}' for v in p['position_m'])}) m, {rot}")
+    where = f"position ({', '.join(f'{v:.3f}' for v in p['position_m'])}) m, {rot}"
+    if not p["stored"]:
+        t.add_row("pose", "none stored (taken as the identity)")
+    elif d["format"] == "3dtk":
+        t.add_row("pose", f"{where} (from {Path(d['path']).with_suffix('.pose').name})")
+    else:
+        t.add_row("pose", where)
     if d["camera"]:
         t.add_row("camera", json.dumps(d["camera"]))
-    return t
+    if d["hint"] is None:
+        return t
+    from rich.console import Group
+    from rich.text import Text
+
+    hint = f"{d['path']}: {d['hint']}; register takes it as --target-origin / --source-origin"
+    return Group(t, Text(hint, no_wrap=False))
 
 
 def choose_png_scale(max_range_m: float) -> float:

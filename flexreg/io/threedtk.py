@@ -21,6 +21,11 @@ and columns run with increasing azimuth ``atan2(Y, X)`` in the right-handed fram
 points within a profile are reversed as needed; for the Kurt3D sample the profiles are stored
 bottom-up, so rows are the profiles in reverse order and columns keep the file order.
 No-return cells are kept in the file at the SICK maximum range (3276.7 cm) and become invalid.
+
+A ``.pose`` file is a stored pose even when it holds the identity: 3DTK puts a sequence's first
+scan at the origin of its world frame, and ``scan000.pose`` says so with six zeros. Only a scan
+without a ``.pose`` file stores no pose (:func:`pose_file` tells the two apart; the scan's
+``T_world_scanner`` is the identity in both cases).
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform
 from flexreg.errors import InputError
 
-__all__ = ["pose_to_transform", "read", "read_pose"]
+__all__ = ["pose_file", "pose_to_transform", "read", "read_pose"]
 
 #: Left-handed 3DTK axes (x right, y up, z forward) -> right-handed (X forward, Y left, Z up).
 S_RH_FROM_LH = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -61,10 +66,10 @@ def read(
         The ``.3d`` file: one ``x y z`` (cm) per line; blank lines, ``#`` comments and the
         optional ``W x H`` first line of the uos format are skipped.
     pose : path-like or (4, 4) array_like or bool, optional
-        ``None`` / ``True``: the ``.pose`` file beside the scan with the same stem, identity if
-        there is none. A path: that 3DTK ``.pose`` file (must exist). A (4, 4) array:
-        ``T_world_scanner`` already in flexreg's frame (metres, right-handed). ``False``:
-        identity, ignoring any pose file.
+        ``None`` / ``True``: the ``.pose`` file beside the scan with the same stem
+        (:func:`pose_file`), identity if there is none. A path: that 3DTK ``.pose`` file
+        (must exist). A (4, 4) array: ``T_world_scanner`` already in flexreg's frame (metres,
+        right-handed). ``False``: identity, ignoring any pose file.
     grid : bool or (int, int)
         ``True``: find the scan profiles from the azimuth jumps and require them all to have the
         same length; ``(profiles, points_per_profile)``: require exactly that many lines;
@@ -193,10 +198,21 @@ def _orientation(cube: NDArray[np.float64], ok: NDArray[np.bool_]) -> tuple[bool
     return flip_rows, flip_cols
 
 
+def pose_file(path: str | PathLike[str]) -> Path | None:
+    """The ``.pose`` file :func:`read` takes for the scan ``path`` by default (beside it, the
+    same stem), or None when there is none: the scan stores no pose.
+
+    A pose file holding the identity (six zeros, as 3DTK writes for a sequence's first scan)
+    is a stored pose all the same.
+    """
+    candidate = Path(path).with_suffix(".pose")
+    return candidate if candidate.is_file() else None
+
+
 def _resolve_pose(path: Path, pose: Any) -> NDArray[np.float64]:
     if pose is None or pose is True:
-        pose_path = path.with_suffix(".pose")
-        return read_pose(pose_path) if pose_path.is_file() else np.eye(4)
+        pose_path = pose_file(path)
+        return np.eye(4) if pose_path is None else read_pose(pose_path)
     if pose is False:
         return np.eye(4)
     if isinstance(pose, (str, PathLike)):

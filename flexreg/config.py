@@ -32,9 +32,13 @@ the field; models pickle (Dask) and export a JSON schema (the picker's form).
 
 from __future__ import annotations
 
+import difflib
+import inspect
 import json
 import math
+import re
 import sys
+import textwrap
 import types
 import typing
 import unicodedata
@@ -77,11 +81,15 @@ __all__ = [
     "Seed",
     "ThresholdM",
     "VoxelM",
+    "attribute_descriptions",
+    "did_you_mean",
+    "field_descriptions",
     "load_config",
     "odd",
     "one_of",
     "parse_sets",
     "to_toml",
+    "toml_text",
 ]
 
 C = TypeVar("C", bound="Config")
@@ -192,14 +200,36 @@ def _message(err: Any, field: str, cls: type[BaseModel] | None) -> str:
     if kind == "finite_number":
         return f"must be a finite number{_unit(field)}"
     if kind == "extra_forbidden":
-        known = ", ".join(cls.model_fields) if cls is not None else ""
-        return "unknown setting" + (f"; known: {known}" if known else "")
+        return "unknown setting" + (did_you_mean(field, cls.model_fields) if cls else "")
     if kind == "missing":
         return "required"
     msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
     if msg.startswith("Input should be "):
         msg = "must be " + msg.removeprefix("Input should be ")
     return msg
+
+
+#: Most names an "unknown" message lists when none is close to what was given.
+MAX_LISTED = 8
+
+
+def did_you_mean(given: str, known: Iterable[str]) -> str:
+    """The end of an "unknown" message: the closest of the ``known`` names (difflib), all of
+    them when there are few, else how many there are.
+
+    >>> did_you_mean("treshold_m", ["threshold_m", "threshold_px", "seed"])
+    '; did you mean threshold_m?'
+    >>> did_you_mean("x", ["n", "seed"])
+    '; known: n, seed'
+    """
+    names = list(known)
+    lower = {n.lower(): n for n in names}
+    close = difflib.get_close_matches(given.lower(), list(lower), n=1, cutoff=0.6)
+    if close:
+        return f"; did you mean {lower[close[0]]}?"
+    if len(names) <= MAX_LISTED:
+        return "; known: " + ", ".join(names)
+    return f"; none of the {len(names)} known names is close ('flexreg config show' lists them)"
 
 
 def _shown(value: Any, limit: int = 60) -> str:
@@ -325,6 +355,100 @@ ThresholdM = Annotated[float, Field(gt=0, le=MAX_THRESHOLD_M, allow_inf_nan=Fals
 VoxelM = Annotated[float, Field(ge=MIN_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)]
 
 
+# --------------------------------------------------------- field descriptions from docstrings
+
+#: words of a numpy docstring's type slot that name a type, not a unit
+_TYPE_WORDS = frozenset(
+    "float int bool str None or of tuple list sequence mapping optional T".split()
+)
+#: a Sphinx cross-reference (``:func:`a.b` ``, ``:data:`~a.b` ``)
+_ROLE = re.compile(r":[a-z]+:`(~?)([^`]+)`")
+
+
+def _is_type(part: str) -> bool:
+    """Whether a piece of a type slot names a type (``float or None``, ``RegistrationConfig``)."""
+    words = re.findall(r"[\w/]+", part)
+    return bool(words) and all(w in _TYPE_WORDS or w[:1].isupper() for w in words)
+
+
+def _slot_units(slot: str, count: int) -> list[str]:
+    """The unit of each of ``count`` names from a type slot: ``float, metres`` (all of them),
+    ``float, degrees and metres`` or ``float, degrees, metres`` (one each)."""
+    flat = re.sub(r"\{[^}]*\}|\([^)]*\)", "T", slot)  # choices and tuples hold commas
+    units = [p.strip() for p in flat.split(",") if p.strip() and not _is_type(p)]
+    if len(units) == 1 and count > 1 and len(units[0].split(" and ")) == count:
+        units = units[0].split(" and ")
+    if len(units) == count:
+        return units
+    return [units[0] if len(units) == 1 else ""] * count
+
+
+def _plain(text: str) -> str:
+    """Docstring markup as plain text: ``x`` and cross-references as `x` (a ``~`` reference as
+    its last name)."""
+    text = _ROLE.sub(lambda m: "`" + (m[2].rpartition(".")[2] if m[1] else m[2]) + "`", text)
+    return " ".join(text.replace("``", "`").split())
+
+
+def _first_sentence(text: str) -> str:
+    """``text`` up to its first full stop outside brackets that a new sentence follows."""
+    depth = 0
+    for i, ch in enumerate(text):
+        depth += (ch in "([{") - (ch in ")]}")
+        rest = text[i + 1 : i + 3]
+        if ch == "." and depth <= 0 and rest[:1] == " " and rest[1:2] in "`(" + _CAPITALS:
+            return text[:i]
+    return text.removesuffix(".")
+
+
+_CAPITALS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+
+def _attribute_entries(doc: str) -> list[tuple[str, str, str]]:
+    """``(names, type slot, text)`` of each entry of a numpy docstring's Attributes section."""
+    lines = inspect.cleandoc(doc).splitlines()
+    heads = [i for i, line in enumerate(lines[:-1]) if line.strip() == "Attributes"]
+    if not heads or set(lines[heads[0] + 1].strip()) != {"-"}:
+        return []
+    entries: list[tuple[str, str, list[str]]] = []
+    body = lines[heads[0] + 2 :]
+    for i, line in enumerate(body):
+        if line and not line[0].isspace():
+            if i + 1 < len(body) and body[i + 1].strip() and set(body[i + 1].strip()) == {"-"}:
+                break  # the next section
+            names, _, slot = line.partition(" : ")
+            entries.append((names.strip(), slot.strip(), []))
+        elif entries:
+            entries[-1][2].append(line)
+    return [(names, slot, " ".join(text)) for names, slot, text in entries]
+
+
+def attribute_descriptions(cls: type) -> dict[str, str]:
+    """One line per attribute from the Attributes section of ``cls``'s numpy docstring: the
+    first sentence of its text, then its unit from the type slot in brackets.
+
+    An entry naming several attributes (``width, height : int``) describes each of them; an
+    entry without text describes nothing.
+
+    >>> class Demo:
+    ...     '''Attributes
+    ...     ----------
+    ...     range_m, step_deg : float, metres and degrees
+    ...         How far and in which steps (:data:`x.MAX`). More detail.
+    ...     '''
+    >>> attribute_descriptions(Demo)["step_deg"]
+    'How far and in which steps (`x.MAX`) [degrees]'
+    """
+    out = {}
+    for names, slot, text in _attribute_entries(cls.__dict__.get("__doc__") or ""):
+        fields = [n.strip() for n in names.split(",")]
+        line = _first_sentence(_plain(text))
+        for field, unit in zip(fields, _slot_units(slot, len(fields)), strict=True):
+            if line:
+                out[field] = f"{line} [{unit}]" if unit else line
+    return out
+
+
 class Config(BaseModel):
     """Base of every configuration: frozen, unknown keys refused, defaults validated.
 
@@ -334,6 +458,22 @@ class Config(BaseModel):
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", validate_default=True)
+
+    @classmethod
+    def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
+        """Each field without a ``description`` takes its line of the class docstring's
+        Attributes section (:func:`attribute_descriptions`): the docstring stays the one
+        place a field's meaning and unit are written, and the JSON schema, ``config show``
+        and docs/configuration.md show it."""
+        super().__pydantic_init_subclass__(**kwargs)
+        described = attribute_descriptions(cls)
+        changed = False
+        for name, field in cls.model_fields.items():
+            if field.description is None and name in described:
+                field.description = described[name]
+                changed = True
+        if changed:
+            cls.model_rebuild(force=True)
 
     def __init__(self, **data: Any) -> None:
         try:
@@ -552,30 +692,68 @@ def _toml_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
-def to_toml(config: Config, *, header: str | None = None) -> str:
+def toml_text(value: Any) -> str:
+    """A JSON-ready value as TOML (``none`` for None, which TOML lacks).
+
+    >>> toml_text(0.1), toml_text("sift"), toml_text([1, 2]), toml_text(None)
+    ('0.1', '"sift"', '[1, 2]', 'none')
+    """
+    return "none" if value is None else _toml_value(value)
+
+
+def field_descriptions(cls: type) -> dict[str, str]:
+    """Field -> its one-line description: a pydantic model's field descriptions, else the
+    Attributes section of the class docstring (a dataclass nested in a configuration)."""
+    fields = getattr(cls, "model_fields", None)
+    if isinstance(fields, dict):
+        return {name: f.description for name, f in fields.items() if f.description}
+    return attribute_descriptions(cls)
+
+
+#: Width of the comment lines :func:`to_toml` writes (the project's 100 columns).
+TOML_WIDTH = 100
+
+
+def _comment(text: str | None) -> list[str]:
+    if not text:
+        return []
+    return ["# " + line for line in textwrap.wrap(text, TOML_WIDTH - 2, break_on_hyphens=False)]
+
+
+def to_toml(config: Config, *, header: str | None = None, comments: bool = True) -> str:
     """The configuration as TOML, one ``key = value`` per field in declaration order; fields
     that are None are written as comments (``# key = none``), nested configurations as
-    ``[name]`` tables after the plain fields.
+    ``[name]`` tables after the plain fields. With ``comments``, each key follows its
+    description (:func:`field_descriptions`) as a comment.
 
     :func:`load_config` reads it back to an equal configuration (floats round-trip exactly).
     """
     lines = [f"# {h}" for h in (header.splitlines() if header else [])]
     tables: list[str] = []
+    notes = field_descriptions(type(config)) if comments else {}
     for name, value in config.model_dump(mode="json").items():
         if isinstance(value, dict):
-            tables += ["", f"[{name}]", *_toml_lines(value, name)]
+            inner = field_descriptions(type(getattr(config, name))) if comments else {}
+            table = _toml_lines(value, name, inner)
+            tables += ["", *_comment(notes.get(name)), f"[{name}]", *table[table[:1] == [""] :]]
         else:
-            lines += _toml_lines({name: value}, "")
+            lines += _toml_lines({name: value}, "", notes)
+    if lines[:1] == [""]:
+        lines = lines[1:]
     return "\n".join(lines + tables) + "\n"
 
 
-def _toml_lines(values: Mapping[str, Any], table: str) -> list[str]:
+def _toml_lines(values: Mapping[str, Any], table: str, notes: Mapping[str, str]) -> list[str]:
+    """``key = value`` lines; a key with a description follows it as a comment, after an
+    empty line."""
     lines = []
     for name, value in values.items():
+        if isinstance(value, dict):
+            raise ConfigError(f"{table}.{name}: tables within tables are not written by to_toml")
+        if notes.get(name):
+            lines += ["", *_comment(notes[name])]
         if value is None:
             lines.append(f"# {name} = none")
-        elif isinstance(value, dict):
-            raise ConfigError(f"{table}.{name}: tables within tables are not written by to_toml")
         else:
             lines.append(f"{name} = {_toml_value(value)}")
     return lines

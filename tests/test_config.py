@@ -70,7 +70,7 @@ def test_floats_round_trip_exactly_through_toml(tmp_path):
         (RegistrationConfig, {"icp": "p2p"}, "icp: unknown method 'p2p'; known: point-to-plane"),
         (RegistrationConfig, {"upright": "yes"}, "upright: must be one of auto, on, off"),
         (RegistrationConfig, {"median": 7}, "median: must be one of 0, 3, 5 (got 7)"),
-        (RegistrationConfig, {"nn": 5}, "nn: unknown setting; known: image, n, median"),
+        (RegistrationConfig, {"nn": 5}, "nn: unknown setting; did you mean n?"),
         (CalibrationConfig, {"patch_px": 20}, "patch_px: must be an odd size 7, 9, 11, ..."),
         (CalibrationConfig, {"confidence": 1.0}, "confidence: must be in (0, 1) (got 1.0)"),
         (OdometryConfig, {"min_inliers": 2}, "min_inliers: must be at least 5 (got 2)"),
@@ -160,7 +160,7 @@ def test_options_and_set_override_the_file(pair, tmp_path):
     ("toml", "extra", "message"),
     [
         ("n = 4\n", [], "error: {toml}: n: must be an odd grid size 3, 5, 7, ... 99 (got 4)"),
-        ("nn = 5\n", [], "error: {toml}: nn: unknown setting; known: image, n,"),
+        ("nn = 5\n", [], "error: {toml}: nn: unknown setting; did you mean n?"),
         ('ratio = "high"\n', [], "error: {toml}: ratio: must be a valid number"),
         ("n = [\n", [], "error: {toml}: not valid TOML"),
         ("", ["--set", "n=4"], "error: --set n: must be an odd grid size"),

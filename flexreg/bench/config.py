@@ -22,8 +22,10 @@ class CompareConfig(Config):
         Scale voxel of the baselines (None: from the scan resolution).
     seed : int
         Seed of flexreg and RANSAC.
-    success_deg, success_m : float, degrees and metres
-        Success: rotation and translation errors at most these.
+    success_deg : float, degrees
+        Largest rotation error of a success.
+    success_m : float, metres
+        Largest translation error of a success.
     timeout_s : float, seconds
         Time limit per method.
     """

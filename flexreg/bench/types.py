@@ -47,23 +47,28 @@ class BenchConfig(Config):
     Attributes
     ----------
     suite : {"synthetic", "real", "all"}
+        Which pairs run: the synthetic station pairs, the real pairs with a reference, or both.
     quick : bool
         The short variant (fewer, smaller pairs; see :meth:`make`).
     methods : tuple of str
+        Methods compared (see :func:`flexreg.bench.methods.parse_methods`).
     seed : int
         Seeds the synthetic pairs and every method's randomness.
     pairs : int
         Synthetic pairs.
-    resolution : (int, int)
+    resolution : (int, int), pixels
         Synthetic station grid (width, height).
     distance_bins_m : tuple of (float, float), metres
+        Station distance bins of the synthetic pairs (pair i takes bin i mod their number).
     yaw_bins_deg : tuple of (float, float), degrees
+        Relative-yaw bins of the synthetic pairs (a Latin square with the distance bins).
     max_tilt_deg : float, degrees
+        Largest tilt of each synthetic station, about a random horizontal axis.
     noise_mm : tuple of float, millimetres
         Range noise sigma, cycled over the pairs.
     min_overlap : float
         Mutual visibility overlap of the stations (0..1).
-    sweep_resolutions : tuple of (int, int)
+    sweep_resolutions : tuple of (int, int), pixels
         Resolutions of the time / memory sweep (empty: no sweep).
     real_pairs : tuple of str
         Names of the real pairs to run (see :data:`REAL_PAIRS`).

@@ -24,13 +24,16 @@ class CalibrationConfig(Config):
         Levenberg-Marquardt refinement on the inliers after RANSAC.
     seed : int
         Seed of OpenCV's USAC random generator (same seed, same result).
-    init_rotation_deg, init_translation_m : float, degrees and metres
-        Automatic mode: how far the initial guess may be off; sets the first search radius,
-        and corrections beyond twice these are not accepted.
+    init_rotation_deg : float, degrees
+        Automatic mode: how far the initial guess's rotation may be off. Sets the first search
+        radius, and corrections beyond twice this are not accepted.
+    init_translation_m : float, metres
+        Automatic mode: how far the initial guess's translation may be off. Sets the first
+        search radius, and corrections beyond twice this are not accepted.
     auto_scale : float or None
-        Automatic mode: scale of the working images relative to the camera image, in (0, 1];
-        None picks it from the lidar's angular density (about 1.75 pixels per lidar point
-        spacing).
+        Automatic mode: scale of the working images relative to the camera image, in (0, 1]
+        (None: from the lidar's angular density). None picks about 1.75 pixels per lidar
+        point spacing.
     auto_rounds : int
         Automatic mode: match-and-solve rounds, each with a smaller search radius.
     patch_px : int, working pixels
@@ -45,7 +48,7 @@ class CalibrationConfig(Config):
         Automatic mode: largest median rotation between the chosen pose and the other rounds'
         poses (rounds 2, 3, ...); beyond it the matches are judged unreliable and the mode
         refuses.
-    flexion_n : int
+    flexion_n : int, pixels
         Grid size n of the Flexion n x n images (odd, >= 3).
     verdict_min_inliers : int
         Fewer agreeing pairs make the result uncertain (``few_inliers``).
@@ -62,9 +65,12 @@ class CalibrationConfig(Config):
     verdict_min_image_coverage : float
         Share of the camera image the inlier pixels' convex hull must cover, in [0, 1]
         (``clustered_pixels`` below it).
-    verdict_max_rotation_std_deg, verdict_max_translation_std_m : float, degrees and metres
-        Largest standard deviation of the pose about / along any camera axis (from the
-        reprojection's information matrix) for a confident result (``weak_axis`` beyond).
+    verdict_max_rotation_std_deg : float, degrees
+        Largest standard deviation of the rotation about any camera axis for a confident
+        result (``weak_axis`` beyond). From the reprojection's information matrix.
+    verdict_max_translation_std_m : float, metres
+        Largest standard deviation of the translation along any camera axis for a confident
+        result (``weak_axis`` beyond). From the reprojection's information matrix.
     """
 
     threshold_px: Positive = 3.0

@@ -40,7 +40,7 @@ class OdometryConfig(Config):
     image : str
         Feature image: ``flexion``, ``flexion-normalized``, ``flexion-angle``,
         ``bearing-{horizontal,vertical,diagonal,antidiagonal}`` or ``color``.
-    n : int
+    n : int, pixels
         Odd neighbourhood size of the conversion (Flexion n x n; 3 is the paper's Bearing
         Angle between adjacent pixels).
     median : {0, 3, 5}
@@ -64,7 +64,8 @@ class OdometryConfig(Config):
     mutual : bool
         Also require mutual nearest neighbours (not in the paper).
     method : {"svd", "essential"}
-        Pose solver, see :mod:`flexreg.odometry.track`. Default ``"svd"`` (3D-3D): 2-2.6x
+        Pose solver: ``"svd"`` (3D-3D) or ``"essential"`` (the paper's 2D-2D; see
+        :mod:`flexreg.odometry.track`). Default ``"svd"`` (3D-3D): 2-2.6x
         lower ATE than the paper's ``"essential"`` on the measured sequences
         (docs/odometry.md), and it also runs on panoramic (lidar, TLS) frames.
     ransac_threshold_px : float, pixels

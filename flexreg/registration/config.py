@@ -52,8 +52,9 @@ class RegistrationConfig(Config):
     Attributes
     ----------
     image : str
-        Feature image kind (see :data:`flexreg.stages.feature_images.KINDS`), or ``"intensity"``.
-    n : int
+        Feature image kind, one of :data:`flexreg.stages.feature_images.KINDS` or
+        ``"intensity"``.
+    n : int, pixels
         Flexion / Bearing Angle neighbourhood size (odd, >= 3).
     median : {0, 3, 5}
         Median pre-filter window (0: off).
@@ -63,15 +64,16 @@ class RegistrationConfig(Config):
         Detector/descriptor: sift, orb, akaze, kaze, brisk (surf on nonfree OpenCV).
     max_features : int
         Strongest keypoints kept per image, in [8, :data:`MAX_FEATURES`] (200 000).
-    feature_strip_pixels : int
-        SIFT on a larger image runs in horizontal strips of about this many pixels each (plus
-        margins; :func:`flexreg.stages.keypoints.detect_and_describe` ``strip_rows``), so only
+    feature_strip_pixels : int, pixels
+        SIFT on a larger image runs in horizontal strips of about this many pixels each (0:
+        always the whole image). Plus margins
+        (:func:`flexreg.stages.keypoints.detect_and_describe` ``strip_rows``), so only
         one strip's scale space is in memory: 0.18 GB instead of 0.47 GB for a 2048 x 1024
-        image, for about 40 % more detection time. 0: always the whole image. Pixels, at most
+        image, for about 40 % more detection time. Pixels, at most
         :data:`MAX_IMAGE_PIXELS` (strips are at least 64 rows high whatever the value).
-    feature_tile_pixels : int
-        When above 0, SIFT runs in square tiles of at most this many pixels each instead
-        (plus margins; :func:`flexreg.stages.keypoints.tiles`): 196 608 keeps about 0.045 GB
+    feature_tile_pixels : int, pixels
+        When above 0, SIFT runs in square tiles of at most this many pixels each instead of
+        strips. Plus margins (:func:`flexreg.stages.keypoints.tiles`): 196 608 keeps about 0.045 GB
         of scale space for a 2048 x 1024 image (0.2 GB less than the strips) and finds 98 % of
         its keypoints. Not the default: it changes the keypoints of 1024 x 512 images too,
         and the survey and verdict benchmarks were measured with the strips. Pixels, at most
@@ -83,13 +85,15 @@ class RegistrationConfig(Config):
     threshold_m : float or None, metres
         RANSAC inlier distance; derived from the scans' pixel footprint when None.
     threshold_px : float, pixel footprints
-        Derived threshold in pixel footprints (keypoint localisation error).
+        RANSAC inlier distance when ``threshold_m`` is None (keypoint localisation error).
     consistency : bool
         Prune correspondences by pairwise-distance consistency before RANSAC.
     min_inliers : int
         Fewer RANSAC inliers raise :class:`RegistrationError` (>= 3).
-    confidence, max_iterations : float, int
-        RANSAC stopping: confidence in (0, 1), iteration cap (a count of sampled triplets) in
+    confidence : float
+        RANSAC stopping confidence, in (0, 1).
+    max_iterations : int
+        RANSAC iteration cap, a count of sampled triplets, in
         [1, :data:`MAX_RANSAC_ITERATIONS`] (1 000 000).
     refine : bool
         Refine with ICP.
@@ -106,69 +110,77 @@ class RegistrationConfig(Config):
         Refine the given initial transform (``register(..., init=T)``) only: no descriptor
         or plan-view search. Requires ``init``.
     upright : {"auto", "on", "off"}
-        Levelled-scanner prior: estimate each scan's vertical, overlay their plan views
-        (:mod:`flexreg.stages.priors`) and use the best overlays to guide matching. ``"auto"``
-        uses it when both scans are panoramas or native grids that look levelled, ``"on"``
-        requires it.
+        Levelled-scanner prior: overlay the scans' plan views to guide matching (``"auto"``:
+        when both look levelled; ``"on"``: required). Each scan's vertical is estimated, the
+        plan views overlaid (:mod:`flexreg.stages.priors`) and the best overlays guide
+        matching. ``"auto"`` uses it when both scans are panoramas or native grids that look
+        levelled.
     max_tilt_rad : float, radians
-        Largest tilt of a scan still treated as levelled, in [0, pi/2): 25° (the vertical is
-        estimated reliably up to about that, see :data:`flexreg.stages.priors.MAX_TILT_RAD`).
-        A scan tilted more gets no plan-view prior; the reason, with its measured tilt, is in
-        the error message when registration fails (and ``upright="on"`` fails with it).
+        Largest tilt of a scan still treated as levelled, in [0, pi/2) (default 25°). The
+        vertical is estimated reliably up to about that
+        (:data:`flexreg.stages.priors.MAX_TILT_RAD`). A scan tilted more gets no plan-view
+        prior; the reason, with its measured tilt, is in the error message when registration
+        fails (and ``upright="on"`` fails with it).
     plan_cell_m : float, metres
         Plan-view cell size, in [0.1, 2] m (:data:`MIN_PLAN_CELL_M`, :data:`MAX_PLAN_CELL_M`).
     plan_hypotheses : int
         Plan overlays tried (best first), in [1, :data:`MAX_PLAN_HYPOTHESES`] (50).
-    guided_radius_m, guided_radius_per_m : float
-        Guided matching search radius around a prior's prediction: metres, in (0, 5] (a
-        window wider than the largest inlier distance guides nothing), plus metres per metre
-        of range, in [0, 1] (a cone of 45 degrees).
+    guided_radius_m : float, metres
+        Guided matching search radius around a prior's prediction, in (0, 5] (a window wider
+        than the largest inlier distance guides nothing).
+    guided_radius_per_m : float, metres per metre of range
+        Guided matching search radius added per metre of range, in [0, 1] (1: a cone of 45
+        degrees).
     min_overlap : float
-        Smallest share of the source's points the result must explain, in [0, 1] (see
-        :func:`overlap_score`); less raises :class:`RegistrationError` (no overlap).
-    max_image_pixels : int
+        Smallest share of the source's points the result must explain, in [0, 1]; less raises
+        :class:`RegistrationError` (no overlap). See :func:`overlap_score`.
+    max_image_pixels : int, pixels
         Larger range images are subsampled (every k-th row and column) before the image
-        stages; ICP still uses every point. Pixels, in [16 384, 50 000 000]
+        stages. ICP still uses every point. Pixels, in [16 384, 50 000 000]
         (:data:`MIN_IMAGE_PIXELS`, :data:`MAX_IMAGE_PIXELS`).
     open3d_overlap_check : bool
         Also state Open3D's ``evaluate_registration`` fitness and inlier RMSE beside the
-        overlap (:mod:`flexreg.stages.overlap`; the same figures computed independently).
+        overlap. The same figures computed independently (:mod:`flexreg.stages.overlap`).
         Off by default: it loads Open3D (0.2 GB and 0.6 s) into a call that has no other use
         for it; ``open3d_fitness`` and ``open3d_inlier_rmse_m`` are then null.
     polish : bool
         Judge each candidate after a quick local ICP on small subsets of the scans.
     aliases : bool
-        Also try the twins of the best prior in repeating structure (the pose moved by each
+        Also try the twins of the best prior in repeating structure, so that the truth one
+        bay or module beside a wrong answer competes. Twins: the pose moved by each
         symmetry of either scan's plan view, and by the offsets to the best other candidates
-        the other way round; :func:`~flexreg.registration.candidates.alias_candidates`): the
-        truth one bay or module beside a wrong answer competes, and the verdict duels the
-        answer against every such twin.
+        the other way round (:func:`~flexreg.registration.candidates.alias_candidates`); the
+        verdict duels the answer against every such twin.
     settle : bool
-        Settle near-ties at full resolution (:mod:`flexreg.registration.settle`): when the
+        Settle near-ties at full resolution (:mod:`flexreg.registration.settle`). When the
         winning pose has a weak translation axis or the target's plan repeats, candidates slid
         along that axis (and turned by the plan's self-overlays) join; clearly different
         candidates scoring close to the best then duel on every pixel of both scans, and one
         that beats all others decisively is the answer. Costs nothing on pairs without a weak
         axis, a repeat or a close rival.
     settle_open_share : float
-        A pose in a repeating plan (the target's plan view overlays itself shifted by a bay)
-        with no close rival, explaining at least ``verdict_min_overlap`` of the source's
-        sample, is still swept along the repeat when, at full resolution, at
-        least this share of both scans' points lies in the other's open space: right poses
+        Share of both scans' points in the other's open space, at full resolution, from which
+        a pose in a repeating plan with no close rival is still swept along the repeat. The
+        plan repeats when the target's plan view overlays itself shifted by a bay; the pose
+        explains at least ``verdict_min_overlap`` of the source's sample. Right poses
         leave 0.00-0.24 % there (every placed pair of the synthetic survey projects), a
         warehouse pair one bay off 1.1 %.
     sweep_axis_strength : float
         A translation direction weaker than this (per point, 0-1) is swept.
-    sweep_range_m, sweep_step_m : float, metres
-        How far either way and in which steps the sweep slides the pose: range in (0, 50] m,
-        step in [0.05, 5] m (:data:`MIN_SLIDE_STEP_M` and the others beside it).
+    sweep_range_m : float, metres
+        How far either way the sweep slides the pose, in (0, 50]
+        (:data:`MAX_SLIDE_RANGE_M`).
+    sweep_step_m : float, metres
+        Steps in which the sweep slides the pose, in [0.05, 5] (:data:`MIN_SLIDE_STEP_M`,
+        :data:`MAX_SLIDE_STEP_M`).
     refine_guard : bool
         Keep the ICP refinement only when it scores at least as well as the coarse transform
-        in the two-way dense check (:func:`~flexreg.stages.verification.soft_score`), less
-        ``refine_guard_margin``; else keep the coarse transform (see docs/registration.md).
+        in the two-way dense check, less ``refine_guard_margin``; else keep the coarse
+        transform. See :func:`~flexreg.stages.verification.soft_score` and
+        docs/registration.md.
     refine_guard_margin : float
         How much lower (fraction of the sampled points) the refinement may score and still be
-        kept: the check resolves the tolerance, not the millimetres ICP adds.
+        kept. The check resolves the tolerance, not the millimetres ICP adds.
     verdict_min_overlap : float
         Share of each scan the other must explain at the fine tolerance, in [0, 1]; less
         gives the reason ``low_overlap``.
@@ -177,11 +189,11 @@ class RegistrationConfig(Config):
         (``free_space``).
     verdict_max_conflict_ratio : float
         Largest share of either scan in the other's free space as a fraction of the share the
-        other explains (``free_space``): a pose that contradicts half as much as it explains
+        other explains (``free_space``). A pose that contradicts half as much as it explains
         is not a fit, whatever the absolute shares.
     verdict_min_inliers : int
-        Fewest agreeing feature matches (``few_inliers``; 0: not tested; plan-view poses
-        often rest on a handful of matches and the dense checks).
+        Fewest agreeing feature matches (``few_inliers``; 0: not tested). Plan-view poses
+        often rest on a handful of matches and the dense checks.
     verdict_min_inlier_spread : float
         Smallest second principal spread of the agreeing matches, as a fraction of the
         overlap's (``clustered_inliers``).
@@ -189,66 +201,82 @@ class RegistrationConfig(Config):
         Smallest per-point strength of each pose parameter, 0-1 (``weak_axis``).
     verdict_ambiguity_ratio : float
         A clearly different pose scoring at least this fraction of the winner's score makes
-        the answer ``ambiguous`` unless the answer beats it decisively (below).
-    verdict_decisive_share, verdict_decisive_ratio : float
-        The answer beats a runner-up decisively when the points it explains and the runner-up
-        puts in free space outnumber the reverse by at least ``verdict_decisive_share`` of both
-        scans' samples and by a factor of at least ``verdict_decisive_ratio``: one unique
-        object (a cue) settles what the symmetric rest leaves open.
+        the answer ``ambiguous`` unless the answer beats it decisively
+        (``verdict_decisive_share``).
+    verdict_decisive_share : float
+        Smallest lead, as a share of both scans' samples, by which the answer beats a
+        runner-up decisively. The lead: the points the answer explains and the runner-up puts
+        in free space, less the reverse; it must also be ``verdict_decisive_ratio`` times
+        the reverse. One unique object (a cue) settles what the symmetric rest leaves open.
+    verdict_decisive_ratio : float
+        Smallest factor by which the answer's lead over a runner-up must outnumber the
+        reverse to be decisive (see ``verdict_decisive_share``).
     verdict_full_decisive_share : float
-        The same at full resolution (:mod:`flexreg.registration.fullres`): the winner's lead
-        as a share of all points of both scans checked (the ratio is
-        ``verdict_decisive_ratio``). A runner-up beaten so is no ambiguity, and a weak axis
-        along which every slid pose was beaten so is settled.
+        Smallest decisive lead at full resolution, as a share of all points of both scans
+        checked, at the ratio ``verdict_decisive_ratio``. See
+        :mod:`flexreg.registration.fullres`. A runner-up beaten so is no ambiguity, and a weak
+        axis along which every slid pose was beaten so is settled.
     verdict_full_decisive_points : int
-        ... or a lead of at least this many points, at the same ratio (0: off). A small cue
+        Smallest decisive lead at full resolution in points, at the same ratio (0: off); the
+        alternative to ``verdict_full_decisive_share``. A small cue
         holds a fixed number of pixels whatever the scans' size: a forklift two bays away
         leads by 13-53 points of 850 000 (1024 x 512), below the share, while the duels of
         empty tunnels, arcades and rooms leave 0-2 points either way.
     verdict_full_max_conflict : float
-        ... provided the answer itself puts at most this share of all points of both scans in
-        open space at full resolution (a right pose puts almost none there; a wrong one puts
-        the cue there, and beating other wrong poses does not make it right).
+        Largest share of all points of both scans the answer itself may put in open space at
+        full resolution for its full-resolution lead to count as decisive. A right pose puts
+        almost none there; a wrong one puts the cue there, and beating other wrong poses does
+        not make it right.
     verdict_full_max_open : float
         Largest share of all points of both scans an answer may put in the other's open space
-        at full resolution (checked where the settling compared the scans there: a repeating
-        plan, a weak axis or a close rival) before ``free_space``. Right poses put 0.00-0.24 %
+        at full resolution before ``free_space``. Checked where the settling compared the
+        scans there: a repeating plan, a weak axis or a close rival. Right poses put 0.00-0.24 %
         there on every placed pair of the synthetic survey projects; wrong ones in repeating
         halls 0.4-17 %.
-    verdict_full_check, verdict_full_max_open_check : bool, float
+    verdict_full_check : bool
         Check a confident answer at full resolution also where the settling did not compare
-        the scans there, and the largest share of both scans' points it may then put in
-        open space: two identical rooms overlaid by a pose nine metres off put 4-8 % there
-        while the samples' checks pass; right poses of real pairs 0.2-0.35 % (3DTK, Velodyne,
-        the bunny), and things that moved between the scans add to it. Costs both scans'
-        full views once (about 0.3-0.6 s a pair at 1024 x 512).
+        the scans there. Costs both scans' full views once (about 0.3-0.6 s a pair at
+        1024 x 512).
+    verdict_full_max_open_check : float
+        Largest share of both scans' points a confident answer may put in open space in the
+        check of ``verdict_full_check``. Two identical rooms overlaid by a pose nine metres
+        off put 4-8 % there while the samples' checks pass; right poses of real pairs
+        0.2-0.35 % (3DTK, Velodyne, the bunny), and things that moved between the scans add
+        to it.
     verdict_twins : bool
         Also slide a confident answer of two levelled scans along the target's wall
-        directions and check where else it fits (:mod:`flexreg.registration.twins`): in a
+        directions and check where else it fits (:mod:`flexreg.registration.twins`). In a
         hall of identical bays an answer whole bays off fits as well as the truth, and only
         its twins give it away. Costs 0.1-0.2 s a pair at 1024 x 512.
-    verdict_twin_min_ratio, verdict_twin_fit_open : float
-        The answer is ``ambiguous`` when a twin puts at most ``verdict_twin_fit_open`` of
-        both scans' points in open space (or twice the answer's share) and explains at least
+    verdict_twin_min_ratio : float
+        Share of what the answer explains from which a fitting twin makes the answer
+        ``ambiguous``.
+    verdict_twin_fit_open : float
+        Largest share of both scans' points a twin may put in open space (or twice the
+        answer's share) and still fit. The answer is ``ambiguous`` when a twin puts at most
+        ``verdict_twin_fit_open`` of both scans' points in open space and explains at least
         ``verdict_twin_min_ratio`` of what the answer explains. On the synthetic survey
         projects no right answer of the accuracy set has such a twin (the best fitting one
         explains 0-8 % of what the answer does), while 91 of the 93 confident answers whole
         bays off on the 64-station warehouse have one (docs/benchmarks.md, Survey).
     verdict_twin_strong_ratio : float
-        A fitting twin that explains less than this share of what the answer explains also
-        duels the answer on every pixel, and one the answer beats decisively (a forklift, a
-        niche: :func:`~flexreg.registration.verdict.decisive_full`) does not count. A
+        Share of what the answer explains under which a fitting twin also duels the answer on
+        every pixel, and does not count when the answer beats it decisively. Decisively: by
+        a forklift, a niche (:func:`~flexreg.registration.verdict.decisive_full`). A
         stronger twin counts whatever its duel: a neighbouring bay seen almost as well as
         the answer's, which the answer may beat by a hundred points of clutter while the
         truth lies bays further (warehouse 36, station_10 <- station_27). The wall direction
         the settling swept and won a tournament along is not slid at all.
-    twin_range_m, twin_step_m : float, metres
-        How far either way and in which steps the answer is slid: range in (0, 50] m, step in
-        [0.05, 5] m, as for the sweep.
-    verdict_distinct_deg, verdict_distinct_m : float, degrees, metres
-        How far a candidate must be from the answer to count as a different pose.
-    verdict_max_rmse_ratio : float
-        Largest final inlier RMSE, in inlier thresholds (``high_residual``).
+    twin_range_m : float, metres
+        How far either way the answer is slid to find its twins, in (0, 50], as for the sweep.
+    twin_step_m : float, metres
+        Steps in which the answer is slid to find its twins, in [0.05, 5], as for the sweep.
+    verdict_distinct_deg : float, degrees
+        How far a candidate must be turned from the answer to count as a different pose.
+    verdict_distinct_m : float, metres
+        How far a candidate must be moved from the answer to count as a different pose.
+    verdict_max_rmse_ratio : float, inlier thresholds
+        Largest final inlier RMSE (``high_residual``).
     """
 
     image: Annotated[str, one_of(IMAGES, "feature image")] = "flexion"

@@ -42,14 +42,16 @@ class SurveyConfig(Config):
     loop_max_deg : float, degrees
         A link that disagrees by more than this with the cycle it closes is rejected.
     loop_max_m : float, metres
-        The same, in translation (plus ``loop_per_link_m`` per link of the cycle).
+        A link that disagrees by more than this in translation with the cycle it closes is
+        rejected (plus ``loop_per_link_m`` per link of the cycle).
     loop_per_link_m : float, metres
         Loop tolerance added per link of the closed cycle (errors add up along a path).
     loop_doubt_min : float
-        A disagreeing loop blames only its most doubtful link (doubt: the link's own
-        free-space conflict ratio) when that doubt is at least this ...
+        Smallest doubt of a disagreeing loop's most doubtful link for the loop to blame only
+        it (doubt: the link's own free-space conflict ratio), with ``loop_doubt_ratio``.
     loop_doubt_ratio : float
-        ... and at least this many times the doubt of every other link of the loop.
+        How many times the doubt of every other link of the loop the most doubtful link's
+        doubt must be for the loop to blame only it (with ``loop_doubt_min``).
     trust_lone_links : bool
         Let a confident link that no loop confirms place stations even when an ambiguous
         link agrees with it, or when it is more doubtful than every link a loop confirmed
@@ -65,9 +67,9 @@ class SurveyConfig(Config):
         After the optimisation, a link whose residual exceeds this many times the median
         residual of the accepted links is dropped and the graph solved again (worst first).
     residual_floor_m : float, metres
-        ... but never for a translation residual under this.
+        A link is never dropped for a translation residual under this (``residual_factor``).
     residual_floor_deg : float, degrees
-        ... nor for a rotation residual under this.
+        A link is never dropped for a rotation residual under this (``residual_factor``).
     joint_refine : bool
         Joint multi-view ICP on the accepted links after the graph (``--refine``).
     refine_voxel_m : float, metres
@@ -87,7 +89,8 @@ class SurveyConfig(Config):
         A placed station whose stored pose disagrees with its registered pose by more than
         this (after the stored frame is aligned on the stations that agree) is flagged.
     stored_max_m : float, metres
-        The same, in translation.
+        A placed station whose stored pose disagrees with its registered pose by more than
+        this in translation is flagged.
     map_check : bool
         After the graph, score every pair of placed stations of a group (linked or not) on the
         dense check and cut the most doubtful link between two that contradict each other
@@ -96,9 +99,10 @@ class SurveyConfig(Config):
         Pairs of placed stations farther apart than this are not checked.
     map_min_conflict : float
         A pair conflicts when, in either direction, at least this share of one station's
-        sample lies in the other's free space ...
+        sample lies in the other's free space (and ``map_conflict_ratio`` holds).
     map_conflict_ratio : float
-        ... and that share is at least this many times the share the other explains.
+        A pair conflicts only when that share in free space is at least this many times the
+        share the other explains (with ``map_min_conflict``).
     map_rounds : int
         Map checks (each after the graph was solved again without the cut links).
     map_doubt_margin : float
@@ -111,13 +115,15 @@ class SurveyConfig(Config):
         other choice contradicts ``map_judge_ratio`` times as much (:mod:`flexreg.survey.graph`,
         step 2). Needs ``map_check``.
     map_judge_ratio : float
-        See ``map_judges_loops``.
+        How many times more than the blamed link every other choice of a disagreeing loop
+        must contradict the map for the map to blame it (``map_judges_loops``).
     map_coincident_m : float, metres
         Two placed stations closer than this are one viewpoint: they conflict unless each
         explains at least ``map_coincident_explained`` of the other (a repeated set-up does;
         two stations folded onto one spot of a repeating structure do not).
     map_coincident_explained : float
-        See ``map_coincident_m``.
+        Share of each other two stations closer than ``map_coincident_m`` must explain not to
+        conflict.
     map_joins_groups : bool
         A separate group joins the reference's group through an uncertain link when, of all
         the placements the links between them propose, that link's is the only one under which

@@ -46,7 +46,7 @@ class TLSConfig(Config):
 
     Attributes
     ----------
-    width, height : int
+    width, height : int, pixels
         Grid size: columns (azimuth) x rows (polar angle), at least 4 x 2.
     phi_min, phi_max : float, radians
         Azimuth field of view (full turn by default).
@@ -54,8 +54,8 @@ class TLSConfig(Config):
         Polar field of view, from +Z (zenith) down.
     range_noise_m : float, metres
         Constant part of the range noise standard deviation.
-    range_noise_per_m : float
-        Range-proportional part (metres of sigma per metre of range; 1e-5 = 10 ppm).
+    range_noise_per_m : float, metres per metre of range
+        Range-proportional part of the range noise standard deviation (1e-5 = 10 ppm).
     min_range_m, max_range_m : float, metres
         Returns outside this interval are lost.
     max_incidence_rad : float, radians
@@ -129,25 +129,28 @@ class RGBDConfig(Config):
 
     Attributes
     ----------
-    width, height : int
-    fx, fy, cx, cy : float
-        Intrinsics in pixels (paper eq. 1).
+    width, height : int, pixels
+        Image size: columns x rows.
+    fx, fy, cx, cy : float, pixels
+        Intrinsics: focal lengths and principal point (paper eq. 1).
     depth_noise_m : float, metres
         Constant part of the depth noise standard deviation.
     depth_noise_quadratic : float, 1/metres
         Quadratic part: ``sigma = depth_noise_m + depth_noise_quadratic * z**2``.
     min_depth_m, max_depth_m : float, metres
-        ``0 <= min_depth_m < max_depth_m``; the maximum must fit 16-bit TUM depth (13.1 m).
+        Depths outside this interval are lost; ``0 <= min_depth_m < max_depth_m``, and the
+        maximum must fit 16-bit TUM depth (13.1 m).
     max_incidence_rad : float, radians
+        Depths at a larger incidence angle (grazing) are lost.
     dropout_rate : float
         Probability of a random missing depth pixel.
     edge_dropout_prob : float
         Probability that a pixel at a depth edge has no depth (structured-light shadows).
     colour : bool
         Colour (RGB) or grey images.
-    image_noise : float
-        Standard deviation of the image noise, in 8-bit grey levels.
-    rate_hz : float
+    image_noise : float, 8-bit grey levels
+        Standard deviation of the image noise.
+    rate_hz : float, hertz
         Frame rate of sequences (timestamps).
     speed_mps : float, metres per second
         Mean speed along a sequence's trajectory.
@@ -198,23 +201,28 @@ class SynthConfig(Config):
     Attributes
     ----------
     scene : str
-        A kind of :data:`~flexreg.synth.scenes.SCENE_KINDS` (``"room"``, ``"courtyard"``,
+        Scene to scan: a procedural kind, a project kind, or the path of a mesh file. A kind
+        of :data:`~flexreg.synth.scenes.SCENE_KINDS` (``"room"``, ``"courtyard"``,
         ``"hall"``, ``"symmetric-room"``, ``"tunnel"``, ``"bays"`` and their ``"-cue"``
         variants), a project kind of :data:`~flexreg.synth.scenes.PROJECT_SCENE_KINDS`
         (``"building"``, ``"warehouse"``, ``"street"``: sized for the stations, placed as a
         walked survey), or the path of a mesh file to scan.
     stations : int
         Number of TLS stations (1..200; a project needs at least 2 per group).
-    width, height : int
-        Station grid (azimuth columns x polar rows), within 8x4 .. 8192x4096 and within the
-        memory budget (:mod:`flexreg.core.budget`; a station takes about
+    width, height : int, pixels
+        Station grid (azimuth columns x polar rows), within 8x4 .. 8192x4096 and the memory
+        budget. See :mod:`flexreg.core.budget`; a station takes about
         :data:`STATION_PIXEL_BYTES` per pixel while it is simulated and written).
     noise_m : float, metres
         Constant part of the range noise sigma (0..1 m).
     seed : int
+        Seed of the scene, the station placement and the sensor noise (same seed, same data).
     format : {"ptx", "e57", "npz"}
-    rgbd_frames, lidar_frames : int
-        Length of the optional RGB-D sequence and spinning-lidar sequence (0..100000).
+        File format of the stations.
+    rgbd_frames : int
+        Length of the optional RGB-D sequence, frames (0..100000; 0: none).
+    lidar_frames : int
+        Length of the optional spinning-lidar sequence, frames (0..100000; 0: none).
     min_overlap : float
         Minimal mutual overlap of a station with its neighbour, 0..1 (project kinds:
         :data:`PROJECT_MIN_OVERLAP` unless given).
@@ -223,12 +231,13 @@ class SynthConfig(Config):
     max_tilt_rad : float, radians
         Maximal station tilt, 0..30 degrees. (A result's ``max_tilt_deg`` is accepted too.)
     mixed_pixels : bool
+        Simulate mixed pixels at depth edges (returns between the near and the far surface).
     mesh_scale : float
         Scale of a mesh scene to metres.
     mesh_up_axis : {"x", "y", "z"}
         Up axis of a mesh scene.
-    size_m : (float, float) or None
-        Floor size of a procedural scene, metres, 1..1000 each way.
+    size_m : (float, float) or None, metres
+        Floor size of a procedural scene, 1..1000 each way (None: the scene's own).
     embed_poses : bool
         Write each station's true pose into its file instead of the identity.
     groups : int

@@ -284,7 +284,10 @@ def create_app(
             "/api/lidar/{mode}.png",
             _json_errors(lambda r: _png(s.lidar_png(r.path_params["mode"], full=full(r)))),
         ),
-        Route("/api/overlay.png", _json_errors(lambda r: _png(s.overlay_png()))),
+        Route(
+            "/api/overlay.png",
+            _json_errors(lambda r: _png(s.overlay_png(r.query_params.get("zoom", 1.0)))),
+        ),
         Route("/api/snap", _json_errors(lambda r: s.snap(q(r, "mode"), q(r, "x"), q(r, "y")))),
         Route(
             "/api/predict",

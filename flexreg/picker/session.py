@@ -153,8 +153,9 @@ class PickSession:
         self._step = max(1, math.ceil(len(scan) / OVERLAY_POINTS))
         self._overlay_points = scan.points[:: self._step]
         self._projected: tuple[int, Any, NDArray[np.float64], NDArray[np.int64]] | None = None
-        #: (revision, camera box on the panorama, mirror or None) under the current pose
-        self._box: tuple[int, list[float] | None, bool | None] | None = None
+        #: (revision, camera box on the panorama, mirror or None, the pose's source) under
+        #: the current pose (or the rough one of the pairs)
+        self._box: tuple[int, list[float] | None, bool | None, str | None] | None = None
 
     # ------------------------------------------------------------------ pose and solving
 
@@ -416,15 +417,21 @@ class PickSession:
         pic = self.views.picture(mode)
         return encode_png(pic if full else preview(pic, self.preview_px))
 
-    def overlay_png(self) -> bytes:
+    def overlay_png(self, zoom: Any = 1.0) -> bytes:
         """The lidar points projected with the current pose (transparent PNG at the camera
-        preview's size; fully transparent without a pose)."""
+        preview's size; fully transparent without a pose), drawn for ``zoom`` screen pixels
+        per preview pixel (:func:`~flexreg.picker.views.overlay_rgba`)."""
+        z = _finite("zoom", zoom)
+        if not 1e-3 <= z <= 1e3:
+            raise InputError("zoom", f"must be within 0.001 and 1000, got {zoom!r}")
         with self._lock:
             h, w = preview(self.image, self.preview_px).shape[:2]
             T = self.pose
             if T is None:
                 return encode_png(np.zeros((h, w, 4), dtype=np.uint8))
-            return encode_png(overlay_rgba(self._overlay_points, self.intrinsics, T, (w, h)))
+            return encode_png(
+                overlay_rgba(self._overlay_points, self.intrinsics, T, (w, h), zoom=z)
+            )
 
     # ------------------------------------------------------------------ state and saving
 
@@ -495,6 +502,7 @@ class PickSession:
                     },
                     "points": len(self.scan),
                     "camera_box": self._camera_box(),
+                    "camera_view": self._camera_view(),
                     "mirror": self._mirror(),
                 },
                 "pairs": self._pair_dicts(pairs),
@@ -518,17 +526,72 @@ class PickSession:
         assert self._box is not None
         return self._box[2] if self._box[2] is not None else self.views.mirror
 
+    def rough_pose(self) -> NDArray[np.float64] | None:
+        """Where the camera probably looks before a pose exists: the rotation that best turns
+        the picked returns' directions onto their pixels' rays, with the camera at the
+        lidar's centre (Wahba's problem, solved by SVD as Kabsch's; a camera a few
+        centimetres from the scanner sees the scene at nearly the same bearings). None with
+        fewer than 2 pairs or pairs whose returns lie in one direction."""
+        if len(self.pairs) < 2:
+            return None
+        ps = list(self.pairs.values())
+        uv = np.array([[p.u, p.v, 1.0] for p in ps])
+        rays = uv @ np.linalg.inv(self.intrinsics.K).T
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        P = np.array([p.point for p in ps])
+        n = np.linalg.norm(P, axis=1)
+        if not (n > 0).all():
+            return None
+        P = P / n[:, None]
+        if np.linalg.norm(np.cross(P[:, None], P[None]), axis=2).max() < math.radians(1.0):
+            return None  # all returns in one direction: the turn about it is unknown
+        U, _, Vt = np.linalg.svd(P.T @ rays)  # rays ~ R P
+        d = np.sign(np.linalg.det(Vt.T @ U.T))
+        T = np.eye(4)
+        T[:3, :3] = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+        return T
+
+    def _view_pose(self) -> tuple[NDArray[np.float64] | None, str | None]:
+        """The pose that places the camera's view on the panorama, and where it comes from:
+        ``"solution"``, ``"initial guess"``, ``"pairs"`` (:meth:`rough_pose`) or None."""
+        if self.pose is not None:
+            return self.pose, "solution" if self.result is not None else "initial guess"
+        T = self.rough_pose()
+        return (T, "pairs") if T is not None else (None, None)
+
+    def _camera_view(self) -> dict[str, Any]:
+        """What the page says about where in the panorama the camera looks: the box of
+        :meth:`_camera_box`, where it comes from and a sentence for the page."""
+        box = self._camera_box()
+        source = self._box[3] if self._box is not None else None
+        n = len(self.pairs)
+        if box is None and source is None:
+            note = (
+                "where the camera looks is not known yet: start with --init, or pick 2 pairs "
+                "(a rough view is then outlined here)"
+            )
+        elif box is None:
+            note = f"the {source} puts too few lidar returns into the camera image"
+        elif source == "pairs":
+            note = (
+                f"camera's probable view from {n} pairs (camera taken at the scanner's "
+                f"centre); solved from {MIN_CORRESPONDENCES} pairs"
+            )
+        else:
+            note = f"camera's view under the {source}"
+        return {"box": box, "source": source, "note": note}
+
     def _camera_box(self) -> list[float] | None:
-        """``[x0, y0, x1, y1]`` on the panorama around the returns the current pose puts in
-        the camera image (1st to 99th percentile), for the page to zoom to; None without a
-        pose or such returns."""
-        T = self.pose
+        """``[x0, y0, x1, y1]`` on the panorama around the returns the current pose (or
+        before one, :meth:`rough_pose`) puts in the camera image (1st to 99th percentile),
+        for the page to outline and zoom to; None without a pose or such returns."""
+        T, source = self._view_pose()
         if T is None:
-            self._box = (self.revision, None, None)
+            self._box = (self.revision, None, None, None)
             return None
         if self._box is not None and self._box[0] == self.revision:
             return self._box[1]
-        self._box = (self.revision, None, None)
+        self._box = (self.revision, None, None, source)
         W, H = self.image.shape[1], self.image.shape[0]
         uv, z = project_points(self._overlay_points, self.intrinsics, T)
         seen = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
@@ -542,7 +605,7 @@ class PickSession:
             box = [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
             if np.std(xy[:, 0]) > 0 and np.std(u) > 0:
                 mirror = bool(np.corrcoef(xy[:, 0], u)[0, 1] < 0)
-        self._box = (self.revision, box, mirror)
+        self._box = (self.revision, box, mirror, source)
         return box
 
     def _solution(self) -> dict[str, Any] | None:

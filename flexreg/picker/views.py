@@ -29,6 +29,8 @@ from flexreg.stages.camera_pose import project_points
 from flexreg.viz.draw import as_bgr, range_colours
 
 __all__ = [
+    "OVERLAY_DOT_PX",
+    "OVERLAY_SPACING_PX",
     "PANORAMA_MODES",
     "LidarViews",
     "Snap",
@@ -41,6 +43,9 @@ __all__ = [
 PANORAMA_MODES = ("flexion", "range", "intensity")
 #: farthest a click may be from a return and still snap to it, view pixels
 SNAP_RADIUS_PX = 48
+#: projected lidar points on the camera image: dot size and least spacing, screen pixels
+OVERLAY_DOT_PX = 4
+OVERLAY_SPACING_PX = 10
 
 
 def encode_png(image: NDArray[np.uint8]) -> bytes:
@@ -65,6 +70,21 @@ def preview(image: NDArray[np.uint8], max_px: int) -> NDArray[np.uint8]:
     return np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), dtype=np.uint8)
 
 
+def _disc(radius: int) -> NDArray[np.int64]:
+    """(K, 2) integer offsets within ``radius`` pixels of a pixel (the pixel itself for 0)."""
+    d = np.arange(-radius, radius + 1)
+    dx, dy = np.meshgrid(d, d)
+    inside = dx * dx + dy * dy <= radius * radius + radius  # rounder discs for small radii
+    return np.column_stack([dx[inside], dy[inside]])
+
+
+def _nearest_per_cell(xy: NDArray[np.float64], cell: float) -> NDArray[np.int64]:
+    """Indices of the first point (in the given order) in each ``cell`` x ``cell`` square."""
+    key = np.floor(xy / cell).astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)
+    return np.sort(first)
+
+
 def overlay_rgba(
     points: ArrayLike,
     intrinsics: CameraIntrinsics,
@@ -72,8 +92,16 @@ def overlay_rgba(
     size: tuple[int, int],
     *,
     max_range_m: float | None = None,
+    zoom: float = 1.0,
 ) -> NDArray[np.uint8]:
     """Lidar points projected into the camera image as a transparent layer, coloured by range.
+
+    The dots keep one look on screen whatever the zoom and the scan's density: each is
+    :data:`OVERLAY_DOT_PX` screen pixels across with a dark rim one screen pixel wide (seen on
+    light and dark images alike), in the bright part of the colour map, and at most one dot
+    (the nearest return) is drawn per square of :data:`OVERLAY_SPACING_PX` screen pixels, so
+    that a dense TLS scan seen whole shows a lattice of dots instead of a haze; zooming in
+    shows more of them.
 
     Parameters
     ----------
@@ -85,14 +113,18 @@ def overlay_rgba(
         Size of the layer (the image as served: full size or a preview of it).
     max_range_m : float, optional
         Far end of the colour map (default: 95th percentile of the visible points' ranges).
+    zoom : float
+        Screen pixels per layer pixel where the page shows the layer (> 0).
 
     Returns
     -------
     (h, w, 4) uint8
-        BGRA, alpha 255 on the points (2 x 2 dots, near ones drawn last), 0 elsewhere.
+        BGRA, alpha 255 on the dots (near ones drawn last), 0 elsewhere.
     """
     if intrinsics.size is None:
         raise InputError(intrinsics.source, "image size unknown")
+    if not (math.isfinite(zoom) and zoom > 0):
+        raise InputError("zoom", f"must be a positive number, got {zoom!r}")
     W, H = intrinsics.size
     w, h = size
     out = np.zeros((h, w, 4), dtype=np.uint8)
@@ -103,16 +135,22 @@ def overlay_rgba(
     if not vis.any():
         return out
     r = np.linalg.norm(P[vis], axis=1)
-    far = float(np.percentile(r, 95)) if max_range_m is None else float(max_range_m)
-    order = np.argsort(-r, kind="stable")
-    xy = (uv[vis][order] + 0.5) * [w / W, h / H] - 0.5
-    colours = range_colours(r[order], max(far, 1e-3))
-    ix = np.floor(xy).astype(np.int64)
-    for dx in (0, 1):
-        for dy in (0, 1):
+    far = max(float(np.percentile(r, 95)) if max_range_m is None else float(max_range_m), 1e-3)
+    xy = (uv[vis] + 0.5) * [w / W, h / H] - 0.5
+    near_first = np.argsort(r, kind="stable")
+    cell = OVERLAY_SPACING_PX / zoom
+    keep = near_first[_nearest_per_cell(xy[near_first], cell)] if cell > 1 else near_first
+    order = keep[np.argsort(-r[keep], kind="stable")]  # far to near: near ones on top
+    # the colour map's bright middle (10 % to 90 %): its dark ends vanish on dark images
+    colours = range_colours(far * (0.1 + 0.8 * np.minimum(r[order] / far, 1.0)), far)
+    ix = np.rint(xy[order]).astype(np.int64)
+    radius = max(0, round(OVERLAY_DOT_PX / 2 / zoom - 0.5))
+    rim = radius + max(1, round(1 / zoom))
+    for offsets, fill in ((_disc(rim), None), (_disc(radius), colours)):
+        for dx, dy in offsets:
             x, y = ix[:, 0] + dx, ix[:, 1] + dy
             ok = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-            out[y[ok], x[ok], :3] = colours[ok]
+            out[y[ok], x[ok], :3] = 24 if fill is None else fill[ok]
             out[y[ok], x[ok], 3] = 255
     return out
 

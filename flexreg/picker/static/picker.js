@@ -128,6 +128,7 @@ class Panel {
       this.fullLoaded = true;  // zoomed past the preview's resolution: the full image
       this.base.src = this.fullSrc;
     }
+    if (this.side === "camera") overlaySoon();
     drawMarks(this);
   }
 
@@ -272,6 +273,7 @@ function drawMarks(panel) {
     svgEl("line", { x1: -2 * r, y1: 0, x2: 2 * r, y2: 0 }, g);
     svgEl("line", { x1: 0, y1: -2 * r, x2: 0, y2: 2 * r }, g);
   }
+  drawCameraView(panel);
   if (panel.side === "lidar" && snapMark) {
     const [X, Y] = panel.toStage(snapMark[0], snapMark[1]);
     svgEl("circle", { cx: X, cy: Y, r: 3 / panel.s, fill: "#fff" }, svg);
@@ -279,6 +281,45 @@ function drawMarks(panel) {
 }
 
 function drawAll() { for (const p of Object.values(panels)) drawMarks(p); }
+
+// the camera's view on the panorama (under the solution, the initial guess, or roughly from
+// the first pairs), outlined with where it comes from
+function drawCameraView(panel) {
+  const view = state.lidar.camera_view;
+  if (panel.side !== "lidar" || gridOf(lidarMode) !== "panorama" || !view || !view.box) return;
+  const [x0, y0, x1, y1] = view.box;
+  const [Xa, Ya] = panel.toStage(x0 - 0.5, y0 - 0.5);
+  const [Xb, Yb] = panel.toStage(x1 + 0.5, y1 + 0.5);
+  const g = svgEl("g", { class: `camera-view ${view.source === "pairs" ? "rough" : ""}` }, panel.svg);
+  svgEl("rect", { x: Math.min(Xa, Xb), y: Ya, width: Math.abs(Xb - Xa), height: Yb - Ya }, g);
+  const t = svgEl("text", { x: Math.min(Xa, Xb) + 4 / panel.s, y: Ya - 5 / panel.s, "font-size": 13 / panel.s }, g);
+  t.textContent = view.source === "pairs" ? "camera (rough, from the pairs)" : `camera (${view.source})`;
+}
+
+// the projected-lidar layer is drawn for the camera panel's zoom (dots of a few screen pixels,
+// thinned to stay apart): asked for again when the zoom changes by half an octave
+function overlayZoom() {
+  const p = panels.camera;
+  const z = (p.s * p.W) / Math.max(p.previewW, 1);
+  return Math.pow(2, Math.round(2 * Math.log2(Math.max(z, 1e-3))) / 2).toPrecision(4);
+}
+
+let overlayTimer = null;
+function overlaySoon() {
+  clearTimeout(overlayTimer);
+  overlayTimer = setTimeout(() => { if (state) renderOverlay(); }, 120);
+}
+
+function renderOverlay() {
+  const ov = panels.camera.overlay;
+  const show = $("#show-overlay").checked && state.solution && state.solution.T_camera_lidar;
+  ov.hidden = !show;
+  if (show) {
+    const src = url("/api/overlay.png", { rev: state.revision, zoom: overlayZoom() });
+    if (ov.dataset.src !== src) { ov.dataset.src = src; ov.src = src; }
+  }
+  ov.style.opacity = $("#opacity").value / 100;
+}
 
 // ------------------------------------------------------------------ picking
 
@@ -502,14 +543,11 @@ function renderImages() {
     if (box) panels.lidar.fitBox(box);
   }
   panels.lidar.grid = grid;
-  const ov = panels.camera.overlay;
-  const show = $("#show-overlay").checked && state.solution && state.solution.T_camera_lidar;
-  ov.hidden = !show;
-  if (show) {
-    const src = url("/api/overlay.png", { rev: state.revision });
-    if (ov.dataset.src !== src) { ov.dataset.src = src; ov.src = src; }
-  }
-  ov.style.opacity = $("#opacity").value / 100;
+  const view = state.lidar.camera_view;
+  const note = $("#view-note");
+  note.textContent = grid === "panorama" && view ? view.note : "";
+  note.dataset.source = view && view.box ? view.source : "";
+  renderOverlay();
 }
 
 function render() {

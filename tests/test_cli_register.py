@@ -309,13 +309,37 @@ def test_uncertain_result_is_written_with_its_verdict_exit_3(
     assert "two poses 3.40 m apart along x fit almost equally well" in stdout
     assert "[weak_axis]" in stdout
     assert "runner-up 1: 0.4° and 3.40 m away (mostly along x)" in stdout
-    assert "97 % as well" in stdout and "plan view 2" in stdout
+    assert "explains 3 % less of the data than the answer (score ratio 0.97)" in stdout
+    assert "plan view 2" in stdout
     assert f"wrote {out / 'T.json'}" in stdout
     # the last line says what happened and what to do
     last = stderr.strip().splitlines()[-1]
     assert last.startswith("uncertain (exit status 3): ") and str(out / "T.json") in last
     assert "runner-up transforms" in last and "--merged" in last
     assert "error:" not in stderr
+
+
+@pytest.mark.parametrize(
+    ("ratio", "words"),
+    [
+        (0.86, "explains 14 % less of the data than the answer (score ratio 0.86)"),
+        (1.0, "explains the data as well as the answer (score ratio 1.00)"),
+        (1.05, "explains 5 % more of the data than the answer (score ratio 1.05)"),
+        (0.0, "explains next to nothing of what the answer explains (score ratio 0.00)"),
+        (-0.14, "the data contradict it: it fits far worse than the answer (score ratio -0.14)"),
+    ],
+)
+def test_a_runner_up_reads_sensibly_whatever_its_score_ratio(ratio, words):
+    """A runner-up whose score is negative (it contradicts the data more than it explains
+    them) once read 'explains the data -14 % as well as the answer'."""
+    from flexreg.cli._common import verdict_lines
+
+    verdict = dataclasses.replace(
+        _UNCERTAIN, runner_up=(Hypothesis(_RUNNER, ratio, 0.4, 3.4, "plan"),)
+    )
+    (line,) = [x for x in verdict_lines(verdict) if "runner-up" in x]
+    assert line == f"  runner-up 1: 0.4° and 3.40 m away, {words}, from plan"
+    assert "-14 %" not in line
 
 
 def test_confident_result_exit_0(registered, pair, tmp_path, monkeypatch):

@@ -393,3 +393,30 @@ def test_map_check_conflicts_are_listed() -> None:
     assert "Placed stations that contradicted each other (map check) (0) none" in _text(
         render_report(small_project())
     )
+
+
+def test_a_pose_from_the_plan_view_shows_no_inlier_count() -> None:
+    """A pose the plan views' overlay found rests on no feature matches: the link table says
+    so instead of a count such as 0 / 1 that reads like a bad link; fitted poses, and failed
+    links, keep their counts."""
+    doc = small_project()
+    doc["links"][0] |= {"inliers": 0, "matches": 1}
+    doc["links"][1]["verdict"] = {
+        "status": "uncertain",
+        "reasons": doc["links"][1]["reasons"],
+        "evidence": {"inliers": {"count": 5, "matches": 40, "fit_to_matches": False}},
+    }
+    doc["links"][3] |= {"inliers": 2, "matches": 9, "stored_deviation": {"rotation_deg": 0.1}}
+    page = render_report(doc)
+    rows = re.findall(r'<tr class="link (\w+)">(.*?)</tr>', page, flags=re.S)
+    inliers = [html.unescape(re.findall(r"<td[^>]*>(.*?)</td>", r)[8]) for _, r in rows]
+    assert inliers == [
+        "pose from the plan view",
+        "pose from the plan view",
+        "52 / 211",
+        "pose from the plan view or the stored poses",
+        "3 / 211",
+        "–",
+    ]
+    assert not any(">0 / 1<" in r for _, r in rows)
+    assert "pose from the plan view when the overlay of the scans' plan views" in _text(page)

@@ -387,6 +387,27 @@ def _along(delta: Any) -> str:
     return f" (mostly along {'xyz'[k]})" if d[k] >= 0.9 * n else ""
 
 
+def versus_answer(ratio: float) -> str:
+    """A runner-up's score ratio (its score over the answer's; the score counts agreeing
+    points less three times the contradicting ones) in words.
+
+    >>> versus_answer(0.86)
+    'explains 14 % less of the data than the answer'
+    >>> versus_answer(1.0), versus_answer(1.05)
+    ('explains the data as well as the answer', 'explains 5 % more of the data than the answer')
+    >>> versus_answer(-0.14)
+    'the data contradict it: it fits far worse than the answer'
+    """
+    if ratio < 0:
+        return "the data contradict it: it fits far worse than the answer"
+    pct = round(100 * abs(1 - ratio))
+    if ratio < 1 and pct >= 100:
+        return "explains next to nothing of what the answer explains"
+    if pct == 0:
+        return "explains the data as well as the answer"
+    return f"explains {pct} % {'less' if ratio < 1 else 'more'} of the data than the answer"
+
+
 def verdict_lines(verdict: Verdict | None, T: Any = None) -> list[str]:
     """The verdict in words: status, one line per reason, one per runner-up pose.
 
@@ -408,8 +429,7 @@ def verdict_lines(verdict: Verdict | None, T: Any = None) -> list[str]:
         origin = f", from {h.origin}" if h.origin else ""
         lines.append(
             f"  runner-up {i}: {h.rotation_deg:.1f}° and {h.translation_m:.2f} m away{where}, "
-            f"explains the data {100 * h.score_ratio:.0f} % as well as the answer (score ratio "
-            f"{h.score_ratio:.2f}){origin}"
+            f"{versus_answer(h.score_ratio)} (score ratio {h.score_ratio:.2f}){origin}"
         )
     return lines + notes
 

@@ -218,7 +218,8 @@ def _confident_tree(
                     if suspect is e:  # the closer alone is far more doubtful than the loop
                         _reject(
                             e,
-                            "disagrees with the loop it closes, and is its most doubtful link",
+                            "disagrees with the loop it closes, and is that loop's least "
+                            "trustworthy link (its scans clash most: open space against surface)",
                             err,
                         )
                         continue
@@ -251,11 +252,11 @@ def _confident_tree(
                 t,
                 _MAP_BLAMES
                 if judged.get(id(t))
-                else f"on {blame.get(id(t), 0)} disagreeing loop(s), confirmed by none",
+                else f"{blame.get(id(t), 0)} disagreeing loop(s) run through it, no agreeing one",
             )
         for e, p, err in bad:
             if len(culprits) > 1 and any(t in culprits for t in p):
-                _reject(e, "closes a loop whose links disagree, undecidable which", err)
+                _reject(e, "closes a loop whose links disagree; nothing tells which is wrong", err)
         active = [e for e in active if e.status != "rejected"]
     for e in tree:
         e.in_tree = True
@@ -263,8 +264,8 @@ def _confident_tree(
 
 
 _MAP_BLAMES = (
-    "disagrees with a loop, and the map blames it: without it the loop places its stations "
-    "where their scans agree, while any other choice puts one in the other's free space"
+    "disagrees with a loop, and the map blames it: without this link the loop's stations land "
+    "where their scans agree; with it, one scan lies where another saw open space"
 )
 
 
@@ -328,14 +329,15 @@ def _lone_suspect(
         a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
         side = a if len(a) <= len(b) else b
         rest = b if side is a else a
-        placing = f"the only link placing {', '.join(sorted(side))}, confirmed by no loop"
+        placing = f"the only link placing {', '.join(sorted(side))}, and no loop checks it"
         doubt = float(t.doubt or 0.0)
         there = [d for e, d in vouched if e.target in rest and e.source in rest]
         ceiling = max([config.loop_doubt_min, *there]) if there else overall
         if ceiling is not None and doubt > ceiling:
             why = (
-                f"{placing}, and more doubtful (free-space conflict ratio {doubt:.2f}) than "
-                f"every link a loop confirmed (at most {ceiling:.2f})"
+                f"{placing}: more of one scan lies where the other saw open space than on any "
+                "link a loop checked, so it may be a wrong match (free-space conflict ratio "
+                f"{doubt:.2f}, checked links at most {ceiling:.2f})"
             )
             out.append((doubt, -len(side), t, why))
             continue
@@ -352,15 +354,15 @@ def _lone_suspect(
                 # stations: the most doubtful of them goes (this one, unless another is worse)
                 worst = max(forest.path(e.target, e.source), key=lambda x: float(x.doubt or 0))
                 why = (
-                    f"{placing}; link {e.target} <- {e.source} agrees with it but finds the "
-                    "pose ambiguous (a clearly different pose fits about as well)"
+                    f"{placing}; link {e.target} <- {e.source} agrees with it, but there another "
+                    "pose fits about as well (look-alike rooms or bays): it may be the wrong one"
                 )
                 if worst is not t:
                     why = (
-                        f"link {e.target} <- {e.source} agrees with the tree's placement of "
-                        f"{e.target} and {e.source} but finds the pose ambiguous (a clearly "
-                        "different pose fits about as well); of the tree links between them "
-                        f"this one is the most doubtful (free-space conflict ratio "
+                        f"link {e.target} <- {e.source} agrees with where the links place "
+                        f"{e.target} and {e.source}, but there another pose fits about as well "
+                        "(look-alike rooms or bays); of the links between them this one is the "
+                        "least trustworthy, its scans clashing most (free-space conflict ratio "
                         f"{float(worst.doubt or 0):.2f})"
                     )
                 out.append((float(worst.doubt or 0), -len(side), worst, why))
@@ -434,7 +436,7 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
             why = (
                 "uncertain, and no second link confirms it"
                 if config.uncertain_joins
-                else "uncertain, and it would join two groups (uncertain links never do)"
+                else "uncertain (see the link's reasons), and one uncertain link never joins groups"
             )
             _reject(e, why)
             continue
@@ -445,7 +447,7 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
             e.confirmed_by_loop = True
             e.loop_error_deg, e.loop_error_m = err
         else:
-            _reject(e, "uncertain and disagrees with the group's poses", err)
+            _reject(e, "uncertain, and the group's other links place its stations elsewhere", err)
 
 
 def _optimise(
@@ -532,17 +534,19 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
 
 def _why_unplaced(stem: str, group: list[str], links: list[Link]) -> str:
     mine = [e for e in links if stem in (e.target, e.source)]
+    near = sorted({x for e in mine for x in (e.target, e.source)} - {stem})[:3]
+    add = f"add a scan between it and {' or '.join(near) or 'a neighbour'}"
     if len(group) > 1:
         return (
-            f"in a separate group of {len(group)} stations: no confident or loop-confirmed "
-            "link joins it to the reference's group"
+            f"in a separate group of {len(group)} stations: no confident link, nor one a loop "
+            "confirms, joins it to the reference's group; add a scan that sees into both"
         )
     if not mine:
-        return "no link was tried (no candidate pair)"
+        return f"no link was tried (no other scan seemed to see the same place); {add}"
     if all(e.status == "failed" for e in mine):
-        return f"all {len(mine)} link(s) failed to register"
+        return f"all {len(mine)} link(s) failed to register; {add}"
     whys = sorted({e.why or e.status for e in mine if e.status != "accepted"})
-    return f"no accepted link ({len(mine)} tried: {'; '.join(whys)})"
+    return f"no link places it ({len(mine)} tried: {'; '.join(whys)}); {add} to close a loop"
 
 
 def _stats(links: list[Link]) -> dict[str, float | None]:
@@ -676,8 +680,8 @@ def _veto_cuts(
             (
                 e,
                 f"cut by the map check: {v.a} and {v.b} contradict each other where the "
-                f"graph places them ({v.why}); of the {len(path)} link(s) between them this one "
-                f"is the most doubtful (free-space conflict ratio {d:.2f})",
+                f"links place them ({v.why}); of the {len(path)} link(s) between them this one "
+                f"is the least trustworthy (free-space conflict ratio {d:.2f})",
             )
             for e, d in zip(path, doubt, strict=True)
             if e in cut
@@ -700,9 +704,9 @@ def _worst_residual(links: list[Link], config: SurveyConfig) -> tuple[Link, str]
     if m <= thr_m and d <= thr_d:
         return None
     return worst, (
-        f"fits the optimised poses {1000 * m:.1f} mm / {d:.3f}° off, beyond "
-        f"{1000 * thr_m:.1f} mm / {thr_d:.3f}° ({config.residual_factor:g} x the project's "
-        "median link residual)"
+        f"is {1000 * m:.1f} mm / {d:.3f}° off the adjusted poses, far more than the other links "
+        f"(limit {1000 * thr_m:.1f} mm / {thr_d:.3f}°: {config.residual_factor:g} x the median "
+        "link's)"
     )
 
 
@@ -754,7 +758,7 @@ def _solve_once(
                     continue
                 err = loop_error(np.asarray(e.T_target_source), solved[e.target], solved[e.source])
                 if e in pruned:
-                    _reject(e, "switched off by the robust pose-graph optimisation", err)
+                    _reject(e, "disagrees with the other links: the adjustment left it out", err)
                     late.append(e)
                 elif not _consistent(err, 2, config):
                     _reject(e, "disagrees with the optimised poses", err)

@@ -130,9 +130,9 @@ def join_by_map(
         best = max(uncertain, key=lambda e: e.overlap)
         why = (
             f"joins {', '.join(members)} to the reference's group: of the {len(scored)} "
-            f"placements the links propose, only this one contradicts no station (at most "
-            f"{100 * worst:.1f}% of a scan in another's free space, {100 * support:.0f}% "
-            "explained); every other puts a station in another's free space"
+            "placements the links propose, only this one puts no scan where another saw open "
+            f"space, every other does (this one: at most {100 * worst:.1f}% of a scan in "
+            f"another's free space, {100 * support:.0f}% explained)"
         )
         log.info("map join: %s <- %s %s", best.target, best.source, why)
         out.append((best, why))

@@ -20,8 +20,8 @@ from flexreg.survey.links import GraphSolution, Link
 
 #: why a cut link places nothing
 WHY = (
-    "a lone link in repeating structure (other links of its stations are whole-bay "
-    "ambiguous) and no loop confirms it: it places nothing"
+    "a lone link among look-alike bays (its stations' other links fit a whole bay off as "
+    "well) and no loop checks it, so it places nothing; add a scan that closes a loop"
 )
 
 

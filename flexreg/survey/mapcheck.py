@@ -115,14 +115,15 @@ class PairLook:
             c >= x for x, c in zip(self.explained, self.conflicting, strict=True)
         ):
             return (
-                f"placed {self.distance_m:.2f} m apart, yet they explain only "
-                f"{100 * min(self.explained):.0f}% of each other: not one viewpoint"
+                f"placed {self.distance_m:.2f} m apart, yet only "
+                f"{100 * min(self.explained):.0f}% of one matches the other: they cannot "
+                "both stand there"
             )
         i = int(np.argmax(self.conflicting))
         seen, seer = (self.b, self.a) if i == 0 else (self.a, self.b)
         return (
-            f"{100 * self.conflicting[i]:.1f}% of {seen}'s points lie in {seer}'s free space "
-            f"and {100 * self.explained[i]:.1f}% on its surfaces"
+            f"{100 * self.conflicting[i]:.1f}% of {seen}'s points lie where {seer} saw open "
+            f"space and {100 * self.explained[i]:.1f}% on its surfaces"
         )
 
     def to_dict(self) -> dict[str, Any]:

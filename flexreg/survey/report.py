@@ -51,6 +51,7 @@ from flexreg.survey.report_data import (
     link_inliers,
     link_kind,
     link_overlap,
+    link_pose_source,
     link_reasons,
     link_rmse,
     link_strength,
@@ -315,7 +316,11 @@ LINK_HEADERS = (
     ("tried as", "why the pair was tried: sequential, place recognition, proximity, all, file"),
     ("overlap src %", "share of the source's points that the target explains"),
     ("overlap tgt %", "share of the target's points that the source explains"),
-    ("inliers", "feature matches that agree with the link / matches tested"),
+    (
+        "inliers",
+        "feature matches that agree with the link / matches tested ('pose from the plan view': "
+        "the plan views' overlay found the pose, not feature matches)",
+    ),
     ("RMSE mm", "cloud-to-cloud RMSE of the link's inliers, millimetres"),
     *((f"str. {a}", f"strength along / about {a}: 0 not constrained, 1 fully") for a in AXES),
     ("loop err °", "accepted: disagreement with the adjusted poses; rejected: with its loop"),
@@ -328,6 +333,7 @@ def _link_row(i: int, lk: Mapping[str, Any], err: LinkError | None, weak: float)
     kind = link_kind(lk)
     s_ov, t_ov = link_overlap(lk)
     n, m = link_inliers(lk)
+    source = link_pose_source(lk)  # not fitted to matches: the counts measure nothing
     strength = link_strength(lk)
     rmse = link_rmse(lk)
     d = err.rotation_deg if err else lk.get("loop_error_deg")
@@ -343,7 +349,7 @@ def _link_row(i: int, lk: Mapping[str, Any], err: LinkError | None, weak: float)
         _cell(str(lk.get("origin") or "–")),
         _cell(_pct(s_ov), s_ov),
         _cell(_pct(t_ov), t_ov),
-        _cell("–" if n is None else (f"{n}" if m is None else f"{n} / {m}"), n),
+        _cell(source or ("–" if n is None else (f"{n}" if m is None else f"{n} / {m}")), n),
         _cell(_mm(rmse), rmse),
     ]
     for a in AXES:
@@ -558,7 +564,9 @@ def _groups_section(doc: Mapping[str, Any], f: ReportFigures) -> str:
 DEFINITIONS = """<section id="definitions"><h2>How the figures are defined</h2><dl>
 <dt>overlap</dt><dd>Share of one scan's points that the other scan explains (within the
 registration's tolerance), in each direction: the denominator is the scan the column names.</dd>
-<dt>inliers</dt><dd>Feature matches that agree with the link's pose / matches tested.</dd>
+<dt>inliers</dt><dd>Feature matches that agree with the link's pose / matches tested;
+<em>pose from the plan view</em> when the overlay of the scans' plan views found the pose, not
+feature matches (their count then says nothing about the link).</dd>
 <dt>RMSE</dt><dd>Cloud-to-cloud root mean square distance of the link's inliers after the last
 stage (point-to-plane when refined).</dd>
 <dt>strength</dt><dd>How firmly the overlap's surfaces fix each pose parameter, per point, from

@@ -37,6 +37,7 @@ __all__ = [
     "link_inliers",
     "link_kind",
     "link_overlap",
+    "link_pose_source",
     "link_reasons",
     "link_rmse",
     "link_strength",
@@ -182,6 +183,28 @@ def link_inliers(link: Mapping[str, Any]) -> tuple[int | None, int | None]:
     n = link.get("inliers", ev.get("count"))
     m = link.get("matches", ev.get("matches"))
     return (None if _float(n) is None else int(n), None if _float(m) is None else int(m))
+
+
+def link_pose_source(link: Mapping[str, Any]) -> str | None:
+    """Where the link's pose came from when feature matches did not make it (None: they did,
+    or nothing says otherwise): a pose fitted to matches rests on at least three that agree,
+    so fewer (or a verdict saying so) mean the plan views' overlay found it, or the poses the
+    files store when the pair has them. Its inlier count is then no measure of the link.
+
+    >>> T = np.eye(4).tolist()
+    >>> link_pose_source({"T_target_source": T, "inliers": 0, "matches": 1})
+    'pose from the plan view'
+    >>> link_pose_source({"T_target_source": T, "inliers": 52, "matches": 211}) is None
+    True
+    """
+    if link.get("T_target_source") is None:  # failed: no pose at all
+        return None
+    fit = _evidence(link, "inliers", "fit_to_matches")
+    n, _ = link_inliers(link)
+    if fit is True or (fit is None and (n is None or n >= 3)):
+        return None
+    stored = link.get("stored_deviation") is not None
+    return "pose from the plan view" + (" or the stored poses" if stored else "")
 
 
 def link_strength(link: Mapping[str, Any]) -> dict[str, float]:

@@ -103,7 +103,10 @@ def test_synth_overwrite_leaves_no_stale_frames_for_odometry(tmp_path):
     assert len(list((out / "rgbd" / "depth").iterdir())) == 4
     (out / "notes.txt").write_text("mine")
     rc, _, err = run_cli([*base, "--rgbd-frames", "2"])
-    assert rc == 1 and f"{out}: is a folder that is not empty {REFUSED}" in one_error_line(err)
+    line = one_error_line(err)  # it names what --overwrite would replace
+    assert rc == 1 and f"{out}: holds the results of an earlier run (" in line
+    assert "gt.json, rgbd/ (12 files)" in line  # its frames: depth, colour, their lists
+    assert line.endswith("; give --overwrite to replace them")
     assert len(list((out / "rgbd" / "depth").iterdir())) == 4  # untouched
     assert run_cli([*base, "--rgbd-frames", "2", "--overwrite"])[0] == 0
     assert sorted(p.name for p in (out / "rgbd" / "depth").iterdir()) == [
@@ -155,6 +158,65 @@ def test_survey_overwrite_keeps_the_cache_and_the_inputs(tmp_path):
         MANIFEST, "cache/station.npz", "notes.txt", "poses.json", "scan.ptx",
     ]  # fmt: skip
     assert read_manifest(tmp_path) == ["poses.json"]
+
+
+def test_a_survey_rerun_keeps_the_cache_and_says_what_it_replaces_and_removes(tmp_path):
+    """Re-running a survey into its folder: the refusal names the earlier results and says the
+    cache stays and is reused (it once read as if the cache would be lost); with --overwrite,
+    the earlier merged cloud this run was not asked for (made from the earlier poses, stale)
+    is removed, and one line names it; the cache and the user's files stay."""
+    site, out = tmp_path / "site", tmp_path / "survey"
+    synth = ["synth", "--scene", "room", "--stations", "2", "--resolution", "256x128",
+             "--seed", "1", "--out", site]  # fmt: skip
+    assert run_cli(synth)[0] == 0
+    scans = sorted(site.glob("station_*.ptx"))
+    base = ["survey", *scans, "--out", out, "--workers", "1"]
+    rc, _, err = run_cli([*base, "--merged", out / "merged.ply"])
+    assert rc in (0, 3), err
+    assert (out / "merged.ply").is_file() and "merged.ply" in read_manifest(out)
+    (out / "notes.txt").write_text("mine")
+    cache = _snapshot(out / "cache")
+    rc, _, err = run_cli(base)
+    line = one_error_line(err)
+    assert rc == 1 and line == (
+        f"error: --out: {out}: holds the results of an earlier run (merged.ply, poses.json, "
+        "report.html, stations/ (2 files)); give --overwrite to replace them; "
+        f"{out / 'cache'} (prepared stations and links) is kept either way and reused: only "
+        "new or changed scans are prepared again"
+    )
+    rc, stdout, err = run_cli([*base, "--overwrite"])
+    assert rc in (0, 3), err
+    assert f"{out}: removing the earlier run's merged.ply (made from its poses: stale now)" in (
+        stdout
+    )
+    assert "0 station(s) prepared, 2 from the cache" in stdout
+    assert not (out / "merged.ply").exists() and (out / "notes.txt").read_text() == "mine"
+    assert _snapshot(out / "cache") == cache
+    # a run that writes everything again removes nothing, and says nothing about it
+    rc, stdout, err = run_cli([*base, "--overwrite"])
+    assert rc in (0, 3), err
+    assert "removing" not in stdout
+
+
+def test_the_refusal_says_a_kept_entry_stays_and_names_no_missing_file(tmp_path):
+    """No manifest (an older result, or the user's files): the plain refusal, with the kept
+    entry's note; a manifest naming files that are gone lists only those still there."""
+    from flexreg.cli.options import check_out_folder, removed_line, set_overwrite
+    from flexreg.errors import ConfigError
+
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "poses.json").write_text("{}")
+    set_overwrite(False)
+    with pytest.raises(ConfigError) as e:
+        check_out_folder("--out", tmp_path, keep=("cache",), kept="(the cache) stays")
+    assert str(e.value) == (
+        f"--out: {tmp_path}: is a folder that is not empty {REFUSED}; {tmp_path / 'cache'} "
+        "(the cache) stays"
+    )
+    (tmp_path / MANIFEST).write_text(json.dumps({"files": ["poses.json", "gone.ply"]}))
+    with pytest.raises(ConfigError, match=r"earlier run \(poses\.json\); give --overwrite"):
+        check_out_folder("--out", tmp_path, keep=("cache",))
+    assert removed_line(tmp_path) is None  # outside a run: nothing to remove
 
 
 def test_overwrite_removes_only_what_an_earlier_run_wrote(tmp_path):

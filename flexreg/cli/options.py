@@ -207,9 +207,12 @@ def check_out_folder(
     inputs: Iterable[Path] = (),
     *,
     keep: tuple[str, ...] = (),
+    kept: str = "",
 ) -> None:
     """Refuse an output folder that is a file, one of the inputs, or holds anything (but the
-    entries named in ``keep``) unless ``--overwrite`` was given.
+    entries named in ``keep``) unless ``--overwrite`` was given. The refusal names the
+    results an earlier run recorded there (what ``--overwrite`` replaces) and, when a
+    ``keep`` entry is there, says that it stays (``kept``: what it is).
 
     With ``--overwrite``, files of the same names are replaced, and the files an earlier run
     recorded as its own in the folder's manifest that this run does not write again are
@@ -226,8 +229,10 @@ def check_out_folder(
     inputs : iterable of Path
     keep : tuple of str
         Top-level entries that are not results and stay (``survey``: its ``cache``).
+    kept : str
+        What the ``keep`` entries hold and why keeping them matters, for the refusal.
     """
-    from flexreg.io.files import LOCK, MANIFEST, replace_folder
+    from flexreg.io.files import LOCK, MANIFEST, read_manifest, replace_folder
 
     if folder is None:
         return
@@ -238,5 +243,52 @@ def check_out_folder(
             raise ConfigError(f"{option}: {folder}: is also an input")
     ours = (*keep, MANIFEST, LOCK)  # a cache, and flexreg's records of the folder
     if folder.is_dir() and any(e.name not in ours for e in folder.iterdir()):
-        _refuse_existing(option, folder, "is a folder that is not empty")
+        there = [k for k in keep if (folder / k).exists()]
+        stays = f"; {', '.join(str(folder / k) for k in there)} {kept or 'stays'}" if there else ""
+        earlier = [
+            r
+            for r in read_manifest(folder)
+            if r.split("/", 1)[0] not in keep and (folder / r).is_file()
+        ]
+        if not _OVERWRITE[0]:
+            what = (
+                f"holds the results of an earlier run ({_listing(earlier)}); give --overwrite "
+                "to replace them"
+                if earlier
+                else "is a folder that is not empty (an earlier result); give --overwrite to "
+                "replace it"
+            )
+            raise ConfigError(f"{option}: {folder}: {what}{stays}")
     replace_folder(folder, keep)
+
+
+def _listing(files: Sequence[str], most: int = 6) -> str:
+    """Relative paths in a few words: a folder's files as ``NAME/`` with their count.
+
+    >>> _listing(["poses.json", "stations/a.txt", "stations/b.txt", "merged.ply"])
+    'merged.ply, poses.json, stations/ (2 files)'
+    """
+    top: dict[str, int] = {}
+    for f in files:
+        head, _, rest = f.partition("/")
+        key = head + "/" if rest else head
+        top[key] = top.get(key, 0) + 1
+    names = [k if not k.endswith("/") else f"{k} ({_files(n)})" for k, n in sorted(top.items())]
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
+def _files(n: int) -> str:
+    return f"{n} file" + ("" if n == 1 else "s")
+
+
+def removed_line(folder: Path, why: str = "") -> str | None:
+    """One line naming the files an earlier run wrote into ``folder`` that this run removes
+    when it ends (it did not write them again; :func:`flexreg.io.files.superseded`), with
+    ``why`` after them; None when there are none."""
+    from flexreg.io.files import superseded
+
+    gone = superseded(folder)
+    if not gone:
+        return None
+    return f"{folder}: removing the earlier run's {_listing(gone)}{why}"

@@ -16,6 +16,7 @@ from flexreg.cli.options import (
     build_config,
     check_out_folder,
     check_outputs,
+    removed_line,
 )
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.registration.config import RegistrationConfig
@@ -289,7 +290,14 @@ def survey_command(
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
-    check_out_folder("--out", out, scans, keep=("cache",))
+    check_out_folder(
+        "--out",
+        out,
+        scans,
+        keep=("cache",),
+        kept="(prepared stations and links) is kept either way and reused: only new or "
+        "changed scans are prepared again",
+    )
     check_outputs(
         [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
         inputs=[p for p in scans if p.is_file()],
@@ -320,6 +328,8 @@ def survey_command(
         if p.parent.name != "stations":
             console.print(f"wrote {p}", markup=False, soft_wrap=True)
     console.print(f"wrote {len(result.placed)} station matrices to {out / 'stations'}")
+    if gone := removed_line(out, " (made from its poses: stale now)"):
+        console.print(gone, markup=False, highlight=False, soft_wrap=True)
     if result.exit_status == EXIT_UNCERTAIN:
         for line in result.problems():
             err_console.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -47,6 +47,7 @@ __all__ = [
     "protect",
     "read_manifest",
     "replace_folder",
+    "superseded",
     "write_all",
     "write_png",
 ]
@@ -145,6 +146,30 @@ class Outputs:
             os.close(fd)
         self._locks.clear()
 
+    def superseded(self, folder: str | os.PathLike[str]) -> list[str]:
+        """The files (relative POSIX paths) of an owned ``folder``'s manifest that
+        :meth:`commit` will remove as things stand: those an earlier run wrote that this block
+        has not staged again (never a ``keep`` entry or an input); [] for a folder the block
+        does not own."""
+        path = Path(os.path.abspath(folder))
+        if path not in self._owned:
+            return []
+        stale = self._stale(path, self._owned[path], set(self._staged))
+        return [p.relative_to(path).as_posix() for p in stale if p.is_file() or p.is_symlink()]
+
+    def _stale(self, folder: Path, keep: tuple[str, ...], written: set[Path]) -> list[Path]:
+        """The files an earlier run recorded in ``folder``'s manifest that are not in
+        ``written``, ``keep`` or the inputs, deepest first."""
+        if not folder.is_dir():
+            return []
+        return [
+            folder / rel
+            for rel in sorted(read_manifest(folder), key=lambda r: -r.count("/"))
+            if rel.split("/", 1)[0] not in keep
+            and folder / rel not in written
+            and not self._is_input(folder / rel)
+        ]
+
     def _sweep(self, written: list[Path]) -> None:
         """In every owned folder: remove what the earlier run's manifest lists and this block
         did not write again (then the folders that emptied), leave everything else, and
@@ -154,10 +179,7 @@ class Outputs:
             if not folder.is_dir():
                 continue
             ours = sorted(p.relative_to(folder).as_posix() for p in written if folder in p.parents)
-            for rel in sorted(read_manifest(folder), key=lambda r: -r.count("/")):
-                p = folder / rel
-                if rel.split("/", 1)[0] in keep or p in keep_files or self._is_input(p):
-                    continue
+            for p in self._stale(folder, keep, keep_files):
                 with contextlib.suppress(OSError):
                     if p.is_file() or p.is_symlink():
                         p.unlink()
@@ -380,18 +402,42 @@ def replace_folder(folder: str | os.PathLike[str], keep: tuple[str, ...] = ()) -
 
     Examples
     --------
-    >>> import tempfile
+    >>> import json, tempfile
     >>> d = Path(tempfile.mkdtemp())
     >>> _ = (d / "frame_0009.png").write_text("old")
+    >>> _ = (d / MANIFEST).write_text(json.dumps({"files": ["frame_0009.png"]}))
     >>> with all_or_nothing():
     ...     replace_folder(d)
     ...     atomic_write(d / "frame_0000.png", lambda tmp: tmp.write_text("new"))
     >>> sorted(p.name for p in d.iterdir())
-    ['frame_0000.png']
+    ['.flexreg-outputs.json', 'frame_0000.png']
     """
     outputs = _ACTIVE.get()
     if outputs is not None:
         outputs.own(folder, keep)
+
+
+def superseded(folder: str | os.PathLike[str]) -> list[str]:
+    """The files an earlier run wrote into ``folder`` that the running block will remove when
+    it ends, as things stand (:meth:`Outputs.superseded`): those the block has not written
+    again, after :func:`replace_folder` made the folder its own; none outside a block.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for name in ("poses.json", "merged.ply", MANIFEST):
+    ...     _ = (d / name).write_text(json.dumps({"files": ["poses.json", "merged.ply"]}))
+    >>> with all_or_nothing():
+    ...     replace_folder(d)
+    ...     atomic_write(d / "poses.json", lambda tmp: tmp.write_text("{}"))
+    ...     superseded(d)
+    ['merged.ply']
+    >>> sorted(p.name for p in d.iterdir())
+    ['.flexreg-outputs.json', 'poses.json']
+    """
+    outputs = _ACTIVE.get()
+    return [] if outputs is None else outputs.superseded(folder)
 
 
 def discard(*paths: str | os.PathLike[str]) -> None:

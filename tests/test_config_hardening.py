@@ -189,4 +189,4 @@ def test_defaults_are_unchanged_and_within_their_bounds():
         0,
     )
     assert (r.guided_radius_m, r.guided_radius_per_m) == (0.25, 0.02)
-    assert SurveyConfig().refine_voxel_m == 0.05
+    assert SurveyConfig().refine_voxel_m == 0.02 and SurveyConfig().tolerance_mm == 10.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -71,14 +72,30 @@ def test_every_station_placed_confidently_exit_0(first, project):
         if link["status"] == "accepted":
             assert set(link["strength"]) == {"roll", "pitch", "yaw", "x", "y", "z"}
             assert np.asarray(link["information"]).shape == (6, 6)
-            assert link["loop_error_m"] is not None
-    # accurate against the synthetic truth
+            assert link["loop_error_m"] is not None  # three links: each closes a loop
+            c2c = link["cloud_to_cloud"]
+            assert 0 < c2c["overlap"] <= 1 and 0 <= c2c["within_6mm"] <= c2c["within_1cm"] <= 1
+            assert link["link_error"] != "unchecked" and link["link_error"]["mm"] < 10
+    # the final alignment: every station verified, with its accuracy
+    assert s["statuses"] == {"verified": 3, "placed": 0, "outside_tolerance": 0, "unplaced": 0}
+    fa = doc["final_alignment"]
+    assert fa["pairs_checked"] == 3 and fa["pairs_unchecked"] == 0 and fa["bundle_error_mm"] < 10
+    for stem, st in doc["stations"].items():
+        assert st["status"] == "verified" and st["status_why"] is None
+        if stem != doc["reference"]:
+            assert 0 < st["accuracy"]["radius95_mm"] < 10
+    # accurate against the synthetic truth: within the survey's tolerance
     ev = evaluate(doc, json.loads((project / "gt.json").read_text()))
     assert len(ev["stations"]) == 3 and ev["wrong"] == []
     for e in ev["stations"].values():
-        assert e["rotation_deg"] < 0.3 and e["translation_m"] < 0.03
+        assert e["rotation_deg"] < 0.05 and e["translation_m"] < 0.01
     assert (out / "report.html").is_file()
-    assert "3 of 3 stations placed" in stdout
+    assert "3 verified, 0 placed, 0 outside tolerance, 0 unplaced" in stdout
+    # no NaN or infinity anywhere a user reads a figure
+    for f in (out / "poses.json", out / "report.html"):
+        text = f.read_text()
+        assert not re.search(r"\bnan\b|\binfinity\b", text, re.IGNORECASE), f.name
+    assert not re.search(r"\bnan\b", stdout + err, re.IGNORECASE)
 
 
 def test_a_rerun_prepares_nothing_and_a_new_station_only_itself(first, project, tmp_path):
@@ -276,7 +293,7 @@ def test_an_unreadable_station_is_reported_the_rest_registered_exit_3(first, pro
     assert doc["stations"]["broken"]["placed"] is False
     assert "broken.ptx" in doc["stations"]["broken"]["error"]
     assert all(doc["stations"][s]["placed"] for s in STATIONS)
-    assert "broken: unreadable" in err
+    assert "broken: unplaced: unreadable" in err
     assert not (out / "stations" / "broken.txt").exists()
 
 
@@ -351,7 +368,11 @@ def test_a_folder_skips_meshes_with_a_warning_a_named_mesh_is_taken(project, tmp
 
 def test_refine_merged_cloud_and_e57(first, project, tmp_path):
     out = _with_cache(first[3], tmp_path)
-    result = run_survey(_files(project), out, SurveyConfig(joint_refine=True), workers=1)
+    result = run_survey(_files(project), out, SurveyConfig(joint_refine=False), workers=1)
+    assert not result.refined and result.exit_status == 3  # accuracy unchecked without it
+    assert result.status_counts()["placed"] == 3
+    assert all("accuracy unchecked" in p for p in result.problems())
+    result = run_survey(_files(project), out, workers=1)
     assert result.refined and result.exit_status == 0
     assert result.to_dict()["summary"]["links_from_cache"] == len(result.links)
     ev = evaluate(result.to_dict(), json.loads((project / "gt.json").read_text()))

@@ -332,7 +332,7 @@ def test_large_project_renders() -> None:
     page = render_report(doc)
     assert len(re.findall(r'<tr class="link confident">', page)) == 400
     assert len(re.findall(r'<tr class="station">', page)) == 64
-    assert "Done: every station is placed with confident links (exit 0)." in _text(page)
+    assert "Done: every station is verified within the tolerance (exit 0)." in _text(page)
 
 
 # ------------------------------------------------------------------------------ in a browser

@@ -30,13 +30,14 @@ if TYPE_CHECKING:
 
 #: options that set a field of SurveyConfig (option -> field)
 OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine"}
+MERGED_SUFFIXES = (".ply", ".las", ".laz", ".e57")
 add_config("survey", SurveyConfig)
 
 PHASES = {
     "prepare": "Preparing stations",
     "links": "Registering links",
     "map check": "Checking the map",
-    "refine": "Refining",
+    "refine": "Final alignment",
 }
 
 _ScansArgument = Annotated[
@@ -99,19 +100,47 @@ _ReferenceOption = Annotated[
     typer.Option(
         "--reference",
         metavar="STEM",
-        help="Station whose frame the poses are in [default: the best-connected station].",
+        help="Station whose frame the poses are in [default: the first station by name of "
+        "the largest group].",
     ),
 ]
 _RefineOption = Annotated[
     bool | None,
     typer.Option(
         "--refine/--no-refine",
-        help="Multi-view ICP on the accepted links, then the pose graph again. [default: no]",
+        help="The final joint alignment: every placed station refined on its overlapping "
+        "points, with its accuracy and status (--no-refine: poses of the links alone, "
+        "accuracy unchecked). [default: yes]",
+    ),
+]
+_FrameOption = Annotated[
+    str,
+    typer.Option(
+        "--frame",
+        metavar="reference|stored",
+        help="Frame of the written poses, station matrices and clouds: the reference "
+        "station's, or 'stored': the site frame the files store their setups in (E57 poses, "
+        "PTX headers). poses.json holds both.",
+    ),
+]
+_OriginsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--origins",
+        metavar="FILE.csv",
+        help="Scanner positions of stations whose points are in project coordinates "
+        "(georeferenced LAS/LAZ): rows stem,x,y,z in metres, in each file's frame; the "
+        "stations are registered about them and the results come out in the files' "
+        "coordinates.",
     ),
 ]
 _MergedOption = Annotated[
     Path | None,
-    typer.Option("--merged", help="Write all placed stations as one .ply in the reference frame."),
+    typer.Option(
+        "--merged",
+        help="Write all placed stations as one cloud in the poses' frame: .ply, .las, .laz "
+        "(site coordinates keep their millimetres) or .e57.",
+    ),
 ]
 _VoxelOption = Annotated[
     float,
@@ -219,30 +248,38 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
         "T_target_source maps the source onto the target)",
         title_justify="left",
     )
-    for col in ("station", "placed", "group", "links", "confidence", "note"):
+    for col in ("station", "status", "group", "links", "1σ mm (x, y, z)", "note"):
         t.add_column(col)
     for stem, st in doc["stations"].items():
+        acc = st.get("accuracy")
         t.add_row(
             stem,
-            "yes" if st["placed"] else "NO",
+            st["status"].replace("_", " "),
             "-" if st["group"] is None else str(st["group"]),
             f"{st['degree']}/{st['links_attempted']}",
-            st["confidence"] or "-",
-            st["error"] or st["reason"] or _stored_note(st.get("stored_pose_check")),
+            "-" if acc is None else ", ".join(f"{v:.1f}" for v in acc["sigma_mm"].values()),
+            st["error"]
+            or st.get("status_why")
+            or st["reason"]
+            or _stored_note(st.get("stored_pose_check")),
         )
     console.print(t)
-
-    def fmt(v: float | None, scale: float, unit: str) -> str:
-        return "-" if v is None else f"{scale * v:.2f} {unit}"
-
+    fa = doc.get("final_alignment")
+    bundle = (
+        "final alignment off (accuracy unchecked)"
+        if fa is None
+        else "bundle error unchecked (no pair closes a loop)"
+        if fa["bundle_error_mm"] is None
+        else f"bundle error {fa['bundle_error_mm']:.2f} mm / {fa['bundle_error_deg']:.4f}° over "
+        f"the {fa['pairs_checked']} cloud-to-cloud pairs that close loops "
+        f"({fa['pairs_unchecked']} unchecked)"
+    )
     console.print(
-        f"{s['placed']} of {s['stations']} stations placed in {s['groups']} group(s); links "
-        f"{s['links_attempted']} tried: {s['links_accepted']} accepted, {s['links_rejected']} "
-        f"rejected, {s['links_failed']} failed; bundle error "
-        f"{fmt(s['bundle_error_m'], 1000, 'mm')} / {fmt(s['bundle_error_deg'], 1, '°')}, max "
-        f"link error {fmt(s['max_link_error_m'], 1000, 'mm')} / "
-        f"{fmt(s['max_link_error_deg'], 1, '°')}; {s['prepared']} station(s) prepared, "
-        f"{s['from_cache']} from the cache; {s['wall_s']:.1f} s on {s['workers']} worker(s)",
+        f"{s['status_line']} (tolerance {s['tolerance_mm']:g} mm) of {s['stations']} stations "
+        f"in {s['groups']} group(s); links {s['links_attempted']} tried: {s['links_accepted']} "
+        f"accepted, {s['links_rejected']} rejected, {s['links_failed']} failed; {bundle}; "
+        f"{s['prepared']} station(s) prepared, {s['from_cache']} from the cache; "
+        f"{s['wall_s']:.1f} s on {s['workers']} worker(s)",
         markup=False,
         soft_wrap=True,
     )
@@ -269,6 +306,8 @@ def survey_command(
     merged: _MergedOption = None,
     voxel: _VoxelOption = 0.02,
     e57: _E57Option = None,
+    frame: _FrameOption = "reference",
+    origins: _OriginsOption = None,
     seed: _SeedOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
@@ -277,10 +316,11 @@ def survey_command(
 
     \b
     Exit status:
-      0  every station placed through confident links
-      3  written, but some station is unplaced, unreadable or placed only through
-         uncertain links (one line each on screen, and in poses.json under
-         summary.problems)
+      0  every station verified: within the tolerance (--set tolerance_mm=, default 10)
+         and confirmed by an independent route
+      3  written, but some station is only placed, outside the tolerance, unplaced or
+         unreadable (the count per status on one line, one line per station on screen, and
+         in poses.json under summary.problems)
       1  failed: nothing could be registered (one error line; nothing written
          but the cache)
     """
@@ -290,6 +330,10 @@ def survey_command(
     cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
+    if merged is not None and merged.suffix.lower() not in MERGED_SUFFIXES:
+        raise ConfigError(f"--merged: {merged}: must be a .ply, .las, .laz or .e57 file")
+    if frame not in ("reference", "stored"):
+        raise ConfigError(f"--frame: must be reference or stored (got {frame!r})")
     check_out_folder(
         "--out",
         out,
@@ -299,7 +343,7 @@ def survey_command(
         "changed scans are prepared again",
     )
     check_outputs(
-        [("--merged", merged, ".ply"), ("--e57", e57, ".e57")],
+        [("--merged", merged, None), ("--e57", e57, ".e57")],
         inputs=[p for p in scans if p.is_file()],
         input_folders=[p for p in scans if p.is_dir()],
     )
@@ -313,6 +357,8 @@ def survey_command(
             dashboard=dashboard,
             reference=reference,
             pairs_file=pairs_file,
+            origins_file=origins,
+            frame=frame,  # type: ignore[arg-type]
             progress=_Bars(bar),
         )
     if result.exit_status == 1:

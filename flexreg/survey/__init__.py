@@ -12,7 +12,8 @@ The flow (one module per step):
               scheduler address); the same link gives the same result on any worker;
 ``graph``     spanning tree of the strongest confident links, loop-closure checks, robust
               pose-graph optimisation (Open3D's line process), connected groups;
-``multiview`` optional joint multi-view ICP on the accepted links;
+``adjust``    the final joint alignment: every placed station refined on its overlapping
+              points (cloud to cloud), its 1-sigma accuracy and status;
 ``outputs``   poses.json, stations/STEM.txt, merged PLY, E57 (all atomic);
 ``project``   :func:`run_survey`, the one call that does all of the above.
 
@@ -22,7 +23,8 @@ Public API
                                           :class:`~flexreg.registration.RegistrationConfig`)
 ``find_scans(paths) -> list[Path]``       the scan files of files and folders, sorted
 ``run_survey(paths, out_dir, config, *, workers=None, scheduler=None, reference=None,
-progress=None) -> SurveyResult``         the whole project; writes only ``out_dir/cache/``
+pairs_file=None, origins_file=None, frame="reference", progress=None) -> SurveyResult``
+                                          the whole project; writes only ``out_dir/cache/``
 ``SurveyResult.to_dict() -> dict``        the poses document below (what poses.json holds)
 ``write_outputs(result, out_dir, *, merged=None, voxel_m=0.02, e57=None) -> list[Path]``
                                           poses.json, stations/, report.html, merged PLY, E57
@@ -40,7 +42,12 @@ value does not exist (failed link, unplaced station)::
     {
       "schema": "flexreg.survey/1",
       "flexreg_version": "0.1.0",
-      "reference": "station_03",             # STEM of the frame every pose is given in
+      "reference": "station_00",             # STEM of the frame every pose is given in
+                                             # (--reference, else the first by name of the
+                                             # largest group)
+      "frame": {"kind": "reference",         # reference | stored | origins (survey/frames.py)
+                "site": "the frame of station station_00",
+                "T_site_reference": [[...]]},
       "stations": {
         "station_00": {
           "file": "scans/station_00.ptx",    # as given on the command line
@@ -58,7 +65,15 @@ value does not exist (failed link, unplaced station)::
                                              # "uncertain": only loop-confirmed uncertain
                                              # links hold it; null: unplaced
           "reason": null,                    # unplaced: why, in words
-          "error": null                      # unreadable: the one-line error
+          "error": null,                     # unreadable: the one-line error
+          "status": "verified",              # verified | placed | outside_tolerance | unplaced
+          "status_why": null,                # why not verified, in words
+          "accuracy": {"sigma_deg": {"roll": 0.001, "pitch": 0.001, "yaw": 0.002},
+                       "sigma_mm": {"x": 0.4, "y": 0.5, "z": 0.3},   # 1 sigma, reference axes
+                       "radius95_mm": 1.4, "rotation95_mm": 0.6},    # null: unknown
+          "origin": null,                    # --origins: scanner position in the file, m
+          "T_site_station": [[...]],         # the pose in the site frame (float64)
+          "T_site_file": [[...]]             # the file's correction (stations/STEM.txt)
         }, ...
       },
       "groups": [
@@ -96,7 +111,12 @@ value does not exist (failed link, unplaced station)::
           "loop_error_deg": 0.01,            # accepted: disagreement with the final poses;
           "loop_error_m": 0.002,             # rejected: with the loop it closes; null: none
           "seconds": 3.8,                    # wall time of the pairwise registration
-          "cached": false                    # read from DIR/cache/links/ (an earlier run)
+          "cached": false,                   # read from DIR/cache/links/ (an earlier run)
+          "loop_error": "unchecked",         # only when accepted and it closes no loop
+          "cloud_to_cloud": {"rms_mm": 3.1, "within_6mm": 0.93, "within_1cm": 0.97,
+                             "overlap": 0.41, "balance": 0.3, "points": 18000,
+                             "source_points": 40000},     # after the final alignment
+          "link_error": {"deg": 0.002, "mm": 0.4}   # or "unchecked" (closes no loop)
         }, ...
       ],
       "summary": {
@@ -104,12 +124,16 @@ value does not exist (failed link, unplaced station)::
         "unplaced": [],                      # STEMs
         "groups": 1,
         "links_attempted": 20, "links_accepted": 14, "links_rejected": 4, "links_failed": 2,
-        "bundle_error_m": 0.003,             # RMS translation residual of accepted links
-        "bundle_error_deg": 0.01,            # RMS rotation residual of accepted links
+        "bundle_error_m": 0.0004,            # RMS translation residual of the final
+        "bundle_error_deg": 0.003,           # alignment's pairs that close loops
         "mean_link_error_m": 0.002, "max_link_error_m": 0.006,
         "mean_link_error_deg": 0.008, "max_link_error_deg": 0.03,
-        "refined": false,                    # --refine ran
-        "exit_status": 0,                    # 0 all placed and confident, 3 not, 1 nothing
+        "bundle_of": "12 cloud-to-cloud pairs that close loops (2 unchecked)",
+        "refined": true,                     # the final joint alignment ran
+        "statuses": {"verified": 7, "placed": 0, "outside_tolerance": 0, "unplaced": 1},
+        "status_line": "7 verified, 0 placed, 0 outside tolerance, 1 unplaced",
+        "tolerance_mm": 10.0,
+        "exit_status": 0,                    # 0 all verified, 3 not, 1 nothing placed
         "problems": ["station_07: unplaced (no accepted link)"],   # one line each
         "wall_s": 95.2,
         "timings_s": {"prepare": 60.1, "links": 30.2, "graph": 0.3},
@@ -117,6 +141,11 @@ value does not exist (failed link, unplaced station)::
         "prepared": 8, "from_cache": 0,      # stations prepared now / read from the cache
         "links_from_cache": 0                # links read from the cache
       },
+      "final_alignment": {"rounds": 2, "settled": true, "pairs": 14, "pairs_measured": 14,
+                          "pairs_checked": 12, "pairs_unchecked": 2, "pairs_left_out": 0,
+                          "bundle_error_mm": 0.4, "bundle_error_deg": 0.003,
+                          "variance_factor": 0.5, "redundancy": 30, "seconds": 20.1,
+                          "pair_list": [...]},    # null with --no-refine
       "config": {...}                        # SurveyConfig.to_dict() (registration nested)
     }
 """

@@ -71,15 +71,21 @@ class SurveyConfig(Config):
     residual_floor_deg : float, degrees
         A link is never dropped for a rotation residual under this (``residual_factor``).
     joint_refine : bool
-        Joint multi-view ICP on the accepted links after the graph (``--refine``).
+        The final joint alignment (on by default; ``--no-refine`` skips it): every placed
+        station refined together on its overlapping points, each with its 1-sigma accuracy
+        and a status (:mod:`flexreg.survey.adjust`). Without it accuracies are unchecked and
+        no station is ``verified``.
     refine_voxel_m : float, metres
-        Voxel of the clouds the multi-view ICP aligns, in [0.01, 10] m
-        (:data:`MIN_REFINE_VOXEL_M`): every station's cloud is held at once, and voxels
-        finer than 1 cm keep about every point of a survey for millimetres the pairwise
-        ICP already resolves.
+        Voxel of the stations' adjustment clouds, in [0.01, 10] m (:data:`MIN_REFINE_VOXEL_M`;
+        point-to-plane fits of voxel means resolve far under the voxel: 2 cm gives
+        sub-millimetre pairs on indoor scans).
     refine_iterations : int
-        Rounds of pairwise ICP + pose-graph optimisation of the multi-view refinement, in
-        [1, 10].
+        Most rounds of cloud-to-cloud fits + pose-graph adjustment, in [1, 10]; it stops
+        earlier once no station moves by 0.1 mm / 0.001 degrees.
+    tolerance_mm : float, millimetres
+        A placed station whose 95 % error (position, or rotation at its median range)
+        exceeds this, or at which a pair disagrees with the adjusted poses by more, is
+        ``outside_tolerance`` and never verified.
     stored_poses : {"prior", "check", "ignore"}
         Poses the files store per setup (E57 ``pose``, PTX header; identity means none):
         ``prior`` seeds every link between two such stations with the stored relative pose
@@ -152,9 +158,10 @@ class SurveyConfig(Config):
     residual_factor: float = Field(10.0, gt=1)
     residual_floor_m: float = Field(0.02, gt=0)
     residual_floor_deg: float = Field(0.2, gt=0)
-    joint_refine: bool = False
-    refine_voxel_m: float = Field(0.05, ge=MIN_REFINE_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)
-    refine_iterations: int = Field(2, ge=1, le=10)
+    joint_refine: bool = True
+    refine_voxel_m: float = Field(0.02, ge=MIN_REFINE_VOXEL_M, le=MAX_VOXEL_M, allow_inf_nan=False)
+    refine_iterations: int = Field(4, ge=1, le=10)
+    tolerance_mm: float = Field(10.0, gt=0, le=1e4, allow_inf_nan=False)
     stored_poses: StoredPoses = "prior"
     stored_max_deg: float = Field(1.0, gt=0)
     stored_max_m: float = Field(0.10, gt=0)

@@ -31,7 +31,7 @@ link must not place a station, so the graph is built in steps that each trust le
    may switch off; a pruned edge, or one that still disagrees with the optimised poses, is
    rejected and the optimisation rerun.
 5. **Groups**: connected components of the kept links, never fused. Group 0 holds the
-   reference (the given station, or the best-connected one).
+   reference (the given station, or the first by name of the largest group).
 6. **Residuals**: a link can agree with its loops within the loop tolerance and still be a
    few centimetres off, pulling the optimised poses. The accepted link that fits the
    optimised poses worst is dropped when it is beyond ``residual_factor`` times the median
@@ -63,6 +63,7 @@ from flexreg.survey.links import (
     Link,
     Matrix,
     Veto,
+    bridges,
     judged_culprit,
     loop_error,
 )
@@ -505,15 +506,10 @@ def _reference(
         if reference not in comp:
             raise InputError("--reference", f"{reference!r} is not one of the stations")
         return reference
-    degree = {s: 0 for s in stems}
-    for e in links:  # a group's own reference: only its links count (others reach outside it)
-        if e.status == "pending" and e.target in degree and e.source in degree:
-            degree[e.target] += 1
-            degree[e.source] += 1
-    size: dict[str, int] = {}
-    for s in stems:
+    size: dict[str, int] = {}  # the first station by name of the largest group: the same
+    for s in stems:  # reference whatever the links' strengths (deterministic across runs)
         size[comp[s]] = size.get(comp[s], 0) + 1
-    return max(stems, key=lambda s: (size[comp[s]], degree[s], -stems.index(s)))
+    return max(stems, key=lambda s: (size[comp[s]], -stems.index(s)))
 
 
 def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
@@ -562,7 +558,7 @@ def _stats(links: list[Link]) -> dict[str, float | None]:
                 "max_link_error_deg",
             ),
         )
-    m = np.array([e.loop_error_m for e in acc], dtype=np.float64)
+    m = np.array([e.loop_error_m for e in acc], dtype=np.float64)  # links that close loops
     d = np.array([e.loop_error_deg for e in acc], dtype=np.float64)
     return {
         "bundle_error_m": float(np.sqrt(np.mean(m**2))),
@@ -595,7 +591,7 @@ def solve_graph(
     config : SurveyConfig, optional
         Loop tolerances and the line process's prune threshold (default: defaults).
     reference : str, optional
-        The station whose frame group 0 is solved in (default: the best-connected station of
+        The station whose frame group 0 is solved in (default: the first station by name of
         the largest group).
     vetoes : sequence of Veto
         Pairs of stations the map check found contradicting each other: while a solution
@@ -767,9 +763,11 @@ def _solve_once(
             if not late:
                 break
         poses.update(start)
-        for e in links:
-            if e.status == "pending" and e.target in start:
-                e.status = "accepted"
+        kept = [e for e in links if e.status == "pending" and e.target in start]
+        alone = bridges([(e.target, e.source) for e in kept])  # they close no loop: unchecked
+        for i, e in enumerate(kept):
+            e.status = "accepted"
+            if i not in alone:
                 e.loop_error_deg, e.loop_error_m = loop_error(
                     np.asarray(e.T_target_source), start[e.target], start[e.source]
                 )

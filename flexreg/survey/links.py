@@ -186,6 +186,31 @@ class GraphSolution:
         raise KeyError(stem)
 
 
+def bridges(edges: list[tuple[str, str]]) -> set[int]:
+    """Indices of the edges that close no loop: removing one disconnects its two stations
+    (a link between two stations linked twice closes a loop of two).
+
+    >>> sorted(bridges([("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")]))
+    [3]
+    """
+    out = set()
+    for i, (a, b) in enumerate(edges):
+        adj: dict[str, list[str]] = {}
+        for j, (x, y) in enumerate(edges):
+            if j != i:
+                adj.setdefault(x, []).append(y)
+                adj.setdefault(y, []).append(x)
+        seen, queue = {a}, deque([a])
+        while queue:
+            for y in adj.get(queue.popleft(), []):
+                if y not in seen:
+                    seen.add(y)
+                    queue.append(y)
+        if b not in seen:
+            out.add(i)
+    return out
+
+
 def loop_error(T_link: Matrix, P_target: Matrix, P_source: Matrix) -> tuple[float, float]:
     """How far a link is from the relative pose of two solved stations: degrees, metres."""
     rel = invert(P_target) @ P_source
@@ -256,6 +281,7 @@ __all__ = [
     "Link",
     "Matrix",
     "Veto",
+    "bridges",
     "implied_pose",
     "judged_culprit",
     "loop_error",

@@ -218,8 +218,11 @@ def write_outputs(
     placed = result.placed
     if merged is not None or e57 is not None:  # the placed stations are read again
         _check_unchanged(result)
-    poses = {s: np.asarray(doc["stations"][s]["T_reference_station"]) for s in placed}
+    # what each placed station's file needs to land in the poses' frame (the reference's, the
+    # stored site frame, or the files' own coordinates: :mod:`flexreg.survey.frames`)
+    poses = {s: np.asarray(doc["stations"][s]["T_site_file"], dtype=np.float64) for s in placed}
     paths: dict[str, Path | str] = {st.stem: st.ref for st in result.stations}
+    names = {st.stem: st.setup_name or st.stem for st in result.stations}
     writers: list[tuple[Path, Callable[[], Any]]] = []
     for s in placed:
         txt = out_dir / "stations" / f"{s}.txt"
@@ -227,8 +230,10 @@ def write_outputs(
     if merged is not None:
         items = [(paths[s], poses[s]) for s in placed]
         writers.append((merged, lambda: write_scan(merged, merged_cloud(items, voxel_m))))
+        # .ply, .las / .laz (integer coordinates with an offset: site coordinates keep their
+        # millimetres) or .e57, by suffix
     if e57 is not None:
-        lazy = _LazyScans([(paths[s], s, poses[s]) for s in placed])
+        lazy = _LazyScans([(paths[s], names[s], poses[s]) for s in placed])
         writers.append((e57, lambda: atomic_write(e57, lambda tmp: write_e57(tmp, lazy))))
     if report:
         html = out_dir / "report.html"

@@ -10,15 +10,16 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from flexreg._version import __version__
 from flexreg.errors import InputError, RegistrationError
+from flexreg.survey.adjust import STATUSES, Adjustment, adjust
 from flexreg.survey.config import SurveyConfig
+from flexreg.survey.document import SCHEMA, poses_document
 from flexreg.survey.execute import (
     Progress,
     ProgressEvent,
@@ -29,8 +30,10 @@ from flexreg.survey.execute import (
     default_workers,
     run_tasks,
 )
+from flexreg.survey.frames import Frame, read_origins_csv, site_of_reference
 from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
 from flexreg.survey.groupjoin import join_by_map
+from flexreg.survey.links import Matrix
 from flexreg.survey.mapcheck import (
     PairJudge,
     PairLook,
@@ -40,7 +43,6 @@ from flexreg.survey.mapcheck import (
     plan_looks,
     write_glance,
 )
-from flexreg.survey.multiview import refine_links
 from flexreg.survey.pairs import (
     Candidate,
     all_pairs,
@@ -58,11 +60,9 @@ from flexreg.survey.stations import (
     prepare_station,
     stations_of,
 )
-from flexreg.survey.stored import check_stations, deviation, stored_T_target_source
+from flexreg.survey.stored import check_stations, stored_T_target_source
 
 log = logging.getLogger(__name__)
-
-SCHEMA = "flexreg.survey/1"
 
 
 @dataclass(eq=False)
@@ -87,6 +87,11 @@ class SurveyResult:
     vetoes : list of Veto
         Every conflict the map checks found (each cut the most doubtful link between its
         two stations).
+    adjustment : Adjustment or None
+        The final joint alignment (None when off or nothing is placed): accuracies and
+        statuses.
+    frame : {"reference", "stored"}
+        The frame the poses are written in besides the reference's (``T_site_station``).
     """
 
     stations: list[Station]
@@ -101,6 +106,19 @@ class SurveyResult:
     stored: dict[str, Any] = field(default_factory=dict)
     map_looks: list[PairLook] = field(default_factory=list)
     vetoes: list[Veto] = field(default_factory=list)
+    adjustment: Adjustment | None = None
+    frame: Frame = "reference"
+
+    def site(self) -> tuple[Matrix, str]:
+        """``T_site_reference`` and what the site frame is (:mod:`flexreg.survey.frames`)."""
+        sol = self.solution
+        poses = {s: sol.poses[s] for s in self.placed if s in sol.poses}
+        origins = {st.stem: st.origin for st in self.stations if st.origin is not None}
+        if not poses:
+            return np.eye(4), f"the frame of station {sol.reference}"
+        return site_of_reference(
+            self.frame, sol.reference, poses, self.stored, self.stored_checks(), origins
+        )
 
     def stored_checks(self) -> dict[str, dict[str, Any]]:
         """Every placed station against the pose its file stores
@@ -117,20 +135,47 @@ class SurveyResult:
         g0 = self.solution.groups[0]
         return list(g0) if len(g0) > 1 else []
 
+    def status(self, stem: str) -> str:
+        """``verified``, ``placed``, ``outside_tolerance`` or ``unplaced``
+        (:mod:`flexreg.survey.adjust`); without the final alignment a placed station is
+        ``placed`` (its accuracy unchecked)."""
+        if stem not in self.placed:
+            return "unplaced"
+        adj = self.adjustment
+        st = adj.status.get(stem, "placed") if adj is not None else "placed"
+        if st == "verified" and self.solution.confidence.get(stem) == "uncertain":
+            return "placed"  # only uncertain links chose where it is: not independent
+        return st
+
+    def status_why(self, stem: str) -> str | None:
+        """Why a station is not ``verified``, in words (None when it is)."""
+        st = self.status(stem)
+        if st == "verified":
+            return None
+        if st == "unplaced":
+            p = self.prepared[stem]
+            return f"unreadable: {p.error}" if p.error else self.solution.reasons.get(stem, "")
+        if self.adjustment is None:
+            return "accuracy unchecked: the final alignment was off (--no-refine)"
+        if self.solution.confidence.get(stem) == "uncertain" and stem not in self.adjustment.why:
+            return "placed only through uncertain links that a loop confirms; check them"
+        return self.adjustment.why.get(stem, "")
+
+    def status_counts(self) -> dict[str, int]:
+        """Stations per status, every status named."""
+        out = dict.fromkeys(STATUSES, 0)
+        for st in self.stations:
+            out[self.status(st.stem)] += 1
+        return out
+
     def problems(self) -> list[str]:
-        """One line per unreadable, unplaced or uncertainly placed station."""
+        """One line per station that is not verified, per stored pose that disagrees and per
+        pair of placed stations that contradict each other."""
         out = []
         for st in self.stations:
-            p = self.prepared[st.stem]
-            if p.error is not None:
-                out.append(f"{st.stem}: unreadable: {p.error}")
-            elif st.stem not in self.placed:
-                out.append(f"{st.stem}: unplaced: {self.solution.reasons.get(st.stem, '')}")
-            elif self.solution.confidence.get(st.stem) == "uncertain":
-                out.append(
-                    f"{st.stem}: placed only through uncertain links that a loop confirms; "
-                    "check them"
-                )
+            why = self.status_why(st.stem)
+            if why is not None:
+                out.append(f"{st.stem}: {self.status(st.stem).replace('_', ' ')}: {why}")
         for stem, chk in self.stored_checks().items():
             if not chk["agrees"]:
                 out.append(
@@ -144,159 +189,24 @@ class SurveyResult:
                     f"stations {look.a} and {look.b} contradict each other where they are "
                     f"placed ({look.describe(self.config)}); one of them is placed wrongly"
                 )
-        for e in self.links:
-            if e.status == "accepted" and e.verdict == "uncertain":
-                codes = ", ".join(r.get("code", "?") for r in e.reasons) or "uncertain"
-                out.append(
-                    f"link {e.target} <- {e.source}: kept although uncertain ({codes})"
-                    + ("; a loop confirms it" if e.confirmed_by_loop else "")
-                    + (
-                        "; it joins two groups as the only placement no station contradicts"
-                        if e.map_joined
-                        else ""
-                    )
-                )
         return out
+
+    def headline(self) -> str:
+        """The statuses on one line: ``8 verified, 1 placed, 0 outside tolerance, 1
+        unplaced``."""
+        return ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in self.status_counts().items())
 
     @property
     def exit_status(self) -> int:
-        """0 every station placed and every kept link confident, 3 not (some station unplaced
-        or unreadable, or some kept link uncertain), 1 nothing registered."""
+        """0 every station verified and nothing contradicts; 3 written but something to
+        check (see :meth:`problems`); 1 nothing registered."""
         if not self.placed:
             return 1
         return 3 if self.problems() else 0
 
     def to_dict(self) -> dict[str, Any]:
-        """The poses document (poses.json)."""
-        sol = self.solution
-        placed = set(self.placed)
-        stations: dict[str, Any] = {}
-        checks = self.stored_checks()
-        for st in self.stations:
-            stations[st.stem] = self._station(st, placed, checks.get(st.stem))
-        links = [self._link(e) for e in self.links]
-        count = {k: sum(e.status == k for e in self.links) for k in ("accepted", "rejected")}
-        summary = {
-            "stations": len(self.stations),
-            "readable": sum(p.error is None for p in self.prepared.values()),
-            "placed": len(placed),
-            "unplaced": [s.stem for s in self.stations if s.stem not in placed],
-            "groups": sum(1 for g in sol.groups if g and self._readable(g[0])),
-            "links_attempted": len(self.links),
-            "links_accepted": count["accepted"],
-            "links_rejected": count["rejected"],
-            "links_failed": sum(e.status == "failed" for e in self.links),
-            **sol.stats,
-            "refined": self.refined,
-            "exit_status": self.exit_status,
-            "problems": self.problems(),
-            "wall_s": round(self.wall_s, 3),
-            "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
-            "workers": self.workers,
-            "prepared": sum(p.computed for p in self.prepared.values()),
-            "from_cache": sum((not p.computed) and p.error is None for p in self.prepared.values()),
-            "links_from_cache": sum(e.cached for e in self.links),
-        }
-        return {
-            "schema": SCHEMA,
-            "flexreg_version": __version__,
-            "reference": sol.reference,
-            "stations": stations,
-            "groups": self._groups(),
-            "links": links,
-            "map_check": self._map_check(),
-            "summary": summary,
-            "config": self.config.to_dict(),
-        }
-
-    def _map_check(self) -> dict[str, Any]:
-        c = self.config
-        return {
-            "enabled": c.map_check,
-            "pairs_checked": len(self.map_looks),
-            "conflicting_now": [p.to_dict() for p in self.map_looks if p.conflicts(c)],
-            "conflicts_found": [
-                {"a": v.a, "b": v.b, "T_a_b": np.asarray(v.T_a_b).tolist(), "why": v.why}
-                for v in self.vetoes
-            ],
-            "min_conflict": c.map_min_conflict,
-            "conflict_ratio": c.map_conflict_ratio,
-            "radius_m": c.map_radius_m,
-        }
-
-    def _link(self, e: Link) -> dict[str, Any]:
-        d = e.to_dict()
-        T_stored = stored_T_target_source(self.stored, e.target, e.source)
-        d["stored_deviation"] = (
-            None
-            if T_stored is None or e.T_target_source is None
-            else deviation(e.T_target_source, T_stored)
-        )
-        return d
-
-    def _readable(self, stem: str) -> bool:
-        return self.prepared[stem].error is None
-
-    def _groups(self) -> list[dict[str, Any]]:
-        sol, out = self.solution, []
-        for i, g in enumerate(sol.groups):
-            if g and self._readable(g[0]):
-                out.append(
-                    {
-                        "id": i,
-                        "reference": sol.group_reference[i],
-                        "stations": list(g),
-                        "placed": i == 0 and len(g) > 1,
-                    }
-                )
-        return out
-
-    def _station(
-        self, st: Station, placed: set[str], check: dict[str, Any] | None
-    ) -> dict[str, Any]:
-        setup = {"setup": st.setup, "setup_name": st.setup_name}
-        T_stored = self.stored.get(st.stem)
-        stored = {
-            "T_world_station_stored": None if T_stored is None else np.asarray(T_stored).tolist(),
-            "stored_pose_check": check,
-        }
-        return {**self._station_core(st, placed), **setup, **stored}
-
-    def _station_core(self, st: Station, placed: set[str]) -> dict[str, Any]:
-        sol, p = self.solution, self.prepared[st.stem]
-        if p.error is not None:
-            return {
-                "file": str(st.path),
-                "points": None,
-                "placed": False,
-                "T_reference_station": None,
-                "group": None,
-                "group_reference": None,
-                "T_group_station": None,
-                "degree": 0,
-                "links_attempted": 0,
-                "confidence": None,
-                "reason": "unreadable",
-                "error": p.error,
-            }
-        gi = sol.group_of(st.stem)
-        pose = sol.poses.get(st.stem)
-        mine = [e for e in self.links if st.stem in (e.target, e.source)]
-        on = st.stem in placed
-        return {
-            "file": str(st.path),
-            "points": p.points,
-            "placed": on,
-            "T_reference_station": pose.tolist() if on and pose is not None else None,
-            "group": gi,
-            "group_reference": sol.group_reference[gi],
-            "T_group_station": pose.tolist() if pose is not None else None,
-            "degree": sum(e.status == "accepted" for e in mine),
-            "links_attempted": len(mine),
-            "confidence": sol.confidence.get(st.stem) if on else None,
-            "reason": None if on else sol.reasons.get(st.stem),
-            "error": None,
-        }
+        """The poses document (poses.json; :func:`flexreg.survey.document.poses_document`)."""
+        return poses_document(self)
 
 
 def _candidates(
@@ -437,10 +347,15 @@ def _check_inputs(
     reference: str | None,
     pairs_file: Path | None,
     cluster: tuple[int | None, str | None, str | None],
+    origins_file: Path | None = None,
+    frame: str = "reference",
 ) -> list[Station]:
     """What a survey refuses before any work: the cluster's options ``(workers, scheduler,
-    dashboard)`` first (nothing read yet), then the stations, the reference and the pairs."""
+    dashboard)`` first (nothing read yet), then the stations, the reference, the pairs and
+    the origins (set on the stations they name)."""
     workers, scheduler, dashboard = cluster
+    if frame not in ("reference", "stored"):
+        raise InputError("--frame", f"must be reference or stored (got {frame!r})")
     check_workers(workers, scheduler)
     dashboard_address(dashboard)
     stations = stations_of(find_scans(paths))
@@ -453,6 +368,9 @@ def _check_inputs(
         raise InputError("--reference", f"{reference!r} is not one of the stations")
     if pairs_file is not None:
         read_pairs_csv(pairs_file, stems)
+    if origins_file is not None:
+        origins = read_origins_csv(origins_file, stems)
+        stations = [replace(st, origin=origins.get(st.stem)) for st in stations]
     return stations
 
 
@@ -466,6 +384,8 @@ def run_survey(
     dashboard: str | None = None,
     reference: str | None = None,
     pairs_file: Path | None = None,
+    origins_file: Path | None = None,
+    frame: Frame = "reference",
     progress: Progress = None,
 ) -> SurveyResult:
     """Register a project of stations; writes only ``out_dir/cache/``.
@@ -487,9 +407,16 @@ def run_survey(
         ``[HOST:]PORT`` of the local cluster's dashboard (loopback unless a host is named;
         default: no dashboard).
     reference : str, optional
-        The station whose frame the poses are in (default: the best connected).
+        The station whose frame the poses are in (default: the first station by name of the
+        largest group).
     pairs_file : Path, optional
         CSV of ``target,source`` stems: exactly these links.
+    origins_file : Path, optional
+        CSV of ``stem,x,y,z``: the scanner positions of stations whose points are in project
+        coordinates (metres, in each file's frame); poses then come out in the files'
+        coordinates (:mod:`flexreg.survey.frames`).
+    frame : {"reference", "stored"}
+        ``stored``: the poses also in the site frame the files store (``T_site_station``).
     progress : callable, optional
         Called with a :class:`~flexreg.survey.execute.ProgressEvent` as tasks finish.
 
@@ -506,7 +433,9 @@ def run_survey(
     """
     config = config if config is not None else SurveyConfig()
     t_start = time.perf_counter()
-    stations = _check_inputs(paths, reference, pairs_file, (workers, scheduler, dashboard))
+    stations = _check_inputs(
+        paths, reference, pairs_file, (workers, scheduler, dashboard), origins_file, frame
+    )
     cache = out_dir / "cache"
     timings: dict[str, float] = {}
     n_workers = 1 if workers == 1 and scheduler is None else (workers or default_workers())
@@ -568,14 +497,7 @@ def run_survey(
                 progress,
             )
             timings["map_check"] = time.perf_counter() - t
-        if config.joint_refine:
-            t = time.perf_counter()
-            for _ in range(config.refine_iterations):
-                refine_links(client, sol, links, files, config, progress)
-                sol = solve_graph(
-                    stems, links, config, reference=reference, vetoes=vetoes, judge=judge
-                )
-            timings["refine"] = time.perf_counter() - t
+        adjustment = _final_alignment(client, sol, (links, looks), files, config, progress, timings)
     sol = _with_unreadable(sol, stations, prepared)
     log.info("survey: %d of %d stations placed", len(sol.groups[0]), len(stations))
     return SurveyResult(
@@ -587,11 +509,34 @@ def run_survey(
         n_workers,
         time.perf_counter() - t_start,
         timings,
-        config.joint_refine,
+        adjustment is not None,
         stored,
         looks,
         vetoes,
+        adjustment,
+        frame,
     )
+
+
+def _final_alignment(
+    client: Any,
+    sol: GraphSolution,
+    found: tuple[list[Link], list[PairLook]],
+    files: dict[str, str],
+    config: SurveyConfig,
+    progress: Progress,
+    timings: dict[str, float],
+) -> Adjustment | None:
+    """The final joint alignment (:mod:`flexreg.survey.adjust`) when on; its poses replace
+    the solution's (in place). ``found``: the links and the last map check's pairs."""
+    if not config.joint_refine:
+        return None
+    t = time.perf_counter()
+    adjustment = adjust(client, sol, *found, files, config, progress)
+    if adjustment is not None:
+        sol.poses.update(adjustment.poses)
+    timings["refine"] = time.perf_counter() - t
+    return adjustment
 
 
 def _map_check(

@@ -338,6 +338,7 @@ def _link_row(i: int, lk: Mapping[str, Any], err: LinkError | None, weak: float)
     rmse = link_rmse(lk)
     d = err.rotation_deg if err else lk.get("loop_error_deg")
     t = err.translation_m if err else lk.get("loop_error_m")
+    unchecked = lk.get("loop_error") == "unchecked"  # closes no loop: no error to show
     verdict = lk.get("verdict")
     v = verdict.get("status") if isinstance(verdict, Mapping) else verdict
     cells = [
@@ -356,8 +357,8 @@ def _link_row(i: int, lk: Mapping[str, Any], err: LinkError | None, weak: float)
         x = strength.get(a)
         cells.append(_cell(_num(x, ".3f"), x, "weak" if x is not None and x < weak else ""))
     cells += [
-        _cell(_num(d, ".3f"), d),
-        _cell(_mm(t), t),
+        _cell("unchecked" if unchecked else _num(d, ".3f"), None if unchecked else d),
+        _cell("unchecked" if unchecked else _mm(t), None if unchecked else t),
         _cell("; ".join(link_reasons(lk)), cls="text"),
     ]
     return f'<tr class="link {kind}">' + "".join(cells) + "</tr>"
@@ -368,9 +369,9 @@ STATION_HEADERS = (
     ("placed", "whether the station has a pose in the reference frame"),
     ("group", "connected group of stations (each group in its own frame)"),
     (
-        "confidence",
-        "confident: placed through confident links; uncertain: only through "
-        "uncertain links confirmed by a loop",
+        "status",
+        "verified: within the tolerance and confirmed by an independent route; placed: within "
+        "it, one pair alone places it; outside tolerance: its error may exceed it; unplaced",
     ),
     ("x m", "position in the group's frame"),
     ("y m", "position in the group's frame"),
@@ -395,12 +396,14 @@ def _station_row(
     mmax = max((e.translation_m for e in es), default=None)
     placed = bool(st.get("placed"))
     g = group_of(st)
-    conf = st.get("confidence")
+    conf = st.get("status") or st.get("confidence")  # older documents: the confidence
     cells = [
         _cell(stem),
         _cell("yes" if placed else "NO", int(placed), "" if placed else "k-rejected"),
         _cell("–" if g is None else str(g), g),
-        _cell("–" if conf is None else str(conf), cls=f"k-{conf}" if conf else ""),
+        _cell(
+            "–" if conf is None else str(conf).replace("_", " "), cls=f"k-{conf}" if conf else ""
+        ),
         *(
             _cell(_num(None if p is None else p[k], ".3f"), None if p is None else p[k])
             for k in range(3)
@@ -448,9 +451,9 @@ def _outcome_line(f: ReportFigures) -> str:
     if f.outcome == "failed":
         return "Failed: no station could be registered to another (exit 1)."
     if f.outcome == "confident":
-        return "Done: every station is placed with confident links (exit 0)."
-    parts = []
-    if f.unplaced:
+        return "Done: every station is verified within the tolerance (exit 0)."
+    parts = [f.status_line] if f.status_line else []
+    if f.unplaced and not f.status_line:
         parts.append(_plural(len(f.unplaced), "station") + " not placed")
     if f.uncertain_links:
         parts.append(_plural(len(f.uncertain_links), "kept link") + " uncertain")

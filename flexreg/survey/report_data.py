@@ -138,8 +138,16 @@ def link_reasons(link: Mapping[str, Any]) -> list[str]:
 
 
 def station_reasons(station: Mapping[str, Any]) -> list[str]:
-    """Why a station is unplaced or unreadable, or where its stored pose disagrees, in words."""
-    own = [t for k in ("reason", "why", "error") for t in _texts(station.get(k))]
+    """Why a station is unplaced, unreadable or not verified, where its stored pose disagrees,
+    in words, and its 1-sigma accuracy."""
+    own = [t for k in ("reason", "why", "error", "status_why") for t in _texts(station.get(k))]
+    acc = station.get("accuracy")
+    if isinstance(acc, Mapping) and isinstance(acc.get("sigma_mm"), Mapping):
+        own.append(
+            "1σ "
+            + " / ".join(f"{k} {_float(v) or 0.0:.1f}" for k, v in acc["sigma_mm"].items())
+            + " mm"
+        )
     chk = station.get("stored_pose_check")
     if isinstance(chk, Mapping) and chk.get("agrees") is False:
         own.append(
@@ -318,6 +326,9 @@ def link_errors(doc: Mapping[str, Any]) -> list[LinkError | None]:
         if lk.get("status") != "accepted":
             out.append(None)
             continue
+        if lk.get("loop_error") == "unchecked":  # it closes no loop: it fits by construction
+            out.append(None)
+            continue
         d, m = _float(lk.get("loop_error_deg")), _float(lk.get("loop_error_m"))
         out.append(LinkError(d, m) if d is not None and m is not None else _computed_error(doc, lk))
     return out
@@ -348,6 +359,8 @@ class ReportFigures:
         Indices of the accepted links whose verdict is uncertain.
     problems : list of str
         The engine's one-line problems (``summary.problems``), when it gives them.
+    status_line : str
+        Stations per status on one line (``summary.status_line``; empty in older documents).
     """
 
     outcome: str
@@ -365,6 +378,7 @@ class ReportFigures:
     unplaced: list[str] = field(default_factory=list)
     uncertain_links: list[int] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    status_line: str = ""
 
 
 def _groups(doc: Mapping[str, Any]) -> tuple[dict[int, list[str]], dict[int, str]]:
@@ -455,5 +469,6 @@ def report_figures(
         unplaced=unplaced,
         uncertain_links=uncertain,
         problems=problems,
+        status_line=str(summary.get("status_line") or "") if isinstance(summary, Mapping) else "",
         **_stats(errs, doc),
     )

@@ -48,6 +48,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import FlexregError, InputError
 from flexreg.io import read_scan, read_working_scan
+from flexreg.io.origin import centring_problem, recentre
 from flexreg.io.pointcloud import is_mesh
 from flexreg.io.setups import list_setups
 from flexreg.registration.config import RegistrationConfig
@@ -92,12 +93,16 @@ class Station:
         The setup's index in a multi-setup file (None: the file holds one scan).
     setup_name : str or None
         The name the file gives the setup (E57 ``name``).
+    origin : (float, float, float) or None
+        Where the scanner stood in the file's frame, metres (``--origins``: points in project
+        coordinates); the station is registered about it (:mod:`flexreg.survey.frames`).
     """
 
     stem: str
     path: Path
     setup: int | None = None
     setup_name: str | None = None
+    origin: tuple[float, float, float] | None = None
 
     @property
     def ref(self) -> str:
@@ -420,10 +425,18 @@ def _read_and_prepare(
     ``prepare`` holds them)."""
     points_needed = config.refine and not uses_projective(config.icp, config.voxel_m)
     image: RangeImage | None = None
-    if points_needed or config.image == "intensity":
+    if points_needed or config.image == "intensity" or station.origin is not None:
         scan = read_scan(station.ref, intensity=config.image == "intensity")
+        if station.origin is not None:
+            scan = recentre(scan, station.origin)
     else:  # a PTX station straight into its points and its working image
         scan, image = read_working_scan(station.ref, max_pixels=config.max_image_pixels)
+    if image is None and station.origin is None and (why := centring_problem(scan)):
+        raise InputError(
+            station.path,
+            f"not centred on its scanner: {why}; give the scanner positions in the files' "
+            "frames with --origins FILE.csv (rows stem,x,y,z, metres)",
+        )
     n = len(scan)
     T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
     held: list[Any] = [scan, image]
@@ -452,7 +465,9 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     except OSError as e:
         return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
     conf = config_hash(config)
-    key = {"content": content, "config": conf, "setup": station.setup}
+    key: dict[str, Any] = {"content": content, "config": conf, "setup": station.setup}
+    if station.origin is not None:  # registered about another point: another entry
+        key["origin"] = [float(v) for v in station.origin]
     entry, npz = cache_paths(folder, content, conf, station.setup)
     hit = _cached(entry, npz, key)
     if hit is not None:

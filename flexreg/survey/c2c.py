@@ -1,0 +1,482 @@
+"""Cloud-to-cloud fit of two placed stations: the measurement of the survey's final joint
+alignment (:mod:`flexreg.survey.adjust`) and the per-link figures surveyors judge a
+registration by.
+
+Each station is reduced once to an *adjustment cloud*: its points voxel-averaged at
+``refine_voxel_m`` with normals (:func:`adjustment_cloud`, cached beside the prepared
+station). A pair is then aligned by robust point-to-plane ICP (Gauss-Newton, Tukey kernel) started
+from the relative pose the graph holds (written here, so that the same inputs give the same
+bits on every run), and measured at the result (:func:`fit_pair`):
+
+* ``T_target_source`` and its 6 x 6 information matrix, ordered (rx, ry, rz, tx, ty, tz) for a
+  perturbation of the source frame (``T_target_source @ exp(xi)``), as a GTSAM
+  ``BetweenFactorPose3(target, source)`` expects. Each correspondence contributes
+  ``J = [p x n', n']`` (``p`` the source point, ``n'`` the target normal turned into the
+  source frame) weighted by the Tukey weight of its residual over the residual variance.
+  Neighbouring points share their errors (mixed pixels, incidence, the voxel's own bias), so
+  every cell of :data:`CORRELATION_M` counts as one observation: the information of a cell
+  is the mean of its points' (not their sum), which keeps a million points from claiming
+  micrometres. The residuals themselves add the cluster-robust (sandwich) covariance of the
+  same cells (:func:`cluster_covariance`): errors a cell's points share (a surface's bias,
+  noise growing with range) enlarge it where the noise model alone would not; the pair's
+  covariance is the sum of the two;
+* the cloud-to-cloud figures (:func:`cloud_figures`), over the overlapping points (a target
+  point within ICP's final correspondence distance): the point-to-plane RMS of those within
+  the Tukey width (:data:`TUKEY_C` residual sigmas; mm), the share of them within 6 mm and
+  within 1 cm, the overlap (overlapping over all of the source's adjustment points) and the
+  balance (smallest over largest eigenvalue of the overlapping normals' scatter
+  ``sum n n^T``: 0 when every surface faces one way and a translation along them is free,
+  1 when the normals spread evenly; the geometric strength surveyors' tools show as
+  "balance").
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from flexreg.stages.normals import grid_normals, masked_xyz
+from flexreg.survey.stations import PREPARED_SUFFIX, load_prepared
+
+log = logging.getLogger(__name__)
+
+#: Tukey's constant for 95 % efficiency under Gaussian residuals (times the residual sigma)
+TUKEY_C = 4.685
+#: side of the cell that keeps one source point, in voxels (ICP's cost grows with the moved
+#: side's points, its accuracy with the target's density)
+CELL_VOXELS = 10
+#: side of the cell whose points count as one independent observation, metres: a scan's
+#: systematic errors (mixed pixels, incidence, range bias of one surface) are shared over
+#: metres of surface; the points of one cell average their noise but not these (2 m: the
+#: stations' true errors on the tuning projects were within 3 sigma, 1 m left 10 % outside)
+CORRELATION_M = 2.0
+#: residual limits of the per-link figures, metres (ReCap's 6 mm; the 1 cm outer limit)
+WITHIN_M = (0.006, 0.010)
+#: most Gauss-Newton steps of one ICP stage
+ICP_ITERATIONS = 30
+#: MAD to sigma for Gaussian residuals
+MAD_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class CloudFigures:
+    """The cloud-to-cloud figures of one pair at one relative pose.
+
+    Attributes
+    ----------
+    rms_mm : float or None
+        Point-to-plane RMS of the overlapping points within the inlier distance, mm (None:
+        no point overlaps).
+    within_6mm, within_1cm : float
+        Shares (0..1) of the overlapping points whose point-to-plane distance is under 6 mm
+        and 1 cm.
+    overlap : float
+        Overlapping points over the source's adjustment points (0..1).
+    balance : float
+        Smallest over largest eigenvalue of ``sum n n^T`` of the overlapping target normals
+        (0..1).
+    points : int
+        Overlapping points (the denominator of ``within_*``).
+    source_points : int
+        Source adjustment points (the denominator of ``overlap``).
+    """
+
+    rms_mm: float | None
+    within_6mm: float
+    within_1cm: float
+    overlap: float
+    balance: float
+    points: int
+    source_points: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rms_mm": None if self.rms_mm is None else round(self.rms_mm, 3),
+            "within_6mm": round(self.within_6mm, 4),
+            "within_1cm": round(self.within_1cm, 4),
+            "overlap": round(self.overlap, 4),
+            "balance": round(self.balance, 4),
+            "points": self.points,
+            "source_points": self.source_points,
+        }
+
+
+@dataclass(frozen=True)
+class PairFit:
+    """One pair aligned on its overlapping points.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+    information : (6, 6) float64
+        (rx, ry, rz, tx, ty, tz), source-frame perturbation, 1 / (rad^2, m^2).
+    sigma_m : float
+        Robust sigma of the point-to-plane residuals (metres).
+    figures : CloudFigures
+    """
+
+    T_target_source: NDArray[np.float64]
+    information: NDArray[np.float64]
+    sigma_m: float
+    figures: CloudFigures
+
+
+def cloud_path(cache_file: str, voxel_m: float) -> str:
+    """Where the adjustment cloud of a prepared station is kept (beside it, named after its
+    content key and the voxel in tenths of a millimetre)."""
+    base = cache_file.removesuffix(PREPARED_SUFFIX)
+    return f"{base}.adjust-{round(voxel_m * 1e4):d}.npz"
+
+
+def _usable(path: str) -> bool:
+    """Whether a kept adjustment cloud is whole (else it is made again): the arrays, shapes
+    and types it was written with, read without pickles."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            p, n, k, r = z["points"], z["normals"], z["sparse"], z["median_range_m"]
+            return bool(
+                p.ndim == 2
+                and p.shape[1] == 3
+                and n.shape == p.shape
+                and p.dtype == n.dtype == np.float32
+                and k.ndim == 1
+                and k.dtype == np.int64
+                and (len(k) == 0 or (int(k.min()) >= 0 and int(k.max()) < len(p)))
+                and r.shape == ()
+                and np.isfinite(r)
+                and np.isfinite(p).all()
+                and np.isfinite(n).all()
+            )
+    except (OSError, ValueError, KeyError, EOFError):
+        return False
+
+
+def adjustment_cloud(cache_file: str, voxel_m: float) -> str:
+    """Write (once) the adjustment cloud of a prepared station; returns its path (a task).
+
+    The station's valid points with their grid normals (:func:`flexreg.stages.normals.
+    grid_normals`: from the scan's own rows and columns, so far and sparse surfaces get
+    them as well as near ones; none across depth jumps), averaged per ``voxel_m`` voxel
+    (points whose normals disagree within a voxel, an edge, are dropped), and the median
+    range of the points (metres). Kept
+    as float32 in the scanner frame, so the file is about 1/50 of the station at 2 cm.
+    """
+    out = cloud_path(cache_file, voxel_m)
+    if os.path.isfile(out):
+        if _usable(out):
+            return out
+        log.warning("%s: unusable cache entry; making the adjustment cloud again", out)
+    import open3d as o3d
+
+    image = load_prepared(cache_file).image
+    nrm = grid_normals(image)
+    keep = image.valid & np.isfinite(nrm).all(axis=-1)  # no normal across depth jumps
+    pts = np.asarray(masked_xyz(image)[keep], dtype=np.float64)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd.normals = o3d.utility.Vector3dVector(np.asarray(nrm[keep], dtype=np.float64))
+    del nrm
+    pcd = pcd.voxel_down_sample(voxel_m)  # points and normals averaged per voxel
+    p = np.asarray(pcd.points, dtype=np.float32)
+    n = np.asarray(pcd.normals, dtype=np.float64)
+    length = np.linalg.norm(n, axis=1)
+    p, n = p[length > 0.5], (n[length > 0.5] / length[length > 0.5, None]).astype(np.float32)
+    median_range = float(np.median(np.linalg.norm(pts, axis=1))) if len(pts) else 0.0
+    cells = np.floor(p / np.float32(CELL_VOXELS * voxel_m)).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)  # one point per coarse cell
+    tmp = f"{out}.{os.getpid()}.tmp.npz"
+    np.savez(
+        tmp,
+        points=p,
+        normals=n,
+        sparse=np.sort(first).astype(np.int64),
+        median_range_m=np.float64(median_range),
+    )
+    os.replace(tmp, out)
+    return out
+
+
+def read_cloud(
+    path: str, *, sparse: bool = False
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Points (N, 3), normals (N, 3) float64 and median range (m) of an adjustment cloud;
+    ``sparse``: only one point per cell of :data:`CELL_VOXELS` voxels (the side that is
+    moved: ICP's cost grows with it, its accuracy with the target's density)."""
+    with np.load(path, allow_pickle=False) as z:
+        keep = z["sparse"] if sparse else slice(None)
+        return (
+            z["points"][keep].astype(np.float64),
+            z["normals"][keep].astype(np.float64),
+            float(z["median_range_m"]),
+        )
+
+
+def median_range(path: str) -> float:
+    """The median range of a station's points, metres (its lever arm for rotations)."""
+    with np.load(path, allow_pickle=False) as z:
+        return float(z["median_range_m"])
+
+
+def _correspond(
+    tgt: NDArray[np.float64],
+    tgt_n: NDArray[np.float64],
+    src: NDArray[np.float64],
+    T: NDArray[np.float64],
+    max_m: float,
+    tree: Any,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """Source indices, target indices and signed point-to-plane residuals (m) of the source
+    points with a target point within ``max_m`` at ``T``."""
+    moved = src @ T[:3, :3].T + T[:3, 3]
+    d, j = tree.query(moved, k=1, distance_upper_bound=max_m)
+    i = np.flatnonzero(np.isfinite(d))
+    j = j[i]
+    r = np.einsum("ij,ij->i", moved[i] - tgt[j], tgt_n[j])
+    return i, j, r
+
+
+def cloud_figures(
+    tgt: NDArray[np.float64],
+    tgt_n: NDArray[np.float64],
+    src: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    max_m: float,
+    *,
+    inlier_m: float | None = None,
+    tree: Any = None,
+) -> CloudFigures:
+    """The cloud-to-cloud figures of ``src`` moved by ``T_target_source`` against ``tgt``.
+
+    Parameters
+    ----------
+    tgt, tgt_n : (M, 3) float64
+        Target points and unit normals, metres.
+    src : (N, 3) float64
+        Source points, metres.
+    T_target_source : (4, 4) float64
+    max_m : float
+        Correspondence distance: a source point with a target point within it overlaps.
+    inlier_m : float, optional
+        The RMS is of the overlapping points whose point-to-plane distance is under this
+        (default ``max_m``): the inlier RMS, as Open3D's ``inlier_rmse``; the shares within
+        6 mm and 1 cm are of every overlapping point.
+
+    Examples
+    --------
+    Two points of a floor 2 mm and 8 mm above a target floor of four points:
+
+    >>> import numpy as np
+    >>> tgt = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    >>> n = np.tile([0.0, 0.0, 1.0], (4, 1))
+    >>> src = np.array([[0, 0, 0.002], [1, 1, 0.008], [9, 9, 9]], float)
+    >>> f = cloud_figures(tgt, n, src, np.eye(4), 0.05)
+    >>> round(f.rms_mm, 3), f.within_6mm, f.within_1cm, round(f.overlap, 3), f.points
+    (5.831, 0.5, 1.0, 0.667, 2)
+    """
+    from scipy.spatial import cKDTree
+
+    tree = tree if tree is not None else cKDTree(tgt)
+    i, j, r = _correspond(tgt, tgt_n, src, np.asarray(T_target_source, np.float64), max_m, tree)
+    k = len(i)
+    if k == 0:
+        return CloudFigures(None, 0.0, 0.0, 0.0, 0.0, 0, len(src))
+    a = np.abs(r)
+    n = tgt_n[j]
+    ev = np.linalg.eigvalsh(n.T @ n)
+    inl = r[a < (inlier_m if inlier_m is not None else max_m)]
+    return CloudFigures(
+        rms_mm=float(np.sqrt(np.mean(inl * inl)) * 1e3) if len(inl) else None,
+        within_6mm=float(np.mean(a < WITHIN_M[0])),
+        within_1cm=float(np.mean(a < WITHIN_M[1])),
+        overlap=k / len(src),
+        balance=float(max(ev[0], 0.0) / ev[-1]) if ev[-1] > 0 else 0.0,
+        points=k,
+        source_points=len(src),
+    )
+
+
+def jacobian(p: NDArray[np.float64], n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(K, 6) derivatives of point-to-plane residuals ``n . (T exp(xi) p - q)`` by ``xi`` =
+    (rx, ry, rz, tx, ty, tz) at ``xi = 0``: ``[p x n, n]`` (``p`` source points, ``n`` the
+    target normals turned into the source frame)."""
+    return np.hstack([np.cross(p, n), n])
+
+
+def information(
+    src_pts: NDArray[np.float64],
+    normals_src: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    sigma_m: float,
+    cell_m: float,
+) -> NDArray[np.float64]:
+    """The 6 x 6 information of a point-to-plane fit, (rx, ry, rz, tx, ty, tz) for a
+    perturbation of the source frame.
+
+    Parameters
+    ----------
+    src_pts : (K, 3) float64
+        Overlapping source points, source frame, metres.
+    normals_src : (K, 3) float64
+        Their target normals turned into the source frame.
+    weights : (K,) float64
+        Robust weights 0..1.
+    sigma_m : float
+        Residual sigma, metres.
+    cell_m : float
+        Points within one cell of this side count as one observation (mean, not sum).
+    """
+    J = jacobian(src_pts, normals_src)
+    cells = np.floor(src_pts / cell_m).astype(np.int64)
+    _, inv, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    w = weights / counts[inv.ravel()]
+    return (J * w[:, None]).T @ J / (sigma_m * sigma_m)
+
+
+def cluster_covariance(
+    src_pts: NDArray[np.float64],
+    normals_src: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    residuals_m: NDArray[np.float64],
+    cell_m: float,
+) -> NDArray[np.float64]:
+    """The cluster-robust ("sandwich") covariance of a point-to-plane fit, 6 x 6,
+    (rx, ry, rz, tx, ty, tz) for a perturbation of the source frame, rad^2 and m^2.
+
+    ``H^-1 S H^-1`` with ``H = sum w J^T J`` and ``S`` the scatter of the cells' scores
+    ``g_c = sum_(i in c) w_i r_i J_i`` (times ``C / (C - 1)`` for ``C`` cells): what the
+    residuals themselves say, so errors shared within a cell (a surface's bias, noise that
+    grows with range) enlarge it where the model of independent noise cannot.
+
+    Examples
+    --------
+    Residuals of zero leave nothing to add:
+
+    >>> import numpy as np
+    >>> p = np.array([[0.5, 0.5, 0.0], [1.5, 0.5, 0.0]]); n = np.tile([0.0, 0, 1], (2, 1))
+    >>> float(np.abs(cluster_covariance(p, n, np.ones(2), np.zeros(2), 1.0)).max())
+    0.0
+    """
+    J = jacobian(src_pts, normals_src)
+    cells = np.floor(src_pts / cell_m).astype(np.int64)
+    _, inv, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    c = len(counts)
+    g = np.zeros((c, 6))
+    np.add.at(g, inv.ravel(), J * (weights * residuals_m)[:, None])
+    S = g.T @ g * (c / (c - 1) if c > 1 else 1.0)
+    H = (J * weights[:, None]).T @ J
+    Hi = np.linalg.pinv(H)
+    return Hi @ S @ Hi
+
+
+def _icp(
+    tgt: NDArray[np.float64],
+    tgt_n: NDArray[np.float64],
+    tree: Any,
+    src: NDArray[np.float64],
+    T0: NDArray[np.float64],
+    max_m: float,
+    k_m: float,
+) -> NDArray[np.float64]:
+    """Point-to-plane ICP with Tukey weights (width ``k_m``) on correspondences within
+    ``max_m``: Gauss-Newton steps ``T <- T exp(xi)`` until a step is under 1e-7 rad / 1 um
+    or :data:`ICP_ITERATIONS` are made. Written here rather than Open3D's so that the same
+    inputs give the same bits (its parallel sums do not)."""
+    from scipy.spatial.transform import Rotation
+
+    T = np.array(T0, dtype=np.float64)
+    for _ in range(ICP_ITERATIONS):
+        i, j, r = _correspond(tgt, tgt_n, src, T, max_m, tree)
+        if len(i) < 6:
+            break
+        u = np.clip(np.abs(r) / k_m, 0.0, 1.0)
+        w = (1.0 - u * u) ** 2
+        n_s = tgt_n[j] @ T[:3, :3]
+        J = jacobian(src[i], n_s)
+        Jw = J * w[:, None]
+        H = Jw.T @ J
+        try:
+            xi = -np.linalg.solve(H + np.eye(6) * 1e-12 * max(np.trace(H), 1e-12), Jw.T @ r)
+        except np.linalg.LinAlgError:
+            break
+        step = np.eye(4)
+        step[:3, :3] = Rotation.from_rotvec(xi[:3]).as_matrix()
+        step[:3, 3] = xi[3:]
+        T = T @ step
+        if np.linalg.norm(xi[:3]) < 1e-7 and np.linalg.norm(xi[3:]) < 1e-6:
+            break
+    return T
+
+
+def fit_pair(
+    target_cloud: str, source_cloud: str, T_init: NDArray[np.float64], voxel_m: float
+) -> PairFit:
+    """Align two stations' adjustment clouds by robust point-to-plane ICP from ``T_init`` and
+    measure the result (a task; see the module).
+
+    Three stages of point-to-plane ICP with a Tukey kernel (:func:`_icp`): correspondences
+    within 8 and then 3 voxels (kernel 4 and 1.5 voxels), then within three kernel widths of
+    the residuals' own robust sigma (kernel :data:`TUKEY_C` sigma), so the final weights come
+    from the scans' noise, not from a set distance.
+
+    Raises
+    ------
+    ValueError
+        Fewer than six points overlap.
+    """
+    from scipy.spatial import cKDTree
+
+    tgt, tgt_n, _ = read_cloud(target_cloud)
+    src, _, _ = read_cloud(source_cloud, sparse=True)
+    T = np.asarray(T_init, dtype=np.float64)
+    if len(tgt) < 6 or len(src) < 6:
+        raise ValueError("too few points to align")
+    tree = cKDTree(tgt)
+    T = _icp(tgt, tgt_n, tree, src, T, 8 * voxel_m, 4 * voxel_m)
+    T = _icp(tgt, tgt_n, tree, src, T, 3 * voxel_m, 1.5 * voxel_m)
+    _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree)
+    sigma = _robust_sigma(r, voxel_m)
+    k = TUKEY_C * sigma
+    T = _icp(tgt, tgt_n, tree, src, T, 3 * k, k)
+    i, j, r = _correspond(tgt, tgt_n, src, T, 3 * k, tree)
+    sigma = _robust_sigma(r, voxel_m)
+    k = TUKEY_C * sigma
+    u = np.clip(np.abs(r) / k, 0.0, 1.0)
+    w = (1.0 - u * u) ** 2
+    n_src = tgt_n[j] @ T[:3, :3]  # target normals in the source frame
+    model = information(src[i], n_src, w, sigma, CORRELATION_M)
+    cov = np.linalg.pinv(model) + cluster_covariance(src[i], n_src, w, r, CORRELATION_M)
+    info = np.linalg.pinv(0.5 * (cov + cov.T))
+    figures = cloud_figures(tgt, tgt_n, src, T, 3 * k, inlier_m=k, tree=tree)
+    if len(i) < 6 or figures.rms_mm is None:
+        raise ValueError("too few overlapping points to align")
+    return PairFit(T, info, sigma, figures)
+
+
+def _robust_sigma(r: NDArray[np.float64], voxel_m: float) -> float:
+    """Robust sigma (1.4826 MAD) of residuals, metres; never under a twentieth of a voxel
+    (the averaging floor of a voxel's points)."""
+    floor = voxel_m / 20
+    if len(r) < 6:
+        return max(voxel_m, floor)
+    return max(float(MAD_SIGMA * np.median(np.abs(r - np.median(r)))), floor)
+
+
+__all__ = [
+    "CELL_VOXELS",
+    "CORRELATION_M",
+    "CloudFigures",
+    "PairFit",
+    "adjustment_cloud",
+    "cloud_figures",
+    "cloud_path",
+    "cluster_covariance",
+    "fit_pair",
+    "information",
+    "jacobian",
+    "median_range",
+    "read_cloud",
+]

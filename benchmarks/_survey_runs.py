@@ -47,6 +47,7 @@ FLEXREG = PYTHON.with_name("flexreg")
 # acceptance criteria (issue 18)
 SUCCESS_ROT_DEG, SUCCESS_TRANS_M = 0.05, 0.01  # a station within these of the truth
 WRONG_ROT_DEG, WRONG_TRANS_M = 1.0, 0.10  # a placed station beyond either is placed wrongly
+RADIUS_95 = float(np.sqrt(7.815))  # poses.json's 95 % radius over the largest 1-sigma axis
 TARGET_SUCCESS = 0.95
 
 METHODS = ("survey", "multiway")
@@ -301,8 +302,26 @@ def evaluate(doc: dict[str, Any], gt: dict[str, Any]) -> dict[str, Any]:
             )
         else:
             rec.update(rot_deg=None, trans_m=None, cross_site=False, wrong=False, success=False)
+        rec.update(_sigma_check(st, rec))
         records.append(rec)
     return _summary(records, doc, groups, fused, truth)
+
+
+def _sigma_check(st: dict[str, Any], rec: dict[str, Any]) -> dict[str, Any]:
+    """The station's status and stated 1-sigma accuracy (largest axis, translation and
+    rotation), and whether its true error is within 3 sigma of both (None: no sigma or no
+    error to compare, e.g. the reference)."""
+    acc = st.get("accuracy")
+    out: dict[str, Any] = {"status": st.get("status"), "sigma_m": None, "sigma_deg": None}
+    out["covered"] = None
+    if acc is None or rec.get("trans_m") is None:
+        return out
+    out["sigma_m"] = acc["radius95_mm"] / RADIUS_95 / 1e3
+    out["sigma_deg"] = max(acc["sigma_deg"].values())
+    out["covered"] = bool(
+        rec["trans_m"] <= 3 * out["sigma_m"] and rec["rot_deg"] <= 3 * out["sigma_deg"]
+    )
+    return out
 
 
 def _pose_in_group(st: dict[str, Any], ref: str | None) -> tuple[np.ndarray | None, str | None]:
@@ -341,6 +360,24 @@ def _summary(
         "fused_groups": len(fused),
         "links_attempted": len(links),
         "links_accepted": sum(1 for lk in links if lk.get("status") == "accepted"),
+        "statuses": {
+            k: sum(r.get("status") == k for r in records)
+            for k in ("verified", "placed", "outside_tolerance", "unplaced")
+        },
+        # placed stations the survey called verified or placed (within tolerance) that are not
+        "claimed_within_but_outside": [
+            r["station"]
+            for r in records
+            if r.get("status") in ("verified", "placed")
+            and r["placed"]
+            and not r["success"]
+            and r["rot_deg"] is not None
+            and r["trans_m"] is not None
+            and r["trans_m"] > 0
+            and r["station"] != doc.get("reference")
+        ],
+        "sigma_checked": sum(r.get("covered") is not None for r in records),
+        "sigma_covered": sum(bool(r.get("covered")) for r in records),
         "median_rot_deg": float(np.median(rot)) if rot else None,
         "max_rot_deg": float(np.max(rot)) if rot else None,
         "median_trans_m": float(np.median(trans)) if trans else None,

@@ -237,3 +237,14 @@ def test_config_docs_lists_every_field(tmp_path):
     stale.write_text("# x\n<!-- generated: commands -->\nold\n<!-- end generated: commands -->\n")
     assert run_cli(["config", "docs", "--update", stale])[0] == 0
     assert "old" not in stale.read_text() and "`RegistrationConfig` | 64" in stale.read_text()
+
+
+def test_a_misspelt_survey_set_names_the_closest_field(tmp_path):
+    """``survey --set`` takes fields of the survey and of its registration alike: a misspelt
+    one names the closest of both, in one line, before anything is read."""
+    for given, meant in (("neighbors=2", "neighbours"), ("tolerance_m=5", "tolerance_mm"),
+                         ("treshold_m=0.05", "threshold_m")):  # fmt: skip
+        rc, _, err = run_cli(["survey", tmp_path, "--out", tmp_path / "o", "--set", given])
+        assert rc == 1
+        assert one_error_line(err).endswith(f"; did you mean {meant}?")
+    assert not (tmp_path / "o").exists()

@@ -18,6 +18,7 @@ from flexreg.cli.options import (
     check_outputs,
     removed_line,
 )
+from flexreg.config import did_you_mean
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.survey.config import SurveyConfig
@@ -175,7 +176,11 @@ def _configs(
         elif key in RegistrationConfig.model_fields:
             reg_sets.append(item)
         else:
-            raise ConfigError(f"--set {key}: no such field of the survey or the registration")
+            known = [*SurveyConfig.model_fields, *RegistrationConfig.model_fields]
+            raise ConfigError(
+                f"--set {key}: no such field of the survey or the registration"
+                + did_you_mean(key, known)
+            )
     pairs_file = None
     if pairs is not None and pairs not in ("auto", "all", "sequential"):
         pairs_file = Path(pairs)

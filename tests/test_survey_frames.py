@@ -154,3 +154,16 @@ def test_e57_setups_keep_their_names_and_site_frame(tmp_path) -> None:
     from flexreg.io.setups import list_setups
 
     assert [s.name for s in list_setups(out / "site.e57")] == ["Scan 001", "Scan 002", "Scan 003"]
+
+
+def test_a_stored_identity_pose_counts_when_the_file_says_so() -> None:
+    """A 3DTK ``.pose`` file holding the identity (the first scan) is a stored pose; an E57 or
+    PTX identity means none; an old cache entry that does not say keeps the old reading."""
+    from flexreg.survey.stations import _stored_pose
+
+    eye, T = np.eye(4), pose((0.0, 0.0, 0.4), (1.0, 2.0, 0.0))
+    np.testing.assert_array_equal(_stored_pose(eye, True), eye)
+    assert _stored_pose(eye, False) is None and _stored_pose(eye, None) is None
+    np.testing.assert_array_equal(_stored_pose(T, None), T)
+    assert _stored_pose(T, False) is None
+    assert _stored_pose(np.diag([2.0, 1, 1, 1]), True) is None  # not rigid

@@ -48,6 +48,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import is_rigid
 from flexreg.errors import FlexregError, InputError
 from flexreg.io import read_scan, read_working_scan
+from flexreg.io.info import pose_stored
 from flexreg.io.origin import centring_problem, recentre
 from flexreg.io.pointcloud import is_mesh
 from flexreg.io.setups import list_setups
@@ -415,9 +416,10 @@ def read_prepared(path: Path | str) -> tuple[PreparedScan, dict[str, Any]]:
 
 def _read_and_prepare(
     station: Station, config: RegistrationConfig
-) -> tuple[PreparedScan, int, NDArray[np.float64]]:
-    """The station read and prepared at the lowest peak memory, its number of points and its
-    stored pose. No intensities unless the feature image reads them; the checks' inputs after
+) -> tuple[PreparedScan, int, NDArray[np.float64], bool]:
+    """The station read and prepared at the lowest peak memory, its number of points, its
+    stored pose and whether the file stores one (:func:`flexreg.io.info.pose_stored`). No
+    intensities unless the feature image reads them; the checks' inputs after
     the feature stages (``overlap=False``); when the refinement reads only the range images,
     a PTX station is read straight into its points and working image
     (:func:`~flexreg.io.read_working_scan`: no grid index), and the points are let go once
@@ -439,12 +441,13 @@ def _read_and_prepare(
         )
     n = len(scan)
     T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
+    explicit = pose_stored(scan)  # a 3DTK .pose file holding the identity is a pose
     held: list[Any] = [scan, image]
     del scan, image  # only prepare holds them now, and lets go of them when it can
     prepared = Registration(config).prepare(
         held.pop(0), image=held.pop(), overlap=False, keep_scan=points_needed
     )
-    return _compact(prepared), n, T_world
+    return _compact(prepared), n, T_world, explicit
 
 
 def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig) -> Prepared:
@@ -475,7 +478,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         dt = time.perf_counter() - t0
         return Prepared(station.stem, str(entry), n, False, dt, None, T_stored, fingerprint)
     try:
-        prepared, n, T_world = _read_and_prepare(station, config)
+        prepared, n, T_world, explicit = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
     g = global_descriptor(prepared)
@@ -486,12 +489,14 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         "binary": np.bool_(g.binary),
         "n_points": np.int64(n),
         "T_world_scanner": T_world,
+        "pose_stored": np.bool_(explicit),
     }
     write_entry(npz, "global", {k: np.asarray(v) for k, v in arrays.items()}, key)
     save_prepared(prepared, entry, **key)
     log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
     dt = time.perf_counter() - t0
-    return Prepared(station.stem, str(entry), n, True, dt, None, _stored_pose(T_world), fingerprint)
+    T_stored = _stored_pose(T_world, explicit)
+    return Prepared(station.stem, str(entry), n, True, dt, None, T_stored, fingerprint)
 
 
 def _cached(
@@ -506,7 +511,8 @@ def _cached(
         if {k: meta.get(k) for k in key} != key:
             raise CacheEntryError("made of another scan or configuration")
         n = int(z["n_points"])
-        stored = _stored_pose(z["T_world_scanner"])
+        said = bool(z["pose_stored"]) if "pose_stored" in z else None  # older entries: None
+        stored = _stored_pose(z["T_world_scanner"], said)
         if z["points"].shape != (len(z["descriptors"]), 3) or z["binary"].shape != ():
             raise CacheEntryError("not a global descriptor")
         found = (n, stored)
@@ -545,11 +551,14 @@ def unchanged(path: Path, fingerprint: tuple[int, int, str]) -> bool:
         return False
 
 
-def _stored_pose(T: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """A stored pose worth using: rigid and not the identity (which files write when they
-    store none)."""
+def _stored_pose(T: NDArray[np.float64], stored: bool | None = None) -> NDArray[np.float64] | None:
+    """A stored pose worth using: rigid, and stored (``stored``: whether the file says it
+    stores one; None: unknown, then the identity, which files write when they store none,
+    counts as none)."""
     T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not is_rigid(T) or np.allclose(T, np.eye(4), rtol=0.0, atol=1e-12):
+    if T.shape != (4, 4) or not is_rigid(T) or stored is False:
+        return None
+    if stored is None and np.allclose(T, np.eye(4), rtol=0.0, atol=1e-12):
         return None
     return T
 

@@ -98,6 +98,17 @@ def rng():
     return np.random.default_rng(12345)
 
 
+@pytest.fixture(autouse=True)
+def _wide_consoles(monkeypatch):
+    """The command line's consoles wide for every test: what a test reads in a table must
+    not depend on the COLUMNS the test run inherited (long temporary paths are cut or
+    wrapped at 80 columns)."""
+    from flexreg.cli import _common
+
+    monkeypatch.setattr(_common.console, "width", 400)
+    monkeypatch.setattr(_common.err_console, "width", 400)
+
+
 def run_cli(argv: list) -> tuple[int, str, str]:
     """Run ``flexreg`` in-process: (exit status, stdout, stderr)."""
     from flexreg.cli import run

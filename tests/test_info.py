@@ -27,15 +27,6 @@ def _room(n: int = 600, seed: int = 0) -> np.ndarray:
     return d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(2.0, 8.0, size=(n, 1))
 
 
-@pytest.fixture(autouse=True)
-def _wide_console(monkeypatch):
-    """Tables one row per line whatever COLUMNS the test run inherited (long temporary
-    paths would wrap at 80 columns)."""
-    from flexreg.cli._common import console
-
-    monkeypatch.setattr(console, "width", 400)
-
-
 @pytest.fixture(scope="module")
 def six_setups(tmp_path_factory):
     """An E57 with six setups, the last without a pose."""

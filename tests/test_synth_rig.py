@@ -169,4 +169,6 @@ def test_calibrate_takes_synth_camera_json_and_the_truth(tmp_path, rig):
     args += ["--scan", str(rig / "station_00.ptx"), "--pairs", str(pairs), "--out", str(out)]
     assert run([*args, "--truth", str(rig / "gt.json")]) == 0
     err = json.loads(out.read_text())["error_vs_truth"]
-    assert err["rotation_deg"] < 1e-6 and err["translation_m"] < 1e-6
+    # exact pairs, but written to CSV with finite decimals and solved to the solver's own
+    # stopping tolerance: far under the 0.1 deg / 1 cm that counts, not to the last bit
+    assert err["rotation_deg"] < 1e-4 and err["translation_m"] < 1e-4

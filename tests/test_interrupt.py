@@ -58,6 +58,13 @@ def write_station(path: Path, height: int, width: int, offset, seed: int) -> Non
     write_scan(path, Scan.from_organized(room(height, width, offset, seed), name=path.stem))
 
 
+def _default_sigint() -> None:
+    """In the child: Ctrl-C as a terminal delivers it, whatever the test run inherited (a
+    suite started in the background of a non-interactive shell ignores SIGINT, and Python
+    then leaves it ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(argv: list[str], cwd: Path) -> subprocess.Popen:
     env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
     return subprocess.Popen(
@@ -67,6 +74,7 @@ def start(argv: list[str], cwd: Path) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        preexec_fn=_default_sigint,
     )
 
 

@@ -622,6 +622,32 @@ def _mm(m: float) -> str:
     return f"{1000 * m:.2f} mm" if math.isfinite(m) else "n/a"
 
 
+def keypoints_line(result: RegistrationResult, config: RegistrationConfig) -> str:
+    """The summary's keypoint line: how many matched pairs are inliers, and, when the pose
+    was not fitted to them (found from the plan view), that it was not.
+
+    >>> from types import SimpleNamespace as NS
+    >>> cfg = NS(features="sift", image="flexion")
+    >>> r = NS(inliers=0, matches=1, threshold_m=0.05,
+    ...        verdict=NS(evidence={"inliers": {"fit_to_matches": False}}))
+    >>> keypoints_line(r, cfg)  # doctest: +NORMALIZE_WHITESPACE
+    '0 of 1 matched keypoint pairs are inliers (0.0 %) within 50.0 mm (sift on flexion);
+     the pose is from the plan view, not fitted to them'
+    >>> r.verdict.evidence["inliers"]["fit_to_matches"] = True
+    >>> keypoints_line(r, cfg).endswith("(sift on flexion)")
+    True
+    """
+    r = result
+    share = 100 * r.inliers / r.matches if r.matches else 0.0
+    ev = r.verdict.evidence.get("inliers") if r.verdict is not None else None
+    from_matches = not isinstance(ev, dict) or ev.get("fit_to_matches", True)
+    return (
+        f"{r.inliers:,} of {r.matches:,} matched keypoint pairs are inliers ({share:.1f} %) "
+        f"within {1000 * r.threshold_m:.1f} mm ({config.features} on {config.image})"
+        + ("" if from_matches else "; the pose is from the plan view, not fitted to them")
+    )
+
+
 def _print_summary(
     result: RegistrationResult,
     config: RegistrationConfig,
@@ -657,12 +683,7 @@ def _print_summary(
                 f"fitness {o.open3d_fitness:.4f}, inlier_rmse {_mm(o.open3d_inlier_rmse_m)} "
                 f"(evaluate_registration at {_mm(o.distance_m)}, the same clouds)",
             )
-    share = 100 * r.inliers / r.matches if r.matches else 0.0
-    t.add_row(
-        "keypoints",
-        f"{r.inliers:,} of {r.matches:,} matched keypoint pairs are inliers ({share:.1f} %) "
-        f"within {1000 * r.threshold_m:.1f} mm ({config.features} on {config.image})",
-    )
+    t.add_row("keypoints", keypoints_line(r, config))
     t.add_row("inlier RMSE", f"{_mm(r.inlier_rmse_m)} ({final})")
     t.add_row("stage fitness", f"{r.fitness:.3f} of {r.fitness_denominator}")
     t.add_row("prior", r.prior)

@@ -307,9 +307,12 @@ def _optimise_robust(
         )
 
 
-def _two_edge_connected(stems: list[str], ref: str, edges: list[tuple[str, str]]) -> set[str]:
-    """Stations still joined to ``ref`` after any one edge is removed."""
-    cut = bridges(edges)
+def _two_edge_connected(
+    stems: list[str], ref: str, edges: list[tuple[str, str]], cut: set[int] | None = None
+) -> set[str]:
+    """Stations still joined to ``ref`` after any one edge is removed (``cut``: the edges'
+    :func:`~flexreg.survey.links.bridges`, when known)."""
+    cut = bridges(edges) if cut is None else cut
     adj: dict[str, list[str]] = {s: [] for s in stems}
     for j, (x, y) in enumerate(edges):
         if j not in cut:
@@ -475,7 +478,7 @@ def _finish(
                 covs[s] = factor * np.asarray(marg.marginalCovariance(key[s]))
     except (RuntimeError, IndexError):  # an indeterminate system: a station no pair fixes
         covs = {}
-    confirmed = _two_edge_connected(stems, ref, edges)
+    confirmed = _two_edge_connected(stems, ref, edges, alone)
     touched = {s for p in used for s in (p.target, p.source)}
     for s in stems:
         if s == ref:

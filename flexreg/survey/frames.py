@@ -31,6 +31,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.transforms import make_transform, nearest_rotation
 from flexreg.errors import InputError
 
 Matrix = NDArray[np.float64]
@@ -39,9 +40,7 @@ Frame = Literal["reference", "stored"]
 
 def shift(origin: Any) -> Matrix:
     """The 4 x 4 translation by ``origin`` (metres)."""
-    T = np.eye(4)
-    T[:3, 3] = np.asarray(origin, dtype=np.float64)
-    return T
+    return make_transform(np.eye(3), origin)
 
 
 def read_origins_csv(path: Path, stems: list[str]) -> dict[str, tuple[float, float, float]]:
@@ -132,13 +131,10 @@ def _mean_tie(poses: dict[str, Matrix], stored: dict[str, Matrix], tie: list[str
     """``T_site_reference`` that best maps the registered poses of ``tie`` onto their stored
     ones: the chordal mean of the rotations ``R_site_k @ R_reference_k^T`` (SVD of their sum)
     and the mean translation that rotation leaves."""
-    Rs = [stored[k][:3, :3] @ poses[k][:3, :3].T for k in tie]
-    U, _, Vt = np.linalg.svd(np.sum(Rs, axis=0))
-    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    # the stations agree (within degrees), so the sum of their rotations is near a rotation
+    R = nearest_rotation(np.sum([stored[k][:3, :3] @ poses[k][:3, :3].T for k in tie], axis=0))
     t = np.mean([stored[k][:3, 3] - R @ poses[k][:3, 3] for k in tie], axis=0)
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
+    return make_transform(R, t)
 
 
 def file_correction(T_site_station: Matrix, origin: Any) -> Matrix:

@@ -76,7 +76,9 @@ SECTION = "## Verdict"
 LOW, HIGH = (1024, 512), (2048, 1024)
 
 
-def plan(quick: bool, seeds: int | None, normal_seeds: int | None, mixed: bool) -> dict[str, Any]:
+def plan(
+    quick: bool, seeds: int | None, normal_seeds: int | None, mixed: bool, first_seed: int = 0
+) -> dict[str, Any]:
     """What a run registers.
 
     Parameters
@@ -91,6 +93,9 @@ def plan(quick: bool, seeds: int | None, normal_seeds: int | None, mixed: bool) 
         least one) also at 2048 x 1024 (not with ``quick``).
     mixed : bool
         Unrelated pairs also with a 1024 x 512 target and a 2048 x 1024 source.
+    first_seed : int
+        The first scene seed of the ambiguous, cue and normal sets (a held-out run starts
+        past every seed a threshold was set on).
 
     Returns
     -------
@@ -99,17 +104,17 @@ def plan(quick: bool, seeds: int | None, normal_seeds: int | None, mixed: bool) 
     """
     n = seeds if seeds is not None else (2 if quick else 6)
     m = normal_seeds if normal_seeds is not None else (2 if quick else 12)
-    normal = [[list(LOW), list(range(m))]]
+    normal = [[list(LOW), list(range(first_seed, first_seed + m))]]
     if not quick:
-        normal.append([list(HIGH), list(range(max(1, m // 6)))])
+        normal.append([list(HIGH), list(range(first_seed, first_seed + max(1, m // 6)))])
     return {
         "quick": quick,
         "resolution": list(LOW),
-        "seeds": list(range(n)),
+        "seeds": list(range(first_seed, first_seed + n)),
         "ambiguous_kinds": list(AMBIGUOUS_SCENE_KINDS),
         "cue_kinds": list(CUE_SCENE_KINDS),
         "normal_kinds": list(NORMAL_SCENES),
-        "normal_seeds": list(range(m)),
+        "normal_seeds": list(range(first_seed, first_seed + m)),
         "normal_resolutions": normal,
         "unrelated_kinds": (
             ["room", "courtyard", "symmetric-room", "tunnel"] if quick else list(SCENE_KINDS)
@@ -128,6 +133,12 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--quick", action="store_true", help="smoke run (~2 min)")
     ap.add_argument("--seeds", type=int, default=None, help="seeds per ambiguous/cue kind (6)")
     ap.add_argument("--normal-seeds", type=int, default=None, help="seeds per normal kind (12)")
+    ap.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="first scene seed of the ambiguous, cue and normal pairs (held-out runs)",
+    )
     ap.add_argument(
         "--mixed",
         action="store_true",
@@ -164,6 +175,7 @@ def _command(args: argparse.Namespace) -> str:
             (" --quick", args.quick),
             (f" --seeds {args.seeds}", args.seeds is not None),
             (f" --normal-seeds {args.normal_seeds}", args.normal_seeds is not None),
+            (f" --first-seed {args.first_seed}", args.first_seed != 0),
             (" --mixed", args.mixed),
             (" --sets " + " ".join(args.sets), list(args.sets) != list(SET_NAMES)),
         )
@@ -189,7 +201,7 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
     """
     config = RegistrationConfig(refine=True, seed=0)
     write_json(folder / "config.json", config.to_dict(), indent=2)
-    p = plan(args.quick, args.seeds, args.normal_seeds, args.mixed)
+    p = plan(args.quick, args.seeds, args.normal_seeds, args.mixed, args.first_seed)
     state: dict[str, Any] = {
         "benchmark": "verdict",
         "command": _command(args),

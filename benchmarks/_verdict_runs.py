@@ -49,10 +49,9 @@ from flexreg.core.transforms import invert, rotation_error_deg, translation_erro
 from flexreg.errors import RegistrationError
 from flexreg.io import read_scan, read_scans
 from flexreg.registration import RegistrationConfig
-from flexreg.registration.candidates import Check
+from flexreg.registration.check import Check, TwoWay
 from flexreg.registration.pipeline import PreparedScan, Registration
 from flexreg.registration.result import RegistrationResult
-from flexreg.registration.verdict import TwoWay
 from flexreg.synth import AMBIGUOUS_SCENE_KINDS, CUE_SCENE_KINDS, SCENE_KINDS, station_pair
 from flexreg.synth.dataset import make_project
 

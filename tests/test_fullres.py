@@ -10,10 +10,8 @@ import pytest
 from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import from_depth
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
+from flexreg.registration.check import TOLERANCE
 from flexreg.registration.fullres import (
-    FINE_REL,
-    FREE_REL,
-    FREE_THRESHOLDS,
     FullPair,
     full_masks,
     full_score,
@@ -58,10 +56,10 @@ def _reference(view, points, own, T, thr, coarse):
         if not (0 <= iu < W and 0 <= iv < H):
             continue
         e = d[i] - float(view.measured[iv, iu])
-        base = FREE_THRESHOLDS * thr if coarse else thr / 2
-        rel = FREE_REL if coarse else FINE_REL
+        base, rel = TOLERANCE.free(thr) if coarse else TOLERANCE.fine(thr)
         tol = base + rel * d[i] + float(view.slack[iv, iu])
-        free = FREE_THRESHOLDS * thr + FREE_REL * d[i] + own[i]
+        free_m, free_rel = TOLERANCE.free(thr)
+        free = free_m + free_rel * d[i] + own[i]
         explained[i] = abs(e) < tol
         open_space[i] = d[i] < view.nearest[iv, iu] - free
         score += (1.0 - (e / tol) ** 2 if explained[i] else 0.0) - 3.0 * open_space[i]

@@ -12,6 +12,7 @@ from test_verdict import CORRIDOR, NICHE, _full_pair, _judged, _station, _with
 
 from flexreg.core.transforms import make_transform, rotation_about_axis
 from flexreg.registration import RegistrationConfig
+from flexreg.registration.check import decisive_full
 from flexreg.registration.settle import (
     Settlement,
     _across,
@@ -21,7 +22,7 @@ from flexreg.registration.settle import (
     pin_along,
     screen,
 )
-from flexreg.registration.verdict import decide, decisive_full
+from flexreg.registration.verdict import decide
 
 N = 850_000  # points of a 1024 x 512 pair's duel
 

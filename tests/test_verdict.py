@@ -22,13 +22,9 @@ from flexreg.core.transforms import (
 )
 from flexreg.errors import ConfigError
 from flexreg.registration import RegistrationConfig, register
-from flexreg.registration.candidates import (
-    Aliases,
-    Check,
-    Judged,
-    alias_candidates,
-    self_symmetries,
-)
+from flexreg.registration.candidates import Aliases, alias_candidates, self_symmetries
+from flexreg.registration.check import Check, Judged, TwoWay, decisive_full, duel
+from flexreg.registration.evidence import gather, runner_ups
 from flexreg.registration.fullres import FullPair, full_view, pose_masks
 from flexreg.registration.settle import (
     half_turn,
@@ -38,14 +34,7 @@ from flexreg.registration.settle import (
     tournament,
     weak_direction,
 )
-from flexreg.registration.verdict import (
-    TwoWay,
-    decide,
-    decisive_full,
-    duel,
-    gather,
-    runner_ups,
-)
+from flexreg.registration.verdict import decide
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.priors import plan_view
 from flexreg.stages.sampling import area_sample

@@ -1,6 +1,7 @@
 """Pairwise registration of scans: :func:`register` (one pair), :class:`Registration`
 (``prepare`` each scan once, ``align`` many pairs), :class:`RegistrationConfig`,
-:class:`RegistrationResult` and its verdict (:func:`decide`, :mod:`.verdict`)."""
+:class:`RegistrationResult` and its verdict (:func:`decide`, :mod:`.verdict`, on the evidence of
+:mod:`.evidence`)."""
 
 from flexreg.exports import lazy
 

@@ -30,6 +30,7 @@ from flexreg.core.transforms import (
     translation_error_m,
 )
 from flexreg.errors import DegenerateGeometryError, RegistrationError
+from flexreg.registration.check import TOLERANCE, Check, Judged
 from flexreg.registration.config import RegistrationConfig
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
@@ -41,7 +42,6 @@ from flexreg.stages.keypoints import Features
 from flexreg.stages.matching import match_guided
 from flexreg.stages.priors import PlanView, TopView, match_top_views
 from flexreg.stages.refinement.projective import projective_icp
-from flexreg.stages.verification import classify_points
 
 log = logging.getLogger(__name__)
 
@@ -91,61 +91,6 @@ def require_inliers(c: Coarse, thr: float, min_inliers: int, counts: str) -> Non
 def dense_prior(origin: str) -> bool:
     """Whether a candidate's origin is a :data:`DENSE_PRIORS` prior (refined or not)."""
     return origin.split("+")[0] in DENSE_PRIORS
-
-
-@dataclass(frozen=True)
-class Judged:
-    """One candidate as the dense check at the coarse tolerance judged it.
-
-    Attributes
-    ----------
-    origin : str
-    T_target_source : (4, 4) float64
-        The candidate after the quick local ICP (as given without polishing).
-    score : float
-        ``consistent - 3 conflicting`` (see :meth:`Check.judge`).
-    consistent, conflicting : float
-        Fractions of the source's sample.
-    """
-
-    origin: str
-    T_target_source: NDArray[np.float64]
-    score: float
-    consistent: float
-    conflicting: float
-
-
-@dataclass(eq=False)
-class Check:
-    """The dense check of candidates: the target's view and the source's even sample.
-
-    Attributes
-    ----------
-    view : RangeImage
-        The target's range image with a camera model.
-    measured, slack : (H, W) float32
-        Its :func:`~flexreg.stages.verification.measured_image` and
-        :func:`~flexreg.stages.verification.range_slack`.
-    sample : (N, 3) float64
-        The source's points spread evenly over its surfaces.
-    """
-
-    view: RangeImage
-    measured: NDArray[np.float32]
-    slack: NDArray[np.float32]
-    sample: NDArray[np.float64]
-
-    def classify(
-        self, T: NDArray[np.float64], tol: float, rel: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
-        """The sample in the target frame, and which points are consistent / conflicting."""
-        return classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
-
-    def judge(self, T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
-        """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
-        _, ok_, bad_ = self.classify(T, tol, rel)
-        ok, bad = float(ok_.mean()), float(bad_.mean())
-        return ok - 3 * bad, ok, bad
 
 
 @dataclass(eq=False)
@@ -289,7 +234,7 @@ def _best_family(
             # judged after a quick local ICP: a right but rough candidate improves, a wrong one
             # stays wrong
             Tj = polish(T) if polish is not None else T
-            score, ok, bad = check.judge(Tj, 2.5 * thr, 0.01)
+            score, ok, bad = check.judge(Tj, *TOLERANCE.free(thr))
             moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
             judged.append((score, moved, i, ok, bad, Tj))
@@ -551,7 +496,7 @@ def choose(
         est = _guided(kt, ks, polished, thr, config)
         if est is not None and est[1] >= 3:
             finalists.append((f"{finalists[0][0].split('+')[0]}+keypoints", est[0]))
-    origin, T = max(finalists, key=lambda c: check.judge(c[1], thr / 2, 0.002)[0])
+    origin, T = max(finalists, key=lambda c: check.judge(c[1], *TOLERANCE.fine(thr))[0])
     return at_pose(origin, T, kt, ks, thr, judged, top)
 
 
@@ -582,9 +527,7 @@ __all__ = [
     "SYMMETRY_SHARE",
     "Aliases",
     "Candidate",
-    "Check",
     "Coarse",
-    "Judged",
     "Keypoints3D",
     "alias_candidates",
     "at_pose",

@@ -1,6 +1,6 @@
 """Duels at the scans' full resolution: where two poses disagree, a small unique object decides.
 
-The verdict's duel (:func:`flexreg.registration.verdict.duel`) counts, on each scan's even
+The dense check's duel (:func:`flexreg.registration.check.duel`) counts, on each scan's even
 sample of about 20 000 points, the points one pose explains and the other puts in open space.
 A small cue near the stations (a forklift, a niche, a bookshelf) holds a few dozen of them,
 no more than the edges of a repeating structure put on both sides. Here every valid pixel of
@@ -18,8 +18,9 @@ tests are built so that nothing but a real disagreement counts:
 
 Under two poses of a symmetric or repeating scene the same surfaces fit, so both poses explain
 the same points: only where they disagree, on the cue, does one pose explain what the other
-puts in open space. :func:`pose_masks` gives a pose's masks; the verdict's
-:func:`~flexreg.registration.verdict.duel` compares two of them.
+puts in open space. :func:`pose_masks` gives a pose's masks; the dense check's
+:func:`~flexreg.registration.check.duel` compares two of them. The tolerances are the dense
+check's (:data:`~flexreg.registration.check.TOLERANCE`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from scipy import ndimage
 
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
+from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
 
@@ -50,14 +52,6 @@ MAX_SLACK_PER_M = 0.05
 #: of a distant scanner while the near one resolves it (3 x 3 left 30-200 such points on
 #: right poses of the synthetic tunnels and arcades, 5 x 5 none to two)
 NEIGHBOURHOOD = 5
-
-#: relative range tolerances (of the range) of the explained and the open-space tests
-FINE_REL, FREE_REL = 0.002, 0.01
-
-#: the open-space tolerance in inlier thresholds
-FREE_THRESHOLDS = 2.5
-
-Masks = tuple[tuple[NDArray[np.bool_], NDArray[np.bool_]], ...]
 
 
 @dataclass(eq=False)
@@ -144,6 +138,7 @@ def _check_loop(
     slack,
     nearest,
     threshold_m,
+    tolerance,
     coarse,
     explained,
     open_space,
@@ -156,9 +151,10 @@ def _check_loop(
     wrap = spherical and cam[4] > 0.5
     masks = explained.shape[0] == points.shape[0]
     K = t.shape[0]
-    free_m = FREE_THRESHOLDS * threshold_m
+    fine_rel, free_k, free_rel = tolerance
+    free_m = free_k * threshold_m
     explain_m = free_m if coarse else threshold_m / 2
-    explain_rel = FREE_REL if coarse else FINE_REL
+    explain_rel = free_rel if coarse else fine_rel
     c0, c1, c2, c3, c4 = cam[0], cam[1], cam[2], cam[3], cam[4]
     r00, r01, r02, r10, r11, r12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
@@ -193,7 +189,7 @@ def _check_loop(
             iu, iv = int(fu), int(fv)
             e = d - np.float64(measured[iv, iu])
             tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
-            free = free_m + FREE_REL * d + own_i
+            free = free_m + free_rel * d + own_i
             ok = abs(e) < tol
             bad = d < nearest[iv, iu] - free
             r = e / tol
@@ -221,6 +217,7 @@ def _check_full(
     slack,
     nearest,
     threshold_m,
+    tolerance,
     coarse,
     explained,
     open_space,
@@ -228,7 +225,9 @@ def _check_full(
     opens,
 ):  # pragma: no cover
     """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
-    the points, without temporaries, for the poses ``(R, t[k])``: each point turned by ``R``
+    the points, without temporaries, for the poses ``(R, t[k])`` at the tolerances
+    ``tolerance`` (``fine_rel, free_k, free_rel`` of a
+    :class:`~flexreg.registration.check.Tolerance`): each point turned by ``R``
     (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
     Adds each pose's score to ``scores[k]`` (and its count of points in open space to
@@ -236,17 +235,24 @@ def _check_full(
     (one pose) when they are as long as ``points``."""
     if kind == 0:
         _check_loop(
-            True, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
-            explained, open_space, scores, opens,
+            True, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
+            coarse, explained, open_space, scores, opens,
         )  # fmt: skip
     else:
         _check_loop(
-            False, points, own, R, t, cam, measured, slack, nearest, threshold_m, coarse,
-            explained, open_space, scores, opens,
+            False, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
+            coarse, explained, open_space, scores, opens,
         )  # fmt: skip
 
 
 _NO_COUNT = np.zeros(0, dtype=np.int64)
+
+
+def _kernel_tolerance() -> tuple[float, float, float]:
+    """The dense check's :data:`~flexreg.registration.check.TOLERANCE` as the kernel takes it:
+    an argument, not a global (a compiled kernel keeps a global's value in its cache, and the
+    cache follows this file only)."""
+    return float(TOLERANCE.fine_rel), float(TOLERANCE.free_k), float(TOLERANCE.free_rel)
 
 
 def _floats(a: NDArray[Any]) -> NDArray[Any]:
@@ -282,7 +288,8 @@ def _run_check(
         np.ascontiguousarray(view.measured, dtype=np.float32),
         np.ascontiguousarray(view.slack, dtype=np.float32),
         _floats(view.nearest),
-        float(threshold_m), bool(coarse), explained, open_space, scores, opens,
+        float(threshold_m), _kernel_tolerance(), bool(coarse), explained, open_space, scores,
+        opens,
     )  # fmt: skip
     return scores
 
@@ -301,11 +308,12 @@ def full_masks(
 
     A point maps into the view's frame, falls on the view's nearest pixel (its camera
     model), and is tested there: *explained* when its range (depth for a pinhole view) is
-    within half an inlier threshold plus :data:`FINE_REL` of its range plus the pixel's
-    range slack of what the view measured; in *open space* when it lies nearer than the
-    smallest range of the pixel's :data:`NEIGHBOURHOOD` square by more than
-    :data:`FREE_THRESHOLDS` inlier thresholds plus :data:`FREE_REL` of its range plus its own
-    range slack. Points outside the view are neither.
+    within the fine tolerance (:meth:`~flexreg.registration.check.Tolerance.fine`: half an
+    inlier threshold plus 0.2 % of its range) plus the pixel's range slack of what the view
+    measured; in *open space* when it lies nearer than the smallest range of the pixel's
+    :data:`NEIGHBOURHOOD` square by more than the free-space tolerance
+    (:meth:`~flexreg.registration.check.Tolerance.free`: 2.5 inlier thresholds plus 1 % of its
+    range) plus its own range slack. Points outside the view are neither.
 
     Parameters
     ----------
@@ -447,7 +455,7 @@ def _full_view_of(v: Any) -> FullView:
 def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m: float) -> Masks:
     """A pose's explained and open-space masks in both directions (the source's points in the
     target's view, then the target's points in the source's view), at full resolution: the
-    inputs of :func:`flexreg.registration.verdict.duel`.
+    inputs of :func:`flexreg.registration.check.duel`.
 
     Parameters
     ----------
@@ -482,15 +490,11 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
 
 
 __all__ = [
-    "FINE_REL",
-    "FREE_REL",
-    "FREE_THRESHOLDS",
     "MASKS_BUDGET_BYTES",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
     "FullPair",
     "FullView",
-    "Masks",
     "full_masks",
     "full_pair_of",
     "full_score",

@@ -41,7 +41,6 @@ from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationErr
 from flexreg.registration.candidates import (
     Aliases,
     Candidate,
-    Check,
     Coarse,
     Keypoints3D,
     choose,
@@ -50,7 +49,9 @@ from flexreg.registration.candidates import (
     require_inliers,
     self_symmetries,
 )
+from flexreg.registration.check import TOLERANCE, Check, Scored, TwoWay
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.evidence import MAX_RIVALS, full_evidence, gather, runner_ups
 from flexreg.registration.fullres import FullPair, full_pair_of
 from flexreg.registration.preparation import (
     PreparedScan,
@@ -68,15 +69,7 @@ from flexreg.registration.preparation import (
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.twins import find_twins
-from flexreg.registration.verdict import (
-    MAX_RIVALS,
-    Scored,
-    TwoWay,
-    decide,
-    full_evidence,
-    gather,
-    runner_ups,
-)
+from flexreg.registration.verdict import decide
 from flexreg.stages.alignment import consistent_subset, ransac_rigid
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
@@ -244,7 +237,7 @@ def _refine(
             threshold_m=thr,
             method=config.icp,
             voxel_m=config.voxel_m,
-            check=lambda T_: check.judge(T_, thr / 2, 0.002)[0],
+            check=lambda T_: check.judge(T_, *TOLERANCE.fine(thr))[0],
             target_image=vt.image,
             target_normals=vt.normals,
             source_image=vs.image,
@@ -267,7 +260,8 @@ def _verdict(
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     up: NDArray[np.float64] | None,
 ) -> Verdict:
-    """The evidence on the final transform and the verdict (:mod:`.verdict`); a confident
+    """The evidence on the final transform (:mod:`.evidence`) and the verdict
+    (:mod:`.verdict`); a confident
     answer of two levelled scans (``up``: the target's vertical) also has its twins along
     the target's walls checked (:mod:`.twins`)."""
     ups = runner_ups(
@@ -355,8 +349,8 @@ def _finish(
     require_inliers(c, thr, config.min_inliers, counts)
     T_coarse = T.copy()
     rmse = float(np.sqrt(c.residuals2[inl].mean())) if inl.any() else float("nan")
-    fine_tol = thr / 2
-    q, cons, _ = check.classify(T, fine_tol, 0.002)
+    fine_tol, fine_rel = TOLERANCE.fine(thr)
+    q, cons, _ = check.classify(T, fine_tol, fine_rel)
     fitness = float(cons.mean())
     denom = (
         f"{len(vs.sample)} source points spread evenly over its surfaces, within {fine_tol:.3g} m "

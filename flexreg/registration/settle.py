@@ -11,7 +11,7 @@ self-overlays, along that axis over ``sweep_range_m`` in steps of ``sweep_step_m
 pose is scored on the source's points at full resolution (a cue near the stations covers many
 of them), the best local maxima are placed on the surfaces facing the axis and polished by the quick
 projective ICP, and they join the candidates. :func:`tournament` then duels every clearly
-different candidate that scores close to the best (:func:`~flexreg.registration.verdict.duel`
+different candidate that scores close to the best (:func:`~flexreg.registration.check.duel`
 on :func:`~flexreg.registration.fullres.pose_masks`): one that beats every other decisively
 (:func:`decisive_full`) is the answer; without one the near-tie stays and the verdict says so.
 """
@@ -27,18 +27,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
-from flexreg.registration.candidates import Aliases, Check, Coarse, Judged, Keypoints3D, at_pose
+from flexreg.registration.candidates import Aliases, Coarse, Keypoints3D, at_pose
+from flexreg.registration.check import TOLERANCE, Check, Judged, Masks, decisive_full, duel
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import (
     FullPair,
     FullView,
-    Masks,
     full_masks,
     full_score,
     full_scores,
     pose_masks,
 )
-from flexreg.registration.verdict import decisive_full, duel
 from flexreg.stages.verification import plane_information
 
 log = logging.getLogger(__name__)
@@ -94,7 +93,7 @@ def weak_direction(
     (3,) float64 or None
         Unit direction in the target frame, or None when every direction is firm.
     """
-    q, ok, _ = check.classify(T, threshold_m / 2, 0.002)
+    q, ok, _ = check.classify(T, *TOLERANCE.fine(threshold_m))
     info, _, n = plane_information(check.view, normals, q[ok])
     if n < 6:
         return None
@@ -471,7 +470,7 @@ def rescue(
     or aisle off in a repeating hall: the cue is where the other scanner saw through). Its
     twins and the swept poses are screened (:func:`screen`); the one that puts the fewest
     points in open space wins when that is under a third of ``settle_open_share``, it beats
-    the answer :func:`~flexreg.registration.verdict.decisive_full`-ly, explains at least half
+    the answer :func:`~flexreg.registration.check.decisive_full`-ly, explains at least half
     as many points (not clean merely by seeing less of the other scan), and no other clearly
     different clean candidate (within twice its open share) is left unbeaten."""
     answer = Judged("answer", W, 0.0, 0.0, 0.0)
@@ -528,7 +527,7 @@ def tournament(
     *passes* when it puts at most ``verdict_full_max_conflict`` of all points in open space
     itself (a pose that puts the cue where the other scanner saw through is refuted by its
     own contradictions). The winner is close and passes, no player beats it
-    :func:`~flexreg.registration.verdict.decisive_full`-ly, and it beats every other close
+    :func:`~flexreg.registration.check.decisive_full`-ly, and it beats every other close
     player decisively (there is at least one). A single inconclusive duel (a pose far along
     a tunnel where neither scan sees the other's cue) leaves the near-tie open: nothing is
     settled that the data do not settle.
@@ -678,7 +677,7 @@ def settle(
     pair, contradicted, classified = None, None, None
     if u is None and not rivals:  # ... or when full resolution contradicts the answer
         u = repeat_direction(aliases)
-        classified = check.classify(W, thr / 2, 0.002) if u is not None else None
+        classified = check.classify(W, *TOLERANCE.fine(thr)) if u is not None else None
         if classified is None or classified[1].mean() < config.verdict_min_overlap:
             return Settlement(c)  # too little overlap to be confident anyway: nothing to rescue
         pair = full_pair()
@@ -692,7 +691,7 @@ def settle(
     judged = list(c.judged)
     sweep = None
     if u is not None:
-        q, ok, _ = classified if classified is not None else check.classify(W, thr / 2, 0.002)
+        q, ok, _ = classified if classified is not None else check.classify(W, *TOLERANCE.fine(thr))
         pivot = q[ok].mean(axis=0) if ok.any() else W[:3, 3]
         # a contradicted answer in a repeating hall may be off along either of its rows
         axes = [u] if contradicted is None else [u, _other_row(u, aliases)]
@@ -712,7 +711,7 @@ def settle(
             )
         ]
         for T in poses:
-            judged.append(Judged("sweep", T, *check.judge(T, 2.5 * thr, 0.01)))
+            judged.append(Judged("sweep", T, *check.judge(T, *TOLERANCE.free(thr))))
             log.debug("sweep pose at %s: %.3f", np.round(T[:3, 3], 2), judged[-1].score)
         sweep = {
             "kind": kind,
@@ -721,7 +720,7 @@ def settle(
             "step_m": config.sweep_step_m,
             "poses": len(poses),
         }
-    answer = Judged(c.origin, W, *check.judge(W, 2.5 * thr, 0.01))
+    answer = Judged(c.origin, W, *check.judge(W, *TOLERANCE.free(thr)))
     others = contenders(judged, config, floor=0.0, size=SCREENED)
     players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
     players = screen(players, pair, thr)
@@ -742,7 +741,7 @@ def settle(
     if winner is not None and u is not None:
         # the cue alone fixes the position along the axis: place the winner on it
         T = place_along(winner.T_target_source, u, pair, thr, span_m=config.sweep_step_m)
-        winner = Judged(winner.origin, T, *check.judge(T, 2.5 * thr, 0.01))
+        winner = Judged(winner.origin, T, *check.judge(T, *TOLERANCE.free(thr)))
     if winner is not None and (u is not None or _distinct(winner.T_target_source, W, config)):
         log.info("the tournament's winner (%s) is the answer", winner.origin)
         kt, ks = keypoints

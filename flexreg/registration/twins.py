@@ -33,16 +33,15 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from flexreg.core.transforms import invert
+from flexreg.registration.check import Masks, duel
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import (
     FullPair,
     FullView,
-    Masks,
     full_masks,
     full_scores,
     pose_masks,
 )
-from flexreg.registration.verdict import duel
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +183,7 @@ def find_twins(
         answer is slid; a twin that fits (``verdict_twin_fit_open``) and explains between
         ``verdict_twin_min_ratio`` and ``verdict_twin_strong_ratio`` of what the answer
         explains also duels the answer on every pixel of both scans
-        (:func:`~flexreg.registration.verdict.duel`).
+        (:func:`~flexreg.registration.check.duel`).
     settled_axis : (3,) float64, optional
         The direction (target frame) along which the settling swept the answer and placed
         it by a tournament it won at full resolution

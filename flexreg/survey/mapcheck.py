@@ -46,8 +46,7 @@ from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
-from flexreg.registration.candidates import Check
-from flexreg.registration.verdict import check_masks
+from flexreg.registration.check import Check, check_masks
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.stations import (

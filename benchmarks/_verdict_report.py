@@ -28,6 +28,8 @@ from _verdict_runs import (
     summarise,
 )
 
+from flexreg.registration.config import RENAMED, RETIRED, JudgeConfig
+
 Record = dict[str, Any]
 
 #: the evidence each test reads, the threshold field and whether passing means above it
@@ -363,7 +365,7 @@ def evidence_table(state: Record) -> list[str]:
         "|---|" + "---|" * len(groups),
     ]
     for key, field, above, label in TESTS:
-        t = cfg.get(field)
+        t = threshold(cfg, field)
         cond = f"{label} {'≥' if above else '≤' if key != 'runner_up_ratio' else '<'} {t}"
         cells = [
             _spread([r["evidence"][key] for r in v if r["evidence"].get(key) is not None])
@@ -443,10 +445,10 @@ def plot_evidence(state: Record, path: Path) -> None:
                     )
         ax.set_xlabel(lx + (" (none = 0)" if kx == "runner_up_ratio" else ""))
         ax.set_ylabel(ly)
-    axes[0].axvline(cfg["verdict_ambiguity_ratio"], color="0.3", ls="--", lw=0.8)
-    axes[0].axhline(cfg["verdict_min_overlap"], color="0.3", ls="--", lw=0.8)
-    axes[1].axvline(cfg["verdict_max_conflict"], color="0.3", ls="--", lw=0.8)
-    axes[1].axhline(cfg["verdict_min_axis_strength"], color="0.3", ls="--", lw=0.8)
+    axes[0].axvline(threshold(cfg, "verdict_ambiguity_ratio"), color="0.3", ls="--", lw=0.8)
+    axes[0].axhline(threshold(cfg, "verdict_min_overlap"), color="0.3", ls="--", lw=0.8)
+    axes[1].axvline(threshold(cfg, "verdict_max_conflict"), color="0.3", ls="--", lw=0.8)
+    axes[1].axhline(threshold(cfg, "verdict_min_axis_strength"), color="0.3", ls="--", lw=0.8)
     axes[1].set_yscale("log")
     axes[1].legend(fontsize=6, loc="best", ncol=2)
     fig.suptitle("Verdict evidence (dashed: thresholds; uncertain left of / below them)")
@@ -483,15 +485,28 @@ def _intro(state: Record) -> list[str]:
     ]
 
 
+def threshold(cfg: Record, key: str) -> float:
+    """A verdict threshold of a run's configuration by its flat name (``verdict_min_overlap``),
+    in either layout: the flat one of older runs, or the ``judge`` table (a threshold that is
+    a module constant now is read from :mod:`flexreg.registration.config`)."""
+    if key in cfg:
+        return float(cfg[key])
+    judge = JudgeConfig(**cfg.get("judge", {}))
+    if key in RENAMED:
+        return float(getattr(judge, RENAMED[key].partition(".")[2]))
+    return float(RETIRED[key][0])
+
+
 def _thresholds(state: Record) -> list[str]:
     cfg = state["config"]
-    keys = [k for k in cfg if k.startswith("verdict_")]
+    flat = {k: v for k, v in cfg.items() if k.startswith("verdict_")}
+    table = flat or {f"judge.{k}": v for k, v in cfg.get("judge", {}).items() if k != "checks"}
     return [
         "Thresholds (`RegistrationConfig`, the defaults at the time of the run):",
         "",
-        "| " + " | ".join(f"`{k}`" for k in keys) + " |",
-        "|" + "---:|" * len(keys),
-        "| " + " | ".join(str(cfg[k]) for k in keys) + " |",
+        "| " + " | ".join(f"`{k}`" for k in table) + " |",
+        "|" + "---:|" * len(table),
+        "| " + " | ".join(str(v) for v in table.values()) + " |",
         "",
     ]
 

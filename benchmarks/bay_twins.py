@@ -84,10 +84,10 @@ def judge(
     start = time.perf_counter()
     polish = polisher(pt.view.image, pt.view.normals, ps.view.polish_sample, thr)
     up = np.asarray(pt.plan.levelling.up, dtype=np.float64)
-    ev = find_twins(FullPair(vt, vs), T, up, polish, thr, cfg)
-    verdict = decide({"twins": ev}, config=cfg)
+    ev = find_twins(FullPair(vt, vs), T, up, polish, thr, cfg.judge)
+    verdict = decide({"twins": ev}, judge=cfg.judge)
     a = ev["answer"]
-    limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])
+    limit = max(cfg.judge.twin_fit_open, 2 * a["open_share"])
     best = max((w["explained_share"] for w in ev["twins"] if w["open_share"] <= limit), default=0)
     off = float(np.linalg.norm(T[:3, 3] - G[:3, 3]))
     return {

@@ -17,7 +17,7 @@ Sections (the acceptance criteria of ``flexreg.registration.pipeline.register``)
 
 Every ``register`` call uses the default :class:`flexreg.registration.pipeline.RegistrationConfig`
 with
-``refine=True``, ``seed=--seed`` and ``open3d_overlap_check=True`` (Open3D's fitness and inlier
+``refine=True``, ``seed=--seed`` and the ``open3d`` check (Open3D's fitness and inlier
 RMSE beside the overlap in the tables). One warm-up call on a small pair comes first (numba kernels
 compile or load from the cache then); it is not part of any figure.
 
@@ -72,6 +72,7 @@ from _registration_runs import (  # noqa: E402
 
 from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 from flexreg.registration import RegistrationConfig  # noqa: E402
+from flexreg.registration.config import DEFAULT_CHECKS  # noqa: E402
 
 DOC = REPO / "docs" / "benchmarks.md"
 FIGURE = REPO / "docs" / "figures" / "registration-synthetic.png"
@@ -247,7 +248,9 @@ def main(argv: list[str] | None = None) -> int:
 
     command = _command(args, pairs, resolution)
     # Open3D's evaluate_registration beside the overlap: the tables show both
-    config = RegistrationConfig(refine=True, seed=args.seed, open3d_overlap_check=True)
+    config = RegistrationConfig(
+        refine=True, seed=args.seed, judge={"checks": (*DEFAULT_CHECKS, "open3d")}
+    )
     folder = results_folder(args.results, "registration")
     write_json(folder / "config.json", config.to_dict(), indent=2)
     state = _new_state(command, config, resolution)

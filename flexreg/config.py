@@ -25,9 +25,9 @@ A run stores its effective configuration (``config.to_dict()``) in its result JS
 :func:`load_config` reads that JSON (its ``"config"`` key) as readily as a TOML file, so feeding
 it back reproduces the run bit for bit.
 
-The library is pydantic v2 (``BaseModel``, frozen, unknown keys refused): kiss-icp, a dependency,
-already requires it; its field constraints give one place per rule and error messages that name
-the field; models pickle (Dask) and export a JSON schema (the picker's form).
+Pydantic v2 (frozen models, unknown keys refused; a dependency of kiss-icp already): one place
+per rule, messages naming the field, models that pickle (Dask) and export a JSON schema.
+Tables nest (``[judge]``); ``--set`` reaches into them with dotted keys (``judge.min_overlap``).
 """
 
 from __future__ import annotations
@@ -258,15 +258,18 @@ def _one_line(
     err = e.errors(include_url=False)[0]
     field = ".".join(str(p) for p in err.get("loc", ())) or "value"
     got = err.get("input")
-    text = f"{(names or {}).get(field, field)}: {_message(err, field, cls)}"
+    inner = (err.get("ctx") or {}).get("error")  # a nested configuration's line, or a rule's
+    head, sep, rule = str(inner).partition(": ")
+    if isinstance(inner, ConfigError) and sep and " " not in head:
+        field, got, text = (head if field == "value" else f"{field}.{head}"), {}, rule
+    else:
+        text = _message(err, field, cls)
+    text = f"{(names or {}).get(field, field)}: {text}"
     if err.get("type") not in _NO_GOT and not isinstance(got, dict):
         text += f" (got {_shown(got)})"
     if len(e.errors()) > 1:
         text += f"; and {len(e.errors()) - 1} more"
     return f"{where}: {text}" if where else text
-
-
-# ------------------------------------------------------------------------ shared field types
 
 
 class _OneOf:
@@ -598,13 +601,37 @@ def load_config(
     # the raw ValidationError says where each bad value came from
     config = cls.__new__(cls)
     try:
-        BaseModel.__init__(config, **{**data, **extra})
+        BaseModel.__init__(config, **_merged(data, _nested(extra)))
         return config
     except ValidationError as e:
         loc = e.errors(include_url=False)[0].get("loc", ())
-        in_file = bool(loc) and loc[0] in data and loc[0] not in extra
+        field = ".".join(str(p) for p in loc)
+        in_file = bool(loc) and loc[0] in data and loc[0] not in extra and field not in extra
         line = _one_line(e, where if in_file else None, cls, None if in_file else names)
         raise ConfigError(line) from None
+
+
+def _nested(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """Dotted keys as nested tables: ``{"judge.min_overlap": 0.3}`` (as ``--set`` takes them)
+    becomes ``{"judge": {"min_overlap": 0.3}}``."""
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        *tables, name = key.split(".")
+        at = out
+        for t in tables:
+            at[t] = at = dict(at[t]) if isinstance(at.get(t), dict) else {}
+        at[name] = value
+    return out
+
+
+def _merged(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """``over`` on top of ``base``, table by table (a table in ``over`` changes only the
+    keys it names)."""
+    out = dict(base)
+    for key, value in over.items():
+        both = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merged(out[key], value) if both else value
+    return out
 
 
 def _parse_value(text: str, key: str = "value") -> Any:
@@ -733,14 +760,27 @@ def to_toml(config: Config, *, header: str | None = None, comments: bool = True)
     notes = field_descriptions(type(config)) if comments else {}
     for name, value in config.model_dump(mode="json").items():
         if isinstance(value, dict):
-            inner = field_descriptions(type(getattr(config, name))) if comments else {}
-            table = _toml_lines(value, name, inner)
-            tables += ["", *_comment(notes.get(name)), f"[{name}]", *table[table[:1] == [""] :]]
+            inner = getattr(config, name) if comments else None
+            tables += _toml_table(inner, value, name, notes.get(name))
         else:
             lines += _toml_lines({name: value}, "", notes)
     if lines[:1] == [""]:
         lines = lines[1:]
     return "\n".join(lines + tables) + "\n"
+
+
+def _toml_table(config: Any, values: Mapping[str, Any], name: str, note: str | None) -> list[str]:
+    """A nested configuration (``values``: its JSON) as ``[name]``, its tables ``[name.x]``."""
+    inner = field_descriptions(type(config)) if config is not None else {}
+    plain, tables = {}, []
+    for key, value in values.items():
+        if isinstance(value, dict):
+            sub = getattr(config, key, None) if config is not None else None
+            tables += _toml_table(sub, value, f"{name}.{key}", inner.get(key))
+        else:
+            plain[key] = value
+    table = _toml_lines(plain, name, inner)
+    return ["", *_comment(note), f"[{name}]", *table[table[:1] == [""] :], *tables]
 
 
 def _toml_lines(values: Mapping[str, Any], table: str, notes: Mapping[str, str]) -> list[str]:

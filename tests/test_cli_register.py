@@ -30,9 +30,13 @@ from flexreg.core.transforms import (
     rotation_error_deg,
     translation_error_m,
 )
+from flexreg.registration.config import DEFAULT_CHECKS
 from flexreg.stages.projection import project
 
 LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
+
+#: every check of the judge, the optional Open3D figures included
+ALL_CHECKS = "judge.checks=" + json.dumps([*DEFAULT_CHECKS, "open3d"])
 
 
 def _files(folder: Path) -> list[str]:
@@ -79,7 +83,7 @@ def registered(pair, tmp_path_factory):
         "--truth",
         str(target.parent / "truth.txt"),
         "--set",
-        "open3d_overlap_check=true",
+        ALL_CHECKS,
     ]
     np.savetxt(target.parent / "truth.txt", pair[2])
     results = []
@@ -150,7 +154,12 @@ def test_reading_straight_into_working_images_gives_the_same_result(registered, 
         return real_register(*args, **kwargs)
 
     argv = ["register", str(target), str(source), "--out", str(tmp_path / "T.json")]
-    argv += ["--voxel", "0.08", "--set", "open3d_overlap_check=true"]
+    argv += [
+        "--voxel",
+        "0.08",
+        "--set",
+        ALL_CHECKS,
+    ]
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(io.StringIO()):
         mp.setattr(flexreg.registration.pipeline, "register", spy)
         assert run(argv) == 0

@@ -53,7 +53,7 @@ def test_config_show_unknown_name_is_one_line():
 
 
 def test_floats_round_trip_exactly_through_toml(tmp_path):
-    cfg = RegistrationConfig(ratio=0.1 + 0.2, max_tilt_rad=1 / 3, threshold_m=1e-7)
+    cfg = RegistrationConfig(ratio=0.1 + 0.2, prior={"max_tilt_rad": 1 / 3}, threshold_m=1e-7)
     path = tmp_path / "r.toml"
     path.write_text(to_toml(cfg))
     back = load_config(RegistrationConfig, path)
@@ -68,7 +68,11 @@ def test_floats_round_trip_exactly_through_toml(tmp_path):
         (RegistrationConfig, {"voxel_m": 0}, "voxel_m: must be in [0.0001, 10] (got 0"),
         (RegistrationConfig, {"seed": -1}, "seed: must be a non-negative integer (got -1)"),
         (RegistrationConfig, {"icp": "p2p"}, "icp: unknown method 'p2p'; known: point-to-plane"),
-        (RegistrationConfig, {"upright": "yes"}, "upright: must be one of auto, on, off"),
+        (
+            RegistrationConfig,
+            {"prior": {"upright": "yes"}},
+            "prior.upright: must be one of auto, on, off",
+        ),
         (RegistrationConfig, {"median": 7}, "median: must be one of 0, 3, 5 (got 7)"),
         (RegistrationConfig, {"nn": 5}, "nn: unknown setting; did you mean n?"),
         (CalibrationConfig, {"patch_px": 20}, "patch_px: must be an odd size 7, 9, 11, ..."),

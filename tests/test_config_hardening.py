@@ -12,7 +12,13 @@ from conftest import one_error_line, run_cli
 
 from flexreg.config import MAX_CONFIG_BYTES, MAX_CONFIG_DEPTH, load_config, parse_sets
 from flexreg.errors import ConfigError
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import (
+    SWEEP_RANGE_M,
+    SWEEP_STEP_M,
+    TWIN_RANGE_M,
+    TWIN_STEP_M,
+    RegistrationConfig,
+)
 from flexreg.survey.config import SurveyConfig
 
 
@@ -123,23 +129,19 @@ def test_parse_sets_refuses_a_second_line_instead_of_dropping_it():
 
 #: (field, a value no run can afford or resolve, the bounds in the message)
 BAD_VALUES = [
-    ("twin_step_m", "0.000001", "[0.05, 5]"),
-    ("twin_step_m", "0.01", "[0.05, 5]"),
-    ("twin_range_m", "1e9", "(0, 50]"),
-    ("sweep_step_m", "0.000001", "[0.05, 5]"),
-    ("sweep_range_m", "1e6", "(0, 50]"),
-    ("plan_cell_m", "0.000001", "[0.1, 2]"),
-    ("plan_cell_m", "0.01", "[0.1, 2]"),
-    ("plan_cell_m", "100", "[0.1, 2]"),
-    ("plan_hypotheses", "100000", "[1, 50]"),
+    ("prior.plan_cell_m", "0.000001", "[0.1, 2]"),
+    ("prior.plan_cell_m", "0.01", "[0.1, 2]"),
+    ("prior.plan_cell_m", "100", "[0.1, 2]"),
+    ("prior.plan_hypotheses", "100000", "[1, 50]"),
     ("max_iterations", "10000000000", "[1, 1000000]"),
     ("max_features", "100000000", "[8, 200000]"),
     ("max_image_pixels", "1", "[16384, 50000000]"),
     ("max_image_pixels", "1000000000000", "[16384, 50000000]"),
     ("feature_strip_pixels", "1000000000000", "[0, 50000000]"),
     ("feature_tile_pixels", "1000000000000", "[0, 50000000]"),
-    ("guided_radius_m", "1000", "(0, 5]"),
-    ("guided_radius_per_m", "100", "[0, 1]"),
+    ("prior.guided_radius_m", "1000", "(0, 5]"),
+    ("prior.guided_radius_per_m", "100", "[0, 1]"),
+    ("judge.open_share", "2", "[0, 1]"),
 ]
 
 
@@ -163,21 +165,24 @@ def test_survey_refine_voxel_is_bounded(tmp_path, pair):
     assert rc == 1 and not out.exists()
     assert one_error_line(err) == "error: --set refine_voxel_m: must be in [0.01, 10] (got 0.0001)"
     rc, _, err = run_cli(
-        ["survey", *pair, "--out", out, "--set", "registration.twin_step_m=0.000001"]
+        ["survey", *pair, "--out", out, "--set", "registration.prior.plan_cell_m=0.000001"]
     )
     assert rc == 1 and not out.exists()
-    assert "--set twin_step_m: must be in [0.05, 5]" in one_error_line(err)
+    assert "--set prior.plan_cell_m: must be in [0.1, 2]" in one_error_line(err)
+
+
+def test_retired_slide_settings_are_refused_at_another_value(pair, tmp_path):
+    """The sweep's and the twins' slides are fixed now (module constants): their old keys
+    are read at their old values, and refused with one line otherwise."""
+    line = _refused(pair, "--set", "twin_step_m=0.000001")
+    assert line.startswith("error: --set twin_step_m: no longer a setting (fixed; it was 0.25)")
+    assert RegistrationConfig(twin_step_m=0.25, sweep_range_m=20) == RegistrationConfig()
 
 
 def test_defaults_are_unchanged_and_within_their_bounds():
     r = RegistrationConfig()
-    assert (r.twin_step_m, r.twin_range_m, r.sweep_step_m, r.sweep_range_m) == (
-        0.25,
-        15.0,
-        0.5,
-        20.0,
-    )
-    assert (r.plan_cell_m, r.plan_hypotheses, r.max_iterations, r.max_features) == (
+    assert (TWIN_STEP_M, TWIN_RANGE_M, SWEEP_STEP_M, SWEEP_RANGE_M) == (0.25, 15.0, 0.5, 20.0)
+    assert (r.prior.plan_cell_m, r.prior.plan_hypotheses, r.max_iterations, r.max_features) == (
         0.25,
         3,
         50_000,
@@ -188,5 +193,5 @@ def test_defaults_are_unchanged_and_within_their_bounds():
         524_288,
         0,
     )
-    assert (r.guided_radius_m, r.guided_radius_per_m) == (0.25, 0.02)
+    assert (r.prior.guided_radius_m, r.prior.guided_radius_per_m) == (0.25, 0.02)
     assert SurveyConfig().refine_voxel_m == 0.02 and SurveyConfig().tolerance_mm == 10.0

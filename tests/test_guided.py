@@ -320,10 +320,12 @@ def test_register_plan_prior_recovers_truth(registered, kind):
     # the same place is a near tie that another CPU's last bits may break either way
     assert "plan views" in r.timings_s
     ti, si = range_image(pair.target), range_image(pair.source)
-    plans = upright_priors(ti, si, max_tilt_rad=CONFIG.max_tilt_rad, plan_cell_m=CONFIG.plan_cell_m)
+    plans = upright_priors(
+        ti, si, max_tilt_rad=CONFIG.prior.max_tilt_rad, plan_cell_m=CONFIG.prior.plan_cell_m
+    )
     best = plans[0]  # best first
     assert rotation_error_deg(best, gt) < 1.0
-    assert translation_error_m(best, gt) < CONFIG.plan_cell_m
+    assert translation_error_m(best, gt) < CONFIG.prior.plan_cell_m
 
 
 def test_register_is_deterministic(registered):

@@ -14,12 +14,16 @@ from flexreg import Scan, read_scan, write_scan
 from flexreg.core.camera import SphericalCamera
 from flexreg.core.range_image import to_scan
 from flexreg.core.transforms import apply, make_transform, rotation_about_axis
+from flexreg.registration.config import DEFAULT_CHECKS
 from flexreg.stages.overlap import measure_overlap
 from flexreg.stages.projection import project
 from flexreg.stages.sampling import to_open3d, voxel_centroids, voxel_count
 from flexreg.viz.matches import INLIER_COLOUR, OUTLIER_COLOUR, match_figure
 
 LASERSCAN = REPO / "data" / "laserscan" / "laserscan-depth.png"
+
+#: every check of the judge, the optional Open3D figures included
+ALL_CHECKS = "judge.checks=" + json.dumps([*DEFAULT_CHECKS, "open3d"])
 
 
 def _texts(fig) -> str:
@@ -95,7 +99,10 @@ def test_register_and_compare_report_the_same_overlap(pair, tmp_path):
     target, source = pair
     rc, out, err = run_cli(
         ["register", target, source, "--out", tmp_path / "T.json"]
-        + ["--set", "open3d_overlap_check=true"]
+        + [
+            "--set",
+            ALL_CHECKS,
+        ]
     )
     assert rc in (0, 3), err
     reg = json.loads((tmp_path / "T.json").read_text())

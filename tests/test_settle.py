@@ -13,6 +13,7 @@ from test_verdict import CORRIDOR, NICHE, _full_pair, _judged, _station, _with
 from flexreg.core.transforms import make_transform, rotation_about_axis
 from flexreg.registration import RegistrationConfig
 from flexreg.registration.check import decisive_full
+from flexreg.registration.config import FULL_DECISIVE_POINTS, JudgeConfig
 from flexreg.registration.settle import (
     Settlement,
     _across,
@@ -40,13 +41,12 @@ N = 850_000  # points of a 1024 x 512 pair's duel
     ],
 )
 def test_full_duel_counts_a_small_lead_against_nothing(won, lost, points, decisive):
-    assert decisive_full(won / N, lost / N, RegistrationConfig(), points=points) is decisive
+    assert decisive_full(won / N, lost / N, JudgeConfig(), points=points) is decisive
 
 
 def test_count_floor_is_a_config_field_and_can_be_switched_off():
-    cfg = RegistrationConfig(verdict_full_decisive_points=0)
-    assert not decisive_full(17 / N, 0.0, cfg, points=N)
-    assert RegistrationConfig().verdict_full_decisive_points == 10
+    assert not decisive_full(17 / N, 0.0, JudgeConfig())  # without the count, the share alone
+    assert FULL_DECISIVE_POINTS == 10
 
 
 @pytest.mark.parametrize(("won", "ambiguous"), [(17, False), (2, True)])
@@ -144,7 +144,7 @@ def test_a_degenerate_guided_fit_leaves_the_prior_a_candidate(monkeypatch):
     ("own", "refuted", "refuting", "ambiguous"),
     [
         (0.00026, 0.00915, 0.00025, False),  # warehouse 07 <- 08: a bay off refuted outright
-        (0.00026, 0.0025, 0.0, True),  # the runner-up under settle_open_share (0.3 %)
+        (0.00026, 0.0025, 0.0, True),  # the runner-up under judge.settle_open_share (0.3 %)
         (0.0012, 0.00915, 0.0, True),  # the answer itself not clean (above 0.1 %)
         (0.00026, 0.00915, 0.0012, True),  # the runner-up refutes the answer too (< 10 x)
     ],
@@ -153,7 +153,7 @@ def test_a_runner_up_full_resolution_refutes_outright_is_no_ambiguity(
     own, refuted, refuting, ambiguous
 ):
     """Rack bays leave the right pose 0.026 % of points in open space, above the empty
-    scenes' 0.01 % (``verdict_full_max_conflict``); a pose one bay off puts 0.9 % there."""
+    scenes' 0.01 % (``judge.full_max_conflict``); a pose one bay off puts 0.9 % there."""
     ev = _with()
     ev["runner_up"] = {
         "score_ratio": 1.0,
@@ -184,7 +184,7 @@ def test_rescue_replaces_an_answer_full_resolution_contradicts():
     T_wt, T_ws = _station(0.6, 0.4), _station(-1.0, 0.5, 30)
     pair, T = _full_pair(*BOX, CUPBOARD, T_wt, T_ws)
     wrong = invert(T_wt) @ _turn_about_centre(180) @ T_ws
-    cfg = RegistrationConfig(settle_open_share=1e-4)  # the hand-made box is tiny
+    cfg = JudgeConfig(open_share=0.005 / 30)  # the hand-made box is tiny: 0.01 % to rescue
     masks = pose_masks(pair, wrong, 0.02)
     assert open_share(masks) >= cfg.settle_open_share
     out = rescue(masks, [_judged(T), _judged(wrong)], wrong, pair, 0.02, cfg)

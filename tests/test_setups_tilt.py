@@ -52,7 +52,7 @@ def tilted_pair(tmp_path_factory):
 
 def test_default_limit_is_documented_and_covers_15_degrees():
     assert math.degrees(MAX_TILT_RAD) == pytest.approx(25.0)
-    assert RegistrationConfig().max_tilt_rad == pytest.approx(MAX_TILT_RAD)
+    assert RegistrationConfig().prior.max_tilt_rad == pytest.approx(MAX_TILT_RAD)
 
 
 def test_the_vertical_of_a_15_degree_tilted_scan_is_measured(tilted_pair):
@@ -74,7 +74,7 @@ def test_15_degree_tilted_pair_registers_with_the_plan_prior_required(tilted_pai
 def test_beyond_the_limit_the_error_says_tilt_and_the_angle(tilted_pair, tmp_path):
     e57 = tilted_pair / "pair.e57"
     argv = ["register", f"{e57}#0", f"{e57}#1", "--out", tmp_path / "T.json", "--upright", "on"]
-    rc, _, err = run_cli([*argv, "--set", f"max_tilt_rad={math.radians(10.0)}"])
+    rc, _, err = run_cli([*argv, "--set", f"prior.max_tilt_rad={math.radians(10.0)}"])
     line = one_error_line(err)
     assert rc == 1 and not (tmp_path / "T.json").exists()
     assert "tilt" in line and "limit" in line

@@ -9,8 +9,8 @@ import pytest
 from test_verdict import BOX, CUPBOARD, _full_pair, _station
 
 from flexreg.core.transforms import invert, make_transform
-from flexreg.registration import RegistrationConfig
 from flexreg.registration.candidates import polisher
+from flexreg.registration.config import JudgeConfig
 from flexreg.registration.twins import find_twins, horizontal_axes, shares
 from flexreg.registration.verdict import decide
 from flexreg.stages.normals import grid_normals
@@ -41,7 +41,7 @@ def _twins(pair, T):
     src = pair.source.image
     sample = area_sample(src.xyz[src.valid].astype(np.float64), 5000)
     polish = polisher(pair.target.image, grid_normals(pair.target.image), sample, THR)
-    return find_twins(pair, T, UP, polish, THR, RegistrationConfig(twin_range_m=12.0))
+    return find_twins(pair, T, UP, polish, THR, JudgeConfig(), range_m=12.0)
 
 
 def test_the_axes_of_a_hall_are_its_walls():
@@ -63,7 +63,7 @@ def test_an_answer_a_bay_off_has_the_truth_among_its_twins_and_is_ambiguous():
     ]
     assert back and back[0]["open_share"] <= 1e-3
     assert back[0]["explained_share"] >= 0.2 * ev["answer"]["explained_share"]
-    v = decide({"twins": ev}, config=RegistrationConfig())
+    v = decide({"twins": ev})
     assert [r.code for r in v.reasons] == ["ambiguous"]
     assert "moved 5.0 m along x fits too" in v.reasons[0].message
 
@@ -78,7 +78,7 @@ def test_in_a_room_no_twin_fits_and_explains_much():
     assert ev["answer"]["open_share"] == 0.0
     assert ev["twins"]
     assert all(t["open_share"] > 0.01 or t["explained_share"] < 0.1 for t in ev["twins"])
-    assert decide({"twins": ev}, config=RegistrationConfig()).confident
+    assert decide({"twins": ev}).confident
 
 
 @pytest.mark.parametrize(
@@ -103,12 +103,12 @@ def test_a_twin_counts_when_it_fits_and_explains_a_fifth(explained, open_share, 
             ],
         }
     }
-    v = decide(ev, config=RegistrationConfig())
+    v = decide(ev)
     assert (not v.confident) is ambiguous
-    off = decide(ev, config=RegistrationConfig(verdict_twin_min_ratio=1.0))
+    off = decide(ev, judge=JudgeConfig(open_share=0.0))
     assert off.confident
 
 
 def test_twins_need_a_twin():
     ev = {"twins": {"answer": {"explained_share": 0.8, "open_share": 0.0}, "twins": []}}
-    assert decide(ev, config=RegistrationConfig()).confident
+    assert decide(ev).confident

@@ -21,7 +21,7 @@ from flexreg.cli.app import app
 from flexreg.config import Config, field_descriptions, to_toml, toml_text
 from flexreg.errors import ConfigError
 from flexreg.odometry.config import EvaluationConfig, OdometryConfig
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import RegistrationConfig, leaf_fields
 from flexreg.synth.config import SynthConfig
 
 
@@ -126,8 +126,9 @@ def _commands_table() -> list[str]:
     lines = ["| command | configuration | fields | module |", "|---|---|---|---|"]
     for cls, (commands, config) in _models().items():
         nested = [(k, v) for k, v in dict(config).items() if isinstance(v, Config)]
-        count = f"{len(cls.model_fields)}" + "".join(
-            f" (+ {len(type(v).model_fields)} in `[{k}]`)" for k, v in nested
+        own = len(cls.model_fields) - len(nested)
+        count = f"{own}" + "".join(
+            f" (+ {len(leaf_fields(type(v)))} in `[{k}]`)" for k, v in nested
         )
         names = ", ".join(f"`flexreg {c}`" for c in commands)
         lines.append(f"| {names} | `{cls.__name__}` | {count} | `{_module_path(cls)}` |")
@@ -151,13 +152,24 @@ def _fields_tables() -> list[str]:
         for key, value in config.model_dump(mode="json").items():
             note = notes.get(key, "")
             nested = getattr(config, key)
-            if isinstance(nested, Config):
-                users = models.get(type(nested), ([], None))[0]
-                where = f"`flexreg {users[0]}`" if users else f"`{type(nested).__name__}`"
+            if isinstance(nested, Config) and type(nested) in models:
+                where = f"`flexreg {models[type(nested)][0][0]}`"
                 lines.append(f"| `[{key}]` | a table | {_cell(note)}; its keys as for {where} |")
                 continue
-            lines.append(f"| `{key}` | `{_cell(_default(value))}` | {_cell(note)} |")
+            lines += _rows(key, nested, value, note)
     return lines[1:]
+
+
+def _rows(key: str, value: object, dumped: object, note: str) -> list[str]:
+    """The table's rows of one field (``dumped``: its value as JSON); a table of its own
+    (``[judge]``) as a row of its meaning and one row per key, written ``judge.KEY``."""
+    if not isinstance(value, Config) or not isinstance(dumped, dict):
+        return [f"| `{key}` | `{_cell(_default(dumped))}` | {_cell(note)} |"]
+    lines = [f"| `[{key}]` | a table | {_cell(note)} |"]
+    inner = field_descriptions(type(value))
+    for name, v in dumped.items():
+        lines += _rows(f"{key}.{name}", getattr(value, name), v, inner.get(name, ""))
+    return lines
 
 
 def render_docs(name: str) -> str:

@@ -66,7 +66,10 @@ SetOption = Annotated[
 def with_default(cls: type[Config], field: str, text: str) -> str:
     """Help text of an option that aliases ``field``, ending with the field's default (the
     option itself defaults to None: left out, it overrides nothing)."""
-    default = cls.model_fields[field].default
+    *tables, name = field.split(".")  # a field of a nested table: "prior.upright"
+    for t in tables:
+        cls = type(cls.model_fields[t].default)
+    default = cls.model_fields[name].default
     if default is None:
         return text
     shown = ("yes" if default else "no") if isinstance(default, bool) else f"{default}"

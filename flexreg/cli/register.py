@@ -54,7 +54,7 @@ OPTIONS = {
     "--voxel": "voxel_m",
     "--threshold": "threshold_m",
     "--seed": "seed",
-    "--upright": "upright",
+    "--upright": "prior.upright",
     "--icp-only": "icp_only",
 }
 _C = RegistrationConfig
@@ -242,7 +242,7 @@ _UprightOption = Annotated[
         "--upright",
         help=with_default(
             _C,
-            "upright",
+            "prior.upright",
             "Levelled-scanner plan-view prior: auto (when both scans look levelled), on "
             "(required) or off.",
         ),
@@ -344,8 +344,8 @@ def register_command(
         voxel_m=voxel,
         threshold_m=threshold,
         seed=seed,
-        upright=upright,
         icp_only=icp_only,
+        **{"prior.upright": upright},
     )
     frame = _check_options(config, init, txt, txt_frame)
     outputs = [

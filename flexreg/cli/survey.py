@@ -20,7 +20,7 @@ from flexreg.cli.options import (
 )
 from flexreg.config import did_you_mean
 from flexreg.errors import ConfigError, RegistrationError
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import AS_CHECKS, RENAMED, RETIRED, RegistrationConfig, leaf_fields
 from flexreg.survey.config import SurveyConfig
 
 if TYPE_CHECKING:
@@ -165,18 +165,19 @@ def _configs(
     seed: int | None,
 ) -> tuple[SurveyConfig, Path | None]:
     """The survey configuration (``--set`` keys of the registration go to its nested
-    ``registration``; ``registration.KEY`` works too) and the pairs CSV, if any."""
+    ``registration``; ``registration.KEY`` works too, and ``judge.KEY`` for a table of it)
+    and the pairs CSV, if any."""
     survey_sets, reg_sets = [], []
     for item in sets or ():
         key = item.partition("=")[0].strip()
         if key.startswith("registration."):
             reg_sets.append(item.removeprefix("registration."))
-        elif key in SurveyConfig.model_fields:
+        elif key.partition(".")[0] in SurveyConfig.model_fields:
             survey_sets.append(item)
-        elif key in RegistrationConfig.model_fields:
+        elif key.partition(".")[0] in RegistrationConfig.model_fields or key in OLD_KEYS:
             reg_sets.append(item)
         else:
-            known = [*SurveyConfig.model_fields, *RegistrationConfig.model_fields]
+            known = [*leaf_fields(SurveyConfig), *leaf_fields(RegistrationConfig)]
             raise ConfigError(
                 f"--set {key}: no such field of the survey or the registration"
                 + did_you_mean(key, known)
@@ -194,6 +195,10 @@ def _configs(
         RegistrationConfig, None, reg_sets, {"--seed": "seed"}, base=cfg.registration, seed=seed
     )
     return cfg.replace(registration=reg), pairs_file
+
+
+#: keys of the registration's flat layout before its tables, still read for one release
+OLD_KEYS = frozenset([*RENAMED, *AS_CHECKS, *RETIRED])
 
 
 class _Bars:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -77,8 +78,9 @@ class Verdict:
     status : {"confident", "uncertain"}
         ``"uncertain"`` whenever any reason is given.
     reasons : tuple of Reason
-    evidence : dict
-        JSON-ready measurements the decision used (overlaps, inlier spread, per-axis
+    evidence : mapping
+        JSON-ready measurements the decision used (a registration's is its typed
+        :class:`~flexreg.registration.evidence.Evidence`) (overlaps, inlier spread, per-axis
         strength, runner-up, free-space violations, residuals), with units in the keys.
     runner_up : tuple of Hypothesis
         Clearly different transforms that explain the data almost as well, best first.
@@ -89,7 +91,7 @@ class Verdict:
 
     status: Literal["confident", "uncertain"]
     reasons: tuple[Reason, ...] = ()
-    evidence: dict[str, Any] = field(default_factory=dict)
+    evidence: Mapping[str, Any] = field(default_factory=dict)
     runner_up: tuple[Hypothesis, ...] = ()
     notes: tuple[Reason, ...] = ()
 
@@ -112,7 +114,7 @@ class Verdict:
         return {
             "status": self.status,
             "reasons": [{"code": r.code, "message": r.message} for r in self.reasons],
-            "evidence": self.evidence,
+            "evidence": dict(self.evidence),
             "runner_up": [h.to_dict() for h in self.runner_up],
             "notes": [{"code": r.code, "message": r.message} for r in self.notes],
         }

@@ -189,8 +189,8 @@ def _guided(
             ks.points,
             T0,
             threshold_m=thr,
-            radius_m=config.guided_radius_m,
-            radius_per_m=config.guided_radius_per_m,
+            radius_m=config.prior.guided_radius_m,
+            radius_per_m=config.prior.guided_radius_per_m,
         )
     except DegenerateGeometryError as e:
         log.debug("guided fit around a prior skipped: %s", e)
@@ -468,14 +468,14 @@ def choose(
             f"no transform found: {counts}, {len(priors)} priors"
             + (f"; {'; '.join(notes)}" if notes else "")
         )
-    if config.aliases and not config.icp_only:
+    if config.judge.runs("aliases") and not config.icp_only:
         W = polished if polished is not None else fams[best][0][1]
         twins = alias_candidates(
             W,
             judged,
             aliases,
-            distinct_deg=config.verdict_distinct_deg,
-            distinct_m=config.verdict_distinct_m,
+            distinct_deg=config.judge.distinct_deg,
+            distinct_m=config.judge.distinct_m,
         )
         b2, okbad2, pol2, judged2, top2 = _best_family([[c] for c in twins], check, polish, thr)
         judged = judged + judged2

@@ -28,7 +28,12 @@ from numpy.typing import NDArray
 
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import (
+    DECISIVE_SHARE,
+    FULL_DECISIVE_POINTS,
+    FULL_DECISIVE_SHARE,
+    JudgeConfig,
+)
 from flexreg.stages.verification import classify_points, soft_score
 
 
@@ -221,40 +226,40 @@ def duel(A: Masks, B: Masks) -> tuple[float, float]:
     return (won / n, lost / n) if n else (0.0, 0.0)
 
 
-def decisive(won: float, lost: float, cfg: RegistrationConfig) -> bool:
+def decisive(won: float, lost: float, judge: JudgeConfig) -> bool:
     """Whether :func:`duel` shares ``won`` against ``lost`` settle two poses (see
-    ``verdict_decisive_share`` and ``verdict_decisive_ratio`` of the config)."""
-    return won - lost >= cfg.verdict_decisive_share and won >= cfg.verdict_decisive_ratio * lost
+    :data:`~flexreg.registration.config.DECISIVE_SHARE` and ``judge.decisive_ratio``)."""
+    return won - lost >= DECISIVE_SHARE and won >= judge.decisive_ratio * lost
 
 
-def decisive_full(won: float, lost: float, cfg: RegistrationConfig, *, points: int = 0) -> bool:
+def decisive_full(won: float, lost: float, judge: JudgeConfig, *, points: int = 0) -> bool:
     """Whether full-resolution :func:`duel` shares (:mod:`flexreg.registration.fullres`)
-    settle two poses: ``won >= verdict_decisive_ratio * lost`` and a lead ``won - lost`` of
-    at least ``verdict_full_decisive_share`` of the points, or, given the number of
-    ``points`` checked, of at least ``verdict_full_decisive_points`` points.
+    settle two poses: ``won >= judge.decisive_ratio * lost`` and a lead ``won - lost`` of
+    at least ``FULL_DECISIVE_SHARE`` of the points, or, given the number of
+    ``points`` checked, of at least ``FULL_DECISIVE_POINTS`` points.
 
     The share scales with the scans; a small cue does not (a forklift seen two bays away
     leads by 13-53 points of 850 000 at 1024 x 512, less than the share's 85), while the
     duels of empty tunnels, arcades and rooms leave 0-2 points either way: a count floor
     between them with the ratio settles the cue and leaves the empty scenes open.
 
-    >>> cfg = RegistrationConfig()
-    >>> decisive_full(0.0005, 0.0, cfg), decisive_full(0.00005, 0.0, cfg)
+    >>> judge = JudgeConfig()
+    >>> decisive_full(0.0005, 0.0, judge), decisive_full(0.00005, 0.0, judge)
     (True, False)
-    >>> decisive_full(0.0006, 0.0003, cfg)
+    >>> decisive_full(0.0006, 0.0003, judge)
     False
     >>> n = 850_000  # 17 points against none, and 17 against 6 (not 3 : 1)
-    >>> decisive_full(17 / n, 0.0, cfg, points=n), decisive_full(17 / n, 6 / n, cfg, points=n)
+    >>> decisive_full(17 / n, 0.0, judge, points=n), decisive_full(17 / n, 6 / n, judge, points=n)
     (True, False)
-    >>> decisive_full(2 / n, 0.0, cfg, points=n)
+    >>> decisive_full(2 / n, 0.0, judge, points=n)
     False
     """
-    if won < cfg.verdict_decisive_ratio * lost:
+    if won < judge.decisive_ratio * lost:
         return False
     lead = won - lost
-    if lead >= cfg.verdict_full_decisive_share:
+    if lead >= FULL_DECISIVE_SHARE:
         return True
-    floor = cfg.verdict_full_decisive_points
+    floor = FULL_DECISIVE_POINTS
     return points > 0 and floor > 0 and lead * points >= floor - 1e-6
 
 

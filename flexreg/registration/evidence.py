@@ -11,14 +11,18 @@ answers, in numbers with units in their keys:
 * ``axis_strength``: how firmly the overlap's surfaces fix each of the six pose parameters
   (a corridor fixes nothing along its axis);
 * ``runner_up``: the best clearly different candidate pose and its score against the winner;
-* ``residual``: how closely the surfaces meet; ``refinement``: whether ICP was kept.
+* ``residual``: how closely the surfaces meet; ``refinement``: whether ICP was kept;
+* measured only where it tells something (:func:`flexreg.registration.pipeline.register`
+  gates them on the sample evidence): ``full_resolution``, ``sweep``, ``twins``.
 
-:func:`flexreg.registration.verdict.decide` turns it into a verdict.
+It is held in one frozen :class:`Evidence`, measured once per registration before the single
+decision (:func:`flexreg.registration.verdict.decide`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -36,6 +40,113 @@ MAX_RUNNER_UPS = 3
 
 #: most other candidate poses the answer duels (``rivals`` of :func:`gather`)
 MAX_RIVALS = 8
+
+
+#: sections every evidence has (null when not measured), in the order results show them;
+#: the others (``full_resolution``, ``sweep``, ``runner_ups``, ``twins``) only when measured
+ALWAYS = (
+    "overlap",
+    "free_space",
+    "inliers",
+    "axis_strength",
+    "runner_up",
+    "candidates",
+    "residual",
+    "refinement",
+)
+
+
+@dataclass(frozen=True)
+class Evidence(Mapping[str, Any]):
+    """What a registration's checks measured on its answer, one attribute per section (each
+    JSON-ready, units in its keys; see :func:`gather`). Read it by attribute; as a mapping
+    it is the JSON the results store (:meth:`to_dict`), sections not measured left out.
+
+    Attributes
+    ----------
+    overlap, free_space, inliers, axis_strength, residual, refinement : dict or None
+    runner_up : dict or None
+        The best clearly different candidate (the first of ``runner_ups``).
+    candidates : int or None
+        How many candidate poses were judged.
+    full_resolution : dict or None
+        The answer's open-space share at full resolution, and why the scans were compared
+        there (:func:`full_evidence`).
+    sweep : dict or None
+        What the sweep along a weak axis or a repeat did.
+    runner_ups, rivals : list of dict or None
+        The close runner-ups and every rival the answer dueled.
+    twins : dict or None
+        The answer slid along the walls (:func:`flexreg.registration.twins.find_twins`).
+    """
+
+    overlap: dict[str, Any] | None = None
+    free_space: dict[str, Any] | None = None
+    inliers: dict[str, Any] | None = None
+    axis_strength: dict[str, Any] | None = None
+    runner_up: dict[str, Any] | None = None
+    candidates: int | None = None
+    residual: dict[str, Any] | None = None
+    refinement: dict[str, Any] | None = None
+    full_resolution: dict[str, Any] | None = None
+    sweep: dict[str, Any] | None = None
+    runner_ups: list[dict[str, Any]] | None = None
+    rivals: list[dict[str, Any]] | None = None
+    twins: dict[str, Any] | None = None
+
+    @classmethod
+    def of(cls, sections: Mapping[str, Any]) -> Evidence:
+        """Evidence from its JSON (a result file's, or a hand-made case's).
+
+        >>> Evidence.of({"overlap": {"source_explained": 0.5}}).overlap
+        {'source_explained': 0.5}
+        """
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in sections.items() if k in known})
+
+    def _keys(self) -> list[str]:
+        return [
+            f.name
+            for f in fields(self)
+            if f.name in ALWAYS or f.name == "rivals" or getattr(self, f.name) is not None
+        ]
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in self._keys():
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys())
+
+    def __len__(self) -> int:
+        return len(self._keys())
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON the results store."""
+        return {k: getattr(self, k) for k in self._keys()}
+
+    @property
+    def doubt(self) -> float | None:
+        """The larger free-space conflict ratio (share of a scan in the other's free space
+        over the share the other explains, either direction), or None when unknown.
+
+        >>> Evidence(free_space={"source_conflict_ratio": 0.1, "target_conflict_ratio": 0.3}).doubt
+        0.3
+        """
+        fs = self.free_space or {}
+        vals = [
+            float(fs[k])
+            for k in ("source_conflict_ratio", "target_conflict_ratio")
+            if fs.get(k) is not None
+        ]
+        return max(vals) if vals else None
+
+    @property
+    def strengths(self) -> dict[str, float]:
+        """Each pose parameter's strength (``x`` ... ``rz``, per point) that was measured."""
+        s = self.axis_strength or {}
+        return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
 
 
 def _frac(mask: NDArray[np.bool_]) -> float:
@@ -136,8 +247,8 @@ def gather(
     full: FullPair | None = None,
     full_ratio: float = 0.6,
     sweep: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """The evidence of a registration (JSON-ready, units in the keys).
+) -> Evidence:
+    """The evidence of a registration (JSON-ready sections, units in the keys).
 
     Parameters
     ----------
@@ -238,7 +349,9 @@ def gather(
     c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)
     # whenever the settling made both scans' full views (a repeating plan, a weak axis or a
     # close rival) the answer's own open-space share there decides ``free_space`` (decide)
-    full_answer = None if full is None else full_evidence(ev, full, final.T, threshold_m)
+    full_answer = None
+    if full is not None:
+        ev["full_resolution"], full_answer = full_evidence(full, final.T, threshold_m)
     if sweep is not None:
         ev["sweep"] = dict(sweep)
     ups = []
@@ -261,29 +374,28 @@ def gather(
         ev["runner_up"] = ups[0]
         ev["runner_ups"] = ups
     ev["rivals"] = [_rival(two, answer, h, threshold_m) for h in rivals]
-    return ev
+    return Evidence(**ev)
 
 
 def full_evidence(
-    ev: dict[str, Any],
     full: FullPair,
     T: NDArray[np.float64],
     threshold_m: float,
     why: str = "settling",
-) -> Masks:
-    """Record under ``ev["full_resolution"]`` how many points of both scans ``full`` checks,
-    the share of them the pose ``T`` puts in the other's open space, and ``why`` they were
+) -> tuple[dict[str, Any], Masks]:
+    """The ``full_resolution`` section: how many points of both scans ``full`` checks, the
+    share of them the pose ``T`` puts in the other's open space, and ``why`` they were
     compared (``"settling"``: a repeat, a weak axis or a close rival, where a twin beside the
-    truth is likely; ``"check"``: a confident answer checked anyway); its masks
+    truth is likely; ``"check"``: a confident answer checked anyway); and its masks
     (:func:`~flexreg.registration.fullres.pose_masks`)."""
     masks = pose_masks(full, T, threshold_m)
     bad = sum(int(b.sum()) for _, b in masks)
-    ev["full_resolution"] = {
+    section = {
         "points": full.points,
         "open_space_share": round(bad / full.points, 7) if full.points else 0.0,
         "why": why,
     }
-    return masks
+    return section, masks
 
 
 def _full_duel(
@@ -317,8 +429,10 @@ def _rival(two: TwoWay, answer: Masks, h: Hypothesis, threshold_m: float) -> dic
 
 
 __all__ = [
+    "ALWAYS",
     "MAX_RIVALS",
     "MAX_RUNNER_UPS",
+    "Evidence",
     "full_evidence",
     "gather",
     "runner_ups",

@@ -50,7 +50,7 @@ from flexreg.registration.candidates import (
     self_symmetries,
 )
 from flexreg.registration.check import TOLERANCE, Check, Scored, TwoWay
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import GUARD_MARGIN, RegistrationConfig
 from flexreg.registration.evidence import MAX_RIVALS, full_evidence, gather, runner_ups
 from flexreg.registration.fullres import FullPair, full_pair_of
 from flexreg.registration.preparation import (
@@ -69,7 +69,7 @@ from flexreg.registration.preparation import (
 from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.twins import find_twins
-from flexreg.registration.verdict import decide
+from flexreg.registration.verdict import decide, reasons
 from flexreg.stages.alignment import consistent_subset, ransac_rigid
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
@@ -87,13 +87,13 @@ def _plan_priors(
     target: PlanView | str | None, source: PlanView | str | None, config: RegistrationConfig
 ) -> PlanPriors:
     """The plan overlays of two plan views (raises the reason a scan has none), and the
-    symmetries of each (when ``config.aliases``)."""
+    symmetries of each (when ``config.judge.runs("aliases")``)."""
     for p in (target, source):
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
-    overlays = plan_overlays(target, source, hypotheses=config.plan_hypotheses)  # type: ignore[arg-type]
+    overlays = plan_overlays(target, source, hypotheses=config.prior.plan_hypotheses)  # type: ignore[arg-type]
     up = np.asarray(target.levelling.up, dtype=np.float64)  # type: ignore[union-attr]
-    if not config.aliases:
+    if not config.judge.runs("aliases"):
         return overlays, Aliases(up=up)
     return overlays, Aliases(self_symmetries(target), self_symmetries(source), up)
 
@@ -194,7 +194,7 @@ def _plan_candidates(
     try:
         overlays, aliases = job.result()
     except DegenerateGeometryError as e:
-        if config.upright == "on":
+        if config.prior.upright == "on":
             raise RegistrationError(f"upright prior impossible: {e}") from None
         notes.append(f"no plan prior ({e})")
         log.info("no plan prior: %s", e)
@@ -260,24 +260,25 @@ def _verdict(
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     up: NDArray[np.float64] | None,
 ) -> Verdict:
-    """The evidence on the final transform (:mod:`.evidence`) and the verdict
-    (:mod:`.verdict`); a confident
-    answer of two levelled scans (``up``: the target's vertical) also has its twins along
-    the target's walls checked (:mod:`.twins`)."""
+    """The evidence on the final transform (:mod:`.evidence`), measured once, and the one
+    decision on it (:mod:`.verdict`). An answer no test doubts on the samples is also
+    checked at full resolution (when the settling did not compare the scans there) and, for
+    two levelled scans (``up``: the target's vertical), has its twins along the target's
+    walls measured (:mod:`.twins`)."""
     ups = runner_ups(
         c.judged,
         scored.T,
         c.score,
-        distinct_deg=config.verdict_distinct_deg,
-        distinct_m=config.verdict_distinct_m,
-        ratio=config.verdict_ambiguity_ratio,
+        distinct_deg=config.judge.distinct_deg,
+        distinct_m=config.judge.distinct_m,
+        ratio=config.judge.ambiguity_ratio,
     )
     rivals = runner_ups(
         c.judged,
         scored.T,
         c.score,
-        distinct_deg=config.verdict_distinct_deg,
-        distinct_m=config.verdict_distinct_m,
+        distinct_deg=config.judge.distinct_deg,
+        distinct_m=config.judge.distinct_m,
         ratio=-np.inf,
         limit=MAX_RIVALS,
     )
@@ -297,18 +298,17 @@ def _verdict(
         refinement=refinement,
         rivals=rivals,
         full=settled.pair,
-        full_ratio=config.verdict_ambiguity_ratio,
+        full_ratio=config.judge.ambiguity_ratio,
         sweep=None if settled.sweep is None else settled.sweep | {"settled": settled.won},
     )
-    verdict = decide(ev, ups, config)
-    if verdict.confident and settled.pair is None and config.verdict_full_check:  # see config
-        full_evidence(ev, full_pair(), scored.T, thr, "check")
-        verdict = decide(ev, ups, config)
-    if verdict.confident and up is not None and config.verdict_twins:
+    judge = config.judge
+    # measured further only where the answer still stands on what is measured so far
+    if not reasons(ev, judge) and settled.pair is None and judge.runs("full"):
+        ev = replace(ev, full_resolution=full_evidence(full_pair(), scored.T, thr, "check")[0])
+    if not reasons(ev, judge) and up is not None and judge.runs("twins"):
         pair = settled.pair if settled.pair is not None else full_pair()
-        ev["twins"] = find_twins(pair, scored.T, up, polish, thr, config, settled.axis)
-        verdict = decide(ev, ups, config)
-    return verdict
+        ev = replace(ev, twins=find_twins(pair, scored.T, up, polish, thr, judge, settled.axis))
+    return decide(ev, ups, judge)
 
 
 def _finish(
@@ -333,16 +333,17 @@ def _finish(
     assert vs.measured is not None and vs.slack is not None and vt.sample is not None
     check = Check(vt.image, vt.measured, vt.slack, vs.sample)
     two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
-    polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if config.polish else None
+    judge = config.judge
+    polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if judge.runs("polish") else None
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
     given: list[Candidate] = [] if init is None else [("init", init)]
     priors = given if config.icp_only else given + plan_priors + m.priors
     with run.stage("estimation"):
         c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases=aliases)
     settled, pair = Settlement(c), full_pair_of(views)
-    if config.settle and not config.icp_only:
+    if judge.runs("settle") and not config.icp_only:
         with run.stage("settling"):
-            settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config)
+            settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), judge)
         c = settled.coarse
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
@@ -366,14 +367,13 @@ def _finish(
         kind = "keypoints"
         if icp is not None:
             refined = two.score(icp.T_target_source, fine_tol)
-            margin = config.refine_guard_margin
-            kept = not config.refine_guard or refined.value >= coarse.value - margin
+            kept = not judge.runs("guard") or refined.value >= coarse.value - GUARD_MARGIN
             refinement = {
                 "kept": kept,
                 "score_coarse": round(coarse.value, 6),
                 "score_refined": round(refined.value, 6),
-                "guard": config.refine_guard,
-                "margin": margin,
+                "guard": judge.runs("guard"),
+                "margin": GUARD_MARGIN,
                 "method": config.icp,
             }
             if kept:
@@ -393,7 +393,7 @@ def _finish(
             as_points(scans[0], keep_float32=True),
             as_points(scans[1], keep_float32=True),
             T,
-            open3d_check=config.open3d_overlap_check,
+            open3d_check=config.judge.runs("open3d"),
         )
     log.info("overlap %s", overlap.headline())
     return RegistrationResult(
@@ -422,8 +422,8 @@ def _finish(
 
 
 def _check_upright(config: RegistrationConfig) -> None:
-    if config.upright not in ("auto", "on", "off"):
-        raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.upright!r}")
+    if config.prior.upright not in ("auto", "on", "off"):
+        raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.prior.upright!r}")
 
 
 def _check_init(
@@ -439,7 +439,7 @@ def _check_init(
 def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
     """Plan views for these images: ``upright="on"``, or ``"auto"`` and all panoramas."""
     panoramic = all(not isinstance(i.camera, PinholeCamera) for i in images)
-    return config.upright == "on" or (config.upright == "auto" and panoramic)
+    return config.prior.upright == "on" or (config.prior.upright == "auto" and panoramic)
 
 
 @contextmanager

@@ -208,7 +208,8 @@ def keypoints_of(
 
 def _plan_view(image: RangeImage, config: RegistrationConfig) -> PlanView | str:
     try:
-        return plan_view(image, max_tilt_rad=config.max_tilt_rad, plan_cell_m=config.plan_cell_m)
+        prior = config.prior
+        return plan_view(image, max_tilt_rad=prior.max_tilt_rad, plan_cell_m=prior.plan_cell_m)
     except DegenerateGeometryError as e:
         return str(e)
 
@@ -266,7 +267,7 @@ def scan_views(
     ]
     if roles == [(True, False), (False, True)] and None not in scans:  # register's pair
         _keep_overlap_inputs(scans)  # type: ignore[arg-type]
-        if config.verdict_full_check:
+        if config.judge.runs("full"):
             # the full-resolution views the verdict's check of a confident answer reads,
             # made here beside the feature stages instead of at the end of the call (kept
             # with these views: :func:`~flexreg.registration.fullres.full_pair_of`)

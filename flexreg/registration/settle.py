@@ -7,7 +7,7 @@ themselves. The priors then land anywhere along the axis, and the true pose is o
 the candidates at all. When the winning pose has a weak translation axis (the point-to-plane
 information of its overlap, :func:`weak_direction`) or the target's plan view repeats (a shift
 among its symmetries), :func:`sweep_candidates` slides the winner, and its turns by the plan's
-self-overlays, along that axis over ``sweep_range_m`` in steps of ``sweep_step_m``; each slid
+self-overlays, along that axis over ``SWEEP_RANGE_M`` in steps of ``SWEEP_STEP_M``; each slid
 pose is scored on the source's points at full resolution (a cue near the stations covers many
 of them), the best local maxima are placed on the surfaces facing the axis and polished by the quick
 projective ICP, and they join the candidates. :func:`tournament` then duels every clearly
@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.candidates import Aliases, Coarse, Keypoints3D, at_pose
 from flexreg.registration.check import TOLERANCE, Check, Judged, Masks, decisive_full, duel
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import SWEEP_RANGE_M, SWEEP_STEP_M, JudgeConfig
 from flexreg.registration.fullres import (
     FullPair,
     FullView,
@@ -384,33 +384,33 @@ def place_along(
     return _shifted(T, best * direction)
 
 
-def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], config: RegistrationConfig) -> bool:
+def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], judge: JudgeConfig) -> bool:
     return (
-        rotation_error_deg(A, B) > config.verdict_distinct_deg
-        or translation_error_m(A, B) > config.verdict_distinct_m
+        rotation_error_deg(A, B) > judge.distinct_deg
+        or translation_error_m(A, B) > judge.distinct_m
     )
 
 
 def contenders(
     judged: Sequence[Judged],
-    config: RegistrationConfig,
+    judge: JudgeConfig,
     *,
     floor: float | None = None,
     size: int = TOURNAMENT_SIZE,
 ) -> list[Judged]:
     """The clearly different candidates, best first, each the best of its neighbourhood:
-    those scoring at least ``verdict_ambiguity_ratio`` of the best (``floor`` None), or at
+    those scoring at least ``judge.ambiguity_ratio`` of the best (``floor`` None), or at
     least ``floor``; at most ``size``."""
     ranked = sorted(judged, key=lambda j: -j.score)
     if not ranked:
         return []
     top = ranked[0].score
-    low = config.verdict_ambiguity_ratio * top if floor is None else floor
+    low = judge.ambiguity_ratio * top if floor is None else floor
     out: list[Judged] = []
     for j in ranked:
         if j.score < low:
             break
-        if all(_distinct(j.T_target_source, o.T_target_source, config) for o in out):
+        if all(_distinct(j.T_target_source, o.T_target_source, judge) for o in out):
             out.append(j)
         if len(out) >= size:
             break
@@ -462,19 +462,19 @@ def rescue(
     W: NDArray[np.float64],
     pair: FullPair,
     threshold_m: float,
-    config: RegistrationConfig,
+    judge: JudgeConfig,
 ) -> Judged | None:
     """The candidate that replaces an answer full resolution contradicts, or None.
 
-    The answer ``W`` puts at least ``settle_open_share`` of both scans in open space (one bay
+    The answer ``W`` puts at least ``judge.settle_open_share`` of both scans in open space (one bay
     or aisle off in a repeating hall: the cue is where the other scanner saw through). Its
     twins and the swept poses are screened (:func:`screen`); the one that puts the fewest
-    points in open space wins when that is under a third of ``settle_open_share``, it beats
+    points in open space wins when that is under a third of ``judge.settle_open_share``, it beats
     the answer :func:`~flexreg.registration.check.decisive_full`-ly, explains at least half
     as many points (not clean merely by seeing less of the other scan), and no other clearly
     different clean candidate (within twice its open share) is left unbeaten."""
     answer = Judged("answer", W, 0.0, 0.0, 0.0)
-    others = [j for j in judged if _distinct(j.T_target_source, W, config)]
+    others = [j for j in judged if _distinct(j.T_target_source, W, judge)]
     ranked = screen([answer, *others], pair, threshold_m, size=TOURNAMENT_SIZE)[1:]
     n = pair.points
     scored = []
@@ -482,18 +482,18 @@ def rescue(
         m = pose_masks(pair, j.T_target_source, threshold_m)
         scored.append((open_share(m), j, m))
     scored.sort(key=lambda x: x[0])
-    if not scored or scored[0][0] > config.settle_open_share / 3:
+    if not scored or scored[0][0] > judge.settle_open_share / 3:
         return None
     share, best, masks = scored[0]
-    if not decisive_full(*duel(masks, contradicted), config, points=n):
+    if not decisive_full(*duel(masks, contradicted), judge, points=n):
         return None
     if explained_share(masks) < 0.5 * explained_share(contradicted):  # clean only by seeing less
         return None
     for other_share, j, m in scored[1:]:
         if other_share <= 2 * max(share, 1.0 / n) and _distinct(
-            j.T_target_source, best.T_target_source, config
+            j.T_target_source, best.T_target_source, judge
         ):
-            if not decisive_full(*duel(masks, m), config, points=n):
+            if not decisive_full(*duel(masks, m), judge, points=n):
                 return None
     log.info("full resolution contradicts the answer; %s puts %.3f%% in open space", best.origin,
              100 * share)  # fmt: skip
@@ -519,12 +519,12 @@ def open_share(masks: Masks) -> float:
 
 
 def tournament(
-    players: Sequence[Judged], pair: FullPair, threshold_m: float, config: RegistrationConfig
+    players: Sequence[Judged], pair: FullPair, threshold_m: float, judge: JudgeConfig
 ) -> Judged | None:
     """The one candidate that settles a near-tie at full resolution, or None.
 
-    A player is *close* when it scores at least ``verdict_ambiguity_ratio`` of the best, and
-    *passes* when it puts at most ``verdict_full_max_conflict`` of all points in open space
+    A player is *close* when it scores at least ``judge.ambiguity_ratio`` of the best, and
+    *passes* when it puts at most ``judge.full_max_conflict`` of all points in open space
     itself (a pose that puts the cue where the other scanner saw through is refuted by its
     own contradictions). The winner is close and passes, no player beats it
     :func:`~flexreg.registration.check.decisive_full`-ly, and it beats every other close
@@ -538,7 +538,7 @@ def tournament(
         Clearly different candidates (:func:`contenders`).
     pair : FullPair
     threshold_m : float, metres
-    config : RegistrationConfig
+    judge : JudgeConfig
 
     Returns
     -------
@@ -549,17 +549,17 @@ def tournament(
         return None
     masks = [pose_masks(pair, p.T_target_source, threshold_m) for p in players]
     n = pair.points
-    passing = [open_share(m) <= config.verdict_full_max_conflict for m in masks]
+    passing = [open_share(m) <= judge.full_max_conflict for m in masks]
     top = max(p.score for p in players)
-    close = [k for k, p in enumerate(players) if p.score >= config.verdict_ambiguity_ratio * top]
+    close = [k for k, p in enumerate(players) if p.score >= judge.ambiguity_ratio * top]
     winners = []
     for i, p in enumerate(players):
         if not passing[i] or i not in close:
             continue
         duels = {k: duel(masks[i], masks[k]) for k in range(len(players)) if k != i}
-        if any(decisive_full(lost, won, config, points=n) for won, lost in duels.values()):
+        if any(decisive_full(lost, won, judge, points=n) for won, lost in duels.values()):
             continue
-        if all(decisive_full(*duels[k], config, points=n) for k in close if k != i):
+        if all(decisive_full(*duels[k], judge, points=n) for k in close if k != i):
             winners.append(p)
     for i, p in enumerate(players):
         log.debug(
@@ -641,7 +641,7 @@ def settle(
     threshold_m: float,
     aliases: Aliases | None,
     keypoints: tuple[Keypoints3D, Keypoints3D],
-    config: RegistrationConfig,
+    judge: JudgeConfig,
 ) -> Settlement:
     """Sweep along a weak axis or a repeat, then hold a tournament of the close candidates.
 
@@ -663,27 +663,27 @@ def settle(
         The plans' symmetries.
     keypoints : (Keypoints3D, Keypoints3D)
         Target and source keypoints (the final guided matches of a new winner).
-    config : RegistrationConfig
+    judge : JudgeConfig
 
     Returns
     -------
     Settlement
     """
     W, thr = c.T_target_source, threshold_m
-    rivals = len(contenders(c.judged, config)) >= 2
-    kind, u = "weak_axis", weak_direction(check, normals, W, thr, config.sweep_axis_strength)
+    rivals = len(contenders(c.judged, judge)) >= 2
+    kind, u = "weak_axis", weak_direction(check, normals, W, thr, judge.sweep_axis_strength)
     if u is None and rivals:  # a repeat matters only when a pose beside the answer competes
         kind, u = "repeat", repeat_direction(aliases)
     pair, contradicted, classified = None, None, None
     if u is None and not rivals:  # ... or when full resolution contradicts the answer
         u = repeat_direction(aliases)
         classified = check.classify(W, *TOLERANCE.fine(thr)) if u is not None else None
-        if classified is None or classified[1].mean() < config.verdict_min_overlap:
+        if classified is None or classified[1].mean() < judge.min_overlap:
             return Settlement(c)  # too little overlap to be confident anyway: nothing to rescue
         pair = full_pair()
         contradicted = pose_masks(pair, W, thr)
         share = open_share(contradicted)
-        if not config.settle_open_share <= share < RESCUE_MAX_OPEN:
+        if not judge.settle_open_share <= share < RESCUE_MAX_OPEN:
             return Settlement(c, pair)  # the verdict reads the answer's share
         kind = "repeat"
         log.debug("answer puts %.2f%% in open space at full resolution: sweep", 100 * share)
@@ -706,8 +706,8 @@ def settle(
                 thr,
                 polish,
                 pivot=pivot,
-                range_m=config.sweep_range_m,
-                step_m=config.sweep_step_m,
+                range_m=SWEEP_RANGE_M,
+                step_m=SWEEP_STEP_M,
             )
         ]
         for T in poses:
@@ -716,17 +716,17 @@ def settle(
         sweep = {
             "kind": kind,
             "direction_target": [round(float(x), 3) for x in u],
-            "range_m": config.sweep_range_m,
-            "step_m": config.sweep_step_m,
+            "range_m": SWEEP_RANGE_M,
+            "step_m": SWEEP_STEP_M,
             "poses": len(poses),
         }
     answer = Judged(c.origin, W, *check.judge(W, *TOLERANCE.free(thr)))
-    others = contenders(judged, config, floor=0.0, size=SCREENED)
-    players = [answer] + [j for j in others if _distinct(j.T_target_source, W, config)]
+    others = contenders(judged, judge, floor=0.0, size=SCREENED)
+    players = [answer] + [j for j in others if _distinct(j.T_target_source, W, judge)]
     players = screen(players, pair, thr)
-    winner = tournament(players, pair, thr, config)
+    winner = tournament(players, pair, thr, judge)
     if winner is None and contradicted is not None:
-        winner = rescue(contradicted, judged, W, pair, thr, config)
+        winner = rescue(contradicted, judged, W, pair, thr, judge)
     out = Coarse(
         c.origin,
         W,
@@ -740,9 +740,9 @@ def settle(
     )
     if winner is not None and u is not None:
         # the cue alone fixes the position along the axis: place the winner on it
-        T = place_along(winner.T_target_source, u, pair, thr, span_m=config.sweep_step_m)
+        T = place_along(winner.T_target_source, u, pair, thr, span_m=SWEEP_STEP_M)
         winner = Judged(winner.origin, T, *check.judge(T, *TOLERANCE.free(thr)))
-    if winner is not None and (u is not None or _distinct(winner.T_target_source, W, config)):
+    if winner is not None and (u is not None or _distinct(winner.T_target_source, W, judge)):
         log.info("the tournament's winner (%s) is the answer", winner.origin)
         kt, ks = keypoints
         out = at_pose(winner.origin, winner.T_target_source, kt, ks, thr, judged, c.score)

@@ -15,8 +15,8 @@ slid poses that put least in open space nearby and explain most, at least
 (explained and open-space shares of a sample each way,
 :func:`~flexreg.registration.fullres.full_masks`). The verdict
 (:func:`flexreg.registration.verdict.decide`, ``ambiguous``) then calls the answer ambiguous
-when a twin *fits* (it puts at most ``verdict_twin_fit_open`` of the points in open space, or
-twice what the answer does) and explains at least ``verdict_twin_min_ratio`` of what the
+when a twin *fits* (it puts at most ``judge.twin_fit_open`` of the points in open space, or
+twice what the answer does) and explains at least ``TWIN_MIN_RATIO`` of what the
 answer explains: two poses a whole bay apart that both fit are two answers, and the larger
 overlap of one is no evidence for it.
 """
@@ -34,7 +34,13 @@ from scipy import ndimage
 
 from flexreg.core.transforms import invert
 from flexreg.registration.check import Masks, duel
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import (
+    TWIN_MIN_RATIO,
+    TWIN_RANGE_M,
+    TWIN_STEP_M,
+    TWIN_STRONG_RATIO,
+    JudgeConfig,
+)
 from flexreg.registration.fullres import (
     FullPair,
     FullView,
@@ -161,8 +167,11 @@ def find_twins(
     up: NDArray[np.float64],
     polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     threshold_m: float,
-    config: RegistrationConfig,
+    judge: JudgeConfig,
     settled_axis: NDArray[np.float64] | None = None,
+    *,
+    range_m: float = TWIN_RANGE_M,
+    step_m: float = TWIN_STEP_M,
 ) -> dict[str, Any]:
     """The answer ``T`` slid along the target's wall directions: where else it fits.
 
@@ -178,11 +187,11 @@ def find_twins(
         The quick local ICP (:func:`~flexreg.registration.candidates.polisher`).
     threshold_m : float, metres
         The inlier threshold.
-    config : RegistrationConfig
-        ``twin_range_m`` and ``twin_step_m``: how far either way and in which steps the
-        answer is slid; a twin that fits (``verdict_twin_fit_open``) and explains between
-        ``verdict_twin_min_ratio`` and ``verdict_twin_strong_ratio`` of what the answer
-        explains also duels the answer on every pixel of both scans
+    judge : JudgeConfig
+        A twin that fits (:attr:`~flexreg.registration.config.JudgeConfig.twin_fit_open`)
+        and explains between :data:`~flexreg.registration.config.TWIN_MIN_RATIO` and
+        :data:`~flexreg.registration.config.TWIN_STRONG_RATIO` of what the answer explains
+        also duels the answer on every pixel of both scans
         (:func:`~flexreg.registration.check.duel`).
     settled_axis : (3,) float64, optional
         The direction (target frame) along which the settling swept the answer and placed
@@ -191,6 +200,9 @@ def find_twins(
         within 20 m, the truth's included, has lost a duel against the answer there (a niche
         in a tunnel, a forklift among identical bays), so the wall direction within
         :data:`SETTLED_DEG` of it is not slid again.
+    range_m, step_m : float, metres
+        How far either way and in which steps the answer is slid
+        (:data:`~flexreg.registration.config.TWIN_RANGE_M`, ``TWIN_STEP_M``).
 
     Returns
     -------
@@ -202,7 +214,6 @@ def find_twins(
         ``full_refuting_share`` (shares of ``full_points``); ``settled_axes_target``: the
         wall directions left out as settled.
     """
-    range_m, step_m = config.twin_range_m, config.twin_step_m
     axes: list[NDArray[np.float64]] = []
     settled: list[NDArray[np.float64]] = []
     for a in horizontal_axes(pair.target, up):
@@ -217,8 +228,8 @@ def find_twins(
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins: list[dict[str, Any]] = []
-    limit = max(config.verdict_twin_fit_open, 2.0 * o0)
-    weak = (config.verdict_twin_min_ratio * x0, config.verdict_twin_strong_ratio * x0)
+    limit = max(judge.twin_fit_open, 2.0 * o0)
+    weak = (TWIN_MIN_RATIO * x0, TWIN_STRONG_RATIO * x0)
     answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
     for a in axes:
         opens = np.zeros(len(offsets), dtype=np.int64)

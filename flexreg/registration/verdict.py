@@ -2,22 +2,28 @@
 (:func:`flexreg.registration.evidence.gather`).
 
 :func:`decide` turns the evidence into a :class:`~flexreg.core.results.Verdict` with one
-:class:`~flexreg.core.results.Reason` per failed test; its thresholds are the ``verdict_*``
-fields of :class:`~flexreg.registration.config.RegistrationConfig`. Whether a duel between
+:class:`~flexreg.core.results.Reason` per failed test; its thresholds are the ``judge`` table
+of :class:`~flexreg.registration.config.RegistrationConfig`. Whether a duel between
 two poses settles them is the dense check's (:func:`~flexreg.registration.check.decisive`,
 :func:`~flexreg.registration.check.decisive_full`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
 
 from flexreg.core.results import Hypothesis, Reason, Verdict
 from flexreg.registration.check import decisive, decisive_full
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import (
+    MAX_RMSE_RATIO,
+    MIN_INLIER_SPREAD,
+    TWIN_MIN_RATIO,
+    JudgeConfig,
+)
+from flexreg.registration.evidence import Evidence
 from flexreg.stages.verification import AXES
 
 
@@ -33,64 +39,62 @@ def _along(v: Sequence[float]) -> str:
     return "({:.2f}, {:.2f}, {:.2f}) of the target frame".format(*(a / n))
 
 
-def _sweep_settled(ev: dict[str, Any]) -> bool:
+def _sweep_settled(ev: Evidence) -> bool:
     """Whether a sweep along the weak axis found every other position refuted at full
     resolution (:mod:`flexreg.registration.settle`)."""
-    sw = ev.get("sweep") or {}
+    sw = ev.sweep or {}
     return bool(sw.get("kind") == "weak_axis" and sw.get("settled"))
 
 
-def _overlap_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    o = ev.get("overlap")
+def _overlap_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    o = ev.overlap
     if not o:
         return None
     s, t = o["source_explained"], o["target_explained"]
-    if min(s, t) >= cfg.verdict_min_overlap:
+    if min(s, t) >= judge.min_overlap:
         return None
     return Reason(
         "low_overlap",
         f"only {100 * s:.0f}% of the source and {100 * t:.0f}% of the target are explained by "
-        f"the other scan (need {100 * cfg.verdict_min_overlap:.0f}% of each): the scans may "
+        f"the other scan (need {100 * judge.min_overlap:.0f}% of each): the scans may "
         "hardly overlap",
     )
 
 
-def _free_space_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    f = ev.get("free_space")
+def _free_space_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    f = ev.free_space
     if not f:
         return None
     worst = max(f["source_conflicting"], f["target_conflicting"])
     ratio = max(f.get("source_conflict_ratio") or 0.0, f.get("target_conflict_ratio") or 0.0)
-    if worst > cfg.verdict_max_conflict:
+    if worst > judge.max_free_space:
         return Reason(
             "free_space",
             f"{100 * worst:.0f}% of one scan lands where the other scanner saw through empty "
-            f"space (allowed {100 * cfg.verdict_max_conflict:.0f}%): the pose puts surfaces in "
+            f"space (allowed {100 * judge.max_free_space:.0f}%): the pose puts surfaces in "
             "open space",
         )
-    if ratio > cfg.verdict_max_conflict_ratio:
+    if ratio > judge.max_free_space_ratio:
         return Reason(
             "free_space",
             f"for every 100 points of one scan the other explains, {100 * ratio:.0f} land where "
             f"the other scanner saw through empty space (allowed "
-            f"{100 * cfg.verdict_max_conflict_ratio:.0f}): the pose contradicts much of what it "
+            f"{100 * judge.max_free_space_ratio:.0f}): the pose contradicts much of what it "
             "fits",
         )
     return None
 
 
-def _full_open_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    """The answer puts more than ``verdict_full_max_open`` (where the settling compared the
-    scans: a twin beside the truth is likely) or ``verdict_full_max_open_check`` (a confident
+def _full_open_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    """The answer puts more than ``judge.open_share`` (where the settling compared the
+    scans: a twin beside the truth is likely) or ``judge.full_max_open_check`` (a confident
     answer checked anyway) of both scans' points in the other's open space at full
     resolution: one bay, aisle or room beside the right pose, which the samples' checks
     cannot tell."""
-    f = ev.get("full_resolution")
+    f = ev.full_resolution
     if not f:
         return None
-    allowed = (
-        cfg.verdict_full_max_open_check if f.get("why") == "check" else cfg.verdict_full_max_open
-    )
+    allowed = judge.full_max_open_check if f.get("why") == "check" else judge.open_share
     if f["open_space_share"] <= allowed:
         return None
     return Reason(
@@ -101,38 +105,31 @@ def _full_open_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | N
     )
 
 
-def _inlier_reasons(ev: dict[str, Any], cfg: RegistrationConfig) -> list[Reason]:
-    i = ev.get("inliers")
+def _inlier_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    """The agreeing feature matches lie in a narrow patch (their second principal spread
+    under :data:`~flexreg.registration.config.MIN_INLIER_SPREAD` of the overlap's); not
+    tested where the pose is not fitted to them (a plan overlay)."""
+    i = ev.inliers
     if not i or not i.get("fit_to_matches", True):
-        return []
-    if i["count"] < cfg.verdict_min_inliers:
-        return [
-            Reason(
-                "few_inliers",
-                f"only {i['count']} of {i['matches']} feature matches agree with the pose (need "
-                f"{cfg.verdict_min_inliers}): it rests on the surfaces alone",
-            )
-        ]
-    if i["count"] >= 3 and i["spread_ratio"] < cfg.verdict_min_inlier_spread:
-        return [
-            Reason(
-                "clustered_inliers",
-                f"the {i['count']} agreeing feature matches lie in a narrow patch (spread "
-                f"{i['std_principal_m'][1]:.2f} m across, the overlap "
-                f"{i['overlap_std_principal_m'][1]:.2f} m): the pose may tilt about them",
-            )
-        ]
-    return []
+        return None
+    if i["count"] >= 3 and i["spread_ratio"] < MIN_INLIER_SPREAD:
+        return Reason(
+            "clustered_inliers",
+            f"the {i['count']} agreeing feature matches lie in a narrow patch (spread "
+            f"{i['std_principal_m'][1]:.2f} m across, the overlap "
+            f"{i['overlap_std_principal_m'][1]:.2f} m): the pose may tilt about them",
+        )
+    return None
 
 
-def _axis_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    a = ev.get("axis_strength")
+def _axis_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    a = ev.axis_strength
     if not a:
         return None
-    weak = [k for k in AXES if a.get(k, 1.0) < cfg.verdict_min_axis_strength]
+    weak = [k for k in AXES if a.get(k, 1.0) < judge.min_axis_strength]
     if not weak:
         return None
-    limit = f"strength {min(a[k] for k in weak):.3f}, need {cfg.verdict_min_axis_strength:g}"
+    limit = f"strength {min(a[k] for k in weak):.3f}, need {judge.min_axis_strength:g}"
     w = a.get("weakest", {})
     direction = _along(w.get("direction_target", ()))
     if any(k in ("x", "y", "z") for k in weak) and w.get("kind", "translation") == "translation":
@@ -150,33 +147,33 @@ def _axis_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     )
 
 
-def _settled(u: dict[str, Any], ev: dict[str, Any], cfg: RegistrationConfig) -> bool:
+def _settled(u: dict[str, Any], ev: Evidence, judge: JudgeConfig) -> bool:
     """Whether the answer beats a runner-up decisively, on the samples or at full
     resolution (there only when the answer itself puts almost nothing in open space, or
-    when the runner-up puts ``settle_open_share`` of the points in open space, ten times
+    when the runner-up puts ``judge.settle_open_share`` of the points in open space, ten times
     what the answer does and what it refutes of the runner-up's)."""
-    if "refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], cfg):
+    if "refuted_share" in u and decisive(u["refuted_share"], u["refuting_share"], judge):
         return True
-    full = ev.get("full_resolution") or {}
+    full = ev.full_resolution or {}
     own = full.get("open_space_share", 1.0)
     if (  # a runner-up full resolution refutes outright (a bay off in a repeating hall)
-        u.get("full_refuted_share", 0.0) >= cfg.settle_open_share
-        and own <= cfg.settle_open_share / 3
+        u.get("full_refuted_share", 0.0) >= judge.settle_open_share
+        and own <= judge.settle_open_share / 3
         and u["full_refuted_share"] >= 10 * max(u["full_refuting_share"], own)
     ):
         return True
-    if own > cfg.verdict_full_max_conflict:
+    if own > judge.full_max_conflict:
         return False
     return "full_refuted_share" in u and decisive_full(
-        u["full_refuted_share"], u["full_refuting_share"], cfg, points=u.get("full_points", 0)
+        u["full_refuted_share"], u["full_refuting_share"], judge, points=u.get("full_points", 0)
     )
 
 
-def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+def _ambiguity_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     rivals = [
         u
-        for u in ev.get("runner_ups") or ([ev["runner_up"]] if ev.get("runner_up") else [])
-        if u["score_ratio"] >= cfg.verdict_ambiguity_ratio and not _settled(u, ev, cfg)
+        for u in ev.runner_ups or ([ev.runner_up] if ev.runner_up else [])
+        if u["score_ratio"] >= judge.ambiguity_ratio and not _settled(u, ev, judge)
     ]
     if not rivals:
         return None
@@ -194,10 +191,10 @@ def _ambiguity_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | N
     )
 
 
-def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
+def _refuted_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     """A rival pose beats the answer :func:`decisive`-ly in their duel, whatever the scores."""
     beaten = [
-        u for u in ev.get("rivals") or () if decisive(u["refuting_share"], u["refuted_share"], cfg)
+        u for u in ev.rivals or () if decisive(u["refuting_share"], u["refuted_share"], judge)
     ]
     if not beaten:
         return None
@@ -211,21 +208,22 @@ def _refuted_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | Non
     )
 
 
-def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    """A twin of the answer fits (:mod:`flexreg.registration.twins`, ``verdict_twin_*``)."""
-    a = (ev.get("twins") or {}).get("answer")
+def _twin_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    """A twin of the answer fits (:mod:`flexreg.registration.twins`): it puts at most
+    ``judge.twin_fit_open`` in open space and explains ``TWIN_MIN_RATIO`` of the answer's."""
+    a = (ev.twins or {}).get("answer")
     if not a:
         return None
-    limit = max(cfg.verdict_twin_fit_open, 2 * a["open_share"])
-    least = max(cfg.verdict_twin_min_ratio * a["explained_share"], 1e-9)
+    limit = max(judge.twin_fit_open, 2 * a["open_share"])
+    least = max(TWIN_MIN_RATIO * a["explained_share"], 1e-9)
     won, lost = "full_refuted_share", "full_refuting_share"
     fits = [  # a weak twin the answer beats on every pixel does not count
         t
-        for t in ev["twins"].get("twins", ())
+        for t in ev.twins.get("twins", ())
         if t["open_share"] <= limit
         and t["explained_share"] >= least
         and not decisive_full(
-            t.get(won, 0.0), t.get(lost, 0.0), cfg, points=t.get("full_points", 0)
+            t.get(won, 0.0), t.get(lost, 0.0), judge, points=t.get("full_points", 0)
         )
     ]
     if not fits:
@@ -240,85 +238,66 @@ def _twin_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
     )
 
 
-def _residual_reason(ev: dict[str, Any], cfg: RegistrationConfig) -> Reason | None:
-    r = ev.get("residual")
+def _residual_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    r = ev.residual
     if not r or r.get("rmse_over_threshold") is None or r.get("kind") == "open3d":
         return None
-    if r["rmse_over_threshold"] <= cfg.verdict_max_rmse_ratio:
+    if r["rmse_over_threshold"] <= MAX_RMSE_RATIO:
         return None
     return Reason(
         "high_residual",
         f"the surfaces still differ by {100 * r['inlier_rmse_m']:.1f} cm RMS (allowed "
-        f"{100 * cfg.verdict_max_rmse_ratio * r['threshold_m']:.1f} cm): they do not meet closely",
+        f"{100 * MAX_RMSE_RATIO * r['threshold_m']:.1f} cm): they do not meet closely",
     )
 
 
-def decide(
-    evidence: dict[str, Any],
-    runner_up: Sequence[Hypothesis] = (),
-    config: RegistrationConfig = RegistrationConfig(),
-) -> Verdict:
-    """The verdict on a registration's evidence: ``"uncertain"`` with one reason per failed
-    test, else ``"confident"``.
+#: A verdict test: the reason it fails the evidence for, or None.
+VerdictTest = Callable[[Evidence, JudgeConfig], "Reason | None"]
 
-    Tests (thresholds: ``config.verdict_*``; a test whose evidence is missing passes):
-    ``low_overlap`` (either scan explained less than ``verdict_min_overlap``),
-    ``free_space`` (either conflicting more than ``verdict_max_conflict``, or more than
-    ``verdict_max_conflict_ratio`` of what the other explains of it, or, where the scans were
-    compared at full resolution, more than ``verdict_full_max_open`` of all their points in
-    the other's open space),
-    ``few_inliers`` (fewer than ``verdict_min_inliers``) or ``clustered_inliers`` (their
-    second principal spread below ``verdict_min_inlier_spread`` of the overlap's),
-    ``weak_axis`` (a pose parameter's strength below ``verdict_min_axis_strength``),
-    ``ambiguous`` (a clearly different pose scores at least ``verdict_ambiguity_ratio`` of
-    the winner and the answer does not beat it :func:`decisive`-ly, or any rival pose beats
-    the answer :func:`decisive`-ly in their duel, or the answer moved a whole bay fits
-    too: :func:`_twin_reason`), ``high_residual``
-    (inlier RMSE above ``verdict_max_rmse_ratio`` inlier thresholds). A rejected refinement
-    is a note, not a reason.
+#: The tests in the order their reasons are listed: each pair is (test, the reason codes
+#: already given that make it moot): a second ``free_space`` or ``ambiguous`` reason adds
+#: nothing to the first.
+TESTS: tuple[tuple[VerdictTest, tuple[str, ...]], ...] = (
+    (_overlap_reason, ()),
+    (_free_space_reason, ()),
+    (_axis_reason, ()),
+    (_ambiguity_reason, ()),
+    (_full_open_reason, ("free_space",)),
+    (_refuted_reason, ("ambiguous",)),
+    (_twin_reason, ("ambiguous",)),
+    (_inlier_reason, ()),
+    (_residual_reason, ()),
+)
 
-    Parameters
-    ----------
-    evidence : dict
-        As :func:`~flexreg.registration.evidence.gather` makes it.
-    runner_up : sequence of Hypothesis
-    config : RegistrationConfig
 
-    Returns
-    -------
-    Verdict
+def reasons(evidence: Evidence, judge: JudgeConfig = JudgeConfig()) -> list[Reason]:
+    """Every reason the evidence gives for doubt (:data:`TESTS`, in order); a test whose
+    evidence was not measured passes. What :func:`decide` decides on, and what the
+    registration reads to measure more only where the answer still stands (the full
+    resolution check, the twins).
 
-    Examples
-    --------
-    >>> v = decide({"overlap": {"source_explained": 0.05, "target_explained": 0.6}})
-    >>> v.status, [r.code for r in v.reasons]
-    ('uncertain', ['low_overlap'])
-    >>> decide({"overlap": {"source_explained": 0.7, "target_explained": 0.6}}).status
-    'confident'
+    >>> [r.code for r in reasons(Evidence(overlap={"source_explained": 0.05,
+    ...                                            "target_explained": 0.6}))]
+    ['low_overlap']
     """
-    reasons: list[Reason] = []
-    for test in (_overlap_reason, _free_space_reason, _axis_reason, _ambiguity_reason):
-        r = test(evidence, config)
+    out: list[Reason] = []
+    for test, moot in TESTS:
+        if any(r.code in moot for r in out):
+            continue
+        r = test(evidence, judge)
         if r is not None:
-            reasons.append(r)
-    if not any(x.code == "free_space" for x in reasons):
-        r = _full_open_reason(evidence, config)
-        if r is not None:
-            reasons.append(r)
-    for extra in (_refuted_reason, _twin_reason):
-        if not any(x.code == "ambiguous" for x in reasons):
-            r = extra(evidence, config)
-            if r is not None:
-                reasons.append(r)
-    reasons += _inlier_reasons(evidence, config)
-    r = _residual_reason(evidence, config)
-    if r is not None:
-        reasons.append(r)
+            out.append(r)
+    return out
+
+
+def _notes(evidence: Evidence, judge: JudgeConfig) -> list[Reason]:
+    """What is worth knowing and does not make the answer uncertain: a weak axis a sweep
+    settled, a refinement the guard discarded."""
     notes: list[Reason] = []
-    if _sweep_settled(evidence) and _axis_reason(evidence, config) is None:
-        a = evidence.get("axis_strength") or {}
-        if any(a.get(k, 1.0) < config.verdict_min_axis_strength for k in ("x", "y", "z")):
-            sw = evidence["sweep"]
+    if _sweep_settled(evidence) and _axis_reason(evidence, judge) is None:
+        a = evidence.axis_strength or {}
+        if any(a.get(k, 1.0) < judge.min_axis_strength for k in ("x", "y", "z")):
+            sw = evidence.sweep or {}
             notes.append(
                 Reason(
                     "weak_axis_settled",
@@ -328,7 +307,7 @@ def decide(
                     "one fits them (a unique object decides)",
                 )
             )
-    ref = evidence.get("refinement")
+    ref = evidence.refinement
     if ref and not ref.get("kept", True):
         notes.append(
             Reason(
@@ -337,8 +316,56 @@ def decide(
                 f"against {ref['score_coarse']:.4f} before it (the coarse transform is kept)",
             )
         )
-    status: Literal["confident", "uncertain"] = "uncertain" if reasons else "confident"
-    return Verdict(status, tuple(reasons), evidence, tuple(runner_up), tuple(notes))
+    return notes
 
 
-__all__ = ["decide"]
+def decide(
+    evidence: Evidence | Mapping[str, Any],
+    runner_up: Sequence[Hypothesis] = (),
+    judge: JudgeConfig = JudgeConfig(),
+) -> Verdict:
+    """The verdict on a registration's evidence: ``"uncertain"`` with one reason per failed
+    test (:func:`reasons`), else ``"confident"``.
+
+    Tests (thresholds: ``judge``, :class:`~flexreg.registration.config.JudgeConfig`):
+    ``low_overlap`` (either scan explained less than ``min_overlap``),
+    ``free_space`` (either conflicting more than ``max_free_space``, or more than
+    ``max_free_space_ratio`` of what the other explains of it, or, where the scans were
+    compared at full resolution, more than ``open_share`` of all their points in the other's
+    open space), ``clustered_inliers`` (the agreeing matches' second principal spread below
+    :data:`~flexreg.registration.config.MIN_INLIER_SPREAD` of the overlap's),
+    ``weak_axis`` (a pose parameter's strength below ``min_axis_strength``),
+    ``ambiguous`` (a clearly different pose scores at least ``ambiguity_ratio`` of the
+    winner and the answer does not beat it decisively, or any rival pose beats the answer
+    decisively in their duel, or the answer moved a whole bay fits too: :func:`_twin_reason`),
+    ``high_residual`` (inlier RMSE above
+    :data:`~flexreg.registration.config.MAX_RMSE_RATIO` inlier thresholds). A rejected
+    refinement is a note, not a reason.
+
+    Parameters
+    ----------
+    evidence : Evidence
+        As :func:`~flexreg.registration.evidence.gather` measures it (a mapping of its
+        sections, such as a result file's, is read with :meth:`Evidence.of`).
+    runner_up : sequence of Hypothesis
+    judge : JudgeConfig
+
+    Returns
+    -------
+    Verdict
+
+    Examples
+    --------
+    >>> v = decide(Evidence(overlap={"source_explained": 0.05, "target_explained": 0.6}))
+    >>> v.status, [r.code for r in v.reasons]
+    ('uncertain', ['low_overlap'])
+    >>> decide(Evidence(overlap={"source_explained": 0.7, "target_explained": 0.6})).status
+    'confident'
+    """
+    ev = evidence if isinstance(evidence, Evidence) else Evidence.of(evidence)
+    found = reasons(ev, judge)
+    status: Literal["confident", "uncertain"] = "uncertain" if found else "confident"
+    return Verdict(status, tuple(found), ev, tuple(runner_up), tuple(_notes(ev, judge)))
+
+
+__all__ = ["TESTS", "VerdictTest", "decide", "reasons"]

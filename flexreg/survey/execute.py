@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from flexreg.errors import ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.evidence import Evidence
 from flexreg.registration.pipeline import Registration
 from flexreg.survey.graph import Link
 from flexreg.survey.pairs import Candidate
@@ -307,23 +308,6 @@ def _io_error(e: OSError) -> InputError:
     return InputError(e.filename or "cache", f"{e.strerror or e}")
 
 
-def _strength(evidence: dict[str, Any]) -> dict[str, float]:
-    s = evidence.get("axis_strength") or {}
-    return {a: float(s[a]) for a in AXES if a in s and s[a] is not None}
-
-
-def _doubt(evidence: dict[str, Any]) -> float | None:
-    """The larger free-space conflict ratio of the verdict's evidence (conflicting share over
-    explained share, either direction), or None when unknown."""
-    fs = evidence.get("free_space") or {}
-    vals = [
-        float(fs[k])
-        for k in ("source_conflict_ratio", "target_conflict_ratio")
-        if fs.get(k) is not None
-    ]
-    return max(vals) if vals else None
-
-
 def link_cache_path(target_file: str, source_file: str, *, prior: bool = False) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
     stations' cache keys (file content, setup and configuration) and whether the stored
@@ -399,8 +383,8 @@ def align_link(
             _store_link(cache, link)
         return link
     v = r.verdict
-    ev = v.evidence if v is not None else {}
-    ov = ev.get("overlap") or {}
+    ev = v.evidence if v is not None and isinstance(v.evidence, Evidence) else Evidence()
+    ov = ev.overlap or {}
     one = r.overlap
     link = Link(
         cand.target,
@@ -419,9 +403,9 @@ def align_link(
         overlap_of=None if one is None else one.definition,
         open3d_fitness=None if one is None else one.open3d_fitness,
         open3d_inlier_rmse_m=None if one is None else one.to_dict()["open3d_inlier_rmse_m"],
-        strength=_strength(ev),
-        doubt=_doubt(ev),
-        repeat=v is not None and not v.confident and "twins" in ev,
+        strength=ev.strengths,
+        doubt=ev.doubt,
+        repeat=v is not None and not v.confident and ev.twins is not None,
         seconds=time.perf_counter() - t0,
         origin=cand.origin,
         place_score=cand.place_score,

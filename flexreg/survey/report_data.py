@@ -250,15 +250,18 @@ def station_pose(station: Mapping[str, Any]) -> NDArray[np.float64] | None:
 
 def weak_axis_threshold(doc: Mapping[str, Any]) -> float:
     """The strength under which an axis counts as weak: the document's
-    ``config.registration.verdict_min_axis_strength`` when given, else the default."""
+    ``config.registration.judge.min_axis_strength`` when given (``verdict_min_axis_strength``
+    in documents written before the judge's table), else the default."""
     cfg = doc.get("config")
     if isinstance(cfg, Mapping):
         reg = cfg.get("registration", cfg)
         if isinstance(reg, Mapping):
-            v = _float(reg.get("verdict_min_axis_strength"))
+            judge = reg.get("judge")
+            v = _float(judge.get("min_axis_strength") if isinstance(judge, Mapping) else None)
+            v = v if v is not None else _float(reg.get("verdict_min_axis_strength"))
             if v is not None:
                 return v
-    return float(RegistrationConfig().verdict_min_axis_strength)
+    return float(RegistrationConfig().judge.min_axis_strength)
 
 
 # --------------------------------------------------------------------------- figures

@@ -175,3 +175,36 @@ def test_every_exception_is_explained_in_the_architecture_page():
     doc = (REPO / "docs" / "architecture.md").read_text()
     missing = [key for key in EXCEPTIONS if key not in doc]
     assert not missing, missing
+
+
+#: The dense check's entry points (flexreg.registration.check, fullres): their tolerances come
+#: from its one Tolerance model, never from a number typed at the call.
+CHECK_CALLS = frozenset(
+    {"classify", "judge", "score", "check_masks", "duel_masks", "pose_masks", "full_masks"}
+)
+
+
+def test_no_bare_numbers_in_calls_to_the_dense_check():
+    """A call to the dense check in registration/ or survey/ passes no number literal (a
+    tolerance written at the call drifts from the one model: check.TOLERANCE)."""
+    found = []
+    for folder in ("registration", "survey"):
+        for path in sorted((PACKAGE / folder).glob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, ast.Call):
+                    continue
+                f = node.func
+                name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+                if name not in CHECK_CALLS:
+                    continue
+                args = [*node.args, *(k.value for k in node.keywords)]
+                for a in args:
+                    inner = a.operand if isinstance(a, ast.UnaryOp) else a
+                    if isinstance(inner, ast.Constant) and isinstance(inner.value, float):
+                        found.append(f"{path.relative_to(REPO)}:{node.lineno} {name}")
+                    if isinstance(a, ast.BinOp) and any(
+                        isinstance(x, ast.Constant) and isinstance(x.value, float)
+                        for x in (a.left, a.right)
+                    ):
+                        found.append(f"{path.relative_to(REPO)}:{node.lineno} {name}")
+    assert not found, "\n".join(found)

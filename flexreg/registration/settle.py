@@ -156,9 +156,10 @@ def _across(
 ) -> NDArray[np.float64]:
     """``T`` slid horizontally across ``direction`` to where ``score`` peaks, within
     :data:`ACROSS_M` in :data:`ACROSS_STEP_M` steps. The overlap's centroid misses the axis
-    of a tunnel's cross-section when one station stands near a wall (tunnel-cue 4: 57 cm,
-    so the half turn about it stood 1.1 m beside the walls and no slide along the axis
-    fitted); across the axis the walls fix the position."""
+    of a tunnel's cross-section when one station stands near a wall (by half a metre on the
+    cue tunnels of the verdict benchmark, docs/benchmarks.md: the half turn about it then
+    stands beside the walls and no slide along the axis fits); across the axis the walls
+    fix the position."""
     v = np.cross(np.asarray(up, dtype=np.float64), direction)
     norm = float(np.linalg.norm(v))
     if norm < 1e-6:
@@ -219,8 +220,9 @@ class _FacingScorer:
     """Scores a pose on the source's points facing the sweep's direction only (at most
     :data:`FACING_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
     tunnel the other surfaces change their score with the grazing angles and the reach of
-    the other scanner far more than a small cue does (tunnel-cue 1: the truth scores 1 % below
-    a pose 12 m away on all points); on the facing points it peaks at the cue."""
+    the other scanner far more than a small cue does (on all points the truth can score a
+    percent below a pose metres away: docs/benchmarks.md, Verdict); on the facing points it
+    peaks at the cue."""
 
     target: FullView
     points: NDArray[np.floating[Any]]
@@ -423,10 +425,10 @@ def screen(
     """The first player and the ``size - 1`` others that put the fewest of every k-th point
     of both scans in open space (:data:`SWEEP_POINTS` each way; ties: the better score
     first). The samples' scores differ by a percent or two between poses of a tunnel or an
-    arcade, so the best scores are not the right pose's company: a pose slid onto the cue
-    ranked 13th of 20 on tunnel-cue 5; at full resolution it is the one pose that contradicts
-    nothing, and the poses that contradict little are those that can win or refute a
-    winner."""
+    arcade, so the best scores are not the right pose's company (a pose slid onto the cue can
+    rank in the middle of twenty: docs/benchmarks.md, Verdict); at full resolution it is the
+    one pose that contradicts nothing, and the poses that contradict little are those that
+    can win or refute a winner."""
     if len(players) <= size:
         return list(players)
     s, t = pair.source, pair.target
@@ -621,9 +623,9 @@ def pin_along(
     """``T`` (a refined pose) moved along the axis the settlement placed its winner on, so
     that its position along it is ``T_placed``'s again; ``T`` itself without such an axis.
     The cue fixes that one coordinate; ICP, with nothing but grazing floors and walls to pull
-    on along a tunnel, slides (tunnel-cue 3: from 3 cm to 17 cm, tunnel-cue 5: from 1 cm to
-    13 cm, while the two-way soft score that the guard reads barely moved). ICP keeps the
-    other five degrees of freedom."""
+    on along a tunnel, slides by a decimetre or more while the two-way soft score that the
+    guard reads barely moves (docs/benchmarks.md, Verdict). ICP keeps the other five degrees
+    of freedom."""
     if settled.axis is None:
         return T
     u = settled.axis / np.linalg.norm(settled.axis)

@@ -412,3 +412,71 @@ def test_no_reason_is_in_jargon(build):
         _assert_plain(e.why or "")
     for text in sol.reasons.values():
         _assert_plain(text, link=False)
+
+
+# ------------------------------------------------------------------ hypotheses of a link
+
+
+def _bay(P, a, b, offset):
+    """The pose of ``a <- b`` moved by ``offset`` metres in ``a``'s frame (a look-alike bay)."""
+    T = invert(P[a]) @ P[b]
+    W = T.copy()
+    W[:3, 3] += np.asarray(offset, dtype=np.float64)
+    return W
+
+
+def test_an_alias_pair_whose_right_pose_is_its_runner_up_is_resolved_by_a_loop():
+    """Three stations in a hall of 6 m bays: two confident links place them, the third pair
+    registered one bay off (uncertain: its twin fits too). The loop picks the twin, which
+    becomes the link's pose; the answer stays as an alternative."""
+    from flexreg.survey.links import Alternative
+
+    P = _grid(2)
+    links = [_link(P, "s00", "s01"), _link(P, "s01", "s03")]
+    truth = invert(P["s00"]) @ P["s03"]
+    alias = _link(P, "s00", "s03", "uncertain", T=_bay(P, "s00", "s03", [6.0, 0, 0]))
+    alias.alternatives = [
+        Alternative(_bay(P, "s00", "s03", [12.0, 0, 0]), "twin", 0.7),
+        Alternative(truth, "twin", 0.9),
+    ]
+    sol = solve_graph(["s00", "s01", "s03"], [*links, alias], SurveyConfig())
+    assert alias.status == "accepted" and alias.confirmed_by_loop
+    assert translation_error_m(alias.T_target_source, truth) < 1e-9
+    assert alias.alternatives[0].kind == "answer"
+    assert "the loop picks its twin" in alias.why
+    assert max(e[1] for e in _errors(sol, P).values()) < 1e-6
+
+
+def test_planted_wrong_hypotheses_among_right_ones_are_left_out():
+    """A 3 x 3 grid of confident links, and uncertain links whose answers are whole bays
+    off with the truth among their alternatives (or not at all): every station lands on the
+    truth, each alias link either takes its right alternative or is rejected; none of the
+    wrong poses is accepted."""
+    from flexreg.survey.links import Alternative
+
+    P = _grid(3)
+    links = _grid_links(P, 3)
+    names = sorted(P)
+    rng = np.random.default_rng(5)
+    planted = []
+    for a, b in [
+        (names[0], names[4]),
+        (names[2], names[4]),
+        (names[4], names[8]),
+        (names[6], names[2]),
+    ]:
+        shift = [6.0 * rng.choice([-2, -1, 1, 2]), 0.0, 0.0]
+        e = _link(P, a, b, "uncertain", T=_bay(P, a, b, shift))
+        right = Alternative(invert(P[a]) @ P[b], "runner_up", 0.8)
+        wrong = Alternative(_bay(P, a, b, [0.0, 6.0, 0.0]), "twin", 0.9)
+        e.alternatives = [wrong, right] if len(planted) % 2 == 0 else [wrong]
+        planted.append(e)
+    sol = solve_graph(names, [*links, *planted], SurveyConfig())
+    assert set(sol.groups[0]) == set(names)
+    assert max(err[1] for err in _errors(sol, P).values()) < 1e-6
+    for i, e in enumerate(planted):
+        truth = invert(P[e.target]) @ P[e.source]
+        if e.status == "accepted":
+            assert translation_error_m(e.T_target_source, truth) < 1e-9, i
+        else:
+            assert e.status == "rejected" and i % 2 == 1

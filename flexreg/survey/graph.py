@@ -67,7 +67,7 @@ from flexreg.survey.links import (
     judged_culprit,
     loop_error,
 )
-from flexreg.survey.lone import lone_cuts
+from flexreg.survey.lone import lone_cuts, lone_suspect
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +184,7 @@ def _confident_tree(
     stems: list[str], links: list[Link], config: SurveyConfig, judge: Judge | None = None
 ) -> _Forest:
     """Steps 1 and 2: the tree of confident links after the loop checks."""
-    active = [e for e in links if e.verdict == "confident" and e.status == "pending"]
+    active = [e for e in links if e.trusted and e.status == "pending"]
     while True:
         tree, rest = _kruskal(stems, active)
         forest = _Forest(stems, tree)
@@ -233,7 +233,7 @@ def _confident_tree(
                 continue
         if not bad:
             confirmed = agreeing + [t for t in tree if support.get(id(t), 0) > 0]
-            lone = _lone_suspect(forest, tree, support, confirmed, links, config)
+            lone = lone_suspect(forest, tree, support, confirmed, links, config)
             if not lone:
                 break
             for t, why in lone:
@@ -270,115 +270,11 @@ _MAP_BLAMES = (
 )
 
 
-def _beyond(adj: dict[str, list[tuple[str, Link]]], cut: Link, start: str) -> set[str]:
-    """Stations reachable from ``start`` over the tree without the link ``cut``."""
-    seen, queue = {start}, deque([start])
-    while queue:
-        for y, e in adj[queue.popleft()]:
-            if e is not cut and y not in seen:
-                seen.add(y)
-                queue.append(y)
-    return seen
-
-
-def _lone_suspect(
-    forest: _Forest,
-    tree: list[Link],
-    support: dict[int, int],
-    confirmed: list[Link],
-    links: list[Link],
-    config: SurveyConfig,
-) -> list[tuple[Link, str]]:
-    """A tree link that alone places stations and that nothing vouches for, or [].
-
-    A tree link that no loop confirms is the only evidence for where the stations beyond it
-    are (the smaller side of the tree it splits). It is rejected (better unplaced than wrong)
-    when
-
-    * an *ambiguous* link across the same cut (its verdict found a clearly different pose
-      that fits about as well: a symmetric room, repeating bays) agrees with that placement:
-      the placement is one of twins and nothing checks which (an ambiguous link that
-      disagrees says nothing about it). The tree links between the ambiguous link's stations
-      make the twin placement; the most doubtful of them is rejected (this one unless another
-      is more doubtful, even one a loop of links wrong in the same way confirms); or
-    * it is more doubtful (free-space conflict ratio) than every link a loop confirmed among
-      the stations it attaches to (the larger side; the whole project's when no loop
-      confirms a link there), and than ``loop_doubt_min``: the loops show how much conflict
-      that part's right links carry, and this one carries more, unchecked. (Another part of
-      the project may be a region folded onto itself, its wrong links confirmed by loops of
-      wrong links: their doubt says nothing about this one.)
-
-    One at a time, the most doubtful first: a wrongly placed station's own ambiguous links
-    agree with whatever placed it, and would make its neighbours' tree links look alike. Off
-    with ``trust_lone_links``."""
-    if config.trust_lone_links:
-        return []
-    ambiguous = [
-        e
-        for e in links
-        if e.T_target_source is not None
-        and e.status != "failed"
-        and any(r.get("code") == "ambiguous" for r in e.reasons)
-    ]
-    vouched = [(e, float(e.doubt)) for e in confirmed if e.doubt is not None]
-    overall = max([config.loop_doubt_min, *(d for _, d in vouched)]) if vouched else None
-    adj = forest.adj  # the tree's links per station
-    out: list[tuple[float, int, Link, str]] = []
-    for t in tree:
-        if support.get(id(t), 0) > 0:
-            continue
-        a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
-        side = a if len(a) <= len(b) else b
-        rest = b if side is a else a
-        placing = f"the only link placing {', '.join(sorted(side))}, and no loop checks it"
-        doubt = float(t.doubt or 0.0)
-        there = [d for e, d in vouched if e.target in rest and e.source in rest]
-        ceiling = max([config.loop_doubt_min, *there]) if there else overall
-        if ceiling is not None and doubt > ceiling:
-            why = (
-                f"{placing}: more of one scan lies where the other saw open space than on any "
-                "link a loop checked, so it may be a wrong match (free-space conflict ratio "
-                f"{doubt:.2f}, checked links at most {ceiling:.2f})"
-            )
-            out.append((doubt, -len(side), t, why))
-            continue
-        for e in ambiguous:
-            if not (
-                (e.target in side and e.source in rest) or (e.source in side and e.target in rest)
-            ):
-                continue
-            err = loop_error(
-                np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
-            )
-            if err[0] <= 1.0 and err[1] <= 0.1:
-                # the twin placement is made by the tree links between the ambiguous link's
-                # stations: the most doubtful of them goes (this one, unless another is worse)
-                worst = max(forest.path(e.target, e.source), key=lambda x: float(x.doubt or 0))
-                why = (
-                    f"{placing}; link {e.target} <- {e.source} agrees with it, but there another "
-                    "pose fits about as well (look-alike rooms or bays): it may be the wrong one"
-                )
-                if worst is not t:
-                    why = (
-                        f"link {e.target} <- {e.source} agrees with where the links place "
-                        f"{e.target} and {e.source}, but there another pose fits about as well "
-                        "(look-alike rooms or bays); of the links between them this one is the "
-                        "least trustworthy, its scans clashing most (free-space conflict ratio "
-                        f"{float(worst.doubt or 0):.2f})"
-                    )
-                out.append((float(worst.doubt or 0), -len(side), worst, why))
-                break
-    if not out:
-        return []
-    _, _, t, why = max(out, key=lambda x: (x[0], x[1]))
-    return [(t, why)]
-
-
 def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: SurveyConfig) -> None:
     """Step 3: uncertain links join groups only in agreeing pairs; inside a group they are
     kept when they agree with its poses."""
     uncertain = sorted(
-        (e for e in links if e.verdict == "uncertain" and e.status == "pending"),
+        (e for e in links if not e.trusted and e.status == "pending"),
         key=lambda e: -e.overlap,
     )
     comp = forest.root
@@ -444,6 +340,16 @@ def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: Survey
         err = loop_error(
             np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
         )
+        pick = (
+            None
+            if _consistent(err, 2, config)
+            else e.agreeing_alternative(
+                forest.pose[e.target], forest.pose[e.source], lambda x: _consistent(x, 2, config)
+            )
+        )
+        if pick is not None:  # an alias pair: the loop picks the right one of its poses
+            e.take(pick[0], "the loop")
+            err = pick[1]
         if _consistent(err, 2, config):
             e.confirmed_by_loop = True
             e.loop_error_deg, e.loop_error_m = err
@@ -516,7 +422,7 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
     """``confident`` when joined to ``ref`` by confident accepted links alone."""
     adj: dict[str, list[str]] = {s: [] for s in group}
     for e in links:
-        if e.status == "accepted" and e.verdict == "confident" and e.target in adj:
+        if e.status == "accepted" and e.trusted and e.target in adj:
             adj[e.target].append(e.source)
             adj[e.source].append(e.target)
     seen, queue = {ref}, deque([ref])

@@ -4,8 +4,10 @@ Uncertain links never join groups on their own (:mod:`flexreg.survey.graph`, ste
 through a doorway is often uncertain because the two scans share little, and an uncertain
 link is as likely to overlay two identical rooms. What decides is the rest of the project.
 Every link between a separate group and the reference's group (confident or uncertain, not
-failed) proposes one placement of the whole group; links that propose the same placement
-(within 1° and 0.1 m) are one hypothesis. Each hypothesis is scored with the map check's
+failed) proposes a placement of the whole group by its answer and one by each of its
+alternatives (its runner-ups and the twins of its answer, :func:`flexreg.survey.links.
+alternatives_of`); proposals of the same placement (within 1° and 0.1 m) are one
+hypothesis. Each hypothesis is scored with the map check's
 dense scores (:class:`~flexreg.survey.mapcheck.PairJudge`) on every pair of one station of
 each group within ``map_radius_m``:
 
@@ -15,8 +17,9 @@ each group within ``map_radius_m``:
 * **refuted**: some pair puts at least ``map_min_conflict`` of a sample in the other's free
   space.
 
-The group is joined by the clean hypothesis's best link only when it is the *only* clean one
-and every other hypothesis is refuted: then every other placement puts one station's walls
+The group is joined by the clean hypothesis's best link (with the pose of it that proposes
+the placement: an alternative replaces the answer) only when it is the *only* clean one and
+every other hypothesis is refuted: then every other placement puts one station's walls
 where another station saw through, and this one contradicts nothing while the groups see
 each other. The joining link stays ``uncertain``, so the stations it places are
 ``"confidence": "uncertain"`` and the survey exits 3 (placed, but say which to check).
@@ -38,26 +41,28 @@ log = logging.getLogger(__name__)
 
 def _placements(
     P: dict[str, Matrix], links: list[Link], members: set[str], main: set[str]
-) -> list[tuple[Matrix, list[Link]]]:
+) -> list[tuple[Matrix, list[tuple[Link, Matrix]]]]:
     """Placements ``T_ref_group`` of a group proposed by the links between it and the main
-    group, links that agree within 1° / 0.1 m merged; links in file order."""
-    out: list[tuple[Matrix, list[Link]]] = []
+    group, by their answers and their alternatives (each link's pose that proposes it kept
+    beside it); proposals within 1° / 0.1 m merged; links in file order."""
+    out: list[tuple[Matrix, list[tuple[Link, Matrix]]]] = []
     for e in links:
         if e.T_target_source is None or e.status == "failed":
             continue
-        T = np.asarray(e.T_target_source, dtype=np.float64)
-        if e.target in main and e.source in members:
-            R = P[e.target] @ T @ invert(P[e.source])
-        elif e.source in main and e.target in members:
-            R = P[e.source] @ invert(T) @ invert(P[e.target])
-        else:
-            continue
-        for R0, same in out:
-            if rotation_error_deg(R, R0) <= 1.0 and translation_error_m(R, R0) <= 0.1:
-                same.append(e)
+        for T in [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]:
+            T = np.asarray(T, dtype=np.float64)
+            if e.target in main and e.source in members:
+                R = P[e.target] @ T @ invert(P[e.source])
+            elif e.source in main and e.target in members:
+                R = P[e.source] @ invert(T) @ invert(P[e.target])
+            else:
                 break
-        else:
-            out.append((R, [e]))
+            for R0, same in out:
+                if rotation_error_deg(R, R0) <= 1.0 and translation_error_m(R, R0) <= 0.1:
+                    same.append((e, T))
+                    break
+            else:
+                out.append((R, [(e, T)]))
     return out
 
 
@@ -124,10 +129,13 @@ def join_by_map(
         if len(clean) != 1 or len(refuted) != len(scored) - 1:
             continue
         (worst, support), same = clean[0]
-        uncertain = [e for e in same if e.verdict == "uncertain"]
+        uncertain = [(e, T) for e, T in same if not e.trusted]
         if not uncertain:  # confident links there were rejected for their own reasons
             continue
-        best = max(uncertain, key=lambda e: e.overlap)
+        best, T = max(uncertain, key=lambda x: x[0].overlap)
+        picked = [a for a in best.alternatives if a.T_target_source is T]
+        if picked:  # the placement is one of its alternatives'
+            best.take(picked[0], "the map")
         why = (
             f"joins {', '.join(members)} to the reference's group: of the {len(scored)} "
             "placements the links propose, only this one puts no scan where another saw open "

@@ -4,7 +4,7 @@ of a disagreeing loop (see :mod:`flexreg.survey.graph` for how they are decided)
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,8 +12,99 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+from flexreg.registration.check import decisive_full
+from flexreg.registration.config import TWIN_MIN_RATIO, JudgeConfig
 
 Matrix = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Alternative:
+    """A pose a link could have instead of its answer.
+
+    Attributes
+    ----------
+    T_target_source : (4, 4) float64
+    kind : {"runner_up", "twin", "answer"}
+        A clearly different candidate of the registration that scored close to the answer,
+        the answer slid along the target's walls to where it fits again, or the
+        registration's own answer where a prior picked another of its poses.
+    support : float
+        How well it fits against the answer: a runner-up's score ratio, a twin's share of
+        what the answer explains (1: as well).
+    """
+
+    T_target_source: Matrix
+    kind: str
+    support: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "T_target_source": np.asarray(self.T_target_source, dtype=np.float64).tolist(),
+            "kind": self.kind,
+            "support": round(float(self.support), 4),
+        }
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> Alternative:
+        """From :meth:`to_dict`'s JSON (a cached link's)."""
+        return cls(np.asarray(d["T_target_source"], dtype=np.float64), d["kind"], d["support"])
+
+
+#: Most alternatives a link keeps, the best supported first.
+MAX_ALTERNATIVES = 6
+
+
+def alternatives_of(
+    T: Matrix, runner_ups: Sequence[Any], twins: Mapping[str, Any] | None, judge: JudgeConfig
+) -> list[Alternative]:
+    """A link's alternatives: the registration's runner-ups (each a
+    :class:`~flexreg.core.results.Hypothesis`) and the twins of its answer ``T`` that fit by
+    the verdict's own measure (the ``twins`` section of its evidence; the answer moved by
+    each twin's ``offset_m``, target frame): at least
+    :data:`~flexreg.registration.config.TWIN_MIN_RATIO` of what the answer explains, no more
+    open space than ``judge.twin_fit_open`` (or twice the answer's), not beaten decisively on
+    every pixel. Without duplicates (within ``judge.distinct_deg`` / ``distinct_m`` of a
+    better one or of the answer), best first, at most :data:`MAX_ALTERNATIVES`.
+
+    >>> T = np.eye(4)
+    >>> twins = {"answer": {"explained_share": 0.5, "open_share": 0.0},
+    ...          "twins": [{"offset_m": [5.9, 0, 0], "explained_share": 0.45, "open_share": 0.0},
+    ...                    {"offset_m": [-5.9, 0, 0], "explained_share": 0.05, "open_share": 0.0}]}
+    >>> [(a.kind, a.support, float(a.T_target_source[0, 3]))
+    ...  for a in alternatives_of(T, [], twins, JudgeConfig())]
+    [('twin', 0.9, 5.9)]
+    """
+    found: list[Alternative] = [
+        Alternative(np.asarray(h.T_target_source, dtype=np.float64), "runner_up", h.score_ratio)
+        for h in runner_ups
+    ]
+    answer = (twins or {}).get("answer") or {}
+    explained = float(answer.get("explained_share") or 0.0)
+    most_open = max(judge.twin_fit_open, 2.0 * float(answer.get("open_share") or 0.0))
+    for t in (twins or {}).get("twins", ()) if explained > 0 else ():
+        support = float(t["explained_share"]) / explained
+        beaten = decisive_full(
+            t.get("full_refuted_share", 0.0),
+            t.get("full_refuting_share", 0.0),
+            judge,
+            points=t.get("full_points", 0),
+        )
+        if support < TWIN_MIN_RATIO or t["open_share"] > most_open or beaten:
+            continue
+        Tt = np.array(T, dtype=np.float64)
+        Tt[:3, 3] += np.asarray(t["offset_m"], dtype=np.float64)
+        found.append(Alternative(Tt, "twin", support))
+    found.sort(key=lambda a: -a.support)
+    kept: list[Alternative] = []
+    for a in found:
+        if all(
+            rotation_error_deg(a.T_target_source, b) > judge.distinct_deg
+            or translation_error_m(a.T_target_source, b) > judge.distinct_m
+            for b in [T, *(k.T_target_source for k in kept)]
+        ):
+            kept.append(a)
+    return kept[:MAX_ALTERNATIVES]
 
 
 @dataclass(eq=False)
@@ -47,6 +138,15 @@ class Link:
         An uncertain link the map allows as the only placement of its stations' groups
         (:mod:`flexreg.survey.groupjoin`): it joins them on its own.
     status : {"pending", "accepted", "rejected", "failed"}
+    vouched : str
+        Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
+        ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
+        :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
+        like a confident one, and loops still check it.
+    alternatives : list of Alternative
+        The clearly different poses the registration found fitting almost as well (its
+        runner-ups) or the answer moved a whole bay or room that fits too (its twins):
+        what the link could be instead of its answer (:func:`alternatives_of`).
     """
 
     target: str
@@ -79,12 +179,41 @@ class Link:
     map_joined: bool = False
     doubt: float | None = None
     repeat: bool = False
+    alternatives: list[Alternative] = field(default_factory=list)
+    vouched: str = ""
 
     @property
     def overlap(self) -> float:
         """The smaller overlap of both directions (0 when unknown)."""
         vals = [v for v in (self.overlap_target, self.overlap_source) if v is not None]
         return float(min(vals)) if vals else 0.0
+
+    def take(self, alternative: Alternative, why: str) -> None:
+        """Let one of its alternatives be the link's pose (something outside the pair picked
+        it: a loop, the map, rough positions); the answer becomes an alternative."""
+        self.alternatives = [
+            Alternative(np.asarray(self.T_target_source), "answer", 1.0),
+            *(a for a in self.alternatives if a is not alternative),
+        ]
+        self.T_target_source = np.asarray(alternative.T_target_source, dtype=np.float64)
+        self.why = f"{why} picks its {alternative.kind.replace('_', '-')}, not its answer"
+
+    def agreeing_alternative(
+        self, P_target: Matrix, P_source: Matrix, agrees: Callable[[tuple[float, float]], bool]
+    ) -> tuple[Alternative, tuple[float, float]] | None:
+        """The one alternative whose loop error against the stations' poses ``agrees``, with
+        that error; None when none does, or more than one."""
+        fits = [
+            (a, err)
+            for a in self.alternatives
+            if agrees(err := loop_error(np.asarray(a.T_target_source), P_target, P_source))
+        ]
+        return fits[0] if len(fits) == 1 else None
+
+    @property
+    def trusted(self) -> bool:
+        """Whether it may place stations: confident, or vouched for (:attr:`vouched`)."""
+        return self.verdict == "confident" or bool(self.vouched)
 
     @property
     def usable(self) -> bool:
@@ -125,6 +254,8 @@ class Link:
             "loop_error_m": self.loop_error_m,
             "seconds": self.seconds,
             "cached": self.cached,
+            "alternatives": [a.to_dict() for a in self.alternatives],
+            "vouched": self.vouched or None,
         }
 
 
@@ -276,11 +407,14 @@ def judged_culprit(
 
 
 __all__ = [
+    "MAX_ALTERNATIVES",
+    "Alternative",
     "GraphSolution",
     "Judge",
     "Link",
     "Matrix",
     "Veto",
+    "alternatives_of",
     "bridges",
     "implied_pose",
     "judged_culprit",

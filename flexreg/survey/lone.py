@@ -1,4 +1,7 @@
-"""Separate groups held by lone links in repeating structure pose nothing.
+"""Lone links: a tree link no loop checks (:func:`lone_suspect`, step 2 of
+:mod:`flexreg.survey.graph`), and separate groups such links hold (:func:`lone_cuts`).
+
+Separate groups held by lone links in repeating structure pose nothing.
 
 A group that no link joins to the reference's is still solved in its own frame
 (``T_group_station``). When it is held together only by tree links that no loop confirms and
@@ -16,7 +19,13 @@ annex), keeps its poses.
 
 from __future__ import annotations
 
-from flexreg.survey.links import GraphSolution, Link
+from collections import deque
+from typing import Protocol
+
+import numpy as np
+
+from flexreg.survey.config import SurveyConfig
+from flexreg.survey.links import GraphSolution, Link, Matrix, loop_error
 
 #: why a cut link places nothing
 WHY = (
@@ -51,11 +60,127 @@ def lone_cuts(sol: GraphSolution, links: list[Link]) -> list[tuple[Link, str]]:
             for e in links
             if e.status == "accepted" and e.target in members and e.source in members
         ]
-        lone = all(e.in_tree and not e.confirmed_by_loop and not e.map_joined for e in inside)
+        lone = all(
+            e.in_tree and not e.confirmed_by_loop and not e.map_joined and not e.vouched
+            for e in inside
+        )
         repeats = any(e.repeat and (e.target in members or e.source in members) for e in links)
         if inside and lone and repeats:
             cuts += [(e, WHY) for e in inside]
     return cuts
 
 
-__all__ = ["WHY", "lone_cuts"]
+class Tree(Protocol):
+    """The graph's spanning tree as :func:`lone_suspect` reads it."""
+
+    adj: dict[str, list[tuple[str, Link]]]
+    pose: dict[str, Matrix]
+
+    def path(self, a: str, b: str) -> list[Link]: ...
+
+
+def _beyond(adj: dict[str, list[tuple[str, Link]]], cut: Link, start: str) -> set[str]:
+    """Stations reachable from ``start`` over the tree without the link ``cut``."""
+    seen, queue = {start}, deque([start])
+    while queue:
+        for y, e in adj[queue.popleft()]:
+            if e is not cut and y not in seen:
+                seen.add(y)
+                queue.append(y)
+    return seen
+
+
+def lone_suspect(
+    forest: Tree,
+    tree: list[Link],
+    support: dict[int, int],
+    confirmed: list[Link],
+    links: list[Link],
+    config: SurveyConfig,
+) -> list[tuple[Link, str]]:
+    """A tree link that alone places stations and that nothing vouches for, or [].
+
+    A tree link that no loop confirms is the only evidence for where the stations beyond it
+    are (the smaller side of the tree it splits). It is rejected (better unplaced than wrong)
+    when
+
+    * an *ambiguous* link across the same cut (its verdict found a clearly different pose
+      that fits about as well: a symmetric room, repeating bays) agrees with that placement:
+      the placement is one of twins and nothing checks which (an ambiguous link that
+      disagrees says nothing about it). The tree links between the ambiguous link's stations
+      make the twin placement; the most doubtful of them is rejected (this one unless another
+      is more doubtful, even one a loop of links wrong in the same way confirms); or
+    * it is more doubtful (free-space conflict ratio) than every link a loop confirmed among
+      the stations it attaches to (the larger side; the whole project's when no loop
+      confirms a link there), and than ``loop_doubt_min``: the loops show how much conflict
+      that part's right links carry, and this one carries more, unchecked. (Another part of
+      the project may be a region folded onto itself, its wrong links confirmed by loops of
+      wrong links: their doubt says nothing about this one.)
+
+    One at a time, the most doubtful first: a wrongly placed station's own ambiguous links
+    agree with whatever placed it, and would make its neighbours' tree links look alike. Off
+    with ``trust_lone_links``."""
+    if config.trust_lone_links:
+        return []
+    ambiguous = [
+        e
+        for e in links
+        if e.T_target_source is not None
+        and e.status != "failed"
+        and any(r.get("code") == "ambiguous" for r in e.reasons)
+    ]
+    vouched = [(e, float(e.doubt)) for e in confirmed if e.doubt is not None]
+    overall = max([config.loop_doubt_min, *(d for _, d in vouched)]) if vouched else None
+    adj = forest.adj  # the tree's links per station
+    out: list[tuple[float, int, Link, str]] = []
+    for t in tree:
+        if support.get(id(t), 0) > 0 or t.vouched:
+            continue
+        a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
+        side = a if len(a) <= len(b) else b
+        rest = b if side is a else a
+        placing = f"the only link placing {', '.join(sorted(side))}, and no loop checks it"
+        doubt = float(t.doubt or 0.0)
+        there = [d for e, d in vouched if e.target in rest and e.source in rest]
+        ceiling = max([config.loop_doubt_min, *there]) if there else overall
+        if ceiling is not None and doubt > ceiling:
+            why = (
+                f"{placing}: more of one scan lies where the other saw open space than on any "
+                "link a loop checked, so it may be a wrong match (free-space conflict ratio "
+                f"{doubt:.2f}, checked links at most {ceiling:.2f})"
+            )
+            out.append((doubt, -len(side), t, why))
+            continue
+        for e in ambiguous:
+            if not (
+                (e.target in side and e.source in rest) or (e.source in side and e.target in rest)
+            ):
+                continue
+            err = loop_error(
+                np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
+            )
+            if err[0] <= 1.0 and err[1] <= 0.1:
+                # the twin placement is made by the tree links between the ambiguous link's
+                # stations: the most doubtful of them goes (this one, unless another is worse)
+                worst = max(forest.path(e.target, e.source), key=lambda x: float(x.doubt or 0))
+                why = (
+                    f"{placing}; link {e.target} <- {e.source} agrees with it, but there another "
+                    "pose fits about as well (look-alike rooms or bays): it may be the wrong one"
+                )
+                if worst is not t:
+                    why = (
+                        f"link {e.target} <- {e.source} agrees with where the links place "
+                        f"{e.target} and {e.source}, but there another pose fits about as well "
+                        "(look-alike rooms or bays); of the links between them this one is the "
+                        "least trustworthy, its scans clashing most (free-space conflict ratio "
+                        f"{float(worst.doubt or 0):.2f})"
+                    )
+                out.append((float(worst.doubt or 0), -len(side), worst, why))
+                break
+    if not out:
+        return []
+    _, _, t, why = max(out, key=lambda x: (x[0], x[1]))
+    return [(t, why)]
+
+
+__all__ = ["WHY", "Tree", "lone_cuts", "lone_suspect"]

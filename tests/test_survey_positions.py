@@ -1,0 +1,110 @@
+"""Rough positions as priors: the CSV, which of a link's poses they pick, the site frame."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from flexreg.core.transforms import make_transform, rotation_about_axis
+from flexreg.errors import InputError
+from flexreg.survey.links import Alternative, Link
+from flexreg.survey.positions import (
+    Position,
+    apply_positions,
+    choose,
+    read_positions_csv,
+    sigmas_off,
+    site_from_positions,
+)
+
+STEMS = ["s0", "s1", "s2"]
+
+
+def _pose(x, y, yaw_deg=0.0):
+    return make_transform(rotation_about_axis([0, 0, 1], math.radians(yaw_deg)), [x, y, 0.0])
+
+
+def test_the_csv_takes_optional_columns_and_defaults(tmp_path):
+    path = tmp_path / "p.csv"
+    path.write_text("stem,x,y,z,heading_deg,sigma_m\ns0,1,2,,90,0.5\ns1.ptx,3,4,1.5,,\n")
+    p = read_positions_csv(path, STEMS)
+    assert set(p) == {"s0", "s1"}
+    assert p["s0"].heading_rad == pytest.approx(math.pi / 2) and p["s0"].sigma_m == 0.5
+    assert not p["s0"].has_z and p["s1"].has_z and p["s1"].xyz[2] == 1.5
+    assert p["s1"].heading_rad is None and p["s1"].sigma_m == 1.0
+    short = tmp_path / "short.csv"
+    short.write_text("stem,x,y\ns2,5,6\n")
+    assert read_positions_csv(short, STEMS)["s2"].xyz.tolist() == [5.0, 6.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("x,y\n1,2\n", "expected the header"),
+        ("stem,x,y\nnope,1,2\n", "'nope' is not one of the stations"),
+        ("stem,x,y\ns0,1,2\ns0,3,4\n", "s0 is given twice"),
+        ("stem,x,y\ns0,1,\n", "x and y are needed"),
+        ("stem,x,y\ns0,1,abc\n", "y is not a number"),
+        ("stem,x,y,sigma_m\ns0,1,2,0\n", "sigma_m must be positive"),
+        ("stem,x,y\n", "no station in the file"),
+    ],
+)
+def test_a_bad_csv_is_one_error_naming_the_file(tmp_path, text, words):
+    path = tmp_path / "p.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as e:
+        read_positions_csv(path, STEMS)
+    assert str(path) in str(e.value) and words in str(e.value)
+
+
+def test_positions_pick_the_one_pose_within_three_sigma():
+    """Two stations 6 m apart along a hall of 5.9 m bays, positions 0.5 m and 10 degrees
+    off: of the answer (a bay too far) and its twins, the positions pick the true pose."""
+    truth = _pose(6.0, 0.0)
+    a = Position(np.array([0.3, -0.4, 0.0]), False, math.radians(10), 1.0)
+    b = Position(np.array([6.2, 0.3, 0.0]), False, math.radians(-5), 1.0)
+    poses = [truth @ _pose(5.9, 0.0), truth, truth @ _pose(-5.9, 0.0)]
+    assert choose(poses, a, b) == (1, "")
+    assert sigmas_off(truth, a, b) < 1.0
+    turned = truth @ _pose(0, 0, 180)
+    assert math.isinf(sigmas_off(turned, a, b))  # a half turn never agrees with headings
+
+
+def test_positions_that_cannot_tell_say_so():
+    far = Position(np.array([0.0, 0.0, 0.0]), False, None, 3.0)
+    other = Position(np.array([6.0, 0.0, 0.0]), False, None, 3.0)
+    i, why = choose([_pose(6.0, 0.0), _pose(0.0, 6.5)], far, other)
+    assert i is None and "cannot tell" in why
+
+
+def test_apply_positions_swaps_in_the_alternative_and_vouches():
+    truth = _pose(6.0, 0.0)
+    wrong = truth @ _pose(5.9, 0.0)
+    e = Link("s0", "s1", T_target_source=wrong, verdict="uncertain")
+    e.alternatives = [Alternative(truth, "twin", 0.9)]
+    bad = Link("s0", "s2", T_target_source=_pose(30.0, 0.0), verdict="confident")
+    pos = {
+        "s0": Position(np.zeros(3), False, 0.0, 1.0),
+        "s1": Position(np.array([6.4, 0.2, 0.0]), False, 0.05, 1.0),
+        "s2": Position(np.array([0.0, 8.0, 0.0]), False, 0.0, 1.0),
+    }
+    assert apply_positions([e, bad], pos) == 1
+    assert e.vouched == "positions" and e.trusted
+    assert np.allclose(e.T_target_source, truth)
+    assert e.alternatives[0].kind == "answer" and np.allclose(
+        e.alternatives[0].T_target_source, wrong
+    )
+    assert bad.status == "rejected" and "positions disagree" in bad.why
+
+
+def test_the_site_frame_of_the_positions():
+    """Registered poses in the reference's frame, rough positions in a site frame turned by
+    30 degrees and shifted: the fit recovers the turn and the shift."""
+    T_site_ref = _pose(100.0, 50.0, 30.0)
+    poses = {s: _pose(*xy) for s, xy in zip(STEMS, [(0, 0), (8, 1), (3, 9)], strict=True)}
+    positions = {s: Position((T_site_ref @ P)[:3, 3], False, None, 1.0) for s, P in poses.items()}
+    T = site_from_positions(poses, positions)
+    assert np.allclose(T, T_site_ref, atol=1e-9)
+    assert site_from_positions({"s0": poses["s0"]}, {"s0": positions["s0"]}) is None

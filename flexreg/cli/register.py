@@ -546,52 +546,11 @@ def _writers(
 
 def read_truth(path: Path, target: Path, source: Path) -> NDArray[np.float64]:
     """A known ``T_target_source``: a transform file, or the pair ``target``/``source`` (by
-    file stem, either order) of a ``flexreg synth`` gt.json."""
-    import json
+    file stem, either order) of a ``flexreg synth`` gt.json
+    (:func:`flexreg.io.transform_io.read_pair_transform`)."""
+    from flexreg.io.transform_io import read_pair_transform
 
-    import numpy as np
-
-    from flexreg.core.transforms import invert
-    from flexreg.io import read_transform
-    from flexreg.io.files import protect
-
-    protect(path)
-    if path.suffix.lower() == ".json" and path.is_file():
-        try:
-            doc = json.loads(path.read_text(errors="replace"))
-        except json.JSONDecodeError as e:
-            raise InputError(path, f"invalid JSON: {e.msg} (line {e.lineno})") from None
-        except (OSError, UnicodeError) as e:
-            raise InputError(path, f"cannot read: {e}") from None
-        if isinstance(doc, dict) and "pairs" in doc and "T_target_source" not in doc:
-            pairs = doc["pairs"]
-            if not isinstance(pairs, list) or not all(isinstance(p, dict) for p in pairs):
-                raise InputError(path, "'pairs' must be a list of objects")
-            for pair in pairs:
-                names = (pair.get("target"), pair.get("source"))
-                if names in ((target.stem, source.stem), (source.stem, target.stem)):
-                    if "T_target_source" not in pair:
-                        raise InputError(
-                            path, f"pair {names[0]} / {names[1]} has no T_target_source"
-                        )
-                    T = _truth_matrix(pair["T_target_source"], path)
-                    return T if names == (target.stem, source.stem) else invert(T)
-            raise InputError(path, f"no pair {target.stem} / {source.stem} in its 'pairs'")
-    return np.asarray(read_transform(path), dtype=np.float64)
-
-
-def _truth_matrix(value: Any, path: Path) -> NDArray[np.float64]:
-    """A 4x4 rigid transform from a JSON value, or one error line naming ``path``."""
-    import numpy as np
-
-    from flexreg.core.transforms import as_transform
-
-    try:
-        return as_transform(np.asarray(value, dtype=np.float64), name=str(path))
-    except (ValueError, TypeError) as e:
-        if isinstance(e, InputError):
-            raise
-        raise InputError(path, f"T_target_source is not a 4x4 matrix of numbers ({e})") from None
+    return read_pair_transform(path, target.stem, source.stem)
 
 
 def _errors(result: RegistrationResult, T_true: NDArray[np.float64]) -> dict[str, float]:

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+from typer.core import TyperCommand
 
 from flexreg.cli._common import EXIT_UNCERTAIN, console, err_console, pair_label
 from flexreg.cli.app import app
@@ -65,9 +66,21 @@ _PairsOption = Annotated[
     str | None,
     typer.Option(
         "--pairs",
-        metavar="auto|all|sequential|FILE.csv",
+        metavar="auto|all|sequential|[+]FILE.csv",
         help="Links to try: place recognition + file-order neighbours (auto), every pair, "
-        "file-order neighbours, or the target,source rows of a CSV. [default: auto]",
+        "file-order neighbours, or the target,source rows of a CSV (+FILE.csv: those rows "
+        "as well as the automatic candidates). [default: auto]",
+    ),
+]
+_LinkOption = Annotated[
+    list[Any] | None,
+    typer.Option(
+        "--link",
+        metavar="TARGET SOURCE T.txt",
+        help="A link given by hand (repeatable): two stations (stems or file names) and their "
+        "T_target_source (a 4x4 text matrix, or a JSON with T_target_source, as register "
+        "--init reads it). It is registered like any other link, seeded with that pose "
+        "(refined and checked), in place of any other candidate of the pair.",
     ),
 ]
 _WorkersOption = Annotated[
@@ -163,10 +176,10 @@ def _configs(
     pairs: str | None,
     refine: bool | None,
     seed: int | None,
-) -> tuple[SurveyConfig, Path | None]:
+) -> tuple[SurveyConfig, Path | None, bool]:
     """The survey configuration (``--set`` keys of the registration go to its nested
-    ``registration``; ``registration.KEY`` works too, and ``judge.KEY`` for a table of it)
-    and the pairs CSV, if any."""
+    ``registration``; ``registration.KEY`` works too, and ``judge.KEY`` for a table of it),
+    the pairs CSV, if any, and whether its pairs are added to the automatic ones (``+``)."""
     survey_sets, reg_sets = [], []
     for item in sets or ():
         key = item.partition("=")[0].strip()
@@ -182,11 +195,14 @@ def _configs(
                 f"--set {key}: no such field of the survey or the registration"
                 + did_you_mean(key, known)
             )
-    pairs_file = None
+    pairs_file, add = None, False
     if pairs is not None and pairs not in ("auto", "all", "sequential"):
-        pairs_file = Path(pairs)
+        add = pairs.startswith("+")
+        pairs_file = Path(pairs.removeprefix("+"))
         if pairs_file.suffix.lower() != ".csv":
-            raise ConfigError(f"--pairs: {pairs}: must be auto, all, sequential or a .csv file")
+            raise ConfigError(
+                f"--pairs: {pairs}: must be auto, all, sequential, a .csv file or +FILE.csv"
+            )
         pairs = None
     cfg = build_config(
         SurveyConfig, config_file, survey_sets, OPTIONS, pairs=pairs, joint_refine=refine
@@ -194,7 +210,7 @@ def _configs(
     reg = build_config(
         RegistrationConfig, None, reg_sets, {"--seed": "seed"}, base=cfg.registration, seed=seed
     )
-    return cfg.replace(registration=reg), pairs_file
+    return cfg.replace(registration=reg), pairs_file, add
 
 
 #: keys of the registration's flat layout before its tables, still read for one release
@@ -303,11 +319,23 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
             )
 
 
-@app.command("survey")
+class _SurveyCommand(TyperCommand):
+    """The survey command, whose ``--link`` takes three values each time it is given (typer
+    reads a repeatable option as one value per occurrence)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            if param.name == "link":
+                param.nargs = 3
+
+
+@app.command("survey", cls=_SurveyCommand)
 def survey_command(
     scans: _ScansArgument,
     out: _OutOption,
     pairs: _PairsOption = None,
+    link: _LinkOption = None,
     workers: _WorkersOption = None,
     scheduler: _SchedulerOption = None,
     dashboard: _DashboardOption = None,
@@ -337,7 +365,7 @@ def survey_command(
     from flexreg.survey.outputs import write_outputs
     from flexreg.survey.project import run_survey
 
-    cfg, pairs_file = _configs(config_file, sets, pairs, refine, seed)
+    cfg, pairs_file, add_pairs = _configs(config_file, sets, pairs, refine, seed)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
     if merged is not None and merged.suffix.lower() not in MERGED_SUFFIXES:
@@ -367,6 +395,8 @@ def survey_command(
             dashboard=dashboard,
             reference=reference,
             pairs_file=pairs_file,
+            add_pairs=add_pairs,
+            links=[(t, s, Path(f)) for t, s, f in link or ()],
             origins_file=origins,
             frame=frame,  # type: ignore[arg-type]
             progress=_Bars(bar),

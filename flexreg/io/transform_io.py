@@ -70,6 +70,79 @@ def read_transform(
     return as_transform(rows, name=str(p))
 
 
+def read_pair_transform(path: str | PathLike[str], target: str, source: str) -> NDArray[np.float64]:
+    """A given ``T_target_source`` of the pair ``target``, ``source`` (station stems): what
+    ``flexreg register --init`` / ``--truth`` and ``flexreg survey --link`` read.
+
+    Accepted: a 4x4 text matrix (:func:`read_transform`: 4 rows of 4 numbers, or 3 rows), a
+    JSON ``{"T_target_source": [[4x4]], ...}`` (what ``flexreg register`` writes), or a
+    ``flexreg synth`` ``gt.json`` (its ``pairs`` entry for ``target`` / ``source``, inverted
+    when listed the other way round).
+
+    Parameters
+    ----------
+    path : path-like
+    target, source : str
+        Stems of the two scans, to pick a pair of a ``gt.json``.
+
+    Returns
+    -------
+    (4, 4) float64
+        A rigid transform.
+
+    Raises
+    ------
+    InputError
+        Naming ``path``: missing or unreadable file, invalid JSON, no matching entry, or a
+        matrix that is not a 4x4 rigid transform (non-orthonormal rotation block, reflection,
+        bad last row, NaN).
+    """
+    p = Path(path)
+    protect(p)
+    try:
+        if p.suffix.lower() == ".json" and p.is_file():
+            T = _pair_entry(p, target, source)
+            if T is not None:
+                return T
+        return np.asarray(read_transform(p), dtype=np.float64)
+    except OSError as e:
+        raise InputError(p, f"cannot read: {e.strerror or e}") from None
+
+
+def _pair_entry(p: Path, target: str, source: str) -> NDArray[np.float64] | None:
+    """The ``pairs`` entry of a ``gt.json`` for ``target``/``source`` (inverted when listed
+    the other way round); None when the file is not such a list (a transform JSON)."""
+    try:
+        doc = json.loads(p.read_text(errors="replace"))
+    except json.JSONDecodeError as e:
+        raise InputError(p, f"invalid JSON: {e.msg} (line {e.lineno})") from None
+    except (OSError, UnicodeError) as e:
+        raise InputError(p, f"cannot read: {e}") from None
+    if not (isinstance(doc, dict) and "pairs" in doc and "T_target_source" not in doc):
+        return None
+    pairs = doc["pairs"]
+    if not isinstance(pairs, list) or not all(isinstance(q, dict) for q in pairs):
+        raise InputError(p, "'pairs' must be a list of objects")
+    for pair in pairs:
+        names = (pair.get("target"), pair.get("source"))
+        if names in ((target, source), (source, target)):
+            if "T_target_source" not in pair:
+                raise InputError(p, f"pair {names[0]} / {names[1]} has no T_target_source")
+            T = _json_matrix(pair["T_target_source"], p)
+            return T if names == (target, source) else invert(T)
+    raise InputError(p, f"no pair {target} / {source} in its 'pairs'")
+
+
+def _json_matrix(value: Any, path: Path) -> NDArray[np.float64]:
+    """A 4x4 rigid transform from a JSON value, or one error line naming ``path``."""
+    try:
+        return as_transform(np.asarray(value, dtype=np.float64), name=str(path))
+    except (ValueError, TypeError) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(path, f"T_target_source is not a 4x4 matrix of numbers ({e})") from None
+
+
 def read_ground_truth(
     path: str | PathLike[str],
     *,

@@ -13,6 +13,7 @@ are identical whatever the number of workers or the order tasks finish in.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import signal
@@ -308,13 +309,25 @@ def _io_error(e: OSError) -> InputError:
     return InputError(e.filename or "cache", f"{e.strerror or e}")
 
 
-def link_cache_path(target_file: str, source_file: str, *, prior: bool = False) -> Path:
+def link_cache_path(
+    target_file: str,
+    source_file: str,
+    *,
+    prior: bool = False,
+    given: NDArray[np.float64] | None = None,
+) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
-    stations' cache keys (file content, setup and configuration) and whether the stored
-    poses seeded it."""
+    stations' cache keys (file content, setup and configuration) and what seeded it: the
+    stored poses (``prior``), or a ``T_target_source`` given by hand (``given``: the first
+    12 hex digits of the SHA-256 of its 16 float64 values, so that another hand transform
+    is registered again and the same one is reused)."""
     t = Path(target_file).name.removesuffix(PREPARED_SUFFIX)
     s = Path(source_file).name.removesuffix(PREPARED_SUFFIX)
-    tag = ".stored" if prior else ""
+    if given is not None:
+        values = np.ascontiguousarray(given, dtype="<f8").tobytes()
+        tag = f".hand-{hashlib.sha256(values).hexdigest()[:12]}"
+    else:
+        tag = ".stored" if prior else ""
     return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.npz"
 
 
@@ -360,7 +373,9 @@ def align_link(
     ``init`` (the relative pose the files store, ``T_target_source``) competes as one more
     hypothesis on the registration's dense check; it wins only when it explains the data
     better than what the images found (the link cache's name then says so)."""
-    cache = link_cache_path(target_file, source_file, prior=init is not None)
+    cache = link_cache_path(
+        target_file, source_file, prior=init is not None, given=cand.T_target_source
+    )
     hit = _cached_link(cache, cand)
     if hit is not None:
         return hit

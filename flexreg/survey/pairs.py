@@ -17,20 +17,30 @@ station overlaps only its few neighbours. The candidates come from two cheap cue
 The total is capped at ``max_links_per_station * N``; the file-order links come first, then
 the place-recognition links by score. Later rounds (:mod:`flexreg.survey.project`) add pairs
 whose solved positions are close.
+
+A surveyor can add pairs (a CSV, :func:`read_pairs_csv`) and links given by hand with their
+``T_target_source`` (:func:`hand_links`, e.g. from ``flexreg register --init`` or a point-pair
+alignment); :func:`merge_candidates` puts them in place of the automatic candidates of the
+same pairs (one link per pair).
 """
 
 from __future__ import annotations
 
 import csv
 import re
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from itertools import combinations
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from flexreg.core.transforms import as_transform
 from flexreg.errors import InputError
+from flexreg.io.transform_io import read_pair_transform
 from flexreg.stages.alignment import consistent_subset
 from flexreg.survey.stations import GlobalDescriptor
 
@@ -53,15 +63,20 @@ class Candidate:
     target, source : str
         Station stems (``T_target_source`` maps the source into the target).
     origin : str
-        Why: ``sequential``, ``place``, ``proximity``, ``all`` or ``file``.
+        Why: ``sequential``, ``place``, ``proximity``, ``all``, ``file`` (a pairs CSV) or
+        ``hand`` (a link given with its transform).
     place_score : float or None
         Consistent place-recognition matches (None: not ranked).
+    T_target_source : (4, 4) float64 or None
+        The pose a ``hand`` link is given: it seeds the registration (refined and checked
+        like any other answer, :func:`flexreg.survey.execute.align_link`); None otherwise.
     """
 
     target: str
     source: str
     origin: str
     place_score: float | None = None
+    T_target_source: NDArray[np.float64] | None = field(default=None, compare=False, repr=False)
 
     @property
     def key(self) -> frozenset[str]:
@@ -192,6 +207,19 @@ def auto_pairs(
     return list(chosen.values())[:max_links]
 
 
+def station_stem(name: str, stems: Sequence[str]) -> str | None:
+    """The station ``name`` means: a stem as it is, else the stem of a file name or path
+    (``site/station_07.ptx`` -> ``station_07``); None when it names none of ``stems``.
+
+    >>> station_stem("site/station_07.ptx", ["station_07", "station_08"])
+    'station_07'
+    """
+    if name in stems:
+        return name
+    stem = Path(name).stem
+    return stem if stem in stems else None
+
+
 def read_pairs_csv(path: Path, stems: list[str]) -> list[Candidate]:
     """Pairs from a CSV file of ``target,source`` station stems (a header row is allowed).
 
@@ -213,7 +241,7 @@ def read_pairs_csv(path: Path, stems: list[str]) -> list[Candidate]:
     for n, row in enumerate(rows, 1):
         if len(row) < 2:
             raise InputError(path, f"row {n}: expected target,source")
-        t, s = (Path(x.strip()).stem for x in row[:2])
+        t, s = (station_stem(x.strip(), stems) or Path(x.strip()).stem for x in row[:2])
         for name in (t, s):
             if name not in known:
                 raise InputError(path, f"row {n}: {name!r} is not one of the stations")
@@ -225,15 +253,90 @@ def read_pairs_csv(path: Path, stems: list[str]) -> list[Candidate]:
     return list(out.values())
 
 
+#: a link given by hand: target, source and its ``T_target_source`` (a 4x4 matrix, or a
+#: transform file read by :func:`~flexreg.io.transform_io.read_pair_transform`)
+HandLink = tuple[str, str, ArrayLike | str | PathLike[str]]
+
+
+def hand_links(links: Iterable[HandLink], stems: Sequence[str]) -> list[Candidate]:
+    """Links given by hand, as ``hand`` candidates carrying their ``T_target_source``.
+
+    Parameters
+    ----------
+    links : iterable of (str, str, array_like or path-like)
+        ``(target, source, T_target_source)``: two stations (stems, or file names whose stem
+        is a station) and the pose that maps the source into the target, as a 4x4 matrix or
+        a transform file (a 4x4 text matrix, a JSON with ``T_target_source``, a ``flexreg
+        synth`` gt.json).
+    stems : sequence of str
+        The stations.
+
+    Returns
+    -------
+    list of Candidate
+        In the order given.
+
+    Raises
+    ------
+    InputError
+        An unknown station, a station linked to itself or a pair given twice (naming
+        ``--link``), or a transform that is not a 4x4 rigid matrix (naming its file);
+        checked link by link, the names before the matrix.
+    """
+    out: dict[frozenset[str], Candidate] = {}
+    for target, source, T in links:
+        names = []
+        for name in (target, source):
+            stem = station_stem(str(name), stems)
+            if stem is None:
+                raise InputError(
+                    f"--link {target} {source}", f"{str(name)!r} is not one of the stations"
+                )
+            names.append(stem)
+        t, s = names
+        if t == s:
+            raise InputError(f"--link {target} {source}", "a station cannot be linked to itself")
+        if frozenset((t, s)) in out:
+            raise InputError(f"--link {target} {source}", f"the pair {t} / {s} is given twice")
+        if isinstance(T, str | PathLike):
+            M = read_pair_transform(T, t, s)
+        else:
+            M = as_transform(T, name=f"--link {target} {source}")
+        out[frozenset((t, s))] = Candidate(t, s, "hand", T_target_source=M)
+    return list(out.values())
+
+
+def merge_candidates(
+    candidates: Iterable[Candidate], given: Iterable[Candidate]
+) -> list[Candidate]:
+    """``candidates`` with ``given`` ones in place of those of the same pair (either
+    direction; a given pair the candidates lack comes after them): one link per pair, the
+    surveyor's word first.
+
+    >>> auto = [Candidate("a", "b", "sequential"), Candidate("b", "c", "sequential")]
+    >>> got = merge_candidates(auto, [Candidate("c", "b", "file")])
+    >>> [(c.target, c.source, c.origin) for c in got]
+    [('a', 'b', 'sequential'), ('c', 'b', 'file')]
+    """
+    chosen: dict[frozenset[str], Candidate] = {c.key: c for c in candidates}
+    for c in given:
+        chosen[c.key] = c
+    return list(chosen.values())
+
+
 __all__ = [
     "MIN_PLACE_MATCHES",
     "Candidate",
+    "HandLink",
     "all_pairs",
     "auto_pairs",
+    "hand_links",
+    "merge_candidates",
     "place_score",
     "place_scores",
     "ranked_partners",
     "read_pairs_csv",
     "sequential_order",
     "sequential_pairs",
+    "station_stem",
 ]

@@ -4,12 +4,17 @@ Prepare every station once (cached), choose the candidate links, register them o
 the graph, try the pairs the first solution suggests (stations whose solved positions are
 close, unplaced stations' next candidates), optionally refine jointly, and return a
 :class:`SurveyResult` whose :meth:`~SurveyResult.to_dict` is poses.json.
+
+The surveyor may name pairs (a CSV: exactly these, or added to the automatic candidates) and
+give links by hand with their ``T_target_source`` (:func:`~flexreg.survey.pairs.hand_links`):
+each is registered like any other link, seeded with the given pose.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -45,8 +50,11 @@ from flexreg.survey.mapcheck import (
 )
 from flexreg.survey.pairs import (
     Candidate,
+    HandLink,
     all_pairs,
     auto_pairs,
+    hand_links,
+    merge_candidates,
     place_scores,
     ranked_partners,
     read_pairs_csv,
@@ -209,15 +217,43 @@ class SurveyResult:
         return poses_document(self)
 
 
+@dataclass(frozen=True)
+class _Given:
+    """What the surveyor gave: the pairs of a CSV (``add``: beside the automatic candidates,
+    else instead of them; None: no file) and links with their transforms (``hand``)."""
+
+    pairs: list[Candidate] | None = None
+    add: bool = False
+    hand: list[Candidate] = field(default_factory=list)
+
+    @property
+    def automatic(self) -> bool:
+        """Whether the configuration's candidates (``pairs``) are tried too."""
+        return self.pairs is None or self.add
+
+    def among(self, stems: list[str]) -> list[Candidate]:
+        """The CSV's pairs, then the hand links, between the given (readable) stations."""
+        ok = set(stems)
+        return [c for c in [*(self.pairs or []), *self.hand] if {c.target, c.source} <= ok]
+
+
 def _candidates(
     stems: list[str],
     files: dict[str, str],
     config: SurveyConfig,
-    pairs_file: Path | None,
+    given: _Given,
     max_links: int,
 ) -> tuple[list[Candidate], dict[frozenset[str], int]]:
-    if pairs_file is not None:
-        return read_pairs_csv(pairs_file, stems), {}
+    """The candidates of the first round and the place-recognition scores: the
+    configuration's (unless a CSV gave exactly the pairs), with the CSV's pairs and then the
+    hand links in place of those of the same pairs."""
+    cands, scores = _automatic(stems, files, config, max_links) if given.automatic else ([], {})
+    return merge_candidates(cands, given.among(stems)), scores
+
+
+def _automatic(
+    stems: list[str], files: dict[str, str], config: SurveyConfig, max_links: int
+) -> tuple[list[Candidate], dict[frozenset[str], int]]:
     if config.pairs == "all":
         return all_pairs(stems), {}
     if config.pairs == "sequential":
@@ -329,30 +365,28 @@ def _register(
     phase: str = "links",
 ) -> list[Link]:
     prior = config.stored_poses == "prior"
-    items = [
-        (
-            files[c.target],
-            files[c.source],
-            config.registration,
-            c,
-            stored_T_target_source(stored, c.target, c.source) if prior else None,
-        )
-        for c in cands
-    ]
+    items = []
+    for c in cands:
+        seed = c.T_target_source  # a hand link's pose; else the one the files store, if any
+        if seed is None and prior:
+            seed = stored_T_target_source(stored, c.target, c.source)
+        items.append((files[c.target], files[c.source], config.registration, c, seed))
     return run_tasks(client, align_link, items, on_result=_Counter(phase, len(items), progress))
 
 
 def _check_inputs(
     paths: list[Path],
     reference: str | None,
-    pairs_file: Path | None,
+    pairs: tuple[Path | None, bool, Sequence[HandLink] | None],
     cluster: tuple[int | None, str | None, str | None],
     origins_file: Path | None = None,
     frame: str = "reference",
-) -> list[Station]:
+) -> tuple[list[Station], _Given]:
     """What a survey refuses before any work: the cluster's options ``(workers, scheduler,
-    dashboard)`` first (nothing read yet), then the stations, the reference, the pairs and
-    the origins (set on the stations they name)."""
+    dashboard)`` first (nothing read yet), then the stations, the reference, the pairs
+    ``(pairs_file, add_pairs, links)`` and the origins (set on the stations they name).
+    Returns the stations and the pairs and links given."""
+    pairs_file, add_pairs, links = pairs
     workers, scheduler, dashboard = cluster
     if frame not in ("reference", "stored"):
         raise InputError("--frame", f"must be reference or stored (got {frame!r})")
@@ -366,12 +400,17 @@ def _check_inputs(
     stems = [s.stem for s in stations]
     if reference is not None and reference not in stems:
         raise InputError("--reference", f"{reference!r} is not one of the stations")
-    if pairs_file is not None:
-        read_pairs_csv(pairs_file, stems)
+    if add_pairs and pairs_file is None:
+        raise InputError("add_pairs", "adds the pairs of a pairs_file: none given")
+    given = _Given(
+        None if pairs_file is None else read_pairs_csv(pairs_file, stems),
+        add_pairs,
+        hand_links(links or (), stems),
+    )
     if origins_file is not None:
         origins = read_origins_csv(origins_file, stems)
         stations = [replace(st, origin=origins.get(st.stem)) for st in stations]
-    return stations
+    return stations, given
 
 
 def run_survey(
@@ -384,6 +423,8 @@ def run_survey(
     dashboard: str | None = None,
     reference: str | None = None,
     pairs_file: Path | None = None,
+    add_pairs: bool = False,
+    links: Sequence[HandLink] | None = None,
     origins_file: Path | None = None,
     frame: Frame = "reference",
     progress: Progress = None,
@@ -410,7 +451,21 @@ def run_survey(
         The station whose frame the poses are in (default: the first station by name of the
         largest group).
     pairs_file : Path, optional
-        CSV of ``target,source`` stems: exactly these links.
+        CSV of ``target,source`` stems: exactly these links (with ``add_pairs``: these and
+        the configuration's candidates, ``config.pairs``).
+    add_pairs : bool
+        Add the pairs of ``pairs_file`` to the configuration's candidates (a pair in both is
+        registered once, as the file orients it) instead of trying only them; the proximity
+        rounds of ``pairs="auto"`` run as without a file.
+    links : sequence of (str, str, array_like or path-like), optional
+        Links given by hand, ``(target, source, T_target_source)``: two stations (stems, or
+        file names whose stem is a station) and the pose mapping the source into the target,
+        as a 4x4 matrix or a transform file (4x4 text, a JSON with ``T_target_source``, a
+        ``flexreg synth`` gt.json; :func:`~flexreg.io.transform_io.read_pair_transform`).
+        Each is registered like any other link with that pose as its seed (refined, and it
+        competes with what the images find on the dense check), in place of any other
+        candidate of the same pair; its link's ``origin`` is ``"hand"``, and its cached
+        result is reused only for the same transform.
     origins_file : Path, optional
         CSV of ``stem,x,y,z``: the scanner positions of stations whose points are in project
         coordinates (metres, in each file's frame); poses then come out in the files'
@@ -424,7 +479,9 @@ def run_survey(
     ------
     InputError
         A missing path, a folder without scans, one scan only, duplicate station names, an
-        unknown ``reference``, a bad pairs file; all before any work.
+        unknown ``reference``, a bad pairs file, ``add_pairs`` without one; a hand link
+        naming an unknown station, a station with itself or a pair twice, or whose
+        transform is unreadable or not rigid (naming its file); all before any work.
     ConfigError
         ``workers`` out of range, a bad ``dashboard`` or ``scheduler`` address (before any
         work), or a scheduler that cannot be reached.
@@ -433,8 +490,13 @@ def run_survey(
     """
     config = config if config is not None else SurveyConfig()
     t_start = time.perf_counter()
-    stations = _check_inputs(
-        paths, reference, pairs_file, (workers, scheduler, dashboard), origins_file, frame
+    stations, given = _check_inputs(
+        paths,
+        reference,
+        (pairs_file, add_pairs, links),
+        (workers, scheduler, dashboard),
+        origins_file,
+        frame,
     )
     cache = out_dir / "cache"
     timings: dict[str, float] = {}
@@ -456,29 +518,21 @@ def run_survey(
             raise RegistrationError(f"fewer than two readable stations ({bad})")
         t = time.perf_counter()
         max_links = max(1, int(config.max_links_per_station * len(stems)))
-        cands, scores = _candidates(stems, files, config, pairs_file, max_links)
+        cands, scores = _candidates(stems, files, config, given, max_links)
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
-        stored = (
-            {}
-            if config.stored_poses == "ignore"
-            else {
-                p.stem: p.T_world_scanner
-                for p in prepared_list
-                if p.T_world_scanner is not None and p.stem in files
-            }
-        )
-        links = _register(client, cands, files, config, progress, stored)
+        stored = _stored_poses(prepared_list, files, config)
+        found = _register(client, cands, files, config, progress, stored)
         glances, judge = _glances(client, stems, files, config, progress)
-        sol = solve_graph(stems, links, config, reference=reference, judge=judge)
-        auto = pairs_file is None and config.pairs == "auto"
+        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+        auto = given.automatic and config.pairs == "auto"
         for _ in range(config.proximity_rounds if auto else 0):
-            tried = {frozenset((e.target, e.source)) for e in links}
-            more = _more_candidates(stems, sol, tried, scores, config, max_links - len(links))
+            tried = {frozenset((e.target, e.source)) for e in found}
+            more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
             if not more:
                 break
-            links += _register(client, more, files, config, progress, stored)
-            sol = solve_graph(stems, links, config, reference=reference, judge=judge)
+            found += _register(client, more, files, config, progress, stored)
+            sol = solve_graph(stems, found, config, reference=reference, judge=judge)
         timings["links"] = time.perf_counter() - t
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
@@ -487,7 +541,7 @@ def run_survey(
             sol, looks = _map_check(
                 client,
                 stems,
-                links,
+                found,
                 sol,
                 (files, glances),
                 config,
@@ -497,13 +551,13 @@ def run_survey(
                 progress,
             )
             timings["map_check"] = time.perf_counter() - t
-        adjustment = _final_alignment(client, sol, (links, looks), files, config, progress, timings)
+        adjustment = _final_alignment(client, sol, (found, looks), files, config, progress, timings)
     sol = _with_unreadable(sol, stations, prepared)
     log.info("survey: %d of %d stations placed", len(sol.groups[0]), len(stations))
     return SurveyResult(
         stations,
         prepared,
-        links,
+        found,
         sol,
         config,
         n_workers,
@@ -516,6 +570,20 @@ def run_survey(
         adjustment,
         frame,
     )
+
+
+def _stored_poses(
+    prepared: list[Prepared], files: dict[str, str], config: SurveyConfig
+) -> dict[str, Any]:
+    """The poses the readable stations' files store (``T_world_scanner``), unless
+    ``stored_poses="ignore"``."""
+    if config.stored_poses == "ignore":
+        return {}
+    return {
+        p.stem: p.T_world_scanner
+        for p in prepared
+        if p.T_world_scanner is not None and p.stem in files
+    }
 
 
 def _final_alignment(

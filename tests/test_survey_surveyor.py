@@ -1,0 +1,236 @@
+"""The surveyor in the loop: links given by hand (``--link TARGET SOURCE T.txt``) and pairs
+added to the automatic candidates (``--pairs +FILE.csv``), on a small synthetic room."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import one_error_line, room_project, run_cli
+
+from flexreg.core.transforms import (
+    invert,
+    make_transform,
+    rotation_about_axis,
+    rotation_error_deg,
+    translation_error_m,
+)
+from flexreg.errors import InputError
+from flexreg.io.transform_io import read_pair_transform
+from flexreg.survey import SurveyConfig, run_survey
+from flexreg.survey.pairs import Candidate, hand_links, merge_candidates
+
+STATIONS = ["station_00", "station_01", "station_02"]
+#: the registration cannot search: every link without a given pose fails
+ICP_ONLY = ["--set", "icp_only=true", "--no-refine"]
+
+
+@pytest.fixture(scope="module")
+def project(tmp_path_factory) -> Path:
+    """Three stations of the synthetic room at 512 x 256, with gt.json."""
+    return room_project(tmp_path_factory.mktemp("project"), 3)
+
+
+def _files(project: Path, n: int = 3) -> list[Path]:
+    return [project / f"station_{i:02d}.ptx" for i in range(n)]
+
+
+def _doc(out: Path) -> dict:
+    return json.loads((out / "poses.json").read_text())
+
+
+def _links(doc: dict, target: str, source: str) -> list[dict]:
+    """The links of a pair, in either direction."""
+    return [e for e in doc["links"] if {e["target"], e["source"]} == {target, source}]
+
+
+def _truth(project: Path) -> np.ndarray:
+    return read_pair_transform(project / "gt.json", "station_00", "station_02")
+
+
+def _off(T: np.ndarray, deg: float, m: float) -> np.ndarray:
+    """``T`` moved by ``deg`` degrees about a tilted axis and ``m`` metres."""
+    d = np.array([0.6, -0.4, 0.2]) * m / np.linalg.norm([0.6, -0.4, 0.2])
+    return make_transform(rotation_about_axis([0.3, 0.2, 1.0], np.deg2rad(deg)), d) @ T
+
+
+def _survey(project: Path, out: Path, *args) -> tuple[int, str, str]:
+    return run_cli(["survey", *_files(project), "--out", out, "--workers", "1", *args])
+
+
+# ------------------------------------------------------------------ refused before any work
+
+
+@pytest.mark.parametrize(
+    "case, text, message",
+    [
+        ("malformed.txt", "1 0 0\n0 1 0 0\n", "expected 4 rows of 4 numbers"),
+        ("words.txt", "one two three four\n" * 4, "must hold only numbers"),
+        ("scaled.txt", "2 0 0 0\n0 2 0 0\n0 0 2 0\n0 0 0 1\n", "not a proper rotation"),
+        ("missing.txt", None, "no such file"),
+        ("other.json", '{"T": [[1, 0, 0, 0]]}', "no 'T_target_source' entry"),
+        ("broken.json", '{"T_target_source": [[1, 0', "invalid JSON"),
+    ],
+)
+def test_a_bad_transform_file_is_one_line_naming_it(case, text, message, project, tmp_path):
+    f = tmp_path / case
+    if text is not None:
+        f.write_text(text)
+    out = tmp_path / "out"
+    rc, _, err = _survey(project, out, "--link", "station_00", "station_02", f)
+    assert rc == 1
+    line = one_error_line(err)
+    assert str(f) in line and message in line, line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "links, message",
+    [
+        ([("station_00", "station_09")], "--link station_00 station_09: 'station_09' is not one"),
+        ([("station_01", "station_01.ptx")], "a station cannot be linked to itself"),
+        (
+            [("station_00", "station_02"), ("station_02.ptx", "station_00")],
+            "the pair station_02 / station_00 is given twice",
+        ),
+    ],
+)
+def test_a_bad_link_is_one_line_before_any_work(links, message, project, tmp_path):
+    T = tmp_path / "T.txt"
+    np.savetxt(T, np.eye(4))
+    out = tmp_path / "out"
+    args = [a for t, s in links for a in ("--link", t, s, T)]
+    rc, _, err = _survey(project, out, *args)
+    assert rc == 1
+    assert message in one_error_line(err)
+    assert not out.exists()
+
+
+def test_pairs_plus_needs_a_csv_file(project, tmp_path):
+    out = tmp_path / "out"
+    rc, _, err = _survey(project, out, "--pairs", "+pairs.txt")
+    assert rc == 1
+    assert one_error_line(err).startswith("error: --pairs: +pairs.txt:")
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------------- merging (no scans)
+
+
+def test_hand_links_replace_the_candidates_of_their_pairs(project, tmp_path):
+    T = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.1])
+    f = tmp_path / "T.txt"
+    np.savetxt(f, T)
+    hand = hand_links(
+        [("station_02", "site/station_00.ptx", f), ("station_01", "station_02", T)], STATIONS
+    )
+    assert [(c.target, c.source, c.origin) for c in hand] == [
+        ("station_02", "station_00", "hand"),
+        ("station_01", "station_02", "hand"),
+    ]
+    np.testing.assert_array_equal(hand[0].T_target_source, T)
+    # a synth gt.json: the pair's entry, inverted when listed the other way round
+    (gt,) = hand_links([("station_02", "station_00", project / "gt.json")], STATIONS)
+    np.testing.assert_allclose(gt.T_target_source, invert(_truth(project)), atol=1e-12)
+    auto = [Candidate("station_00", "station_01", "sequential", 12.0)]
+    auto.append(Candidate("station_00", "station_02", "place", 9.0))
+    got = merge_candidates(auto, hand)
+    assert [(c.target, c.source, c.origin) for c in got] == [
+        ("station_00", "station_01", "sequential"),
+        ("station_02", "station_00", "hand"),
+        ("station_01", "station_02", "hand"),
+    ]
+    with pytest.raises(InputError, match=r"^--link station_00 station_01: expected a 4x4"):
+        hand_links([("station_00", "station_01", np.eye(3))], STATIONS)
+
+
+# ------------------------------------------------------------------------- pairs added
+
+
+def test_pairs_plus_file_adds_to_the_automatic_candidates(tmp_path_factory):
+    """``--pairs +FILE``: the file's pair, the automatic candidates (file order) and the
+    proximity round's pairs are all tried, once each; a hand link (here the truth of a
+    gt.json) takes the place of the automatic candidate of its pair."""
+    project = room_project(tmp_path_factory.mktemp("project4"), 4)
+    pairs = project / "pairs.csv"
+    pairs.write_text("target,source\nstation_00,station_02\n")
+    out = tmp_path_factory.mktemp("added") / "out"
+    rc, _, err = run_cli(
+        ["survey", project, "--out", out, "--workers", "1", "--pairs", f"+{pairs}", "--no-refine"]
+        + ["--link", "station_00", "station_01", project / "gt.json"]
+    )
+    assert rc in (0, 3), err
+    doc = _doc(out)
+    tried = {(e["target"], e["source"]): e["origin"] for e in doc["links"]}
+    assert len(tried) == len(doc["links"])
+    assert len({frozenset(k) for k in tried}) == len(tried)  # one link per pair
+    assert tried[("station_00", "station_02")] == "file"
+    assert tried[("station_01", "station_02")] == "sequential"
+    assert tried[("station_00", "station_01")] == "hand"
+    assert "proximity" in tried.values()  # the rounds after the first graph ran
+    assert all(st["placed"] for st in doc["stations"].values())
+
+
+# ------------------------------------------------------------------------- hand links
+
+
+@pytest.fixture(scope="module")
+def hand(project, tmp_path_factory):
+    """A survey where the registration cannot search (icp_only) and station_00-station_02 is
+    given by hand, 0.5 degrees and 5 cm off the truth."""
+    root = tmp_path_factory.mktemp("hand")
+    given = root / "T_00_02.txt"
+    np.savetxt(given, _off(_truth(project), 0.5, 0.05))
+    out = root / "out"
+    rc, _, err = _survey(project, out, *ICP_ONLY, "--link", "station_00", "station_02", given)
+    return rc, err, out, given
+
+
+def test_a_hand_link_seeds_a_pair_the_images_cannot_register(hand, project):
+    rc, err, out, given = hand
+    assert rc == 3, err  # station_01's links fail: it stays unplaced
+    doc = _doc(out)
+    for pair in (("station_00", "station_01"), ("station_01", "station_02")):
+        (e,) = _links(doc, *pair)
+        assert e["status"] == "failed" and e["origin"] == "sequential"
+    (e,) = _links(doc, "station_00", "station_02")
+    assert (e["target"], e["source"], e["origin"]) == ("station_00", "station_02", "hand")
+    assert e["status"] == "accepted" and e["cached"] is False
+    T, truth = np.asarray(e["T_target_source"]), _truth(project)
+    assert rotation_error_deg(T, truth) < 0.1 and translation_error_m(T, truth) < 0.01
+    # refined: not the pose as given
+    assert translation_error_m(np.loadtxt(given), truth) > 0.04
+    assert doc["stations"]["station_02"]["placed"] and not doc["stations"]["station_01"]["placed"]
+    assert len(list((out / "cache" / "links").glob("*.hand-*.link.npz"))) == 1
+
+
+def test_a_rerun_reuses_a_hand_link_and_another_transform_registers_it_again(
+    hand, project, tmp_path
+):
+    _, _, first, given = hand
+    out = tmp_path / "out"
+    shutil.copytree(first / "cache", out / "cache")
+    rc, _, err = _survey(project, out, *ICP_ONLY, "--link", "station_00", "station_02", given)
+    assert rc == 3, err
+    (e,) = _links(_doc(out), "station_00", "station_02")
+    assert e["origin"] == "hand" and e["cached"] is True
+    np.testing.assert_array_equal(
+        e["T_target_source"], _links(_doc(first), *STATIONS[::2])[0]["T_target_source"]
+    )
+    # the Python API, another transform (the truth, as an array): registered again
+    config = SurveyConfig(joint_refine=False)
+    config = config.replace(registration=config.registration.replace(icp_only=True))
+    truth = _truth(project)
+    result = run_survey(
+        _files(project), out, config, workers=1, links=[("station_00", "station_02", truth)]
+    )
+    by_pair = {frozenset((e.target, e.source)): e for e in result.links}
+    link = by_pair[frozenset(("station_00", "station_02"))]
+    assert link.origin == "hand" and link.cached is False
+    assert by_pair[frozenset(("station_00", "station_01"))].cached is True  # the same settings
+    assert rotation_error_deg(link.T_target_source, truth) < 0.1
+    assert translation_error_m(link.T_target_source, truth) < 0.01
+    assert len(list((out / "cache" / "links").glob("*.hand-*.link.npz"))) == 2

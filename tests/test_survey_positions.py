@@ -96,7 +96,7 @@ def test_apply_positions_swaps_in_the_alternative_and_vouches():
     assert e.alternatives[0].kind == "answer" and np.allclose(
         e.alternatives[0].T_target_source, wrong
     )
-    assert bad.status == "rejected" and "positions disagree" in bad.why
+    assert bad.status == "rejected" and "positions refuse" in bad.why
 
 
 def test_the_site_frame_of_the_positions():

@@ -234,3 +234,75 @@ def test_a_rerun_reuses_a_hand_link_and_another_transform_registers_it_again(
     assert rotation_error_deg(link.T_target_source, truth) < 0.1
     assert translation_error_m(link.T_target_source, truth) < 0.01
     assert len(list((out / "cache" / "links").glob("*.hand-*.link.npz"))) == 2
+
+
+# ------------------------------------------------------------------ rough positions
+
+
+def _positions(project: Path, path: Path, off_m: float = 0.5, turn_deg: float = 10.0) -> None:
+    """Rough positions of every station from the truth: ``off_m`` away, the heading
+    ``turn_deg`` off, sigma 1 m."""
+    gt = json.loads((project / "gt.json").read_text())
+    rows = ["stem,x,y,z,heading_deg,sigma_m"]
+    for i, s in enumerate(gt["stations"]):
+        T = np.asarray(s["T_world_scanner"])
+        a = 2.0 * i  # radians: a different direction for each
+        yaw = np.degrees(np.arctan2(T[1, 0], T[0, 0])) + (turn_deg if i % 2 else -turn_deg)
+        x, y = T[0, 3] + off_m * np.cos(a), T[1, 3] + off_m * np.sin(a)
+        rows.append(f"{s['name']},{x:.3f},{y:.3f},,{yaw:.2f},1.0")
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_rough_positions_vouch_for_links_and_give_the_site_frame(project, tmp_path):
+    pos = tmp_path / "positions.csv"
+    _positions(project, pos)
+    out = tmp_path / "out"
+    rc, _, err = _survey(project, out, "--positions", pos)
+    assert rc in (0, 3), err
+    doc = _doc(out)
+    assert doc["frame"]["kind"] == "positions"
+    gt = {s["name"]: np.asarray(s["T_world_scanner"]) for s in json.loads(
+        (project / "gt.json").read_text())["stations"]}  # fmt: skip
+    for stem, st in doc["stations"].items():
+        assert st["placed"], stem
+        T_site, W = np.asarray(st["T_site_station"]), gt[stem]
+        # the site frame is the positions' (no heights given: horizontally), fitted to them:
+        # within their sigma (1 m) and 10 degrees of the truth
+        assert np.linalg.norm(T_site[:2, 3] - W[:2, 3]) < 1.0, stem
+        yaw = np.degrees(np.arctan2(T_site[1, 0], T_site[0, 0]) - np.arctan2(W[1, 0], W[0, 0]))
+        assert abs((yaw + 180) % 360 - 180) < 10, stem
+    assert any(e["vouched"] == "positions" for e in doc["links"] if e["status"] == "accepted")
+
+
+def test_a_bad_positions_file_is_one_line_before_any_work(project, tmp_path):
+    pos = tmp_path / "positions.csv"
+    pos.write_text("stem,x,y\nstation_09,1,2\n")
+    out = tmp_path / "out"
+    rc, _, err = _survey(project, out, "--positions", pos)
+    assert rc == 1 and not out.exists()
+    assert one_error_line(err) == f"error: {pos}: row 2: 'station_09' is not one of the stations"
+
+
+def test_a_wrong_hand_link_is_refused_with_its_loop_error(project, tmp_path):
+    """Every link given by hand and taken as given (icp_only, without the ICP refinement):
+    two right, and station_00 <- station_02 a metre off. The loop of the three refuses the
+    wrong one with its loop error."""
+    truth = read_pair_transform(project / "gt.json", "station_00", "station_02")
+    wrong = make_transform(np.eye(3), [1.0, 0.0, 0.0]) @ truth
+    args = []
+    for t, s, T in [
+        ("station_00", "station_01", None),
+        ("station_01", "station_02", None),
+        ("station_00", "station_02", wrong),
+    ]:
+        f = tmp_path / f"{t}_{s}.txt"
+        np.savetxt(f, T if T is not None else read_pair_transform(project / "gt.json", t, s))
+        args += ["--link", t, s, f]
+    out = tmp_path / "out"
+    keep = ["--set", "refine=false", "--set", "judge.checks=[]"]  # the pose as given
+    rc, _, err = _survey(project, out, *ICP_ONLY, *keep, *args)
+    assert rc == 3, err
+    (e,) = _links(_doc(out), "station_00", "station_02")
+    assert translation_error_m(np.asarray(e["T_target_source"]), truth) > 0.9  # as given
+    assert e["status"] == "rejected" and e["loop_error_m"] > 0.9, e
+    assert "loop" in e["why"]

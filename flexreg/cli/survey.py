@@ -148,6 +148,18 @@ _OriginsOption = Annotated[
         "coordinates.",
     ),
 ]
+_PositionsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--positions",
+        metavar="FILE.csv",
+        help="Rough station positions (a field sketch, GNSS): header "
+        "stem,x,y,z,heading_deg,sigma_m (metres and degrees; z, heading_deg, sigma_m may be "
+        "empty, sigma 1 m by default; heading: the scanner's x axis from the site's x axis). "
+        "Of each link they pick the one pose within 3 sigma (look-alike bays, turned rooms); "
+        "the poses also come out in their site frame.",
+    ),
+]
 _MergedOption = Annotated[
     Path | None,
     typer.Option(
@@ -346,6 +358,7 @@ def survey_command(
     e57: _E57Option = None,
     frame: _FrameOption = "reference",
     origins: _OriginsOption = None,
+    positions: _PositionsOption = None,
     seed: _SeedOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
@@ -398,6 +411,7 @@ def survey_command(
             add_pairs=add_pairs,
             links=[(t, s, Path(f)) for t, s, f in link or ()],
             origins_file=origins,
+            positions_file=positions,
             frame=frame,  # type: ignore[arg-type]
             progress=_Bars(bar),
         )

@@ -65,6 +65,8 @@ def poses_document(r: Any) -> dict[str, Any]:
         "frame": {
             "kind": r.frame
             if r.frame == "stored"
+            else "positions"
+            if what.startswith("the site frame of the rough positions")
             else ("origins" if any(st.origin is not None for st in r.stations) else "reference"),
             "site": what,
             "T_site_reference": T_site.tolist(),

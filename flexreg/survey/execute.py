@@ -33,7 +33,7 @@ from flexreg.errors import ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.evidence import Evidence
 from flexreg.registration.pipeline import Registration
-from flexreg.survey.graph import Link
+from flexreg.survey.links import Alternative, Link, alternatives_of
 from flexreg.survey.pairs import Candidate
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
@@ -342,19 +342,35 @@ def _cached_link(path: Path, cand: Candidate) -> Link | None:
     try:
         meta, arrays = read_entry(path, "link")
         given: dict[str, Any] = {k: arrays[k] for k in _LINK_ARRAYS if k in arrays}
-        link = Link(**meta["link"], **given)
-    except (CacheEntryError, KeyError, TypeError) as e:
+        fields_ = dict(meta["link"])
+        if "alternatives" not in fields_:
+            return None  # cached before links kept their alternatives: register again
+        fields_["alternatives"] = [Alternative.of(a) for a in fields_["alternatives"]]
+        link = Link(**fields_, **given)
+    except (CacheEntryError, KeyError, TypeError, ValueError) as e:
         if path.exists():
             log.warning("%s: unusable cache entry (%s); registering the link again", path, e)
         return None
     if link.T_target_source is not None and link.doubt is None:
         return None  # cached before links kept their free-space doubt: register again
-    return replace(link, origin=cand.origin, place_score=cand.place_score, cached=True)
+    return replace(
+        link,
+        origin=cand.origin,
+        place_score=cand.place_score,
+        cached=True,
+        vouched=_vouched(cand),
+    )
+
+
+def _vouched(cand: Candidate) -> str:
+    """A link the surveyor gave by hand is vouched for (:attr:`Link.vouched`)."""
+    return "hand" if cand.origin == "hand" else ""
 
 
 def _store_link(path: Path, link: Link) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     values = {f.name: getattr(link, f.name) for f in fields(Link)}
+    values["alternatives"] = [a.to_dict() for a in link.alternatives]
     arrays = {k: np.asarray(values.pop(k), dtype=np.float64) for k in _LINK_ARRAYS}
     write_entry(path, "link", {k: a for k, a in arrays.items() if a.ndim}, {"link": values})
 
@@ -370,9 +386,12 @@ def align_link(
     as a ``failed`` link with its reason, not raised. The pairwise result is cached too (the
     stations' cache keys name it), so a re-run registers only the links it has not seen.
 
-    ``init`` (the relative pose the files store, ``T_target_source``) competes as one more
-    hypothesis on the registration's dense check; it wins only when it explains the data
-    better than what the images found (the link cache's name then says so)."""
+    ``init`` (the relative pose the files store, or the one the surveyor gave by hand,
+    ``T_target_source``) competes as one more hypothesis on the registration's dense check;
+    it wins only when it explains the data better than what the images found (the link
+    cache's name then says so). The link keeps the registration's other poses that fit
+    almost as well (:func:`~flexreg.survey.links.alternatives_of`); one given by hand is
+    vouched for (:attr:`~flexreg.survey.links.Link.vouched`)."""
     cache = link_cache_path(
         target_file, source_file, prior=init is not None, given=cand.T_target_source
     )
@@ -424,6 +443,10 @@ def align_link(
         seconds=time.perf_counter() - t0,
         origin=cand.origin,
         place_score=cand.place_score,
+        alternatives=alternatives_of(
+            r.T_target_source, () if v is None else v.runner_up, ev.twins, config.judge
+        ),
+        vouched=_vouched(cand),
     )
     _store_link(cache, link)
     return link

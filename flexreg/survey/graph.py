@@ -434,21 +434,38 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
     return {s: "confident" if s in seen else "uncertain" for s in group}
 
 
-def _why_unplaced(stem: str, group: list[str], links: list[Link]) -> str:
-    mine = [e for e in links if stem in (e.target, e.source)]
-    near = sorted({x for e in mine for x in (e.target, e.source)} - {stem})[:3]
-    add = f"add a scan between it and {' or '.join(near) or 'a neighbour'}"
-    if len(group) > 1:
+def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
+    """Why a station is not placed, and the one thing that would place it."""
+    members = set(group)
+    mine = [e for e in links if (e.target in members) != (e.source in members)]
+    mine = mine if len(group) > 1 else [e for e in links if stem in (e.target, e.source)]
+    toward = [e for e in mine if (e.target in placed) or (e.source in placed)]
+    near = sorted({x for e in toward or mine for x in (e.target, e.source)} - members)
+    other = near[0] if near else "STATION"
+    side = next(iter(sorted(members & {x for e in toward for x in (e.target, e.source)})), stem)
+    hand = f"--link {other} {side} T.txt (a transform from flexreg register {other} {side})"
+    what = (
+        f"in a separate group of {len(group)} stations: no confident link, nor one a loop "
+        "confirms, joins it to the reference's group"
+        if len(group) > 1
+        else "no link was tried (no other scan seemed to see the same place)"
+        if not mine
+        else f"all {len(mine)} link(s) failed to register"
+        if all(e.status == "failed" for e in mine)
+        else f"no link places it ({len(mine)} tried: "
+        + "; ".join(sorted({e.why or e.status for e in mine if e.status != "accepted"}))
+        + ")"
+    )
+    n = max((1 + len(e.alternatives) for e in toward if e.usable), default=1)
+    if n > 1:
         return (
-            f"in a separate group of {len(group)} stations: no confident link, nor one a loop "
-            "confirms, joins it to the reference's group; add a scan that sees into both"
+            f"{what}; its link with {other} fits {n} poses (look-alike rooms or bays): rough "
+            f"positions of both (--positions) would pick one, or {hand}"
         )
-    if not mine:
-        return f"no link was tried (no other scan seemed to see the same place); {add}"
-    if all(e.status == "failed" for e in mine):
-        return f"all {len(mine)} link(s) failed to register; {add}"
-    whys = sorted({e.why or e.status for e in mine if e.status != "accepted"})
-    return f"no link places it ({len(mine)} tried: {'; '.join(whys)}); {add} to close a loop"
+    return (
+        f"{what}; to place it: {hand}, rough positions (--positions) to confirm a link, or a "
+        f"scan between it and {other}"
+    )
 
 
 def _stats(links: list[Link]) -> dict[str, float | None]:
@@ -628,7 +645,7 @@ def _solve_once(
             e.status = "failed"
             e.why = e.why or "registration failed"
         else:  # a reason from an earlier solve would stay on a link accepted now
-            e.why = dropped.get(id(e))
+            e.why = dropped.get(id(e)) or e.refused or None
             if e.why is not None:
                 e.status = "rejected"
     forest = _confident_tree(stations, links, config, judge)
@@ -691,9 +708,10 @@ def _solve_once(
             e.loop_error_deg, e.loop_error_m = loop_error(
                 np.asarray(e.T_target_source), poses[e.target], poses[e.source]
             )
-    reasons = {s: _why_unplaced(s, g, links) for g in ordered[1:] for s in g}
+    placed = set(ordered[0]) if len(ordered[0]) > 1 else set()
+    reasons = {s: _why_unplaced(s, g, links, placed) for g in ordered[1:] for s in g}
     if len(ordered[0]) < 2:
-        reasons[ordered[0][0]] = _why_unplaced(ordered[0][0], ordered[0], links)
+        reasons[ordered[0][0]] = _why_unplaced(ordered[0][0], ordered[0], links, placed)
     return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
 
 

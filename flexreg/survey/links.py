@@ -143,6 +143,12 @@ class Link:
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
         :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
         like a confident one, and loops still check it.
+    picked : str
+        What picked one of its alternatives over its answer (the answer is then among the
+        alternatives), in words; empty when it keeps its answer.
+    refused : str
+        Why something outside the pair refused every pose of the link (rough positions that
+        disagree with all of them); empty for none. A refused link stays rejected.
     alternatives : list of Alternative
         The clearly different poses the registration found fitting almost as well (its
         runner-ups) or the answer moved a whole bay or room that fits too (its twins):
@@ -181,6 +187,8 @@ class Link:
     repeat: bool = False
     alternatives: list[Alternative] = field(default_factory=list)
     vouched: str = ""
+    picked: str = ""
+    refused: str = ""
 
     @property
     def overlap(self) -> float:
@@ -196,7 +204,7 @@ class Link:
             *(a for a in self.alternatives if a is not alternative),
         ]
         self.T_target_source = np.asarray(alternative.T_target_source, dtype=np.float64)
-        self.why = f"{why} picks its {alternative.kind.replace('_', '-')}, not its answer"
+        self.picked = f"{why} picked its {alternative.kind.replace('_', '-')}, not its answer"
 
     def agreeing_alternative(
         self, P_target: Matrix, P_source: Matrix, agrees: Callable[[tuple[float, float]], bool]
@@ -256,6 +264,7 @@ class Link:
             "cached": self.cached,
             "alternatives": [a.to_dict() for a in self.alternatives],
             "vouched": self.vouched or None,
+            "picked": self.picked or None,
         }
 
 

@@ -31,9 +31,11 @@ DEFAULT_SIGMA_M = 1.0
 #: How far, in standard deviations of what the positions predict, a link's translation may
 #: be from it and still agree with them.
 AGREE_SIGMAS = 3.0
-#: 1-sigma of a heading, degrees (a rough heading is off by up to about 10 degrees): at a
-#: distance it moves the predicted position sideways.
-HEADING_SIGMA_DEG = 5.0
+#: Beyond this many standard deviations from what the positions predict, every pose of a
+#: link is refused. Between it and :data:`AGREE_SIGMAS` the positions neither vouch nor
+#: refuse: a rough heading turns the predicted offset (10 degrees move a station 20 m away by
+#: 3.5 m), so they are not trusted to refuse what lies only a little beyond.
+REFUSE_SIGMAS = 6.0
 #: How far a link's turn about the vertical may be from the headings' difference and still
 #: agree, degrees: two rough headings are off by up to about 20 degrees together, while
 #: look-alike poses differ by a quarter or half turn (rooms, halls) or by a bay at the same
@@ -135,20 +137,20 @@ def _wrap_deg(a: float) -> float:
 
 def sigmas_off(T: Matrix, target: Position, source: Position) -> float:
     """How far a link's ``T_target_source`` is from what two stations' rough positions
-    predict, in standard deviations: the source's position in the target's frame (rotated by
-    the target's heading; without one only the distance between them counts), against both
-    sigmas and the sideways lever of a heading off by :data:`HEADING_SIGMA_DEG`; infinite
-    when both headings are known and the link turns more than :data:`AGREE_HEADING_DEG` from
-    their difference.
+    predict, in standard deviations of both positions: the source's position in the target's
+    frame (rotated by the target's heading; without one only the distance between them
+    counts); infinite when both headings are known and the link turns more than
+    :data:`AGREE_HEADING_DEG` from their difference. A heading's own error is not in the
+    sigma: a pose vouched for is one near what the positions predict as they stand.
 
     >>> a = Position(np.zeros(3), False, 0.0, 1.0)
     >>> b = Position(np.array([6.0, 0.0, 0.0]), False, 0.0, 1.0)
     >>> T = np.eye(4); T[0, 3] = 6.3
     >>> round(sigmas_off(T, a, b), 2)
-    0.2
+    0.21
     >>> T[0, 3] = 12.2  # a bay further
     >>> round(sigmas_off(T, a, b), 2)
-    4.11
+    4.38
     """
     d = source.xyz - target.xyz
     t = np.asarray(T[:3, 3], dtype=np.float64)
@@ -160,8 +162,7 @@ def sigmas_off(T: Matrix, target: Position, source: Position) -> float:
         off = float(np.linalg.norm(t[:2] - local))
     if target.has_z and source.has_z:
         off = math.hypot(off, float(t[2] - d[2]))
-    lever = float(np.linalg.norm(d[:2])) * math.radians(HEADING_SIGMA_DEG)
-    sigma = math.sqrt(target.sigma_m**2 + source.sigma_m**2 + lever**2)
+    sigma = math.hypot(target.sigma_m, source.sigma_m)
     if target.heading_rad is not None and source.heading_rad is not None:
         turn = _wrap_deg(_yaw(T) - (source.heading_rad - target.heading_rad))
         if turn > AGREE_HEADING_DEG:
@@ -171,7 +172,9 @@ def sigmas_off(T: Matrix, target: Position, source: Position) -> float:
 
 def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int | None, str]:
     """Which of a link's poses (its answer, then its alternatives) the positions pick: the
-    one within :data:`AGREE_SIGMAS` when it is the only one; None with the reason otherwise.
+    one within :data:`AGREE_SIGMAS` when it is the only one; None with the reason otherwise
+    (the reason starts "the positions refuse" when every pose lies beyond
+    :data:`REFUSE_SIGMAS`).
 
     >>> a = Position(np.zeros(3), False, 0.0, 1.0)
     >>> b = Position(np.array([6.0, 0.0, 0.0]), False, 0.0, 1.0)
@@ -187,7 +190,9 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
     if not near:
         best = min(off)
         what = "turns" if math.isinf(best) else f"lies {best:.1f} sigma"
-        return None, f"the positions disagree with every pose of the link (the nearest {what} off)"
+        if best > REFUSE_SIGMAS:
+            return None, f"the positions refuse every pose of the link (the nearest {what} off)"
+        return None, f"no pose of the link is near the positions (the nearest {what} off)"
     return None, f"{len(near)} poses of the link agree with the positions: they cannot tell"
 
 
@@ -196,8 +201,8 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
     the one pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
     Alternative`) they pick (:func:`choose`) becomes its transform and the link is vouched
     for (``vouched="positions"``, the answer kept as an alternative when replaced); a link
-    none of whose poses agree with them is rejected, with the reason. Returns how many
-    links the positions vouched for."""
+    all of whose poses lie beyond :data:`REFUSE_SIGMAS` is rejected, with the reason.
+    Returns how many links the positions vouched for."""
     vouched = 0
     for e in links:
         if e.T_target_source is None or e.status == "failed" or e.vouched == "hand":
@@ -207,8 +212,8 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
         poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
         i, why = choose(poses, positions[e.target], positions[e.source])
         if i is None:
-            if why.startswith("the positions disagree"):
-                e.status, e.why = "rejected", why
+            if why.startswith("the positions refuse"):
+                e.status, e.why, e.refused = "rejected", why, why
             continue
         if i > 0:
             e.take(e.alternatives[i - 1], "the rough positions")
@@ -264,7 +269,7 @@ __all__ = [
     "AGREE_SIGMAS",
     "COLUMNS",
     "DEFAULT_SIGMA_M",
-    "HEADING_SIGMA_DEG",
+    "REFUSE_SIGMAS",
     "Position",
     "T_site_station",
     "apply_positions",

@@ -60,6 +60,12 @@ from flexreg.survey.pairs import (
     read_pairs_csv,
     sequential_pairs,
 )
+from flexreg.survey.positions import (
+    Position,
+    apply_positions,
+    read_positions_csv,
+    site_from_positions,
+)
 from flexreg.survey.stations import (
     Prepared,
     Station,
@@ -100,6 +106,9 @@ class SurveyResult:
         statuses.
     frame : {"reference", "stored"}
         The frame the poses are written in besides the reference's (``T_site_station``).
+    positions : dict of str -> Position
+        Rough positions given per station (:mod:`flexreg.survey.positions`): the poses are
+        also written in their site frame, unless ``frame`` is ``"stored"``.
     """
 
     stations: list[Station]
@@ -116,6 +125,7 @@ class SurveyResult:
     vetoes: list[Veto] = field(default_factory=list)
     adjustment: Adjustment | None = None
     frame: Frame = "reference"
+    positions: dict[str, Position] = field(default_factory=dict)
 
     def site(self) -> tuple[Matrix, str]:
         """``T_site_reference`` and what the site frame is (:mod:`flexreg.survey.frames`)."""
@@ -124,6 +134,10 @@ class SurveyResult:
         origins = {st.stem: st.origin for st in self.stations if st.origin is not None}
         if not poses:
             return np.eye(4), f"the frame of station {sol.reference}"
+        T = None if self.frame == "stored" else site_from_positions(poses, self.positions)
+        if T is not None:
+            n = sum(s in self.positions for s in poses)
+            return T, f"the site frame of the rough positions (fitted to {n} placed stations)"
         return site_of_reference(
             self.frame, sol.reference, poses, self.stored, self.stored_checks(), origins
         )
@@ -225,6 +239,7 @@ class _Given:
     pairs: list[Candidate] | None = None
     add: bool = False
     hand: list[Candidate] = field(default_factory=list)
+    positions: dict[str, Position] = field(default_factory=dict)
 
     @property
     def automatic(self) -> bool:
@@ -381,6 +396,7 @@ def _check_inputs(
     cluster: tuple[int | None, str | None, str | None],
     origins_file: Path | None = None,
     frame: str = "reference",
+    positions_file: Path | None = None,
 ) -> tuple[list[Station], _Given]:
     """What a survey refuses before any work: the cluster's options ``(workers, scheduler,
     dashboard)`` first (nothing read yet), then the stations, the reference, the pairs
@@ -406,6 +422,7 @@ def _check_inputs(
         None if pairs_file is None else read_pairs_csv(pairs_file, stems),
         add_pairs,
         hand_links(links or (), stems),
+        {} if positions_file is None else read_positions_csv(positions_file, stems),
     )
     if origins_file is not None:
         origins = read_origins_csv(origins_file, stems)
@@ -426,6 +443,7 @@ def run_survey(
     add_pairs: bool = False,
     links: Sequence[HandLink] | None = None,
     origins_file: Path | None = None,
+    positions_file: Path | None = None,
     frame: Frame = "reference",
     progress: Progress = None,
 ) -> SurveyResult:
@@ -470,6 +488,12 @@ def run_survey(
         CSV of ``stem,x,y,z``: the scanner positions of stations whose points are in project
         coordinates (metres, in each file's frame); poses then come out in the files'
         coordinates (:mod:`flexreg.survey.frames`).
+    positions_file : Path, optional
+        CSV of ``stem,x,y,z,heading_deg,sigma_m``: rough positions of some or all stations
+        (:mod:`flexreg.survey.positions`). Of each link between two of them they pick the
+        one pose (its answer or an alternative) within three sigma, which then places
+        stations as a confident link does; a link none of whose poses agrees is rejected.
+        The poses come out in their site frame too (``T_site_station``).
     frame : {"reference", "stored"}
         ``stored``: the poses also in the site frame the files store (``T_site_station``).
     progress : callable, optional
@@ -497,6 +521,7 @@ def run_survey(
         (workers, scheduler, dashboard),
         origins_file,
         frame,
+        positions_file,
     )
     cache = out_dir / "cache"
     timings: dict[str, float] = {}
@@ -522,17 +547,15 @@ def run_survey(
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
         stored = _stored_poses(prepared_list, files, config)
-        found = _register(client, cands, files, config, progress, stored)
-        glances, judge = _glances(client, stems, files, config, progress)
-        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
-        auto = given.automatic and config.pairs == "auto"
-        for _ in range(config.proximity_rounds if auto else 0):
-            tried = {frozenset((e.target, e.source)) for e in found}
-            more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
-            if not more:
-                break
-            found += _register(client, more, files, config, progress, stored)
-            sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+        found, sol, glances, judge = _link_rounds(
+            client,
+            stems,
+            (files, stored),
+            config,
+            (given, cands, scores, max_links),
+            reference,
+            progress,
+        )
         timings["links"] = time.perf_counter() - t
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
@@ -569,7 +592,40 @@ def run_survey(
         vetoes,
         adjustment,
         frame,
+        given.positions,
     )
+
+
+def _link_rounds(
+    client: Any,
+    stems: list[str],
+    stores: tuple[dict[str, str], dict[str, Any]],
+    config: SurveyConfig,
+    plan: tuple[_Given, list[Candidate], dict[frozenset[str], int], int],
+    reference: str | None,
+    progress: Progress,
+) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
+    """The links of the candidates and the graph they make, then the proximity rounds
+    (``stores``: the prepared files and the stored poses; ``plan``: what was given, the
+    candidates, the place-recognition scores and the most links). Rough positions decide
+    between each link's poses before every solve. Returns the links, the solution, the
+    glances and the map's loop judge."""
+    files, stored = stores
+    given, cands, scores, max_links = plan
+    found = _register(client, cands, files, config, progress, stored)
+    glances, judge = _glances(client, stems, files, config, progress)
+    apply_positions(found, given.positions)
+    sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+    auto = given.automatic and config.pairs == "auto"
+    for _ in range(config.proximity_rounds if auto else 0):
+        tried = {frozenset((e.target, e.source)) for e in found}
+        more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
+        if not more:
+            break
+        found += _register(client, more, files, config, progress, stored)
+        apply_positions(found, given.positions)
+        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+    return found, sol, glances, judge
 
 
 def _stored_poses(

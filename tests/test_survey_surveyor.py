@@ -204,7 +204,7 @@ def test_a_hand_link_seeds_a_pair_the_images_cannot_register(hand, project):
     # refined: not the pose as given
     assert translation_error_m(np.loadtxt(given), truth) > 0.04
     assert doc["stations"]["station_02"]["placed"] and not doc["stations"]["station_01"]["placed"]
-    assert len(list((out / "cache" / "links").glob("*.hand-*.link.npz"))) == 1
+    assert len(list((out / "cache" / "links").glob("*.seed-*.link.npz"))) == 1
 
 
 def test_a_rerun_reuses_a_hand_link_and_another_transform_registers_it_again(
@@ -233,7 +233,7 @@ def test_a_rerun_reuses_a_hand_link_and_another_transform_registers_it_again(
     assert by_pair[frozenset(("station_00", "station_01"))].cached is True  # the same settings
     assert rotation_error_deg(link.T_target_source, truth) < 0.1
     assert translation_error_m(link.T_target_source, truth) < 0.01
-    assert len(list((out / "cache" / "links").glob("*.hand-*.link.npz"))) == 2
+    assert len(list((out / "cache" / "links").glob("*.seed-*.link.npz"))) == 2
 
 
 # ------------------------------------------------------------------ rough positions

@@ -310,24 +310,19 @@ def _io_error(e: OSError) -> InputError:
 
 
 def link_cache_path(
-    target_file: str,
-    source_file: str,
-    *,
-    prior: bool = False,
-    given: NDArray[np.float64] | None = None,
+    target_file: str, source_file: str, *, seed: NDArray[np.float64] | None = None
 ) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
-    stations' cache keys (file content, setup and configuration) and what seeded it: the
-    stored poses (``prior``), or a ``T_target_source`` given by hand (``given``: the first
-    12 hex digits of the SHA-256 of its 16 float64 values, so that another hand transform
-    is registered again and the same one is reused)."""
+    stations' cache keys (file content, setup and configuration) and the pose that seeded
+    it, if any (the stored poses', a hand link's, the rough positions'): the first 12 hex
+    digits of the SHA-256 of its 16 float64 values, so that another seed is registered
+    again and the same one is reused."""
     t = Path(target_file).name.removesuffix(PREPARED_SUFFIX)
     s = Path(source_file).name.removesuffix(PREPARED_SUFFIX)
-    if given is not None:
-        values = np.ascontiguousarray(given, dtype="<f8").tobytes()
-        tag = f".hand-{hashlib.sha256(values).hexdigest()[:12]}"
-    else:
-        tag = ".stored" if prior else ""
+    tag = ""
+    if seed is not None:
+        values = np.ascontiguousarray(seed, dtype="<f8").tobytes()
+        tag = f".seed-{hashlib.sha256(values).hexdigest()[:12]}"
     return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.npz"
 
 
@@ -392,9 +387,7 @@ def align_link(
     cache's name then says so). The link keeps the registration's other poses that fit
     almost as well (:func:`~flexreg.survey.links.alternatives_of`); one given by hand is
     vouched for (:attr:`~flexreg.survey.links.Link.vouched`)."""
-    cache = link_cache_path(
-        target_file, source_file, prior=init is not None, given=cand.T_target_source
-    )
+    cache = link_cache_path(target_file, source_file, seed=init)
     hit = _cached_link(cache, cand)
     if hit is not None:
         return hit

@@ -197,8 +197,10 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
 
 
 def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int:
-    """Let rough positions decide each link between two stations that have one (in place):
-    the one pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
+    """Let rough positions decide each link between two stations that have one (in place),
+    among the poses the registration found fitting (a confident answer, or an answer only
+    ambiguous, with its alternatives; a link uncertain for another reason has none): the one
+    pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
     Alternative`) they pick (:func:`choose`) becomes its transform and the link is vouched
     for (``vouched="positions"``, the answer kept as an alternative when replaced); a link
     all of whose poses lie beyond :data:`REFUSE_SIGMAS` is rejected, with the reason.
@@ -209,6 +211,8 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
             continue
         if e.target not in positions or e.source not in positions:
             continue
+        if any(r.get("code") != "ambiguous" for r in e.reasons):
+            continue  # its answer does not fit (free space, overlap, a weak axis): nothing to pick
         poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
         i, why = choose(poses, positions[e.target], positions[e.source])
         if i is None:
@@ -255,6 +259,12 @@ def site_from_positions(
     return T
 
 
+def predicted_T_target_source(target: Position, source: Position) -> Matrix:
+    """The relative pose two stations' rough positions predict (levelled; no heading taken as
+    0 and no height as the target's): what a link between them is seeded with."""
+    return invert(T_site_station(target)) @ T_site_station(source)
+
+
 def T_site_station(p: Position) -> Matrix:
     """The rough pose of a station in the site frame (levelled; heading 0 when unknown)."""
     T = np.eye(4)
@@ -274,6 +284,7 @@ __all__ = [
     "T_site_station",
     "apply_positions",
     "choose",
+    "predicted_T_target_source",
     "read_positions_csv",
     "sigmas_off",
     "site_from_positions",

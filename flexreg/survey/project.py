@@ -63,6 +63,7 @@ from flexreg.survey.pairs import (
 from flexreg.survey.positions import (
     Position,
     apply_positions,
+    predicted_T_target_source,
     read_positions_csv,
     site_from_positions,
 )
@@ -377,14 +378,17 @@ def _register(
     config: SurveyConfig,
     progress: Progress,
     stored: dict[str, Any],
+    positions: dict[str, Position] | None = None,
     phase: str = "links",
 ) -> list[Link]:
     prior = config.stored_poses == "prior"
     items = []
     for c in cands:
-        seed = c.T_target_source  # a hand link's pose; else the one the files store, if any
-        if seed is None and prior:
+        seed = c.T_target_source  # a hand link's pose; else the one the files store, if any;
+        if seed is None and prior:  # else the one rough positions predict
             seed = stored_T_target_source(stored, c.target, c.source)
+        if seed is None and c.target in positions and c.source in positions:
+            seed = predicted_T_target_source(positions[c.target], positions[c.source])
         items.append((files[c.target], files[c.source], config.registration, c, seed))
     return run_tasks(client, align_link, items, on_result=_Counter(phase, len(items), progress))
 
@@ -612,7 +616,7 @@ def _link_rounds(
     glances and the map's loop judge."""
     files, stored = stores
     given, cands, scores, max_links = plan
-    found = _register(client, cands, files, config, progress, stored)
+    found = _register(client, cands, files, config, progress, stored, given.positions)
     glances, judge = _glances(client, stems, files, config, progress)
     apply_positions(found, given.positions)
     sol = solve_graph(stems, found, config, reference=reference, judge=judge)
@@ -622,7 +626,7 @@ def _link_rounds(
         more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
         if not more:
             break
-        found += _register(client, more, files, config, progress, stored)
+        found += _register(client, more, files, config, progress, stored, given.positions)
         apply_positions(found, given.positions)
         sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     return found, sol, glances, judge

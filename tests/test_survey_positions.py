@@ -108,3 +108,26 @@ def test_the_site_frame_of_the_positions():
     T = site_from_positions(poses, positions)
     assert np.allclose(T, T_site_ref, atol=1e-9)
     assert site_from_positions({"s0": poses["s0"]}, {"s0": positions["s0"]}) is None
+
+
+def test_a_pivot_no_station_agrees_with_is_not_flagged_by_its_own_zero():
+    """Two placed stations whose stored poses disagree by 3 m: whichever the frames are tied
+    through, it is not said to disagree by 0.00 degrees / 0.000 m; the other is flagged."""
+    from flexreg.survey.stored import check_stations
+
+    poses = {"s0": np.eye(4), "s1": _pose(8.0, 0.0)}
+    stored = {"s0": _pose(100.0, 50.0), "s1": _pose(100.0, 50.0) @ _pose(11.0, 0.0)}
+    checks = check_stations(poses, stored, 1.0, 0.1)
+    pivot = checks["s0"]["pivot"]
+    other = "s1" if pivot == "s0" else "s0"
+    assert checks[pivot]["agrees"] is None and checks[pivot]["translation_m"] == 0.0
+    assert checks[other]["agrees"] is False and checks[other]["translation_m"] > 2.9
+
+
+def test_stored_poses_declared_rough_are_positions():
+    from flexreg.survey.positions import stored_positions
+
+    stored = {"s0": _pose(1.0, 2.0, 30.0)}
+    assert stored_positions(stored, None) == {}
+    (p,) = stored_positions(stored, 0.3).values()
+    assert p.sigma_m == 0.3 and p.has_z and p.heading_rad == pytest.approx(math.radians(30))

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from flexreg.survey.project import SurveyResult
 
 #: options that set a field of SurveyConfig (option -> field)
-OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine"}
+OPTIONS = {"--pairs": "pairs", "--refine": "joint_refine", "--stored-sigma": "stored_sigma_m"}
 MERGED_SUFFIXES = (".ply", ".las", ".laz", ".e57")
 add_config("survey", SurveyConfig)
 
@@ -160,6 +160,17 @@ _PositionsOption = Annotated[
         "the poses also come out in their site frame.",
     ),
 ]
+_StoredSigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--stored-sigma",
+        metavar="METRES",
+        help="The poses the files store are rough (a field software's or a sketch's), their "
+        "positions good to this 1-sigma in metres: they decide between each link's poses "
+        "like --positions, and a station is flagged only beyond 3 sigma (default: they are "
+        "an earlier registration, flagged beyond 1 degree / 10 cm).",
+    ),
+]
 _MergedOption = Annotated[
     Path | None,
     typer.Option(
@@ -188,6 +199,7 @@ def _configs(
     pairs: str | None,
     refine: bool | None,
     seed: int | None,
+    stored_sigma: float | None = None,
 ) -> tuple[SurveyConfig, Path | None, bool]:
     """The survey configuration (``--set`` keys of the registration go to its nested
     ``registration``; ``registration.KEY`` works too, and ``judge.KEY`` for a table of it),
@@ -217,7 +229,13 @@ def _configs(
             )
         pairs = None
     cfg = build_config(
-        SurveyConfig, config_file, survey_sets, OPTIONS, pairs=pairs, joint_refine=refine
+        SurveyConfig,
+        config_file,
+        survey_sets,
+        OPTIONS,
+        pairs=pairs,
+        joint_refine=refine,
+        stored_sigma_m=stored_sigma,
     )
     reg = build_config(
         RegistrationConfig, None, reg_sets, {"--seed": "seed"}, base=cfg.registration, seed=seed
@@ -272,7 +290,7 @@ def _progress() -> Progress:
 
 
 def _stored_note(check: dict[str, Any] | None) -> str:
-    if check is None or check["agrees"]:
+    if check is None or check["agrees"] is not False:
         return ""
     return f"stored pose disagrees by {check['rotation_deg']:.2f}° / {check['translation_m']:.3f} m"
 
@@ -353,6 +371,7 @@ def survey_command(
     dashboard: _DashboardOption = None,
     reference: _ReferenceOption = None,
     refine: _RefineOption = None,
+    stored_sigma: _StoredSigmaOption = None,
     merged: _MergedOption = None,
     voxel: _VoxelOption = 0.02,
     e57: _E57Option = None,
@@ -378,7 +397,7 @@ def survey_command(
     from flexreg.survey.outputs import write_outputs
     from flexreg.survey.project import run_survey
 
-    cfg, pairs_file, add_pairs = _configs(config_file, sets, pairs, refine, seed)
+    cfg, pairs_file, add_pairs = _configs(config_file, sets, pairs, refine, seed, stored_sigma)
     if voxel <= 0:
         raise ConfigError(f"--voxel: must be a positive number of metres (got {voxel})")
     if merged is not None and merged.suffix.lower() not in MERGED_SUFFIXES:

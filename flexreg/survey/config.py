@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
-from typing import Literal
+import logging
+from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from flexreg.config import MAX_VOXEL_M, Config
+from flexreg.errors import ConfigError
 from flexreg.registration.config import RegistrationConfig
 
 PairsMode = Literal["auto", "all", "sequential"]
 StoredPoses = Literal["prior", "check", "ignore"]
 #: Finest voxel of the survey's multi-view ICP, metres (1 cm).
 MIN_REFINE_VOXEL_M = 0.01
+#: Where the stored poses are an earlier registration (``stored_sigma_m`` None): a placed
+#: station whose stored pose disagrees with its registered one by more than this is flagged
+#: (degrees, metres).
+STORED_MAX_DEG, STORED_MAX_M = 1.0, 0.10
+
+log = logging.getLogger(__name__)
 
 
 class SurveyConfig(Config):
@@ -91,12 +99,14 @@ class SurveyConfig(Config):
         ``prior`` seeds every link between two such stations with the stored relative pose
         (it competes with what the images find on the registration's dense check) and checks
         every placed station against it; ``check`` only checks; ``ignore`` does neither.
-    stored_max_deg : float, degrees
-        A placed station whose stored pose disagrees with its registered pose by more than
-        this (after the stored frame is aligned on the stations that agree) is flagged.
-    stored_max_m : float, metres
-        A placed station whose stored pose disagrees with its registered pose by more than
-        this in translation is flagged.
+    stored_sigma_m : float or None, metres
+        How rough the stored poses are (1-sigma of a position): None takes them as an
+        earlier registration, and a placed station whose stored pose disagrees with its
+        registered one by more than :data:`STORED_MAX_DEG` or :data:`STORED_MAX_M` (after
+        the stored frame is tied on the stations that agree) is flagged. Given, they are
+        rough priors (a field software's or a sketch's): they decide between each link's
+        poses as rough positions do (:mod:`flexreg.survey.positions`) and flag a station
+        only beyond three sigma (and 30 degrees about the vertical).
     map_check : bool
         After the graph, score every pair of placed stations of a group (linked or not) on the
         dense check and cut the most doubtful link between two that contradict each other
@@ -163,8 +173,26 @@ class SurveyConfig(Config):
     refine_iterations: int = Field(4, ge=1, le=10)
     tolerance_mm: float = Field(10.0, gt=0, le=1e4, allow_inf_nan=False)
     stored_poses: StoredPoses = "prior"
-    stored_max_deg: float = Field(1.0, gt=0)
-    stored_max_m: float = Field(0.10, gt=0)
+    stored_sigma_m: float | None = Field(None, gt=0, le=1e3, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _retired(cls, data: Any) -> Any:
+        """``stored_max_deg`` / ``stored_max_m`` of older runs, at their values then: read,
+        with a deprecation warning (:data:`STORED_MAX_DEG`, :data:`STORED_MAX_M` now)."""
+        if not isinstance(data, dict):
+            return data
+        out = dict(data)
+        for key, was in (("stored_max_deg", STORED_MAX_DEG), ("stored_max_m", STORED_MAX_M)):
+            if key in out:
+                if out.pop(key) != was:
+                    raise ConfigError(
+                        f"{key}: no longer a setting (fixed at {was:g}; rough stored poses: "
+                        "stored_sigma_m)"
+                    )
+                log.warning("setting %s is deprecated: fixed at %g now", key, was)
+        return out
+
     map_check: bool = True
     map_radius_m: float = Field(60.0, gt=0)
     map_min_conflict: float = Field(0.03, gt=0, le=1)
@@ -179,4 +207,11 @@ class SurveyConfig(Config):
     map_join_min_explained: float = Field(0.1, gt=0, le=1)
 
 
-__all__ = ["MIN_REFINE_VOXEL_M", "PairsMode", "StoredPoses", "SurveyConfig"]
+__all__ = [
+    "MIN_REFINE_VOXEL_M",
+    "STORED_MAX_DEG",
+    "STORED_MAX_M",
+    "PairsMode",
+    "StoredPoses",
+    "SurveyConfig",
+]

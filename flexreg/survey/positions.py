@@ -259,6 +259,19 @@ def site_from_positions(
     return T
 
 
+def stored_positions(stored: Mapping[str, Matrix], sigma_m: float | None) -> dict[str, Position]:
+    """The poses the files store (``T_world_station``) as rough positions of sigma
+    ``sigma_m`` (none when it is None: the stored poses are then not rough priors)."""
+    if sigma_m is None:
+        return {}
+    return {
+        s: Position(
+            np.asarray(T, dtype=np.float64)[:3, 3].copy(), True, _yaw(np.asarray(T)), sigma_m
+        )
+        for s, T in stored.items()
+    }
+
+
 def predicted_T_target_source(target: Position, source: Position) -> Matrix:
     """The relative pose two stations' rough positions predict (levelled; no heading taken as
     0 and no height as the target's): what a link between them is seeded with."""
@@ -288,4 +301,5 @@ __all__ = [
     "read_positions_csv",
     "sigmas_off",
     "site_from_positions",
+    "stored_positions",
 ]

@@ -13,6 +13,7 @@ each is registered like any other link, seeded with the given pose.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -23,7 +24,7 @@ import numpy as np
 
 from flexreg.errors import InputError, RegistrationError
 from flexreg.survey.adjust import STATUSES, Adjustment, adjust
-from flexreg.survey.config import SurveyConfig
+from flexreg.survey.config import STORED_MAX_DEG, STORED_MAX_M, SurveyConfig
 from flexreg.survey.document import SCHEMA, poses_document
 from flexreg.survey.execute import (
     Progress,
@@ -61,11 +62,14 @@ from flexreg.survey.pairs import (
     sequential_pairs,
 )
 from flexreg.survey.positions import (
+    AGREE_HEADING_DEG,
+    AGREE_SIGMAS,
     Position,
     apply_positions,
     predicted_T_target_source,
     read_positions_csv,
     site_from_positions,
+    stored_positions,
 )
 from flexreg.survey.stations import (
     Prepared,
@@ -149,8 +153,12 @@ class SurveyResult:
         or fewer than two placed stations storing a pose."""
         sol = self.solution
         poses = {s: sol.poses[s] for s in self.placed if s in sol.poses}
-        c = self.config
-        return check_stations(poses, self.stored, c.stored_max_deg, c.stored_max_m)
+        sigma = self.config.stored_sigma_m
+        if sigma is None:
+            return check_stations(poses, self.stored, STORED_MAX_DEG, STORED_MAX_M)
+        return check_stations(
+            poses, self.stored, AGREE_HEADING_DEG, AGREE_SIGMAS * math.sqrt(2.0) * sigma
+        )
 
     @property
     def placed(self) -> list[str]:
@@ -200,7 +208,7 @@ class SurveyResult:
             if why is not None:
                 out.append(f"{st.stem}: {self.status(st.stem).replace('_', ' ')}: {why}")
         for stem, chk in self.stored_checks().items():
-            if not chk["agrees"]:
+            if chk["agrees"] is False:
                 out.append(
                     f"{stem}: the pose stored in its file disagrees with the registration by "
                     f"{chk['rotation_deg']:.2f}° / {chk['translation_m']:.3f} m; check which is "
@@ -611,14 +619,16 @@ def _link_rounds(
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
     """The links of the candidates and the graph they make, then the proximity rounds
     (``stores``: the prepared files and the stored poses; ``plan``: what was given, the
-    candidates, the place-recognition scores and the most links). Rough positions decide
-    between each link's poses before every solve. Returns the links, the solution, the
+    candidates, the place-recognition scores and the most links). Rough positions (or the
+    stored poses, declared rough by ``stored_sigma_m``) seed the links and decide between
+    each link's poses before every solve. Returns the links, the solution, the
     glances and the map's loop judge."""
     files, stored = stores
     given, cands, scores, max_links = plan
-    found = _register(client, cands, files, config, progress, stored, given.positions)
+    priors = given.positions or stored_positions(stored, config.stored_sigma_m)
+    found = _register(client, cands, files, config, progress, stored, priors)
     glances, judge = _glances(client, stems, files, config, progress)
-    apply_positions(found, given.positions)
+    apply_positions(found, priors)
     sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     auto = given.automatic and config.pairs == "auto"
     for _ in range(config.proximity_rounds if auto else 0):
@@ -626,8 +636,8 @@ def _link_rounds(
         more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
         if not more:
             break
-        found += _register(client, more, files, config, progress, stored, given.positions)
-        apply_positions(found, given.positions)
+        found += _register(client, more, files, config, progress, stored, priors)
+        apply_positions(found, priors)
         sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     return found, sol, glances, judge
 

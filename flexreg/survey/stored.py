@@ -63,7 +63,9 @@ def check_stations(
     -------
     dict of str -> dict
         Per placed station that stores a pose: ``rotation_deg``, ``translation_m`` (its
-        disagreement), ``agrees`` (bool) and ``pivot`` (the station the frames were tied by).
+        disagreement), ``agrees`` (bool; None for the pivot when no other station agrees
+        with it: tied on itself, it is neither flagged nor confirmed) and ``pivot`` (the
+        station the frames were tied by).
         Empty when fewer than two placed stations store a pose (nothing to compare).
     """
     common = sorted(s for s in poses if s in stored)
@@ -81,7 +83,10 @@ def check_stations(
     agreeing, _, pivot, dev = best
     out: dict[str, dict[str, Any]] = {}
     for s, d in dev.items():
-        out[s] = {**d, "agrees": _within(d, max_deg, max_m) and agreeing >= 2, "pivot": pivot}
+        agrees: bool | None = _within(d, max_deg, max_m) and agreeing >= 2
+        if s == pivot and agreeing < 2:
+            agrees = None  # tied on itself: it neither agrees nor disagrees with anything
+        out[s] = {**d, "agrees": agrees, "pivot": pivot}
     return out
 
 

@@ -100,9 +100,7 @@ def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives):
         judged.append(Judged("hand-made", Tc, score, ok, bad))
     top = judged[0].score
     config = RegistrationConfig()
-    ups = runner_ups(
-        judged[1:], T, top, distinct_deg=3.0, distinct_m=0.5, ratio=config.judge.ambiguity_ratio
-    )
+    ups = runner_ups(judged[1:], T, top, config.judge, ratio=config.judge.ambiguity_ratio)
     scored = two.score(T, thr / 2)
     ev = gather(
         two,
@@ -231,11 +229,11 @@ def test_runner_ups_skip_poses_near_the_answer_and_each_other():
     far3 = make_transform(np.eye(3), [-3.4, 0, 0])
     judged = [Judged("a", M, s, 0.5, 0.0) for M, s in ((near, 1.0), (far1, 0.9), (far2, 0.89))]
     judged.append(Judged("b", far3, 0.2, 0.3, 0.1))
-    ups = runner_ups(judged, T, 1.0, distinct_deg=3, distinct_m=0.5, ratio=0.85)
+    ups = runner_ups(judged, T, 1.0, JudgeConfig(), ratio=0.85)
     assert [h.translation_m for h in ups] == [3.4]  # far3 is listed only when close in score
     assert ups[0].score_ratio == pytest.approx(0.9)
     # the best distinct one is always listed, however poor
-    ups = runner_ups(judged[3:], T, 1.0, distinct_deg=3, distinct_m=0.5, ratio=0.85)
+    ups = runner_ups(judged[3:], T, 1.0, JudgeConfig(), ratio=0.85)
     assert len(ups) == 1 and ups[0].origin == "b" and ups[0].score_ratio == pytest.approx(0.2)
 
 
@@ -509,12 +507,12 @@ def test_alias_candidates_are_the_winner_moved_by_symmetries_and_offsets():
     near = Judged("plan", make_transform(np.eye(3), [0.1, 0, 0]) @ W, 0.95, 0.5, 0.0)
     S_t = make_transform(rotation_about_axis([0, 0, 1], np.pi), [2.0, 0.0, 0.0])
     S_s = make_transform(np.eye(3), [0.0, 5.0, 0.0])
-    out = alias_candidates(W, [near, J], Aliases([S_t], [S_s]), distinct_deg=3.0, distinct_m=0.5)
+    out = alias_candidates(W, [near, J], Aliases([S_t], [S_s]), JudgeConfig())
     assert [o for o, _ in out] == ["alias"] * 3
     expected = [S_t @ W, W @ S_s, invert(D) @ W]  # the bay on the other side
     for (_, T), E in zip(out, expected, strict=True):
         np.testing.assert_allclose(T, E, atol=1e-12)
-    assert alias_candidates(W, [near], None, distinct_deg=3.0, distinct_m=0.5) == []
+    assert alias_candidates(W, [near], None, JudgeConfig()) == []
 
 
 def test_self_symmetries_of_a_corridor_with_pillars_include_one_bay():

@@ -31,7 +31,7 @@ from flexreg.core.transforms import (
 )
 from flexreg.errors import DegenerateGeometryError, RegistrationError
 from flexreg.registration.check import TOLERANCE, Check, Judged
-from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.config import JudgeConfig, RegistrationConfig
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
     guided_fit,
@@ -394,9 +394,7 @@ def alias_candidates(
     W: NDArray[np.float64],
     judged: list[Judged],
     aliases: Aliases | None,
-    *,
-    distinct_deg: float,
-    distinct_m: float,
+    judge: JudgeConfig,
 ) -> list[Candidate]:
     """The twins of the winning pose ``W`` in repeating structure: ``W`` moved by each
     symmetry of the target's view (``S @ W``) and of the source's (``W @ S'``), and by the
@@ -411,8 +409,8 @@ def alias_candidates(
     judged : list of Judged
         Every candidate as judged.
     aliases : Aliases or None
-    distinct_deg, distinct_m : float
-        How far a candidate must be from ``W`` to count as different.
+    judge : JudgeConfig
+        What counts as a different pose (:meth:`JudgeConfig.distinct`).
 
     Returns
     -------
@@ -424,10 +422,7 @@ def alias_candidates(
         out += [("alias", S @ W) for S in aliases.target]
         out += [("alias", W @ S) for S in aliases.source]
     far = [
-        j
-        for j in sorted(judged, key=lambda j: -j.score)
-        if rotation_error_deg(j.T_target_source, W) > distinct_deg
-        or translation_error_m(j.T_target_source, W) > distinct_m
+        j for j in sorted(judged, key=lambda j: -j.score) if judge.distinct(j.T_target_source, W)
     ]
     for j in far[:ALIAS_OFFSETS]:
         D = j.T_target_source @ invert(W)
@@ -474,8 +469,7 @@ def choose(
             W,
             judged,
             aliases,
-            distinct_deg=config.judge.distinct_deg,
-            distinct_m=config.judge.distinct_m,
+            config.judge,
         )
         b2, okbad2, pol2, judged2, top2 = _best_family([[c] for c in twins], check, polish, thr)
         judged = judged + judged2

@@ -7,9 +7,12 @@ import math
 import typing
 from typing import Annotated, Any
 
+import numpy as np
+from numpy.typing import NDArray
 from pydantic import BaseModel, Field, field_validator, model_validator
 
 from flexreg.config import Config, OddSize, Positive, Seed, ThresholdM, VoxelM, one_of
+from flexreg.core.transforms import rotation_error_deg, translation_error_m
 from flexreg.errors import ConfigError
 from flexreg.stages.feature_images import KINDS
 from flexreg.stages.keypoints import METHODS
@@ -201,6 +204,15 @@ class JudgeConfig(Config):
         if len(set(v)) != len(v):
             raise ValueError("names a check twice")
         return v
+
+    def distinct(self, A: NDArray[np.float64], B: NDArray[np.float64]) -> bool:
+        """Whether two poses (4 x 4 ``T_target_source``) are clearly different: more than
+        ``distinct_deg`` turned or ``distinct_m`` moved from each other. The one definition
+        the candidates, the settling and the evidence share."""
+        return (
+            rotation_error_deg(A, B) > self.distinct_deg
+            or translation_error_m(A, B) > self.distinct_m
+        )
 
     def runs(self, check: str) -> bool:
         """Whether ``check`` (one of :data:`CHECKS`) runs."""

@@ -32,6 +32,7 @@ from flexreg.core.range_image import RangeImage
 from flexreg.core.results import Hypothesis
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.check import TOLERANCE, Judged, Masks, Scored, TwoWay, duel, duel_masks
+from flexreg.registration.config import JudgeConfig
 from flexreg.registration.fullres import FullPair, pose_masks
 from flexreg.stages.verification import AXES, axis_strength, plane_information, spread
 
@@ -165,19 +166,15 @@ def runner_ups(
     judged: Sequence[Judged],
     T: NDArray[np.float64],
     top: float,
+    judge: JudgeConfig,
     *,
-    distinct_deg: float,
-    distinct_m: float,
     ratio: float,
     limit: int = MAX_RUNNER_UPS,
 ) -> list[Hypothesis]:
-    """The best candidates clearly different from ``T`` (more than ``distinct_deg`` or
-    ``distinct_m`` away, and from each other), best first: always the best one, then any
-    others whose score is at least ``ratio`` of the winner's ``top`` (at most ``limit``)."""
-
-    def far(A: NDArray[np.float64], B: NDArray[np.float64]) -> bool:
-        return rotation_error_deg(A, B) > distinct_deg or translation_error_m(A, B) > distinct_m
-
+    """The best candidates clearly different from ``T`` (:meth:`JudgeConfig.distinct`, and
+    from each other), best first: always the best one, then any others whose score is at
+    least ``ratio`` of the winner's ``top`` (at most ``limit``)."""
+    far = judge.distinct
     out: list[Hypothesis] = []
     for j in sorted(judged, key=lambda j: -j.score):
         if not far(j.T_target_source, T) or any(

@@ -269,16 +269,14 @@ def _verdict(
         c.judged,
         scored.T,
         c.score,
-        distinct_deg=config.judge.distinct_deg,
-        distinct_m=config.judge.distinct_m,
+        config.judge,
         ratio=config.judge.ambiguity_ratio,
     )
     rivals = runner_ups(
         c.judged,
         scored.T,
         c.score,
-        distinct_deg=config.judge.distinct_deg,
-        distinct_m=config.judge.distinct_m,
+        config.judge,
         ratio=-np.inf,
         limit=MAX_RIVALS,
     )

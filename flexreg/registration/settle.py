@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+from flexreg.core.transforms import invert, rotation_error_deg
 from flexreg.registration.candidates import Aliases, Coarse, Keypoints3D, at_pose
 from flexreg.registration.check import TOLERANCE, Check, Judged, Masks, decisive_full, duel
 from flexreg.registration.config import SWEEP_RANGE_M, SWEEP_STEP_M, JudgeConfig
@@ -386,13 +386,6 @@ def place_along(
     return _shifted(T, best * direction)
 
 
-def _distinct(A: NDArray[np.float64], B: NDArray[np.float64], judge: JudgeConfig) -> bool:
-    return (
-        rotation_error_deg(A, B) > judge.distinct_deg
-        or translation_error_m(A, B) > judge.distinct_m
-    )
-
-
 def contenders(
     judged: Sequence[Judged],
     judge: JudgeConfig,
@@ -412,7 +405,7 @@ def contenders(
     for j in ranked:
         if j.score < low:
             break
-        if all(_distinct(j.T_target_source, o.T_target_source, judge) for o in out):
+        if all(judge.distinct(j.T_target_source, o.T_target_source) for o in out):
             out.append(j)
         if len(out) >= size:
             break
@@ -476,7 +469,7 @@ def rescue(
     as many points (not clean merely by seeing less of the other scan), and no other clearly
     different clean candidate (within twice its open share) is left unbeaten."""
     answer = Judged("answer", W, 0.0, 0.0, 0.0)
-    others = [j for j in judged if _distinct(j.T_target_source, W, judge)]
+    others = [j for j in judged if judge.distinct(j.T_target_source, W)]
     ranked = screen([answer, *others], pair, threshold_m, size=TOURNAMENT_SIZE)[1:]
     n = pair.points
     scored = []
@@ -492,8 +485,8 @@ def rescue(
     if explained_share(masks) < 0.5 * explained_share(contradicted):  # clean only by seeing less
         return None
     for other_share, j, m in scored[1:]:
-        if other_share <= 2 * max(share, 1.0 / n) and _distinct(
-            j.T_target_source, best.T_target_source, judge
+        if other_share <= 2 * max(share, 1.0 / n) and judge.distinct(
+            j.T_target_source, best.T_target_source
         ):
             if not decisive_full(*duel(masks, m), judge, points=n):
                 return None
@@ -724,7 +717,7 @@ def settle(
         }
     answer = Judged(c.origin, W, *check.judge(W, *TOLERANCE.free(thr)))
     others = contenders(judged, judge, floor=0.0, size=SCREENED)
-    players = [answer] + [j for j in others if _distinct(j.T_target_source, W, judge)]
+    players = [answer] + [j for j in others if judge.distinct(j.T_target_source, W)]
     players = screen(players, pair, thr)
     winner = tournament(players, pair, thr, judge)
     if winner is None and contradicted is not None:
@@ -744,7 +737,7 @@ def settle(
         # the cue alone fixes the position along the axis: place the winner on it
         T = place_along(winner.T_target_source, u, pair, thr, span_m=SWEEP_STEP_M)
         winner = Judged(winner.origin, T, *check.judge(T, *TOLERANCE.free(thr)))
-    if winner is not None and (u is not None or _distinct(winner.T_target_source, W, judge)):
+    if winner is not None and (u is not None or judge.distinct(winner.T_target_source, W)):
         log.info("the tournament's winner (%s) is the answer", winner.origin)
         kt, ks = keypoints
         out = at_pose(winner.origin, winner.T_target_source, kt, ks, thr, judged, c.score)

@@ -203,7 +203,13 @@ def measure(argv: Sequence[str], log: Path, *, timeout_s: float) -> dict[str, An
 
 
 def command(
-    method: str, project: Path, out: Path, *, pairs: str | None, workers: int | None
+    method: str,
+    project: Path,
+    out: Path,
+    *,
+    pairs: str | None,
+    workers: int | None,
+    positions: Path | None = None,
 ) -> list[str]:
     """The command line of one run."""
     scans = project / "scans"
@@ -214,6 +220,8 @@ def command(
             argv += ["--pairs", pairs]
         if workers:
             argv += ["--workers", str(workers)]
+        if positions is not None:
+            argv += ["--positions", str(positions)]
         return argv
     if method == "multiway":
         argv = [str(PYTHON), str(REPO / "benchmarks" / "survey.py"), "--run-multiway", str(scans)]
@@ -222,6 +230,26 @@ def command(
             argv += ["--multiway-pairs", pairs]
         return argv
     raise ValueError(f"unknown method {method!r}")
+
+
+def rough_positions(
+    gt_file: Path, path: Path, off_m: float, heading_deg: float, sigma_m: float
+) -> Path:
+    """A positions CSV of every station of ``gt_file``: each ``off_m`` from its true place in
+    a random direction, its heading ``heading_deg`` off either way, ``sigma_m`` stated (the
+    same for every run: seeded by the project's station names)."""
+    gt = json.loads(gt_file.read_text())
+    rows = ["stem,x,y,z,heading_deg,sigma_m"]
+    seed = sum(ord(c) for s in gt["stations"] for c in s["name"])
+    rng = np.random.default_rng(seed)
+    for s in gt["stations"]:
+        T = np.asarray(s["T_world_scanner"], dtype=np.float64)
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        x, y = T[0, 3] + off_m * np.cos(a), T[1, 3] + off_m * np.sin(a)
+        yaw = np.degrees(np.arctan2(T[1, 0], T[0, 0])) + rng.choice([-1.0, 1.0]) * heading_deg
+        rows.append(f"{s['name']},{x:.4f},{y:.4f},,{yaw:.3f},{sigma_m:g}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
 
 
 def run_multiway(scans: Path, out: Path, pairs: str = "all") -> int:
@@ -395,15 +423,20 @@ def run_one(
     workers: int | None,
     timeout_s: float,
     label: str | None = None,
+    rough: tuple[float, float, float] | None = None,
 ) -> dict[str, Any]:
     """Make the project (if needed), run one method on it in a measured child process and
-    evaluate its ``poses.json``; one JSON-ready record."""
+    evaluate its ``poses.json``; one JSON-ready record. ``rough``: give the survey rough
+    positions of every station, ``(off_m, heading_deg, sigma_m)`` (:func:`rough_positions`)."""
     project = make_project(spec, data)
     tag = label or method + (f"-pairs-{pairs}" if pairs else "")
     out = runs / f"{spec.name}--{tag}"
     shutil.rmtree(out, ignore_errors=True)  # a cold run: no cache from an earlier attempt
     out.mkdir(parents=True)
-    argv = command(method, project, out, pairs=pairs, workers=workers)
+    positions = None
+    if rough is not None and method == "survey":
+        positions = rough_positions(project / "gt.json", out / "positions.csv", *rough)
+    argv = command(method, project, out, pairs=pairs, workers=workers, positions=positions)
     rec: dict[str, Any] = {
         "project": spec.to_dict(),
         "method": method,

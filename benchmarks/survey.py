@@ -164,6 +164,7 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             pairs=pairs,
             workers=args.workers if method == "survey" else None,
             timeout_s=args.timeout_min * 60,
+            rough=tuple(args.rough_positions) if args.rough_positions else None,
         )
         rec["set"] = item["set"]
         state["records"].append(rec)
@@ -219,6 +220,14 @@ def _parser() -> argparse.ArgumentParser:
                     help="also run the baseline on the scaling projects (hours)")  # fmt: skip
     ap.add_argument("--no-pairs-all", action="store_true", help="skip survey --pairs all")
     ap.add_argument("--workers", type=int, default=None, help="flexreg survey --workers")
+    ap.add_argument(
+        "--rough-positions",
+        type=float,
+        nargs=3,
+        metavar=("OFF_M", "HEADING_DEG", "SIGMA_M"),
+        help="give the survey rough positions of every station (--positions): each OFF_M "
+        "from the truth, its heading HEADING_DEG off, SIGMA_M stated",
+    )
     ap.add_argument("--timeout-min", type=float, default=90.0, help="per run, minutes")
     ap.add_argument("--data", type=Path, default=DATA, help="where the projects are kept")
     ap.add_argument("--results", type=Path, default=RESULTS, help="parent of the result folder")

@@ -272,6 +272,11 @@ def test_rough_positions_vouch_for_links_and_give_the_site_frame(project, tmp_pa
         yaw = np.degrees(np.arctan2(T_site[1, 0], T_site[0, 0]) - np.arctan2(W[1, 0], W[0, 0]))
         assert abs((yaw + 180) % 360 - 180) < 10, stem
     assert any(e["vouched"] == "positions" for e in doc["links"] if e["status"] == "accepted")
+    # a re-run with the same positions reuses every link (nothing registered again)
+    rc, _, err = _survey(project, out, "--positions", pos, "--overwrite")
+    assert rc in (0, 3), err
+    summary = _doc(out)["summary"]
+    assert summary["links_from_cache"] == summary["links_attempted"]
 
 
 def test_a_bad_positions_file_is_one_line_before_any_work(project, tmp_path):

@@ -226,6 +226,26 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
     return vouched
 
 
+def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link]:
+    """The links between two stations with positions that the positions could not settle for
+    want of a pose near what they predict: failed, uncertain for a reason other than
+    ambiguity, or with no pose within :data:`AGREE_SIGMAS` (not those where several agree:
+    another seed would not tell them apart); refused ones too. Hand links are left alone."""
+    out = []
+    for e in links:
+        if e.target not in positions or e.source not in positions or e.vouched:
+            continue
+        if e.origin == "hand":
+            continue
+        if e.T_target_source is None or any(r.get("code") != "ambiguous" for r in e.reasons):
+            out.append(e)
+            continue
+        poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
+        if choose(poses, positions[e.target], positions[e.source])[1].startswith("no pose"):
+            out.append(e)
+    return out
+
+
 def site_from_positions(
     poses: Mapping[str, Matrix], positions: Mapping[str, Position]
 ) -> Matrix | None:
@@ -302,4 +322,5 @@ __all__ = [
     "sigmas_off",
     "site_from_positions",
     "stored_positions",
+    "unsettled",
 ]

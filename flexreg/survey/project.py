@@ -70,6 +70,7 @@ from flexreg.survey.positions import (
     read_positions_csv,
     site_from_positions,
     stored_positions,
+    unsettled,
 )
 from flexreg.survey.stations import (
     Prepared,
@@ -386,19 +387,49 @@ def _register(
     config: SurveyConfig,
     progress: Progress,
     stored: dict[str, Any],
-    positions: dict[str, Position] | None = None,
     phase: str = "links",
 ) -> list[Link]:
     prior = config.stored_poses == "prior"
     items = []
     for c in cands:
-        seed = c.T_target_source  # a hand link's pose; else the one the files store, if any;
-        if seed is None and prior:  # else the one rough positions predict
+        seed = c.T_target_source  # a hand link's pose (or the rough positions'), else the
+        if seed is None and prior:  # one the files store, if any
             seed = stored_T_target_source(stored, c.target, c.source)
-        if seed is None and c.target in positions and c.source in positions:
-            seed = predicted_T_target_source(positions[c.target], positions[c.source])
         items.append((files[c.target], files[c.source], config.registration, c, seed))
     return run_tasks(client, align_link, items, on_result=_Counter(phase, len(items), progress))
+
+
+def _positioned(
+    client: Any,
+    found: list[Link],
+    stores: tuple[dict[str, str], dict[str, Any]],
+    config: SurveyConfig,
+    priors: dict[str, Position],
+    progress: Progress,
+) -> list[Link]:
+    """Rough positions decide each link's pose (:func:`~flexreg.survey.positions.
+    apply_positions`); a link they leave open for want of a pose near what they predict (or
+    that failed) is registered again seeded with that pose, and the new result replaces it
+    (a re-run reuses both from the cache)."""
+    apply_positions(found, priors)
+    redo = unsettled(found, priors)
+    if not redo:
+        return found
+    cands = [
+        Candidate(
+            e.target,
+            e.source,
+            e.origin,
+            e.place_score,
+            predicted_T_target_source(priors[e.target], priors[e.source]),
+        )
+        for e in redo
+    ]
+    seeded = _register(client, cands, stores[0], config, progress, stores[1], "positions")
+    again = {id(e): n for e, n in zip(redo, seeded, strict=True)}
+    found = [again.get(id(e), e) for e in found]
+    apply_positions(found, priors)
+    return found
 
 
 def _check_inputs(
@@ -626,9 +657,9 @@ def _link_rounds(
     files, stored = stores
     given, cands, scores, max_links = plan
     priors = given.positions or stored_positions(stored, config.stored_sigma_m)
-    found = _register(client, cands, files, config, progress, stored, priors)
+    found = _register(client, cands, files, config, progress, stored)
     glances, judge = _glances(client, stems, files, config, progress)
-    apply_positions(found, priors)
+    found = _positioned(client, found, stores, config, priors, progress)
     sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     auto = given.automatic and config.pairs == "auto"
     for _ in range(config.proximity_rounds if auto else 0):
@@ -636,8 +667,8 @@ def _link_rounds(
         more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
         if not more:
             break
-        found += _register(client, more, files, config, progress, stored, priors)
-        apply_positions(found, priors)
+        found += _register(client, more, files, config, progress, stored)
+        found = _positioned(client, found, stores, config, priors, progress)
         sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     return found, sol, glances, judge
 

@@ -10,8 +10,10 @@ The flow (one module per step):
               or sequential, or a CSV of ``target,source``);
 ``execute``   run preparation and links on Dask (a local cluster, or an existing one by
               scheduler address); the same link gives the same result on any worker;
-``graph``     spanning tree of the strongest confident links, loop-closure checks, robust
-              pose-graph optimisation (Open3D's line process), connected groups;
+``graph``     spanning tree of the strongest confident (or vouched) links, loop-closure
+              checks, robust pose-graph optimisation (Open3D's line process), connected
+              groups; ``links`` holds a link with its alternatives, ``positions`` the rough
+              positions that pick between them;
 ``adjust``    the final joint alignment: every placed station refined on its overlapping
               points (cloud to cloud), its 1-sigma accuracy and status;
 ``outputs``   poses.json, stations/STEM.txt, merged PLY, E57 (all atomic);
@@ -23,7 +25,8 @@ Public API
                                           :class:`~flexreg.registration.RegistrationConfig`)
 ``find_scans(paths) -> list[Path]``       the scan files of files and folders, sorted
 ``run_survey(paths, out_dir, config, *, workers=None, scheduler=None, reference=None,
-pairs_file=None, origins_file=None, frame="reference", progress=None) -> SurveyResult``
+pairs_file=None, add_pairs=False, links=None, origins_file=None, positions_file=None,
+frame="reference", progress=None) -> SurveyResult``
                                           the whole project; writes only ``out_dir/cache/``
 ``SurveyResult.to_dict() -> dict``        the poses document below (what poses.json holds)
 ``write_outputs(result, out_dir, *, merged=None, voxel_m=0.02, e57=None) -> list[Path]``
@@ -85,7 +88,7 @@ value does not exist (failed link, unplaced station)::
         {
           "target": "station_00", "source": "station_01",
           "origin": "sequential",            # why it was tried: sequential | place | proximity
-                                             # | all | file
+                                             # | all | file | hand (--link)
           "place_score": 0.41,               # place-recognition score (null: not ranked)
           "status": "accepted",              # accepted | rejected | failed
           "why": null,                       # rejected / failed: the reason in words
@@ -112,6 +115,11 @@ value does not exist (failed link, unplaced station)::
           "loop_error_m": 0.002,             # rejected: with the loop it closes; null: none
           "seconds": 3.8,                    # wall time of the pairwise registration
           "cached": false,                   # read from DIR/cache/links/ (an earlier run)
+          "alternatives": [{"T_target_source": [[...]], "kind": "twin", "support": 0.8}],
+                                             # other poses that fit: runner_up | twin | answer
+          "vouched": null,                   # hand | positions: trusted beyond its verdict
+          "picked": null,                    # what picked an alternative over the answer
+          "refused": "",                     # why rough positions refused every pose
           "loop_error": "unchecked",         # only when accepted and it closes no loop
           "cloud_to_cloud": {"rms_mm": 3.1, "within_6mm": 0.93, "within_1cm": 0.97,
                              "overlap": 0.41, "balance": 0.3, "points": 18000,

@@ -119,7 +119,7 @@ value does not exist (failed link, unplaced station)::
                                              # other poses that fit: runner_up | twin | answer
           "vouched": null,                   # hand | positions: trusted beyond its verdict
           "picked": null,                    # what picked an alternative over the answer
-          "refused": "",                     # why rough positions refused every pose
+          "refused": null,                   # why rough positions refused every pose
           "loop_error": "unchecked",         # only when accepted and it closes no loop
           "cloud_to_cloud": {"rms_mm": 3.1, "within_6mm": 0.93, "within_1cm": 0.97,
                              "overlap": 0.41, "balance": 0.3, "points": 18000,

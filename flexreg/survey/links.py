@@ -265,6 +265,7 @@ class Link:
             "alternatives": [a.to_dict() for a in self.alternatives],
             "vouched": self.vouched or None,
             "picked": self.picked or None,
+            "refused": self.refused or None,
         }
 
 

@@ -142,7 +142,9 @@ class Link:
         Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
         :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
-        like a confident one, and loops still check it.
+        like a confident one, and loops still check it; positions vouch for which pose, not
+        for centimetres, so a link they alone vouch for that alone places stations is still
+        doubted for its scans' clash (:func:`flexreg.survey.lone.lone_suspect`).
     picked : str
         What picked one of its alternatives over its answer (the answer is then among the
         alternatives), in words; empty when it keeps its answer.

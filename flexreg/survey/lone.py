@@ -134,7 +134,7 @@ def lone_suspect(
     adj = forest.adj  # the tree's links per station
     out: list[tuple[float, int, Link, str]] = []
     for t in tree:
-        if support.get(id(t), 0) > 0 or t.vouched:
+        if support.get(id(t), 0) > 0 or t.vouched == "hand":  # positions pick a pose, not cm
             continue
         a, b = _beyond(adj, t, t.source), _beyond(adj, t, t.target)
         side = a if len(a) <= len(b) else b

@@ -457,6 +457,9 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         + ")"
     )
     n = max((1 + len(e.alternatives) for e in toward if e.usable), default=1)
+    said = next((e.undecided for e in toward if e.undecided), "")
+    if said:
+        return f"{what}; the rough positions cannot place it ({said}): {hand}"
     if n > 1:
         return (
             f"{what}; its link with {other} fits {n} poses (look-alike rooms or bays): rough "

@@ -151,6 +151,9 @@ class Link:
     refused : str
         Why something outside the pair refused every pose of the link (rough positions that
         disagree with all of them); empty for none. A refused link stays rejected.
+    undecided : str
+        Why rough positions given for both stations left the link as it was (several of its
+        poses agree with them, or none is near); empty otherwise.
     alternatives : list of Alternative
         The clearly different poses the registration found fitting almost as well (its
         runner-ups) or the answer moved a whole bay or room that fits too (its twins):
@@ -191,6 +194,7 @@ class Link:
     vouched: str = ""
     picked: str = ""
     refused: str = ""
+    undecided: str = ""
 
     @property
     def overlap(self) -> float:

@@ -212,9 +212,12 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
         if e.target not in positions or e.source not in positions:
             continue
         if any(r.get("code") != "ambiguous" for r in e.reasons):
-            continue  # its answer does not fit (free space, overlap, a weak axis): nothing to pick
+            # its answer does not fit (free space, overlap, a weak axis): nothing to pick
+            e.undecided = "no pose of the link fits the scans, seeded by them or not"
+            continue
         poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
         i, why = choose(poses, positions[e.target], positions[e.source])
+        e.undecided = "" if i is not None else why
         if i is None:
             if why.startswith("the positions refuse"):
                 e.status, e.why, e.refused = "rejected", why, why

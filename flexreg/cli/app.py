@@ -214,9 +214,15 @@ def _return_large_blocks() -> None:
 
 def main() -> None:
     """Console-script entry point. SIGTERM (a scheduler or ``kill``) ends the command like
-    Ctrl-C: nothing it was writing is left behind; exit status 143."""
+    Ctrl-C: nothing it was writing is left behind; exit status 143 (130 for Ctrl-C), taken
+    without the interpreter's teardown once the command has unwound."""
     import signal
 
     _return_large_blocks()
     signal.signal(signal.SIGTERM, _terminated)
-    sys.exit(run())
+    status = run()
+    if status in (130, 143):  # interrupted: its outputs are already discarded. Leave without
+        sys.stdout.flush()  # the interpreter's teardown, which may meet a native thread pool
+        sys.stderr.flush()  # (numba's, OpenCV's) still winding down and crash (exit -11)
+        os._exit(status)
+    sys.exit(status)

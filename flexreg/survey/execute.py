@@ -354,7 +354,6 @@ def _cached_link(path: Path, cand: Candidate) -> Link | None:
         place_score=cand.place_score,
         cached=True,
         vouched=_vouched(cand),
-        undecided="",
     )
 
 

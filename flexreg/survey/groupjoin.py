@@ -49,8 +49,7 @@ def _placements(
     for e in links:
         if e.T_target_source is None or e.status == "failed":
             continue
-        for T in [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]:
-            T = np.asarray(T, dtype=np.float64)
+        for T in e.poses:
             if e.target in main and e.source in members:
                 R = P[e.target] @ T @ invert(P[e.source])
             elif e.source in main and e.target in members:

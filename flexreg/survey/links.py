@@ -99,9 +99,7 @@ def alternatives_of(
     kept: list[Alternative] = []
     for a in found:
         if all(
-            rotation_error_deg(a.T_target_source, b) > judge.distinct_deg
-            or translation_error_m(a.T_target_source, b) > judge.distinct_m
-            for b in [T, *(k.T_target_source for k in kept)]
+            judge.distinct(a.T_target_source, b) for b in [T, *(k.T_target_source for k in kept)]
         ):
             kept.append(a)
     return kept[:MAX_ALTERNATIVES]
@@ -201,6 +199,11 @@ class Link:
         """The smaller overlap of both directions (0 when unknown)."""
         vals = [v for v in (self.overlap_target, self.overlap_source) if v is not None]
         return float(min(vals)) if vals else 0.0
+
+    @property
+    def poses(self) -> list[Matrix]:
+        """Its answer, then its alternatives' poses (the same arrays)."""
+        return [np.asarray(self.T_target_source), *(a.T_target_source for a in self.alternatives)]
 
     def take(self, alternative: Alternative, why: str) -> None:
         """Let one of its alternatives be the link's pose (something outside the pair picked

@@ -211,12 +211,10 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
             continue
         if e.target not in positions or e.source not in positions:
             continue
-        if any(r.get("code") != "ambiguous" for r in e.reasons):
-            # its answer does not fit (free space, overlap, a weak axis): nothing to pick
+        if not _fitting(e):  # its answer does not fit (free space, overlap, a weak axis)
             e.undecided = "no pose of the link fits the scans, seeded by them or not"
             continue
-        poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
-        i, why = choose(poses, positions[e.target], positions[e.source])
+        i, why = choose(e.poses, positions[e.target], positions[e.source])
         e.undecided = "" if i is not None else why
         if i is None:
             if why.startswith("the positions refuse"):
@@ -237,16 +235,19 @@ def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link
     out = []
     for e in links:
         if e.target not in positions or e.source not in positions or e.vouched:
-            continue
-        if e.origin == "hand":
-            continue
-        if e.T_target_source is None or any(r.get("code") != "ambiguous" for r in e.reasons):
+            continue  # a hand link is vouched for
+        if e.T_target_source is None or not _fitting(e):
             out.append(e)
             continue
-        poses = [np.asarray(e.T_target_source), *(a.T_target_source for a in e.alternatives)]
-        if choose(poses, positions[e.target], positions[e.source])[1].startswith("no pose"):
+        if choose(e.poses, positions[e.target], positions[e.source])[1].startswith("no pose"):
             out.append(e)
     return out
+
+
+def _fitting(e: Link) -> bool:
+    """Whether the link's poses fit its scans: confident, or uncertain only because several
+    poses fit (ambiguous): what positions may choose between."""
+    return all(r.get("code") == "ambiguous" for r in e.reasons)
 
 
 def site_from_positions(

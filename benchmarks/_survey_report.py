@@ -151,10 +151,10 @@ def acceptance(state: Record) -> list[tuple[str, str, str]]:
 def project_table(records: Sequence[Record]) -> list[str]:
     """One row per run: accuracy, placement, groups, links, time and memory."""
     lines = [
-        "| project | stations | method | within tol. | placed | wrong | groups | median / max "
-        "error (° / cm) | links attempted (accepted) | wall s | peak MB (tree / process) | exit "
-        "| load at start |",
-        "|---|---:|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|",
+        "| project | stations | method | within tol. | placed | reachable | wrong | groups "
+        "| median / max error (° / cm) | links attempted (accepted) | wall s "
+        "| peak MB (tree / process) | exit | load at start |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in records:
         ev = r.get("evaluation")
@@ -165,14 +165,15 @@ def project_table(records: Sequence[Record]) -> list[str]:
             f"{'timeout' if r['timeout'] else r['exit']} | {r['load_before'][0]:.0f} |"
         )
         if ev is None:
-            lines.append(head + " – | – | – | – | – | – |" + tail)
+            lines.append(head + " – | – | – | – | – | – | – |" + tail)
             continue
         err = (
             f"{_num(ev['median_rot_deg'], '.3f')} / {_num(_cm(ev['median_trans_m']), '.2f')} · "
             f"{_num(ev['max_rot_deg'], '.3f')} / {_num(_cm(ev['max_trans_m']), '.2f')}"
         )
         lines.append(
-            head + f" {ev['success']} | {ev['placed']} | {ev['wrong']} | {ev['groups']} | {err} | "
+            head + f" {ev['success']} | {ev['placed']} | {ev.get('reachable', '–')} | "
+            f"{ev['wrong']} | {ev['groups']} | {err} | "
             f"{ev['links_attempted']} ({ev['links_accepted']}) |" + tail
         )
     return lines

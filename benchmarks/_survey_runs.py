@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
+from flexreg.survey.outputs import evaluate as survey_evaluate
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = Path(sys.executable)
@@ -387,6 +388,8 @@ def _summary(
         "groups": len(groups),
         "fused_groups": len(fused),
         "links_attempted": len(links),
+        # the most stations one choice among the links' poses could place (the graph's best)
+        "reachable": survey_evaluate(doc, {"stations": list(truth.values())})["reachable"],
         "links_accepted": sum(1 for lk in links if lk.get("status") == "accepted"),
         "statuses": {
             k: sum(r.get("status") == k for r in records)

@@ -173,6 +173,7 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             f"    exit {rec['exit']}, {rec['wall_s']:.0f} s, {rec['peak_tree_mb']:.0f} MB"
             + (
                 f", {ev['success']}/{ev['n']} within tolerance, {ev['wrong']} wrong, "
+                f"{ev['reachable']} reachable, "
                 f"{ev['groups']} groups, {ev['links_attempted']} links; statuses "
                 f"{ev.get('statuses')}, claimed within but outside "
                 f"{ev.get('claimed_within_but_outside')}, true error within 3 sigma "

@@ -13,6 +13,7 @@ from conftest import one_error_line, room_project, run_cli
 
 from flexreg.errors import InputError
 from flexreg.io import read_scans
+from flexreg.io.transform_io import read_pair_transform
 from flexreg.survey import SurveyConfig, evaluate, find_scans, run_survey, write_outputs
 
 STATIONS = ["station_00", "station_01", "station_02"]
@@ -298,12 +299,16 @@ def test_an_unreadable_station_is_reported_the_rest_registered_exit_3(first, pro
 
 
 def test_an_unplaced_station_exit_3_one_line(first, project, tmp_path):
+    """One link, given by hand: it places its two stations; the third stays unplaced."""
     pairs = tmp_path / "pairs.csv"
     pairs.write_text("target,source\nstation_00,station_01\n")
+    hand = tmp_path / "T.txt"
+    np.savetxt(hand, read_pair_transform(project / "gt.json", "station_00", "station_01"))
     out = _with_cache(first[3], tmp_path / "out")
     rc, _, err = run_cli(
-        ["survey", *_files(project), "--out", out, "--workers", "1", "--pairs", pairs]
-    )
+        ["survey", *_files(project), "--out", out, "--workers", "1", "--pairs", pairs,
+         "--link", "station_00", "station_01", hand]
+    )  # fmt: skip
     assert rc == 3, err
     doc = _doc(out)
     assert doc["stations"]["station_02"]["placed"] is False

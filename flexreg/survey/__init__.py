@@ -105,10 +105,10 @@ value does not exist (failed link, unplaced station)::
           "strength": {"roll": 0.24, "pitch": 0.31, "yaw": 0.18,
                        "x": 0.20, "y": 0.20, "z": 0.59},
           "information": [[...]],            # 6x6, (rx, ry, rz, tx, ty, tz), Open3D order
-          "in_tree": true,                   # in the spanning tree that placed the stations
+          "in_tree": true,                   # it merged two groups (survey/consensus.py)
           "confirmed_by_loop": true,         # a closed loop agrees with it
-          "map_joined": false,               # uncertain, joins two groups: the only placement
-                                             # the map allows (survey/groupjoin.py)
+          "map_joined": false,               # joined two groups at the one placement of
+                                             # several the map allows (survey/consensus.py)
           "repeat": false,                   # ambiguous: the answer moved a whole bay fits
                                              # too (registration/twins.py)
           "loop_error_deg": 0.01,            # accepted: disagreement with the final poses;

@@ -3,8 +3,8 @@ overlapping points, each with its accuracy (``SurveyConfig.joint_refine``, on by
 
 After the graph has chosen the links and placed the stations, the pairs that overlap are
 measured again on their points: every accepted link of the reference's group, and every other
-pair of its stations that the map check found seeing each other (at least
-``map_join_min_explained`` of both samples explained). Each pair is aligned by robust
+pair of its stations that the map check found seeing each other (at least 10 % of both
+samples explained, :data:`~flexreg.survey.config.MIN_EXPLAINED`). Each pair is aligned by robust
 point-to-plane ICP on the stations' adjustment clouds, started from the relative pose the
 current solution holds (:func:`flexreg.survey.c2c.fit_pair`), and gives a relative pose with
 its information matrix. A pose graph of these measurements (GTSAM: ``BetweenFactorPose3``
@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.survey.c2c import PairFit, adjustment_cloud, fit_pair, median_range
-from flexreg.survey.config import SurveyConfig
+from flexreg.survey.config import MIN_EXPLAINED, SurveyConfig
 from flexreg.survey.execute import Progress, ProgressEvent, run_tasks
 from flexreg.survey.links import GraphSolution, Link, Matrix, bridges
 
@@ -226,7 +226,7 @@ def _pairs(
     for look in looks:
         k = frozenset((look.a, look.b))
         if look.a in group and look.b in group and k not in seen:
-            if min(look.explained) >= config.map_join_min_explained:
+            if min(look.explained) >= MIN_EXPLAINED:
                 seen.add(k)
                 out.append(Pair(look.a, look.b, "overlap"))
     return out

@@ -19,6 +19,35 @@ MIN_REFINE_VOXEL_M = 0.01
 #: station whose stored pose disagrees with its registered one by more than this is flagged
 #: (degrees, metres).
 STORED_MAX_DEG, STORED_MAX_M = 1.0, 0.10
+#: Open3D's line-process weight under which the pose-graph optimisation prunes an edge
+#: (its own default).
+PRUNE_THRESHOLD = 0.25
+#: A map conflict cuts the most doubtful link of a path between its stations and every link
+#: of the path whose doubt (free-space conflict ratio) is within this factor of it.
+MAP_DOUBT_MARGIN = 1.5
+#: Two placed stations closer than this (metres) are one viewpoint: they must explain
+#: :data:`COINCIDENT_EXPLAINED` of each other (a repeated set-up does; two stations folded
+#: onto one spot of a repeating structure do not).
+COINCIDENT_M, COINCIDENT_EXPLAINED = 1.0, 0.8
+#: Two placed stations "see each other" where each explains at least this share of the
+#: other's sample: a pair the final alignment measures.
+MIN_EXPLAINED = 0.1
+#: Settings of earlier releases the graph's consistency mechanism replaced, at the values
+#: they had then: read with a deprecation warning at those values, refused otherwise.
+RETIRED: dict[str, Any] = {
+    "loop_doubt_min": 0.15,
+    "loop_doubt_ratio": 2.0,
+    "trust_lone_links": False,
+    "uncertain_joins": False,
+    "map_judges_loops": True,
+    "map_judge_ratio": 3.0,
+    "map_joins_groups": True,
+    "map_join_min_explained": MIN_EXPLAINED,
+    "prune_threshold": PRUNE_THRESHOLD,
+    "map_doubt_margin": MAP_DOUBT_MARGIN,
+    "map_coincident_m": COINCIDENT_M,
+    "map_coincident_explained": COINCIDENT_EXPLAINED,
+}
 
 log = logging.getLogger(__name__)
 
@@ -54,23 +83,6 @@ class SurveyConfig(Config):
         rejected (plus ``loop_per_link_m`` per link of the cycle).
     loop_per_link_m : float, metres
         Loop tolerance added per link of the closed cycle (errors add up along a path).
-    loop_doubt_min : float
-        Smallest doubt of a disagreeing loop's most doubtful link for the loop to blame only
-        it (doubt: the link's own free-space conflict ratio), with ``loop_doubt_ratio``.
-    loop_doubt_ratio : float
-        How many times the doubt of every other link of the loop the most doubtful link's
-        doubt must be for the loop to blame only it (with ``loop_doubt_min``).
-    trust_lone_links : bool
-        Let a confident link that no loop confirms place stations even when an ambiguous
-        link agrees with it, or when it is more doubtful than every link a loop confirmed
-        (off: such a link is rejected and the stations it alone placed stay unplaced).
-    prune_threshold : float
-        Open3D's line-process weight under which an uncertain edge is pruned (0..1).
-    uncertain_joins : bool
-        Let two or more *uncertain* links that agree on the same relative pose join two
-        groups (their stations then marked uncertain). Off by default: repeating structure
-        makes several stations register wrongly in the same way, so agreeing uncertain links
-        can fuse two separate sites.
     residual_factor : float
         After the optimisation, a link whose residual exceeds this many times the median
         residual of the accepted links is dropped and the graph solved again (worst first).
@@ -121,33 +133,6 @@ class SurveyConfig(Config):
         share the other explains (with ``map_min_conflict``).
     map_rounds : int
         Map checks (each after the graph was solved again without the cut links).
-    map_doubt_margin : float
-        A conflict cuts the most doubtful link between its two stations (the highest
-        free-space conflict ratio of its own check) and every link on that path whose doubt
-        is within this factor of it (several when none stands out).
-    map_judges_loops : bool
-        A loop whose links disagree asks the map which link to blame: the one whose two
-        stations, placed by the rest of the loop, contradict each other least, when every
-        other choice contradicts ``map_judge_ratio`` times as much (:mod:`flexreg.survey.graph`,
-        step 2). Needs ``map_check``.
-    map_judge_ratio : float
-        How many times more than the blamed link every other choice of a disagreeing loop
-        must contradict the map for the map to blame it (``map_judges_loops``).
-    map_coincident_m : float, metres
-        Two placed stations closer than this are one viewpoint: they conflict unless each
-        explains at least ``map_coincident_explained`` of the other (a repeated set-up does;
-        two stations folded onto one spot of a repeating structure do not).
-    map_coincident_explained : float
-        Share of each other two stations closer than ``map_coincident_m`` must explain not to
-        conflict.
-    map_joins_groups : bool
-        A separate group joins the reference's group through an uncertain link when, of all
-        the placements the links between them propose, that link's is the only one under which
-        no station puts ``map_min_conflict`` of its scan in another's free space while the
-        groups see each other (:mod:`flexreg.survey.groupjoin`). Needs ``map_check``.
-    map_join_min_explained : float
-        "The groups see each other": some pair of stations, one of each group, explains at
-        least this share of both samples.
     """
 
     registration: RegistrationConfig = RegistrationConfig()
@@ -160,11 +145,6 @@ class SurveyConfig(Config):
     loop_max_deg: float = Field(0.3, gt=0, le=30)
     loop_max_m: float = Field(0.03, gt=0)
     loop_per_link_m: float = Field(0.01, ge=0)
-    loop_doubt_min: float = Field(0.15, ge=0)
-    loop_doubt_ratio: float = Field(2.0, ge=1)
-    trust_lone_links: bool = False
-    prune_threshold: float = Field(0.25, gt=0, lt=1)
-    uncertain_joins: bool = False
     residual_factor: float = Field(10.0, gt=1)
     residual_floor_m: float = Field(0.02, gt=0)
     residual_floor_deg: float = Field(0.2, gt=0)
@@ -178,8 +158,8 @@ class SurveyConfig(Config):
     @model_validator(mode="before")
     @classmethod
     def _retired(cls, data: Any) -> Any:
-        """``stored_max_deg`` / ``stored_max_m`` of older runs, at their values then: read,
-        with a deprecation warning (:data:`STORED_MAX_DEG`, :data:`STORED_MAX_M` now)."""
+        """``stored_max_deg`` / ``stored_max_m`` and the :data:`RETIRED` settings of older
+        runs, at their values then: read, with a deprecation warning."""
         if not isinstance(data, dict):
             return data
         out = dict(data)
@@ -191,6 +171,18 @@ class SurveyConfig(Config):
                         "stored_sigma_m)"
                     )
                 log.warning("setting %s is deprecated: fixed at %g now", key, was)
+        old = sorted(k for k in RETIRED if k in out)
+        for key in old:
+            if out.pop(key) != RETIRED[key]:
+                raise ConfigError(
+                    f"{key}: no longer a setting (it was {RETIRED[key]}): the graph keeps the "
+                    "hypotheses that agree around cycles (docs/survey.md); to place a station, "
+                    "--link, --positions or --pairs +FILE.csv"
+                )
+        if old:
+            log.warning(
+                "settings %s are deprecated: the graph decides without them", ", ".join(old)
+            )
         return out
 
     map_check: bool = True
@@ -198,17 +190,16 @@ class SurveyConfig(Config):
     map_min_conflict: float = Field(0.03, gt=0, le=1)
     map_conflict_ratio: float = Field(1.0, gt=0)
     map_rounds: int = Field(4, ge=1, le=20)
-    map_doubt_margin: float = Field(1.5, ge=1)
-    map_judges_loops: bool = True
-    map_judge_ratio: float = Field(3.0, gt=1)
-    map_coincident_m: float = Field(1.0, ge=0)
-    map_coincident_explained: float = Field(0.8, gt=0, le=1)
-    map_joins_groups: bool = True
-    map_join_min_explained: float = Field(0.1, gt=0, le=1)
 
 
 __all__ = [
+    "COINCIDENT_EXPLAINED",
+    "COINCIDENT_M",
+    "MAP_DOUBT_MARGIN",
+    "MIN_EXPLAINED",
     "MIN_REFINE_VOXEL_M",
+    "PRUNE_THRESHOLD",
+    "RETIRED",
     "STORED_MAX_DEG",
     "STORED_MAX_M",
     "PairsMode",

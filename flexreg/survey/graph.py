@@ -1,49 +1,27 @@
 """The station graph: which links to keep, where each station is, which groups exist.
 
-Each registered link carries its transform, its verdict and its information matrix. A wrong
-link must not place a station, so the graph is built in steps that each trust less:
+Each registered link carries its transform, its verdict, its alternatives and its
+information matrix. A wrong link must not place a station:
 
-1. **Spanning tree of the confident links**, most trusted first (Kruskal; trust = overlap,
-   lowered by the link's doubt: the share of one scan its own check put in the other's free
-   space, relative to what it explains).
-2. **Loop closure**: every other confident link closes a cycle with the tree; it agrees with
-   the cycle when the composed transforms meet within ``loop_max_deg`` and ``loop_max_m``
-   (+ ``loop_per_link_m`` per link of the cycle). A disagreeing cycle blames the tree links
-   on it, an agreeing one supports them; when one link of the disagreeing cycle is far more
-   doubtful than the others (``loop_doubt_ratio``, at least ``loop_doubt_min``), only that
-   one is blamed (or rejected, when it is the closing link). A tree link blamed more than
-   supported is dropped and the tree rebuilt without it; when the blame is tied (one
-   triangle, nobody can tell which link is wrong) every link of that cycle is dropped. What
-   is left disagreeing is rejected, with its loop error. Given a *judge* (the map check's
-   dense scores, :class:`flexreg.survey.mapcheck.PairJudge`), a disagreeing cycle is first
-   put to it: for each link, the rest of the cycle places that link's two stations, and the
-   judge says how much of what each sees lands in the other's free space. When one link's
-   hypothesis is clean and every other contradicts ``map_judge_ratio`` times as much (and
-   at least ``map_min_conflict`` of a scan), that link alone is blamed (identical rooms:
-   the link that overlays two twins is the one whose removal leaves a consistent map).
-3. **Uncertain links** never place a station alone: one inside a group is kept when it agrees
-   with the group's poses; between groups they are rejected, unless ``uncertain_joins`` lets
-   two or more that agree on the same relative pose (a loop through both) join the groups,
-   or the map allows no other placement of a group (``Link.map_joined``, set by
-   :mod:`flexreg.survey.groupjoin`).
-4. **Robust pose-graph optimisation** per group (Open3D's ``PoseGraph`` with its line
-   process): tree links are trusted edges, the others loop-closure edges the line process
-   may switch off; a pruned edge, or one that still disagrees with the optimised poses, is
-   rejected and the optimisation rerun.
-5. **Groups**: connected components of the kept links, never fused. Group 0 holds the
+1. **Hypotheses and groups** (:mod:`flexreg.survey.consensus`): one mechanism, pairwise
+   consistency maximisation between groups of stations, picks each link's pose among its
+   hypotheses and merges groups where loops of trusted links (or the surveyor, or the map)
+   confirm them; every other link of a group keeps the pose that agrees with the group, or
+   is rejected with its loop error.
+2. **Robust pose-graph optimisation** per group (Open3D's ``PoseGraph`` with its line
+   process over every kept link): a link it switches off, or one that still disagrees with
+   the optimised poses, is rejected and the optimisation rerun.
+3. **Groups**: connected components of the kept links, never fused. Group 0 holds the
    reference (the given station, or the first by name of the largest group).
-6. **Residuals**: a link can agree with its loops within the loop tolerance and still be a
+4. **Residuals**: a link can agree with its loops within the loop tolerance and still be a
    few centimetres off, pulling the optimised poses. The accepted link that fits the
    optimised poses worst is dropped when it is beyond ``residual_factor`` times the median
    residual of the accepted links (at least ``residual_floor_m`` / ``residual_floor_deg``),
    and everything is solved again without it, until every link fits.
-7. **Vetoes** from the map check (:mod:`flexreg.survey.mapcheck`): two placed stations
+5. **Vetoes** from the map check (:mod:`flexreg.survey.mapcheck`): two placed stations
    whose scans contradict each other at their solved relative pose (linked or not) mean a
    wrong link between them; the most doubtful one on a path between them (the highest
    free-space conflict ratio of its own check) is cut and everything solved again.
-8. **Lone links in repeating structure** (:mod:`flexreg.survey.lone`): a separate group held
-   only by unconfirmed tree links, one of whose stations has a whole-bay ambiguous link,
-   poses nothing; its links are cut and everything solved again.
 """
 
 from __future__ import annotations
@@ -56,7 +34,15 @@ import numpy as np
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.errors import InputError
-from flexreg.survey.config import SurveyConfig
+from flexreg.survey.config import MAP_DOUBT_MARGIN, PRUNE_THRESHOLD, SurveyConfig
+from flexreg.survey.consensus import (
+    Hypothesis,
+    LoopTolerance,
+    Placement,
+    cycle_votes,
+    hypotheses_of,
+    merge_groups,
+)
 from flexreg.survey.links import (
     GraphSolution,
     Judge,
@@ -64,111 +50,13 @@ from flexreg.survey.links import (
     Matrix,
     Veto,
     bridges,
-    judged_culprit,
     loop_error,
 )
-from flexreg.survey.lone import lone_cuts, lone_suspect
 
 log = logging.getLogger(__name__)
 
 
-# ------------------------------------------------------------------------------ helpers
-
-
-class _Forest:
-    """Spanning forest of a set of links with the poses it implies."""
-
-    def __init__(self, stems: list[str], tree: list[Link]) -> None:
-        self.adj: dict[str, list[tuple[str, Link]]] = {s: [] for s in stems}
-        for e in tree:
-            self.adj[e.target].append((e.source, e))
-            self.adj[e.source].append((e.target, e))
-        self.parent: dict[str, tuple[str, Link] | None] = {}
-        self.depth: dict[str, int] = {}
-        self.root: dict[str, str] = {}
-        self.pose: dict[str, Matrix] = {}
-        for s in stems:
-            if s not in self.parent:
-                self._walk(s)
-
-    def _walk(self, root: str) -> None:
-        self.parent[root], self.depth[root], self.root[root] = None, 0, root
-        self.pose[root] = np.eye(4)
-        queue = deque([root])
-        while queue:
-            a = queue.popleft()
-            for b, e in self.adj[a]:
-                if b in self.parent:
-                    continue
-                T = np.asarray(e.T_target_source)
-                self.pose[b] = self.pose[a] @ (T if e.target == a else invert(T))
-                self.parent[b], self.depth[b], self.root[b] = (a, e), self.depth[a] + 1, root
-                queue.append(b)
-
-    def path(self, a: str, b: str) -> list[Link]:
-        """The tree links between two stations of one tree."""
-        out: list[Link] = []
-        while a != b:
-            if self.depth[a] >= self.depth[b]:
-                pa = self.parent[a]
-                assert pa is not None
-                out.append(pa[1])
-                a = pa[0]
-            else:
-                pb = self.parent[b]
-                assert pb is not None
-                out.append(pb[1])
-                b = pb[0]
-        return out
-
-    def components(self) -> dict[str, list[str]]:
-        out: dict[str, list[str]] = {}
-        for s, r in self.root.items():
-            out.setdefault(r, []).append(s)
-        return out
-
-
-def _trust(e: Link) -> float:
-    """How much a link is trusted to place a station: its overlap, less for a link whose own
-    check put much of one scan in the other's free space (its doubt)."""
-    return e.overlap * max(0.05, 1.0 - 2.0 * float(e.doubt or 0.0))
-
-
-def _standout(loop: list[Link], config: SurveyConfig) -> Link | None:
-    """The link of a disagreeing loop whose doubt stands out: at least ``loop_doubt_min``
-    and ``loop_doubt_ratio`` times every other link's doubt of the loop; else None."""
-    ranked = sorted(loop, key=lambda e: -float(e.doubt or 0.0))
-    top = float(ranked[0].doubt or 0.0)
-    second = float(ranked[1].doubt or 0.0) if len(ranked) > 1 else 0.0
-    if top >= config.loop_doubt_min and top >= config.loop_doubt_ratio * second:
-        return ranked[0]
-    return None
-
-
-def _kruskal(stems: list[str], links: list[Link]) -> tuple[list[Link], list[Link]]:
-    """Tree links (most trusted first, joining separate trees) and the rest."""
-    up = {s: s for s in stems}
-
-    def find(x: str) -> str:
-        while up[x] != x:
-            up[x] = up[up[x]]
-            x = up[x]
-        return x
-
-    tree, rest = [], []
-    for e in sorted(links, key=lambda e: -_trust(e)):
-        a, b = find(e.target), find(e.source)
-        if a != b:
-            up[a] = b
-            tree.append(e)
-        else:
-            rest.append(e)
-    return tree, rest
-
-
-def _consistent(err: tuple[float, float], hops: int, config: SurveyConfig) -> bool:
-    tol_m = config.loop_max_m + config.loop_per_link_m * hops
-    return err[0] <= config.loop_max_deg and err[1] <= tol_m
+# ------------------------------------------------------------------------------ steps
 
 
 def _reject(e: Link, why: str, err: tuple[float, float] | None = None) -> None:
@@ -177,184 +65,82 @@ def _reject(e: Link, why: str, err: tuple[float, float] | None = None) -> None:
         e.loop_error_deg, e.loop_error_m = float(err[0]), float(err[1])
 
 
-# ------------------------------------------------------------------------------ steps
+def tolerance(config: SurveyConfig) -> LoopTolerance:
+    """The survey's loop tolerance."""
+    return LoopTolerance(config.loop_max_deg, config.loop_max_m, config.loop_per_link_m)
 
 
-def _confident_tree(
-    stems: list[str], links: list[Link], config: SurveyConfig, judge: Judge | None = None
-) -> _Forest:
-    """Steps 1 and 2: the tree of confident links after the loop checks."""
-    active = [e for e in links if e.trusted and e.status == "pending"]
-    while True:
-        tree, rest = _kruskal(stems, active)
-        forest = _Forest(stems, tree)
-        blame: dict[int, int] = {}
-        support: dict[int, int] = {}
-        judged: dict[int, bool] = {}
-        bad: list[tuple[Link, list[Link], tuple[float, float]]] = []
-        agreeing: list[Link] = []
-        for e in rest:
-            p = forest.path(e.target, e.source)
-            err = loop_error(
-                np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
-            )
-            if _consistent(err, len(p) + 1, config):
-                e.confirmed_by_loop = True
-                e.loop_error_deg, e.loop_error_m = err
-                agreeing.append(e)
-                for t in p:
-                    support[id(t)] = support.get(id(t), 0) + 1
-                    t.confirmed_by_loop = True
-            else:
-                suspect = judged_culprit(
-                    [e, *p], judge, config.map_judge_ratio, config.map_min_conflict
-                )
-                if suspect is not None:
-                    judged[id(suspect)] = True
-                    if suspect is e:
-                        _reject(e, _MAP_BLAMES, err)
-                        continue
-                else:
-                    suspect = _standout([e, *p], config)
-                    if suspect is e:  # the closer alone is far more doubtful than the loop
-                        _reject(
-                            e,
-                            "disagrees with the loop it closes, and is that loop's least "
-                            "trustworthy link (its scans clash most: open space against surface)",
-                            err,
-                        )
-                        continue
-                bad.append((e, p, err))
-                for t in [suspect] if suspect is not None else p:
-                    blame[id(t)] = blame.get(id(t), 0) + 1
-        if any(e.status == "rejected" for e in rest):
-            active = [e for e in active if e.status != "rejected"]
-            if not bad:
-                continue
-        if not bad:
-            confirmed = agreeing + [t for t in tree if support.get(id(t), 0) > 0]
-            lone = lone_suspect(forest, tree, support, confirmed, links, config)
-            if not lone:
-                break
-            for t, why in lone:
-                _reject(t, why)
-            active = [e for e in active if e.status != "rejected"]
-            continue
-        net = {id(t): blame.get(id(t), 0) - support.get(id(t), 0) for t in tree}
-        worst = max(net.values(), default=0)
-        if worst <= 0:  # every blamed tree link is better supported: the closers are wrong
-            for e, _, err in bad:
-                _reject(e, "disagrees with the loop it closes", err)
-            active = [e for e in active if e.status != "rejected"]
-            continue
-        culprits = [t for t in tree if net[id(t)] == worst]
-        for t in culprits:
-            _reject(
-                t,
-                _MAP_BLAMES
-                if judged.get(id(t))
-                else f"{blame.get(id(t), 0)} disagreeing loop(s) run through it, no agreeing one",
-            )
-        for e, p, err in bad:
-            if len(culprits) > 1 and any(t in culprits for t in p):
-                _reject(e, "closes a loop whose links disagree; nothing tells which is wrong", err)
-        active = [e for e in active if e.status != "rejected"]
-    for e in tree:
-        e.in_tree = True
-    return forest
+def _consistent(err: tuple[float, float], hops: int, config: SurveyConfig) -> bool:
+    return tolerance(config).agrees(err, hops)
 
 
-_MAP_BLAMES = (
-    "disagrees with a loop, and the map blames it: without this link the loop's stations land "
-    "where their scans agree; with it, one scan lies where another saw open space"
-)
-
-
-def _bridge(stems: list[str], forest: _Forest, links: list[Link], config: SurveyConfig) -> None:
-    """Step 3: uncertain links join groups only in agreeing pairs; inside a group they are
-    kept when they agree with its poses."""
-    uncertain = sorted(
-        (e for e in links if not e.trusted and e.status == "pending"),
-        key=lambda e: -e.overlap,
+def _choose(
+    stems: list[str], links: list[Link], config: SurveyConfig, judge: Judge | None
+) -> Placement:
+    """Steps 1-3 (:mod:`flexreg.survey.consensus`): the hypothesis of every pending link,
+    the groups they make and their poses; links left out are rejected with why."""
+    tol = tolerance(config)
+    pending = [e for e in links if e.status == "pending"]
+    hyps: dict[frozenset[str], list[Hypothesis]] = {}
+    for e in pending:
+        hyps.setdefault(frozenset((e.target, e.source)), []).extend(hypotheses_of(e))
+    broken = cycle_votes(hyps, tol)
+    place, chosen = merge_groups(
+        stems,
+        hyps,
+        tol,
+        (config.registration.judge.ambiguity_ratio, config.registration.judge.decisive_ratio),
+        (judge, config.map_min_conflict, config.map_conflict_ratio, config.map_radius_m)
+        if judge is not None
+        else None,
+        broken,
     )
-    comp = forest.root
-    tol_m = config.loop_max_m + 2 * config.loop_per_link_m
-    changed = config.uncertain_joins or any(e.map_joined for e in uncertain)
-    while changed:
-        changed = False
-        between: dict[tuple[str, str], list[tuple[Link, Matrix]]] = {}
-        for e in uncertain:
-            ct, cs = comp[e.target], comp[e.source]
-            if ct == cs:
-                continue
-            # pose of the source's group frame in the target's group frame, by this link
-            rel = (
-                forest.pose[e.target]
-                @ np.asarray(e.T_target_source)
-                @ invert(forest.pose[e.source])
-            )
-            if ct < cs:
-                between.setdefault((ct, cs), []).append((e, rel))
-            else:
-                between.setdefault((cs, ct), []).append((e, invert(rel)))
-        for (ct, cs), items in sorted(between.items()):
-            best: list[tuple[Link, Matrix]] = []
-            for _, r0 in items:
-                agree = [
-                    (e, r)
-                    for e, r in items
-                    if rotation_error_deg(r, r0) <= config.loop_max_deg
-                    and translation_error_m(r, r0) <= tol_m
-                ]
-                if (any(e.map_joined for e, _ in agree), len(agree)) > (
-                    any(e.map_joined for e, _ in best),
-                    len(best),
-                ):
-                    best = agree
-            if not any(e.map_joined for e, _ in best) and (
-                len(best) < 2 or not config.uncertain_joins
-            ):
-                continue
-            rel = best[0][1]
-            for s in stems:
-                if comp[s] == cs:
-                    forest.pose[s] = rel @ forest.pose[s]
-                    comp[s] = ct
-            best.sort(key=lambda x: not x[0].map_joined)  # the map's link is the tree link
-            for i, (e, _) in enumerate(best):
-                e.confirmed_by_loop = e.confirmed_by_loop or len(best) > 1
-                e.in_tree = i == 0
-            changed = True
-            break
-    for e in uncertain:
-        if e.in_tree:
+    for e in pending:
+        c = chosen.get(id(e))
+        if c is not None:
+            if c.hypothesis.alternative is not None:
+                e.take(c.hypothesis.alternative, "the map" if c.how == "map" else "the loop")
+            e.in_tree, e.confirmed_by_loop = c.centre, c.by_loop
+            e.map_joined = c.how == "map"
             continue
-        if comp[e.target] != comp[e.source]:
-            why = (
-                "uncertain, and no second link confirms it"
-                if config.uncertain_joins
-                else "uncertain (see the link's reasons), and one uncertain link never joins groups"
-            )
-            _reject(e, why)
+        if place.root[e.target] != place.root[e.source]:
+            _reject(e, _unconfirmed(e, hyps))
             continue
-        err = loop_error(
-            np.asarray(e.T_target_source), forest.pose[e.target], forest.pose[e.source]
-        )
+        P_t, P_s = place.pose[e.target], place.pose[e.source]
+        err = loop_error(np.asarray(e.T_target_source), P_t, P_s)
         pick = (
-            None
-            if _consistent(err, 2, config)
-            else e.agreeing_alternative(
-                forest.pose[e.target], forest.pose[e.source], lambda x: _consistent(x, 2, config)
-            )
+            e.agreeing_alternative(P_t, P_s, lambda x: tol.agrees(x, 2))
+            if not tol.agrees(err, 2) and not e.trusted
+            else None
         )
         if pick is not None:  # an alias pair: the loop picks the right one of its poses
             e.take(pick[0], "the loop")
             err = pick[1]
-        if _consistent(err, 2, config):
+        if tol.agrees(err, 2):
             e.confirmed_by_loop = True
             e.loop_error_deg, e.loop_error_m = err
         else:
-            _reject(e, "uncertain, and the group's other links place its stations elsewhere", err)
+            _reject(
+                e,
+                "disagrees with the loop it closes"
+                if e.trusted
+                else "uncertain, and the group's other links place its stations elsewhere",
+                err,
+            )
+    return place
+
+
+def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
+    """Why a link between two groups placed nothing, in words."""
+    n = 1 + len(e.alternatives)
+    if n > 1 and not e.trusted:
+        return (
+            f"fits {n} poses (look-alike rooms or bays), and no loop or rough position tells "
+            "which is right"
+        )
+    if e.trusted:
+        return "no loop checks it: a single link places no station on its own"
+    return "uncertain (see the link's reasons), and no loop confirms it"
 
 
 def _optimise(
@@ -380,14 +166,14 @@ def _optimise(
                 idx[e.target],
                 np.asarray(e.T_target_source, dtype=np.float64),
                 info,
-                uncertain=not e.in_tree,
+                uncertain=True,
             )
         )
     if not edges:
         return dict(poses), []
     option = reg.GlobalOptimizationOption(
         max_correspondence_distance=config.loop_max_m,
-        edge_prune_threshold=config.prune_threshold,
+        edge_prune_threshold=PRUNE_THRESHOLD,
         preference_loop_closure=1.0,
         reference_node=idx[ref],
     )
@@ -505,7 +291,7 @@ def solve_graph(
     vetoes: Sequence[Veto] = (),
     judge: Judge | None = None,
 ) -> GraphSolution:
-    """Steps 1-6 of this module: statuses of ``links`` (set in place), poses and groups.
+    """Steps 1-5 of this module: statuses of ``links`` (set in place), poses and groups.
 
     Parameters
     ----------
@@ -522,11 +308,12 @@ def solve_graph(
     vetoes : sequence of Veto
         Pairs of stations the map check found contradicting each other: while a solution
         keeps one in its refuted configuration, the most doubtful link between them is cut
-        (step 7) and the graph solved again.
+        (step 5) and the graph solved again.
     judge : callable, optional
-        ``judge(a, b, T_a_b)``: whether stations ``a`` and ``b`` contradict each other at
-        that relative pose (True / False / None when it cannot tell); it decides which link
-        of a disagreeing loop to blame where it can (step 2). Default: no judge.
+        ``judge(a, b, T_a_b)``: how much stations ``a`` and ``b`` contradict each other at
+        that relative pose (:data:`~flexreg.survey.links.Judge`); it decides between
+        distinct placements of two groups and names the wrong link of a cycle of confident
+        links that does not close (step 1). Default: no judge.
 
     Returns
     -------
@@ -543,7 +330,6 @@ def solve_graph(
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
         cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
-        cuts = cuts or lone_cuts(sol, links)  # step 8: lone links in repeating structure
         if not cuts:
             break
         for e, why in cuts:
@@ -583,7 +369,7 @@ def _veto_cuts(
     """The links to cut for the first veto the solution still violates: both stations in one
     group at (about) the refuted relative pose. The most doubtful accepted link of a path
     between them is cut, with every link of the path whose doubt is within
-    ``map_doubt_margin`` of it; [] when no veto is violated."""
+    ``MAP_DOUBT_MARGIN`` of it; [] when no veto is violated."""
     for v in vetoes:
         if v.a not in sol.poses or v.b not in sol.poses:
             continue
@@ -597,7 +383,7 @@ def _veto_cuts(
             continue
         doubt = [max(float(e.doubt or 0.0), 1e-6) for e in path]
         top = max(doubt)
-        cut = [e for e, d in zip(path, doubt, strict=True) if d * config.map_doubt_margin >= top]
+        cut = [e for e, d in zip(path, doubt, strict=True) if d * MAP_DOUBT_MARGIN >= top]
         return [
             (
                 e,
@@ -640,7 +426,7 @@ def _solve_once(
     dropped: dict[int, str],
     judge: Judge | None = None,
 ) -> GraphSolution:
-    """Steps 1-5 with the links of ``dropped`` rejected beforehand."""
+    """Steps 1-3 with the links of ``dropped`` rejected beforehand."""
     for e in links:
         e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
         e.loop_error_deg = e.loop_error_m = None
@@ -651,8 +437,7 @@ def _solve_once(
             e.why = dropped.get(id(e)) or e.refused or None
             if e.why is not None:
                 e.status = "rejected"
-    forest = _confident_tree(stations, links, config, judge)
-    _bridge(stations, forest, links, config)
+    forest = _choose(stations, links, config, judge)
     comp = forest.root
     ref = _reference(stations, comp, links, reference)
     members: dict[str, list[str]] = {}

@@ -1,5 +1,5 @@
-"""The records of a survey's graph: links, vetoes and the solution, and the map's judgement
-of a disagreeing loop (see :mod:`flexreg.survey.graph` for how they are decided)."""
+"""The records of a survey's graph: links, vetoes and the solution (see
+:mod:`flexreg.survey.consensus` and :mod:`flexreg.survey.graph` for how they are decided)."""
 
 from __future__ import annotations
 
@@ -133,16 +133,14 @@ class Link:
         free space over the share the other explains): which link of a conflicting pair's
         path the map check cuts first.
     map_joined : bool
-        An uncertain link the map allows as the only placement of its stations' groups
-        (:mod:`flexreg.survey.groupjoin`): it joins them on its own.
+        It joined two groups where the map's free-space check allowed only its placement
+        of all those their links propose (:mod:`flexreg.survey.consensus`).
     status : {"pending", "accepted", "rejected", "failed"}
     vouched : str
         Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
         :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
-        like a confident one, and loops still check it; positions vouch for which pose, not
-        for centimetres, so a link they alone vouch for that alone places stations is still
-        doubted for its scans' clash (:func:`flexreg.survey.lone.lone_suspect`).
+        on its own where no loop reaches them, and loops still check it.
     picked : str
         What picked one of its alternatives over its answer (the answer is then among the
         alternatives), in words; empty when it keeps its answer.
@@ -367,62 +365,13 @@ def loop_error(T_link: Matrix, P_target: Matrix, P_source: Matrix) -> tuple[floa
     return rotation_error_deg(T_link, rel), translation_error_m(T_link, rel)
 
 
-Judge = Callable[[str, str, Matrix], "tuple[float, float] | None"]
+Judge = Callable[[str, str, Matrix], "tuple[float, float, float] | None"]
 """How much two stations contradict each other at a relative pose ``T_a_b`` (maps ``b``'s
-points into ``a``'s frame): ``(contradiction, conflict)`` — the larger share, over both
-directions, of what one station sees that lands in the other's free space among what lands
-on its surfaces or in its free space, and the larger share of a station's sample in the
-other's free space — or None when the two hardly see each other there."""
-
-
-def implied_pose(loop: list[Link], k: Link) -> Matrix | None:
-    """``T_{k.target, k.source}`` composed along the other links of the cycle ``loop``."""
-    adj: dict[str, list[tuple[str, Matrix]]] = {}
-    for e in loop:
-        if e is k:
-            continue
-        T = np.asarray(e.T_target_source, dtype=np.float64)
-        adj.setdefault(e.target, []).append((e.source, T))
-        adj.setdefault(e.source, []).append((e.target, invert(T)))
-    pose = {k.target: np.eye(4)}
-    queue = deque([k.target])
-    while queue:
-        x = queue.popleft()
-        for y, T in adj.get(x, []):
-            if y not in pose:
-                pose[y] = pose[x] @ T
-                queue.append(y)
-    return pose.get(k.source)
-
-
-def judged_culprit(
-    loop: list[Link], judge: Judge | None, ratio: float, min_conflict: float
-) -> Link | None:
-    """The link of a disagreeing cycle the map blames, or None.
-
-    Each link ``k`` is a hypothesis: "``k`` is the wrong one and the rest of the cycle is
-    right". The rest of the cycle then places ``k``'s two stations, and the judge says how
-    much they contradict each other there. The link of the cleanest hypothesis is blamed
-    when every other hypothesis contradicts at least ``ratio`` times as much and puts at
-    least ``min_conflict`` of a station's sample in the other's free space: then only that
-    link's removal leaves the loop's stations where their scans agree. Anything the judge
-    cannot tell leaves the decision to the loop's blame counts (None)."""
-    if judge is None:
-        return None
-    scored: list[tuple[float, float, Link]] = []
-    for k in loop:
-        T = implied_pose(loop, k)
-        verdict = judge(k.target, k.source, T) if T is not None else None
-        if verdict is None:
-            return None
-        scored.append((float(verdict[0]), float(verdict[1]), k))
-    scored.sort(key=lambda x: x[0])
-    best = scored[0][0]
-    if all(r >= ratio * best and c >= min_conflict for r, c, _ in scored[1:]) and all(
-        r > best for r, _, _ in scored[1:]
-    ):
-        return scored[0][2]
-    return None
+points into ``a``'s frame): ``(contradiction, conflict, explained)`` — the larger share, over
+both directions, of what one station sees that lands in the other's free space among what
+lands on its surfaces or in its free space; the larger share of a station's sample in the
+other's free space; the smaller share of a station's sample on the other's surfaces — or
+None when the two hardly see each other there."""
 
 
 __all__ = [
@@ -435,7 +384,5 @@ __all__ = [
     "Veto",
     "alternatives_of",
     "bridges",
-    "implied_pose",
-    "judged_culprit",
     "loop_error",
 ]

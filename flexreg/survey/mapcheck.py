@@ -22,9 +22,10 @@ correctly placed stations that barely see each other explain little and contradi
 (moving objects and grazing rays stay a few percent); a station placed into the twin of its
 room contradicts every station that looked into that room.
 
-Two stations placed within ``map_coincident_m`` (1 m) of each other are one viewpoint, and
-from one viewpoint two scans must show the same scene: they also conflict when either explains
-less than ``map_coincident_explained`` (80 %) of the other. A repeated set-up passes; stations
+Two stations placed within 1 m of each other (:data:`~flexreg.survey.config.COINCIDENT_M`)
+are one viewpoint, and from one viewpoint two scans must show the same scene: they also
+conflict when either explains less than 80 % of the other
+(:data:`~flexreg.survey.config.COINCIDENT_EXPLAINED`). A repeated set-up passes; stations
 of different aisles of a repeating hall folded onto one spot agree on the racks but not on
 the far walls, and do not.
 
@@ -48,7 +49,7 @@ from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.registration.check import Check, check_masks
 from flexreg.stages.correspondences import derive_threshold
-from flexreg.survey.config import SurveyConfig
+from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
     CacheEntryError,
@@ -93,12 +94,10 @@ class PairLook:
         return float(np.linalg.norm(np.asarray(self.T_a_b)[:3, 3]))
 
     def coincident(self, config: SurveyConfig) -> bool:
-        """Placed within ``map_coincident_m`` of each other but not seeing the same scene:
-        from (nearly) one viewpoint two scans must explain ``map_coincident_explained`` of
+        """Placed within :data:`COINCIDENT_M` of each other but not seeing the same scene:
+        from (nearly) one viewpoint two scans must explain :data:`COINCIDENT_EXPLAINED` of
         each other (a repeated set-up does); less means one is in the wrong place."""
-        return self.distance_m < config.map_coincident_m and min(self.explained) < (
-            config.map_coincident_explained
-        )
+        return self.distance_m < COINCIDENT_M and min(self.explained) < (COINCIDENT_EXPLAINED)
 
     def conflicts(self, config: SurveyConfig) -> bool:
         """Whether either direction contradicts more than it explains, or the two are
@@ -240,8 +239,9 @@ def look_from(
 class PairJudge:
     """The map check's dense scores for a single pair at any relative pose, in this process.
 
-    The graph asks it, for a disagreeing loop, whether two stations would contradict each
-    other where the rest of the loop places them (:func:`flexreg.survey.links.judged_culprit`).
+    The graph asks it, when two groups could be joined in several places, whether the
+    stations of the links between them would contradict each other at each placement
+    (:mod:`flexreg.survey.consensus`).
     Views are loaded from the prepared files on first use and the last ``keep`` kept;
     answers are remembered per pair and pose (to 1 mm / 1e-4 of the rotation).
 
@@ -294,7 +294,7 @@ class PairJudge:
             self._memo[key] = look
         return self._memo[key]
 
-    def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float] | None:
+    def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, float] | None:
         """How much ``a`` and ``b`` contradict each other at ``T_a_b`` (see
         :data:`flexreg.survey.links.Judge`); None when a station has no view or, in both
         directions, less than ``map_min_conflict`` of a sample lands on the other's surfaces
@@ -302,8 +302,9 @@ class PairJudge:
         look = self.look(a, b, T_a_b)
         return None if look is None else self.contradiction(look)
 
-    def contradiction(self, look: PairLook) -> tuple[float, float] | None:
-        """``(contradiction, conflict)`` of a pair's scores (see :meth:`__call__`)."""
+    def contradiction(self, look: PairLook) -> tuple[float, float, float] | None:
+        """``(contradiction, conflict, explained)`` of a pair's scores (see
+        :meth:`__call__`)."""
         seen = [x + c for x, c in zip(look.explained, look.conflicting, strict=True)]
         if max(seen) < self.config.map_min_conflict:
             return None
@@ -312,7 +313,7 @@ class PairJudge:
             for s, c in zip(seen, look.conflicting, strict=True)
             if s >= self.config.map_min_conflict
         )
-        return float(r), float(max(look.conflicting))
+        return float(r), float(max(look.conflicting)), float(min(look.explained))
 
 
 def pairs_to_check(

@@ -274,7 +274,10 @@ def evaluate(
     dict
         ``stations`` (per STEM: ``rotation_deg``, ``translation_m``, ``group``, each in its
         group's frame), ``placed``, ``accurate``, ``wrong`` (lists of stems; a group's own
-        reference station is not counted).
+        reference station is not counted), and ``reachable``: the most stations one choice
+        among the links' poses could place, the largest group joined by links one of whose
+        poses (answer or alternative) is within ``wrong`` of the truth — what the graph can
+        do at best with the links it was given.
     """
     world = {s["name"]: np.asarray(s["T_world_scanner"], dtype=np.float64) for s in gt["stations"]}
     out: dict[str, Any] = {"stations": {}, "placed": [], "accurate": [], "wrong": []}
@@ -295,7 +298,41 @@ def evaluate(
             out["accurate"].append(stem)
         if rot > wrong[0] or tr > wrong[1]:
             out["wrong"].append(stem)
+    out["reachable"] = _reachable(poses_doc.get("links", []), world, wrong)
     return out
+
+
+def _reachable(
+    links: list[dict[str, Any]], world: dict[str, Any], wrong: tuple[float, float]
+) -> int:
+    """Size of the largest group of stations joined by links with a right pose."""
+    up = {s: s for s in world}
+
+    def find(x: str) -> str:
+        while up[x] != x:
+            up[x] = up[up[x]]
+            x = up[x]
+        return x
+
+    for lk in links:
+        t, s = lk.get("target"), lk.get("source")
+        if lk.get("T_target_source") is None or t not in world or s not in world:
+            continue
+        truth = invert(world[t]) @ world[s]
+        poses = [
+            lk["T_target_source"],
+            *(a["T_target_source"] for a in lk.get("alternatives") or []),
+        ]
+        if any(
+            rotation_error_deg(np.asarray(T), truth) <= wrong[0]
+            and translation_error_m(np.asarray(T), truth) <= wrong[1]
+            for T in poses
+        ):
+            up[find(t)] = find(s)
+    sizes: dict[str, int] = {}
+    for x in world:
+        sizes[find(x)] = sizes.get(find(x), 0) + 1
+    return max(sizes.values(), default=0)
 
 
 __all__ = ["PALETTE", "evaluate", "merged_cloud", "write_outputs"]

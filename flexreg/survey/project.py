@@ -38,7 +38,6 @@ from flexreg.survey.execute import (
 )
 from flexreg.survey.frames import Frame, read_origins_csv, site_of_reference
 from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
-from flexreg.survey.groupjoin import join_by_map
 from flexreg.survey.links import Matrix
 from flexreg.survey.mapcheck import (
     PairJudge,
@@ -726,7 +725,7 @@ def _map_check(
     last round's pair scores (``vetoes`` grows in place)."""
     files, glances = stored
     looks: list[PairLook] = []
-    rounds = config.map_rounds + 1 + (len(sol.groups) if config.map_joins_groups else 0)
+    rounds = config.map_rounds + 1
     for i in range(rounds):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
         todo = plan_looks(pairs, sol.poses, glances)
@@ -740,19 +739,7 @@ def _map_check(
         seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
         looks = assemble(pairs, sol.poses, seen)
         bad = [p for p in looks if p.conflicts(config)]
-        if not bad:  # a consistent map: may a separate group join it in one place only?
-            joins = (
-                join_by_map(sol, links, judge, config)
-                if judge is not None and config.map_joins_groups and i < rounds - 1
-                else []
-            )
-            if not joins:
-                break
-            for e, _ in joins:
-                e.map_joined = True
-            sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
-            continue
-        if i >= config.map_rounds:
+        if not bad or i >= config.map_rounds:
             break
         bad.sort(key=lambda p: -max(p.conflicting))
         vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad)
@@ -775,7 +762,7 @@ def _glances(
         on_result=_Counter("map check", len(stems), progress),
     )
     glances = {s: g for s, g in zip(stems, made, strict=True) if g is not None}
-    return glances, PairJudge(files, glances, config) if config.map_judges_loops else None
+    return glances, PairJudge(files, glances, config)
 
 
 def _with_unreadable(

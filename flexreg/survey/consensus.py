@@ -1,0 +1,716 @@
+"""Which pose of each link the survey keeps: the hypotheses that agree around cycles.
+
+Every registered link offers hypotheses: its answer and, when its verdict is uncertain, the
+clearly different poses that fit almost as well (its runner-ups, its twins one bay or room
+along; :class:`~flexreg.survey.links.Alternative`). A confident verdict has decided between
+its poses on the dense check, and a link the surveyor vouched for (``--link``, rough
+positions) offers its one pose. One mechanism chooses among them for the whole project:
+pairwise consistency maximisation (PCM, Mangelson et al., ICRA 2018) applied between groups
+of stations, the way PCM merges the maps of several robots.
+
+1. **Cycle votes** (:func:`cycle_votes`). Every cycle of three or four stations, and every
+   longer cycle through the spanning forest of the trusted answers (confident or vouched),
+   is composed for every combination of its links' hypotheses. A combination that closes
+   within the loop tolerance (``loop_max_deg``; ``loop_max_m`` plus ``loop_per_link_m`` per
+   link) is an independent route, and each of its hypotheses gets a vote: a *firm* vote
+   when the rest of the cycle is trusted answers. A cycle of trusted answers that does not
+   close contradicts each of them (:attr:`Hypothesis.against`).
+2. **Merges** (:func:`merge_groups`). Starting from single stations, the hypotheses of the
+   links between two groups form consistent sets: two are consistent when the cycle they
+   close through the groups' own poses meets (PCM's test, the groups' poses in the role of
+   odometry). Sets rank by trusted answers, their firm votes, links, all votes, the
+   surveyor's word, then weight. The best set of the whole project merges its groups when a
+   loop of trusted answers confirms it (two of them in it, or a firm vote) and no distinct
+   placement of the same groups is as well supported; then everything is looked at again.
+   Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
+   the same way. Where distinct placements compete, the map's free-space check may pick the
+   one under which the groups' nearest stations see each other without contradiction, every
+   other contradicting decisively more. Once no such merge is left, a lone trusted answer
+   (or the surveyor's word) places its stations unchecked unless the map check refutes it;
+   one that a cycle of trusted answers contradicts, only where the map sees the groups at
+   ease, and when nothing else is left the map may name the wrong link of such a cycle
+   (:func:`_blame`).
+3. **Inside a group**, every other link keeps the hypothesis that agrees with the group's
+   poses (a loop picks an alias pair's right pose), or is rejected with its loop error.
+
+Two separate sites are never fused: a merge needs a loop of trusted answers, the
+surveyor's word or the map between them. The mechanism has no setting of its own: the loop
+tolerances (the scanner's noise), the registration's ``judge.ambiguity_ratio`` (what a close
+rival is) and ``judge.decisive_ratio`` (what a decisive win is), and the map check's
+thresholds decide.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexreg.core.transforms import invert
+from flexreg.survey.config import MIN_EXPLAINED
+from flexreg.survey.links import Alternative, Judge, Link, Matrix, loop_error
+
+log = logging.getLogger(__name__)
+
+#: A hypothesis's weight: a trusted answer counts whole, an uncertain answer half, an
+#: alternative half its support (a runner-up's score ratio, a twin's share of the answer's).
+UNCERTAIN_WEIGHT = 0.5
+#: Most distinct placements of two groups the map's free-space check looks at: where more
+#: remain, the groups stay apart (a periodic hall offers one per bay).
+MAP_PLACEMENTS = 6
+#: Pairs of stations, one of each group, the map's check scores per placement: the nearest.
+MAP_PAIRS = 8
+
+
+@dataclass(frozen=True)
+class LoopTolerance:
+    """How far a cycle of links may be from closing: ``max_deg`` degrees, and ``max_m``
+    plus ``per_link_m`` per link metres (errors add up along a path)."""
+
+    max_deg: float
+    max_m: float
+    per_link_m: float
+
+    def metres(self, hops: int) -> float:
+        return self.max_m + self.per_link_m * hops
+
+    def agrees(self, err: tuple[float, float], hops: int) -> bool:
+        """Whether a loop error (degrees, metres) over ``hops`` links is within it."""
+        return err[0] <= self.max_deg and err[1] <= self.metres(hops)
+
+
+@dataclass(eq=False)
+class Hypothesis:
+    """One pose a link may have.
+
+    Attributes
+    ----------
+    link : Link
+    T : (4, 4) float64
+        ``T_target_source`` of the hypothesis.
+    alternative : Alternative or None
+        None for the link's answer.
+    votes : int
+        Cycles it closes (within the loop tolerance).
+    firm_votes : int
+        Those of them whose other links are all trusted answers (confident, or vouched for).
+    misfit : float
+        Over those cycles, how far each closes at best, as a share of the tolerance
+        (rotation and translation added): which of equally voted hypotheses fits tightest.
+    against : int
+        Cycles of trusted answers through it (it one of them) that do not close.
+    blamed : bool
+        The map named it the wrong link of such a cycle (:func:`_blame`): it places nothing.
+    """
+
+    link: Link
+    T: Matrix
+    alternative: Alternative | None = None
+    votes: int = 0
+    firm_votes: int = 0
+    misfit: float = 0.0
+    against: int = 0
+    blamed: bool = False
+
+    @property
+    def vouched(self) -> bool:
+        return self.alternative is None and bool(self.link.vouched)
+
+    @property
+    def firm(self) -> bool:
+        """A trusted answer: confident, or vouched for."""
+        return self.alternative is None and self.link.trusted
+
+    @property
+    def weight(self) -> float:
+        if self.alternative is not None:
+            return UNCERTAIN_WEIGHT * float(self.alternative.support)
+        return 1.0 if self.link.trusted else UNCERTAIN_WEIGHT
+
+    def oriented(self, a: str) -> Matrix:
+        """The pose as ``T_a_other`` (``a`` one of the link's stations)."""
+        return self.T if self.link.target == a else invert(self.T)
+
+
+def hypotheses_of(link: Link) -> list[Hypothesis]:
+    """A link's hypotheses: its answer, then, for an uncertain link, its alternatives (a
+    confident verdict has decided between its poses on the dense check; the surveyor or rough
+    positions vouch for one pose)."""
+    out = [Hypothesis(link, np.asarray(link.T_target_source, dtype=np.float64))]
+    if not link.trusted:
+        out += [Hypothesis(link, np.asarray(a.T_target_source), a) for a in link.alternatives]
+    return out
+
+
+# ------------------------------------------------------------------ step 1: cycle votes
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """A cycle of stations and the trusted answer of each link around it (``links[i]``
+    joins ``stations[i]`` and ``stations[i + 1]``, the last the first)."""
+
+    stations: tuple[str, ...]
+    links: list[Hypothesis]
+
+    def rest(self, i: int) -> Matrix:
+        """``T_{stations[i], stations[i + 1]}`` composed along the other links."""
+        n = len(self.stations)
+        P = np.eye(4)  # T_{v[i+1], x} along v[i+1] -> v[i+2] -> ... -> v[i]
+        for j in range(1, n):
+            x = self.stations[(i + j) % n]
+            P = P @ self.links[(i + j) % n].oriented(x)
+        return invert(P)
+
+
+def _angles_deg(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Geodesic angles between the rotation blocks of two stacks of 4x4 (broadcast)."""
+    c = (np.einsum("...ji,...ji->...", A[..., :3, :3], B[..., :3, :3]) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def _cycles(adj: dict[str, set[str]]) -> Iterator[tuple[str, ...]]:
+    """Every simple cycle of three or four stations once (its smallest station first)."""
+    for a in sorted(adj):
+        for b, c in itertools.combinations(sorted(x for x in adj[a] if x > a), 2):
+            if c in adj[b]:
+                yield (a, b, c)
+    for a in sorted(adj):
+        for c in sorted(x for x in adj if x > a):
+            common = sorted(x for x in adj[a] & adj[c] if x > a)
+            for b, d in itertools.combinations(common, 2):
+                yield (a, b, c, d)
+
+
+def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> list[Cycle]:
+    """Step 1: each hypothesis's :attr:`~Hypothesis.votes` and :attr:`~Hypothesis.against`
+    (set in place). ``hyps``: the hypotheses per pair of stations. Returns the cycles of
+    three or four trusted answers that do not close (for :func:`_blame`)."""
+    adj: dict[str, set[str]] = {}
+    for pair in hyps:
+        a, b = sorted(pair)
+        adj.setdefault(a, set()).add(b)
+        adj.setdefault(b, set()).add(a)
+
+    def stack(x: str, y: str) -> tuple[list[Hypothesis], np.ndarray]:
+        hs = hyps[frozenset((x, y))]
+        return hs, np.stack([h.oriented(x) for h in hs])
+
+    n = 0
+    broken: list[Cycle] = []
+    for cyc in _cycles(adj):
+        n += 1
+        if len(cyc) == 3:  # T_ab T_bc against T_ac
+            a, b, c = cyc
+            left = [stack(a, b), stack(b, c)]
+            right = [stack(a, c)]
+        else:  # a-b-c-d: T_ab T_bc against T_ad T_dc
+            a, b, c, d = cyc
+            left = [stack(a, b), stack(b, c)]
+            right = [stack(a, d), stack(d, c)]
+        A = np.einsum("iab,jbc->ijac", left[0][1], left[1][1])
+        B = right[0][1] if len(right) == 1 else np.einsum("iab,jbc->ijac", right[0][1], right[1][1])
+        A = A.reshape(-1, 4, 4)
+        B = B.reshape(-1, 4, 4)
+        deg = _angles_deg(A[:, None], B[None, :])
+        m = np.linalg.norm(A[:, None, :3, 3] - B[None, :, :3, 3], axis=-1)
+        closes = (deg <= tol.max_deg) & (m <= tol.metres(len(cyc)))
+        if _contradict(closes, left, right):
+            edges = [hyps[frozenset((x, cyc[(i + 1) % len(cyc)]))] for i, x in enumerate(cyc)]
+            firm = [[h for h in e if h.firm] for e in edges]
+            if all(len(f) == 1 for f in firm):
+                broken.append(Cycle(cyc, [f[0] for f in firm]))
+        closing = np.argwhere(closes)
+        if not len(closing):
+            continue
+        misfit = deg / tol.max_deg + m / tol.metres(len(cyc))
+        fit: dict[int, tuple[float, Hypothesis, bool]] = {}
+        nl1 = len(left[1][0])
+        nr1 = len(right[1][0]) if len(right) == 2 else 1
+        for i, k in closing:
+            members = [left[0][0][i // nl1], left[1][0][i % nl1]]
+            members += (
+                [right[0][0][k]]
+                if len(right) == 1
+                else [right[0][0][k // nr1], right[1][0][k % nr1]]
+            )
+            for h in members:
+                f = float(misfit[i, k])
+                firm = all(o.firm for o in members if o is not h)
+                was = fit.get(id(h))
+                if was is None or (firm, -f) > (was[2], -was[0]):
+                    fit[id(h)] = (f, h, firm)
+        for f, h, firm in fit.values():
+            _vote(h, f, firm)
+    log.debug("%d short cycles, %d longer ones closed", n, _tree_votes(hyps, tol))
+    return broken
+
+
+def _contradict(closes: np.ndarray, *sides: list[tuple[list[Hypothesis], np.ndarray]]) -> bool:
+    """A cycle whose links all have a trusted answer, and whose trusted answers do not
+    close: each of them is contradicted (:attr:`Hypothesis.against`; returns True).
+    ``closes``: which combinations of the left side's (rows) and the right side's (columns)
+    close."""
+    firm = []
+    for side in sides:
+        hs = [x[0] for x in side]
+        combos = np.ones(1, dtype=bool)
+        for lst in hs:
+            combos = np.outer(combos, [h.firm for h in lst]).ravel()
+        firm.append(combos)
+    if not (firm[0].any() and firm[1].any()) or closes[np.ix_(firm[0], firm[1])].any():
+        return False
+    for side in sides:
+        for lst in (x[0] for x in side):
+            for h in lst:
+                h.against += h.firm
+    return True
+
+
+def _vote(h: Hypothesis, misfit: float, firm: bool) -> None:
+    h.votes += 1
+    h.firm_votes += firm
+    h.misfit += misfit
+
+
+def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> int:
+    """Votes of the longer cycles: the trusted answers' spanning forest (best overlap first,
+    Kruskal), and every other hypothesis closing a cycle of five or more links through it;
+    returns how many such cycles closed."""
+    up: dict[str, str] = {}
+
+    def find(x: str) -> str:
+        while up.setdefault(x, x) != x:
+            up[x] = up[up[x]]
+            x = up[x]
+        return x
+
+    firm = [h for hs in hyps.values() for h in hs if h.alternative is None and h.link.trusted]
+    adj: dict[str, list[tuple[str, Hypothesis]]] = {}
+    in_tree: set[int] = set()
+    for h in sorted(firm, key=lambda h: -h.link.overlap):
+        a, b = find(h.link.target), find(h.link.source)
+        if a != b:
+            up[a] = b
+            in_tree.add(id(h))
+            adj.setdefault(h.link.target, []).append((h.link.source, h))
+            adj.setdefault(h.link.source, []).append((h.link.target, h))
+    closed = 0
+    for hs in hyps.values():
+        for h in hs:
+            if id(h) in in_tree:
+                continue
+            path = _tree_path(adj, h.link.target, h.link.source)
+            if path is None or len(path) + 1 <= 4:
+                continue  # another tree, or a short cycle (counted already)
+            T = np.eye(4)  # T_target_source along the tree
+            x = h.link.target
+            for y, e in path:
+                T = T @ e.oriented(x)
+                x = y
+            err = (float(_angles_deg(T, h.T)), float(np.linalg.norm(T[:3, 3] - h.T[:3, 3])))
+            if tol.agrees(err, len(path) + 1):
+                closed += 1
+                f = err[0] / tol.max_deg + err[1] / tol.metres(len(path) + 1)
+                _vote(h, f, True)  # the rest of its cycle: the forest's trusted answers
+                for _, e in path:
+                    _vote(e, f, h.firm)
+            elif h.firm:  # a cycle of trusted answers that does not close
+                for k in [h, *(e for _, e in path)]:
+                    k.against += 1
+    return closed
+
+
+def _tree_path(
+    adj: dict[str, list[tuple[str, Hypothesis]]], start: str, end: str
+) -> list[tuple[str, Hypothesis]] | None:
+    """The forest's walk from ``start`` to ``end``: (next station, hypothesis) steps; None
+    when they are in different trees."""
+    back: dict[str, tuple[str, Hypothesis] | None] = {end: None}
+    queue = [end]
+    while queue and start not in back:
+        x = queue.pop()
+        for y, h in adj.get(x, []):
+            if y not in back:
+                back[y] = (x, h)
+                queue.append(y)
+    if start not in back:
+        return None
+    steps: list[tuple[str, Hypothesis]] = []
+    x = start
+    while (step := back[x]) is not None:
+        steps.append(step)
+        x = step[0]
+    return steps
+
+
+# ------------------------------------------------------------------ step 2: merges
+
+
+@dataclass
+class Placement:
+    """Groups and the poses of their stations in each group's frame.
+
+    Attributes
+    ----------
+    root : dict of str -> str
+        The group (its first station) of every station.
+    pose : dict of str -> (4, 4) float64
+        ``T_group_station``.
+    """
+
+    root: dict[str, str]
+    pose: dict[str, Matrix]
+    merges: list[str] = field(default_factory=list)
+
+    def members(self, r: str) -> list[str]:
+        return [s for s, g in self.root.items() if g == r]
+
+
+@dataclass(frozen=True, eq=False)
+class Chosen:
+    """What a merge gave a link: its hypothesis, whether it is the merge's own link (the
+    others of its set close loops with it), what decided (``"loop"``, ``"map"``) and
+    whether a loop confirms it."""
+
+    hypothesis: Hypothesis
+    centre: bool
+    how: str
+    by_loop: bool
+
+
+@dataclass(eq=False)
+class _Set:
+    """A consistent set of hypotheses between two groups, one per link."""
+
+    centre: Hypothesis
+    X: Matrix  # T_g1_g2 the centre proposes
+    members: list[Hypothesis]
+
+    @property
+    def rank(self) -> tuple[int, int, int, int, int, float]:
+        """Trusted answers, their cycles, links, all cycles, the surveyor's word, weight."""
+        return (
+            sum(h.firm for h in self.members),
+            sum(h.firm_votes for h in self.members),
+            len(self.members),
+            sum(h.votes for h in self.members),
+            sum(h.vouched for h in self.members),
+            sum(h.weight for h in self.members),
+        )
+
+    @property
+    def misfit(self) -> float:
+        """Mean cycle misfit of its voted members (0 without votes)."""
+        votes = sum(h.votes for h in self.members)
+        return sum(h.misfit for h in self.members) / votes if votes else 0.0
+
+    @property
+    def firmly_confirmed(self) -> bool:
+        """A loop of trusted answers closes through it (two of its links are, or a cycle of
+        them closes through one)."""
+        return sum(h.firm for h in self.members) >= 2 or any(h.firm_votes for h in self.members)
+
+
+def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:
+    return X @ place.pose[s] if place.root[s] == g2 else place.pose[s]
+
+
+def _sets(
+    place: Placement, g1: str, g2: str, items: list[Hypothesis], tol: LoopTolerance
+) -> list[_Set]:
+    """The consistent sets between groups ``g1`` and ``g2``, best first: one per hypothesis
+    as its centre, with the best-fitting hypothesis of every other link that agrees with
+    the placement it proposes (the cycle through both and the groups' poses closes)."""
+    out = []
+    for c in items:
+        X = _proposal(c, place, g1)
+        best: dict[int, tuple[float, Hypothesis]] = {id(c.link): (0.0, c)}
+        for h in items:
+            if h.link is c.link:
+                continue
+            err = loop_error(
+                h.T,
+                _placed(place, X, g2, h.link.target),
+                _placed(place, X, g2, h.link.source),
+            )
+            if tol.agrees(err, 4):
+                score = err[1] + err[0] * 0.01
+                if id(h.link) not in best or score < best[id(h.link)][0]:
+                    best[id(h.link)] = (score, h)
+        out.append(_Set(c, X, [h for _, h in best.values()]))
+    out.sort(key=lambda s: s.rank, reverse=True)
+    return out
+
+
+def _proposal(h: Hypothesis, place: Placement, g1: str) -> Matrix:
+    """``T_g1_g2``: where hypothesis ``h`` (of a link between groups ``g1`` and ``g2``)
+    places the second group."""
+    a = h.link.target if place.root[h.link.target] == g1 else h.link.source
+    b = h.link.source if a == h.link.target else h.link.target
+    return place.pose[a] @ h.oriented(a) @ invert(place.pose[b])
+
+
+def _medoid(s: _Set, place: Placement, g1: str, g2: str) -> _Set:
+    """The set with its best-agreeing member as its centre: the one whose placement the
+    others fit best (the merge's own link; the others close loops with it)."""
+    if len(s.members) < 3:
+        return s
+    best: tuple[float, Hypothesis, Matrix] | None = None
+    for c in s.members:
+        X = _proposal(c, place, g1)
+        cost = sum(
+            loop_error(
+                h.T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source)
+            )[1]
+            for h in s.members
+        )
+        if best is None or cost < best[0]:
+            best = (cost, c, X)
+    assert best is not None
+    return _Set(best[1], best[2], s.members)
+
+
+def _rival(
+    sets: list[_Set], top: _Set, place: Placement, g2: str, tol: LoopTolerance
+) -> _Set | None:
+    """The best set proposing a placement distinct from ``top``'s."""
+    for s in sets[1:]:
+        c = s.centre
+        err = loop_error(
+            c.T,
+            _placed(place, top.X, g2, c.link.target),
+            _placed(place, top.X, g2, c.link.source),
+        )
+        if not tol.agrees(err, 4):
+            return s
+    return None
+
+
+def _contradiction(
+    s: _Set, place: Placement, g2: str, judge: Judge, radius_m: float
+) -> tuple[float, float, float] | None:
+    """What the map's check says of the two groups' stations where the set places the
+    second: over the :data:`MAP_PAIRS` nearest pairs of stations (one of each group) within
+    ``radius_m``, the worst contradiction and conflict and the best explained share of the
+    judge's. The set's own links' pairs are no witnesses (their registrations fitted them,
+    and their verdicts judged them already); None when the map cannot tell for any pair."""
+    c = s.centre.link
+    g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
+    at = {x: _placed(place, s.X, g2, x) for x in place.members(g1) + place.members(g2)}
+    own = {frozenset((h.link.target, h.link.source)) for h in s.members}
+    pairs = sorted(
+        (float(np.linalg.norm(at[a][:3, 3] - at[b][:3, 3])), a, b)
+        for a in place.members(g1)
+        for b in place.members(g2)
+        if frozenset((a, b)) not in own
+    )
+    said = [judge(a, b, invert(at[a]) @ at[b]) for d, a, b in pairs[:MAP_PAIRS] if d <= radius_m]
+    seen = [x for x in said if x is not None]
+    if not seen:
+        return None
+    return max(x[0] for x in seen), max(x[1] for x in seen), max(x[2] for x in seen)
+
+
+def _refuted(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
+    """The map check's own test (:meth:`~flexreg.survey.mapcheck.PairLook.conflicts`): at
+    least ``min_conflict`` of a scan in the other's free space, and ``ratio`` times what it
+    explains there."""
+    return said is not None and said[1] >= min_conflict and said[0] >= ratio / (1.0 + ratio)
+
+
+def _seen(said: tuple[float, float, float] | None) -> bool:
+    """The two groups see each other there: a pair explains :data:`~flexreg.survey.config.
+    MIN_EXPLAINED` of both samples."""
+    return said is not None and said[2] >= MIN_EXPLAINED
+
+
+@dataclass(frozen=True)
+class _Pick:
+    """What merges two groups: the set, what chose it, and how much the map finds the
+    groups' stations contradicting each other there (0 when it was not asked)."""
+
+    set: _Set
+    how: str
+    contradiction: float = 0.0
+
+
+def _decide(
+    sets: list[_Set],
+    place: Placement,
+    g2: str,
+    tol: LoopTolerance,
+    ratios: tuple[float, float],
+    judge: tuple[Judge, float, float, float] | None,
+    alone: bool,
+) -> _Pick | None:
+    """The set that merges two groups, or None. What chooses it (:attr:`_Pick.how`):
+    ``"loop"``, a loop of trusted answers; ``"map"``, the map's check among distinct
+    placements; ``"hand"``, the surveyor's word; ``"alone"``, one trusted answer no loop
+    checks. The last two only when ``alone`` (once no set a loop confirms is left) where a
+    cycle of trusted answers contradicts them."""
+    rival_ratio, decisive = ratios
+    top = sets[0]
+    rival = _rival(sets, top, place, g2, tol)
+    clear = (
+        rival is None
+        or top.rank[:5] > rival.rank[:5]
+        or (top.rank[:5] == rival.rank[:5] and rival.rank[5] < rival_ratio * top.rank[5])
+    )
+    if clear and top.firmly_confirmed:
+        return _Pick(top, "loop")
+    vouched = any(h.vouched for h in top.members)
+    contradicted = any(h.against for h in top.members)
+    if clear and (vouched or (top.rank[0] and alone)) and (alone or not contradicted):
+        # placed unchecked (the map check and the final alignment's pairs check it later),
+        # unless the map check refutes it; where a cycle of trusted answers contradicts it,
+        # only where the groups see each other, the least contradicted first
+        said = _contradiction(top, place, g2, judge[0], judge[3]) if judge else None
+        log.debug("%s <- %s alone: the map says %s", top.centre.link.target,
+                  top.centre.link.source, said)  # fmt: skip
+        if judge is not None and _refuted(said, judge[1], judge[2]):
+            return None
+        if contradicted and not _seen(said):
+            return None
+        return _Pick(top, "hand" if vouched else "alone", said[0] if said else 0.0)
+    if judge is None or rival is None:
+        return None
+    distinct: list[_Set] = []  # the distinct placements, best supported first
+    for s in sets:
+        if all(not tol.agrees(_err(s, f, place, g2), 4) for f in distinct):
+            distinct.append(s)
+    if len(distinct) > MAP_PLACEMENTS:
+        return None
+    said = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
+    if any(x is None for x in said):
+        return None
+    scores = [x for x in said if x is not None]
+    best = min(range(len(scores)), key=lambda i: scores[i][0])
+    low = scores[best][0]
+    if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
+        return None
+    if all(
+        x[0] >= decisive * low and x[0] > low and x[1] >= judge[1]
+        for i, x in enumerate(scores)
+        if i != best
+    ):
+        return _Pick(distinct[best], "map", low)
+    return None
+
+
+def _err(s: _Set, f: _Set, place: Placement, g2: str) -> tuple[float, float]:
+    """Loop error of ``s``'s centre where ``f`` places the groups."""
+    c = s.centre
+    return loop_error(
+        c.T, _placed(place, f.X, g2, c.link.target), _placed(place, f.X, g2, c.link.source)
+    )
+
+
+def _blame(
+    cycles: Sequence[Cycle], judge: tuple[Judge, float, float, float], decisive: float
+) -> bool:
+    """For the first cycle of trusted answers that does not close and that the map can
+    decide: each of its links in turn is the hypothesis "this one is wrong and the rest is
+    right"; the rest then places that link's two stations, and the map's check scores them
+    there. The link whose hypothesis the map finds clean (they see each other, it does not
+    refute them) while every other contradicts ``decisive`` times as much is blamed
+    (:attr:`Hypothesis.blamed`), and the cycle no longer contradicts the others. Returns
+    whether one was blamed."""
+    for cyc in cycles:
+        if any(h.blamed for h in cyc.links) or not all(h.against for h in cyc.links):
+            continue
+        said = []
+        for i in range(len(cyc.links)):
+            a, b = cyc.stations[i], cyc.stations[(i + 1) % len(cyc.stations)]
+            said.append(judge[0](a, b, cyc.rest(i)))
+        if any(x is None for x in said):
+            continue
+        scores = [x for x in said if x is not None]
+        best = min(range(len(scores)), key=lambda i: scores[i][0])
+        low = scores[best][0]
+        if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
+            continue
+        if all(
+            x[0] >= decisive * low and x[0] > low and x[1] >= judge[1]
+            for i, x in enumerate(scores)
+            if i != best
+        ):
+            cyc.links[best].blamed = True
+            for h in cyc.links:
+                h.against -= 1
+            return True
+    return False
+
+
+def merge_groups(
+    stems: list[str],
+    hyps: dict[frozenset[str], list[Hypothesis]],
+    tol: LoopTolerance,
+    ratios: tuple[float, float],
+    judge: tuple[Judge, float, float, float] | None = None,
+    broken: Sequence[Cycle] = (),
+) -> tuple[Placement, dict[int, Chosen]]:
+    """Step 2: the groups, and what each link that merged groups was given (by link id).
+
+    Parameters
+    ----------
+    stems : list of str
+    hyps : dict
+        The hypotheses per pair of stations.
+    tol : LoopTolerance
+    ratios : (float, float)
+        The registration's ``judge.ambiguity_ratio`` and ``judge.decisive_ratio``: a
+        distinct placement as well supported in trusted answers, votes and links whose
+        weight is at least the first share of the best's is a rival, and the groups stay
+        apart unless the map decides: the one placement under which the groups see each
+        other and the map check does not refute them, every other contradicting at least
+        the second times as much.
+    judge : (Judge, float, float, float), optional
+        The map's free-space check, and its ``map_min_conflict``, ``map_conflict_ratio`` and
+        ``map_radius_m``.
+    broken : sequence of Cycle
+        The cycles of trusted answers that do not close (:func:`cycle_votes`): when no merge
+        is left, the map may name the wrong link of one (:func:`_blame`), and merging goes
+        on without it.
+    """
+    place = Placement({s: s for s in stems}, {s: np.eye(4) for s in stems})
+    chosen: dict[int, Chosen] = {}
+    while True:
+        between: dict[tuple[str, str], list[Hypothesis]] = {}
+        for pair, hs in hyps.items():
+            a, b = sorted(pair)
+            ra, rb = place.root[a], place.root[b]
+            if ra != rb:
+                key = (ra, rb) if ra < rb else (rb, ra)
+                between.setdefault(key, []).extend(
+                    h for h in hs if id(h.link) not in chosen and not h.blamed
+                )
+        best: tuple[tuple[float, ...], str, str, _Pick] | None = None
+        sets = {k: _sets(place, *k, items, tol) for k, items in sorted(between.items()) if items}
+        for alone in (False, True):  # what a loop confirms first, then lone trusted links
+            for (g1, g2), found in sets.items():
+                pick = _decide(found, place, g2, tol, ratios, judge, alone)
+                if pick is None:
+                    continue
+                p = pick.set
+                overlap = sum(h.link.overlap for h in p.members)
+                key = (*p.rank[:5], -pick.contradiction, -p.misfit, p.rank[5], overlap)
+                if best is None or key > best[0]:
+                    best = (key, g1, g2, pick)
+            if best is not None:
+                break
+        if best is None:
+            if judge is not None and _blame(broken, judge, ratios[1]):
+                continue
+            return place, chosen
+        _, g1, g2, picked = best
+        how, pick = picked.how, _medoid(picked.set, place, g1, g2)
+        for s in place.members(g2):
+            place.pose[s] = pick.X @ place.pose[s]
+            place.root[s] = g1
+        for h in pick.members:
+            chosen[id(h.link)] = Chosen(h, h is pick.centre, how, pick.firmly_confirmed)
+        place.merges.append(how)

@@ -1,0 +1,194 @@
+"""The graph's one mechanism on hand-built graphs: hypotheses that agree around cycles."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexreg.core.transforms import invert, make_transform, rotation_about_axis
+from flexreg.survey.config import SurveyConfig
+from flexreg.survey.consensus import LoopTolerance, cycle_votes, hypotheses_of
+from flexreg.survey.graph import Link, solve_graph
+from flexreg.survey.links import Alternative
+from flexreg.survey.mapcheck import PairJudge, PairLook
+
+INFO = np.diag([2e5, 2e5, 2e5, 1e4, 1e4, 1e4])
+TOL = LoopTolerance(0.3, 0.03, 0.01)
+
+
+def _poses(n=6):
+    return {
+        f"s{i}": make_transform(rotation_about_axis([0, 0, 1], 0.2 * i), [4.0 * i, 1.0 * i, 0])
+        for i in range(n)
+    }
+
+
+def _link(P, a, b, verdict="confident", T=None):
+    T = invert(P[a]) @ P[b] if T is None else T
+    return Link(a, b, T, INFO, verdict, overlap_target=0.4, overlap_source=0.4, doubt=0.05)
+
+
+def _moved(P, a, b, offset):
+    """``a <- b`` moved by ``offset`` metres in ``a``'s frame (a look-alike room or bay)."""
+    return make_transform(np.eye(3), offset) @ invert(P[a]) @ P[b]
+
+
+class _Judge:
+    """The map's free-space check knowing the truth: at the true relative pose ``clean`` of
+    a scan lands in the other's free space and ``explained`` on its surfaces; anywhere else
+    ``wrong`` and a tenth as much (judged as :class:`PairJudge` does)."""
+
+    def __init__(self, P, *, clean=0.01, wrong=0.12, explained=0.3):
+        self.P, self.clean, self.wrong, self.explained = P, clean, wrong, explained
+        self.asked = 0
+
+    def __call__(self, a, b, T):
+        self.asked += 1
+        true = invert(self.P[a]) @ self.P[b]
+        right = np.linalg.norm(T[:3, 3] - true[:3, 3]) < 0.5
+        c, x = (self.clean, self.explained) if right else (self.wrong, self.explained / 10)
+        look = PairLook(a, b, T, (x, x), (c, c), (1000, 1000))
+        return PairJudge({}, {}, SurveyConfig()).contradiction(look)
+
+
+def _by_pair(links):
+    out = {}
+    for e in links:
+        out.setdefault(frozenset((e.target, e.source)), []).extend(hypotheses_of(e))
+    return out
+
+
+def test_cycle_votes_count_the_closing_cycles_of_each_hypothesis():
+    """A square s0-s1-s2-s3 with the diagonal s0-s2: two triangles and the square. The
+    diagonal's answer is 2 m off and its twin right: the twin closes both triangles, the
+    answer none; every right answer closes its triangle and the square."""
+    P = _poses(4)
+    links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s2", "s3"),
+             _link(P, "s0", "s3")]  # fmt: skip
+    diag = _link(P, "s0", "s2", "uncertain", T=_moved(P, "s0", "s2", [2.0, 0, 0]))
+    diag.alternatives = [Alternative(invert(P["s0"]) @ P["s2"], "twin", 0.9)]
+    hyps = _by_pair([*links, diag])
+    assert cycle_votes(hyps, TOL) == []  # no cycle of trusted answers fails to close
+    answer, twin = hyps[frozenset(("s0", "s2"))]
+    assert (answer.votes, twin.votes) == (0, 2)
+    assert [hyps[frozenset(p)][0].votes for p in (("s0", "s1"), ("s1", "s2"))] == [2, 2]
+    assert twin.misfit < 1e-6
+
+
+def test_a_chain_closed_by_a_long_cycle_is_confirmed():
+    """Six stations in a ring of confident links: no cycle of three or four, the ring of
+    six confirms every link. Without the closing link the chain still places them, each
+    link unchecked; with it one metre off, nothing tells which link is wrong: nothing."""
+    P = _poses(6)
+    ring = [_link(P, f"s{i}", f"s{(i + 1) % 6}") for i in range(6)]
+    sol = solve_graph(sorted(P), ring, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == sorted(P)
+    assert all(e.status == "accepted" and e.confirmed_by_loop for e in ring)
+    sol = solve_graph(sorted(P), ring[:5], SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == sorted(P)
+    assert not any(e.confirmed_by_loop for e in ring[:5])
+    ring[5] = _link(P, "s5", "s0", T=_moved(P, "s5", "s0", [1.0, 0, 0]))
+    sol = solve_graph(sorted(P), ring, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) == 1 and all(e.status == "rejected" for e in ring)
+
+
+def _two_groups(P):
+    """s0-s1-s2 and s3-s4-s5 each a triangle of confident links; between them only
+    uncertain links: s2-s3 right (a doorway), s1-s3 wrong (an identical room 6 m off)."""
+    return [
+        _link(P, "s0", "s1"),
+        _link(P, "s1", "s2"),
+        _link(P, "s0", "s2"),
+        _link(P, "s3", "s4"),
+        _link(P, "s4", "s5"),
+        _link(P, "s3", "s5"),
+        _link(P, "s2", "s3", "uncertain"),
+        _link(P, "s1", "s3", "uncertain", T=_moved(P, "s1", "s3", [6.0, 0, 0])),
+    ]
+
+
+def test_the_map_picks_the_only_placement_no_station_contradicts():
+    P = _poses()
+    links = _two_groups(P)
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) == 3  # two placements, one link each: nothing tells
+    assert "no loop or rough position" in (links[6].why or "") + (links[7].why or "") or (
+        links[6].status == links[7].status == "rejected"
+    )
+    links = _two_groups(P)
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", judge=_Judge(P))
+    assert sorted(sol.groups[0]) == sorted(P)
+    for s in ("s3", "s4", "s5"):
+        np.testing.assert_allclose(sol.poses[s], invert(P["s0"]) @ P[s], atol=1e-6)
+        assert sol.confidence[s] == "uncertain"  # joined through an uncertain link
+    assert links[6].status == "accepted" and links[6].map_joined
+    assert links[7].status == "rejected"
+
+
+def test_no_join_when_the_map_accepts_both_placements_or_cannot_tell():
+    P = _poses()
+    for judge in (_Judge(P, wrong=0.02), _Judge(P, explained=0.005, clean=0.001, wrong=0.001)):
+        links = _two_groups(P)
+        sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", judge=judge)
+        assert len(sol.groups[0]) == 3 and judge.asked > 0
+
+
+def test_two_separate_sites_are_never_fused_when_every_placement_contradicts():
+    P = _poses()
+    links = _two_groups(P)
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", judge=_Judge(P, clean=0.5))
+    assert len(sol.groups[0]) == 3 and len(sol.groups[1]) == 3
+
+
+def test_look_alike_links_wrong_the_same_way_place_nothing():
+    """s3 seen from s1 and s2 through two uncertain links both one bay (6 m) off the same
+    way, each with the right pose as its twin: two placements of s3 equally supported by
+    two links each, so s3 stays unplaced, its link naming the poses it fits."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    bay = [6.0, 0.0, 0.0]
+    wrong = []
+    for a in ("s1", "s2"):
+        shifted = invert(P[a]) @ make_transform(np.eye(3), bay) @ P["s3"]
+        e = _link(P, a, "s3", "uncertain", T=shifted)
+        e.alternatives = [Alternative(invert(P[a]) @ P["s3"], "twin", 1.0)]
+        wrong.append(e)
+    sol = solve_graph(sorted(P), [*base, *wrong], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    assert all("fits 2 poses" in e.why for e in wrong)
+    assert "fits 2 poses" in sol.reasons["s3"]
+
+
+def test_a_hand_link_places_a_station_alone_and_a_wrong_one_is_refused_by_its_loop():
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    hand = _link(P, "s2", "s3")
+    hand.vouched = "hand"
+    sol = solve_graph(sorted(P), [*base, hand], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and hand.status == "accepted"
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    # one metre off, with two automatic links that agree on s3: refused, with its loop error
+    hand = _link(P, "s2", "s3", T=_moved(P, "s2", "s3", [1.0, 0, 0]))
+    hand.vouched = "hand"
+    auto = [_link(P, "s1", "s3"), _link(P, "s0", "s3", "uncertain")]
+    sol = solve_graph(sorted(P), [*base, hand, *auto], SurveyConfig(), reference="s0")
+    assert hand.status == "rejected" and "loop" in hand.why
+    assert abs(hand.loop_error_m - 1.0) < 1e-6
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+
+
+def test_the_map_names_the_wrong_link_of_a_triangle_that_does_not_close():
+    """Three confident links, s0-s2 overlaying two look-alike rooms: the triangle does not
+    close and no loop says which link is wrong. Without the map nothing is placed; with it,
+    "s0-s2 is wrong" is the one hypothesis under which s0 and s2 sit at ease, and the other
+    two place all three."""
+    P = _poses(3)
+    twin = make_transform(rotation_about_axis([0, 0, 1], np.pi), [3.0, 2.0, 0.0])
+    links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"),
+             _link(P, "s0", "s2", T=twin @ invert(P["s0"]) @ P["s2"])]  # fmt: skip
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) == 1
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", judge=_Judge(P))
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert [e.status for e in links] == ["accepted", "accepted", "rejected"]
+    assert "loop" in links[2].why and links[2].loop_error_deg > 100
+    np.testing.assert_allclose(sol.poses["s2"], invert(P["s0"]) @ P["s2"], atol=1e-6)

@@ -117,7 +117,7 @@ class Hypothesis:
 
     @property
     def vouched(self) -> bool:
-        return self.alternative is None and bool(self.link.vouched)
+        return self.alternative is None and self.link.vouched == "hand"
 
     @property
     def firm(self) -> bool:
@@ -140,7 +140,7 @@ def hypotheses_of(link: Link) -> list[Hypothesis]:
     confident verdict has decided between its poses on the dense check; the surveyor or rough
     positions vouch for one pose)."""
     out = [Hypothesis(link, np.asarray(link.T_target_source, dtype=np.float64))]
-    if not link.trusted:
+    if not link.trusted and not link.vouched:
         out += [Hypothesis(link, np.asarray(a.T_target_source), a) for a in link.alternatives]
     return out
 

@@ -140,7 +140,8 @@ class Link:
         Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
         :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
-        on its own where no loop reaches them, and loops still check it.
+        on its own where no loop reaches them (a hand link only: positions pick a pose, they
+        do not confirm its centimetres), and loops still check it.
     picked : str
         What picked one of its alternatives over its answer (the answer is then among the
         alternatives), in words; empty when it keeps its answer.
@@ -227,8 +228,10 @@ class Link:
 
     @property
     def trusted(self) -> bool:
-        """Whether it may place stations: confident, or vouched for (:attr:`vouched`)."""
-        return self.verdict == "confident" or bool(self.vouched)
+        """Whether its pose may place stations: confident, or given by the surveyor. Rough
+        positions pick which of an uncertain link's poses is meant, not its centimetres (a
+        pose 0.4 m off fits a 1 m sigma): such a link still needs a loop."""
+        return self.verdict == "confident" or self.vouched == "hand"
 
     @property
     def usable(self) -> bool:

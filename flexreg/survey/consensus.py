@@ -45,13 +45,13 @@ from __future__ import annotations
 import itertools
 import logging
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from flexreg.core.transforms import invert
 from flexreg.survey.config import MIN_EXPLAINED
-from flexreg.survey.links import Alternative, Judge, Link, Matrix, loop_error
+from flexreg.survey.links import Alternative, Judge, Link, Matrix, loop_error, walk
 
 log = logging.getLogger(__name__)
 
@@ -245,7 +245,8 @@ def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
                     fit[id(h)] = (f, h, firm)
         for f, h, firm in fit.values():
             _vote(h, f, firm)
-    log.debug("%d short cycles, %d longer ones closed", n, _tree_votes(hyps, tol))
+    closed = _tree_votes(hyps, tol)
+    log.debug("%d short cycles, %d longer ones closed", n, closed)
     return broken
 
 
@@ -288,7 +289,7 @@ def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
             x = up[x]
         return x
 
-    firm = [h for hs in hyps.values() for h in hs if h.alternative is None and h.link.trusted]
+    firm = [h for hs in hyps.values() for h in hs if h.firm]
     adj: dict[str, list[tuple[str, Hypothesis]]] = {}
     in_tree: set[int] = set()
     for h in sorted(firm, key=lambda h: -h.link.overlap):
@@ -303,7 +304,7 @@ def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
         for h in hs:
             if id(h) in in_tree:
                 continue
-            path = _tree_path(adj, h.link.target, h.link.source)
+            path = walk(adj, h.link.target, h.link.source)
             if path is None or len(path) + 1 <= 4:
                 continue  # another tree, or a short cycle (counted already)
             T = np.eye(4)  # T_target_source along the tree
@@ -324,29 +325,6 @@ def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
     return closed
 
 
-def _tree_path(
-    adj: dict[str, list[tuple[str, Hypothesis]]], start: str, end: str
-) -> list[tuple[str, Hypothesis]] | None:
-    """The forest's walk from ``start`` to ``end``: (next station, hypothesis) steps; None
-    when they are in different trees."""
-    back: dict[str, tuple[str, Hypothesis] | None] = {end: None}
-    queue = [end]
-    while queue and start not in back:
-        x = queue.pop()
-        for y, h in adj.get(x, []):
-            if y not in back:
-                back[y] = (x, h)
-                queue.append(y)
-    if start not in back:
-        return None
-    steps: list[tuple[str, Hypothesis]] = []
-    x = start
-    while (step := back[x]) is not None:
-        steps.append(step)
-        x = step[0]
-    return steps
-
-
 # ------------------------------------------------------------------ step 2: merges
 
 
@@ -364,7 +342,6 @@ class Placement:
 
     root: dict[str, str]
     pose: dict[str, Matrix]
-    merges: list[str] = field(default_factory=list)
 
     def members(self, r: str) -> list[str]:
         return [s for s, g in self.root.items() if g == r]
@@ -419,6 +396,14 @@ def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:
     return X @ place.pose[s] if place.root[s] == g2 else place.pose[s]
 
 
+def _fit(h: Hypothesis, place: Placement, X: Matrix, g2: str) -> tuple[float, float]:
+    """Loop error (degrees, metres) of hypothesis ``h`` where ``X`` (``T_g1_g2``) places
+    group ``g2``."""
+    return loop_error(
+        h.T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source)
+    )
+
+
 def _sets(
     place: Placement, g1: str, g2: str, items: list[Hypothesis], tol: LoopTolerance
 ) -> list[_Set]:
@@ -432,11 +417,7 @@ def _sets(
         for h in items:
             if h.link is c.link:
                 continue
-            err = loop_error(
-                h.T,
-                _placed(place, X, g2, h.link.target),
-                _placed(place, X, g2, h.link.source),
-            )
+            err = _fit(h, place, X, g2)
             if tol.agrees(err, 4):
                 score = err[1] + err[0] * 0.01
                 if id(h.link) not in best or score < best[id(h.link)][0]:
@@ -462,12 +443,7 @@ def _medoid(s: _Set, place: Placement, g1: str, g2: str) -> _Set:
     best: tuple[float, Hypothesis, Matrix] | None = None
     for c in s.members:
         X = _proposal(c, place, g1)
-        cost = sum(
-            loop_error(
-                h.T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source)
-            )[1]
-            for h in s.members
-        )
+        cost = sum(_fit(h, place, X, g2)[1] for h in s.members)
         if best is None or cost < best[0]:
             best = (cost, c, X)
     assert best is not None
@@ -479,13 +455,7 @@ def _rival(
 ) -> _Set | None:
     """The best set proposing a placement distinct from ``top``'s."""
     for s in sets[1:]:
-        c = s.centre
-        err = loop_error(
-            c.T,
-            _placed(place, top.X, g2, c.link.target),
-            _placed(place, top.X, g2, c.link.source),
-        )
-        if not tol.agrees(err, 4):
+        if not tol.agrees(_fit(s.centre, place, top.X, g2), 4):
             return s
     return None
 
@@ -580,11 +550,26 @@ def _decide(
         return None
     distinct: list[_Set] = []  # the distinct placements, best supported first
     for s in sets:
-        if all(not tol.agrees(_err(s, f, place, g2), 4) for f in distinct):
+        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
             distinct.append(s)
     if len(distinct) > MAP_PLACEMENTS:
         return None
     said = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
+    best = _decisive(said, judge, decisive)
+    if best is None:
+        return None
+    return _Pick(distinct[best], "map", min(x[0] for x in said if x is not None))
+
+
+def _decisive(
+    said: Sequence[tuple[float, float, float] | None],
+    judge: tuple[Judge, float, float, float],
+    decisive: float,
+) -> int | None:
+    """Of several hypotheses the map scored, the one it finds clean (the stations see each
+    other, the map check does not refute them) while every other contradicts ``decisive``
+    times as much and puts ``map_min_conflict`` of a scan in the other's free space; None
+    when there is no such one, or the map cannot tell for one of them."""
     if any(x is None for x in said):
         return None
     scores = [x for x in said if x is not None]
@@ -592,21 +577,10 @@ def _decide(
     low = scores[best][0]
     if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
         return None
-    if all(
-        x[0] >= decisive * low and x[0] > low and x[1] >= judge[1]
-        for i, x in enumerate(scores)
-        if i != best
-    ):
-        return _Pick(distinct[best], "map", low)
+    others = (x for i, x in enumerate(scores) if i != best)
+    if all(x[0] >= decisive * low and x[0] > low and x[1] >= judge[1] for x in others):
+        return best
     return None
-
-
-def _err(s: _Set, f: _Set, place: Placement, g2: str) -> tuple[float, float]:
-    """Loop error of ``s``'s centre where ``f`` places the groups."""
-    c = s.centre
-    return loop_error(
-        c.T, _placed(place, f.X, g2, c.link.target), _placed(place, f.X, g2, c.link.source)
-    )
 
 
 def _blame(
@@ -622,22 +596,10 @@ def _blame(
     for cyc in cycles:
         if any(h.blamed for h in cyc.links) or not all(h.against for h in cyc.links):
             continue
-        said = []
-        for i in range(len(cyc.links)):
-            a, b = cyc.stations[i], cyc.stations[(i + 1) % len(cyc.stations)]
-            said.append(judge[0](a, b, cyc.rest(i)))
-        if any(x is None for x in said):
-            continue
-        scores = [x for x in said if x is not None]
-        best = min(range(len(scores)), key=lambda i: scores[i][0])
-        low = scores[best][0]
-        if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
-            continue
-        if all(
-            x[0] >= decisive * low and x[0] > low and x[1] >= judge[1]
-            for i, x in enumerate(scores)
-            if i != best
-        ):
+        n = len(cyc.stations)
+        said = [judge[0](cyc.stations[i], cyc.stations[(i + 1) % n], cyc.rest(i)) for i in range(n)]
+        best = _decisive(said, judge, decisive)
+        if best is not None:
             cyc.links[best].blamed = True
             for h in cyc.links:
                 h.against -= 1
@@ -678,6 +640,9 @@ def merge_groups(
     """
     place = Placement({s: s for s in stems}, {s: np.eye(4) for s in stems})
     chosen: dict[int, Chosen] = {}
+    # per pair of groups, its sets and what decides them (without, with lone links): a
+    # merge changes only the pairs of the two groups it joins, a blame every pair
+    memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]] = {}
     while True:
         between: dict[tuple[str, str], list[Hypothesis]] = {}
         for pair, hs in hyps.items():
@@ -689,10 +654,14 @@ def merge_groups(
                     h for h in hs if id(h.link) not in chosen and not h.blamed
                 )
         best: tuple[tuple[float, ...], str, str, _Pick] | None = None
-        sets = {k: _sets(place, *k, items, tol) for k, items in sorted(between.items()) if items}
+        for k, items in sorted(between.items()):
+            if items and k not in memo:
+                memo[k] = (_sets(place, *k, items, tol), {})
         for alone in (False, True):  # what a loop confirms first, then lone trusted links
-            for (g1, g2), found in sets.items():
-                pick = _decide(found, place, g2, tol, ratios, judge, alone)
+            for (g1, g2), (found, decided) in sorted(memo.items()):
+                if alone not in decided:
+                    decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone)
+                pick = decided[alone]
                 if pick is None:
                     continue
                 p = pick.set
@@ -704,13 +673,14 @@ def merge_groups(
                 break
         if best is None:
             if judge is not None and _blame(broken, judge, ratios[1]):
+                memo.clear()
                 continue
             return place, chosen
         _, g1, g2, picked = best
+        memo = {k: v for k, v in memo.items() if g1 not in k and g2 not in k}
         how, pick = picked.how, _medoid(picked.set, place, g1, g2)
         for s in place.members(g2):
             place.pose[s] = pick.X @ place.pose[s]
             place.root[s] = g1
         for h in pick.members:
             chosen[id(h.link)] = Chosen(h, h is pick.centre, how, pick.firmly_confirmed)
-        place.merges.append(how)

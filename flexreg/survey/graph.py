@@ -51,6 +51,7 @@ from flexreg.survey.links import (
     Veto,
     bridges,
     loop_error,
+    walk,
 )
 
 log = logging.getLogger(__name__)
@@ -346,21 +347,8 @@ def _accepted_path(links: list[Link], a: str, b: str) -> list[Link]:
         if e.status == "accepted":
             adj.setdefault(e.target, []).append((e.source, e))
             adj.setdefault(e.source, []).append((e.target, e))
-    back: dict[str, tuple[str, Link] | None] = {a: None}
-    queue = deque([a])
-    while queue and b not in back:
-        x = queue.popleft()
-        for y, e in adj.get(x, []):
-            if y not in back:
-                back[y] = (x, e)
-                queue.append(y)
-    if b not in back:
-        return []
-    path, x = [], b
-    while (step := back[x]) is not None:
-        x, e = step
-        path.append(e)
-    return path
+    steps = walk(adj, b, a)
+    return [e for _, e in steps] if steps else []
 
 
 def _veto_cuts(

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,6 +16,7 @@ from flexreg.registration.check import decisive_full
 from flexreg.registration.config import TWIN_MIN_RATIO, JudgeConfig
 
 Matrix = NDArray[np.float64]
+E = TypeVar("E")
 
 
 @dataclass(frozen=True, eq=False)
@@ -362,6 +363,34 @@ def bridges(edges: list[tuple[str, str]]) -> set[int]:
     return out
 
 
+def walk(
+    adj: Mapping[str, Sequence[tuple[str, E]]], start: str, end: str
+) -> list[tuple[str, E]] | None:
+    """A shortest walk from ``start`` to ``end`` over ``adj`` (station -> (neighbour, edge);
+    fewest steps, ties in adjacency order): its (next station, edge) steps, [] when they are
+    one station, None when no walk joins them.
+
+    >>> walk({"a": [("b", 1)], "b": [("a", 1), ("c", 2)], "c": [("b", 2)]}, "a", "c")
+    [('b', 1), ('c', 2)]
+    """
+    back: dict[str, tuple[str, E] | None] = {end: None}
+    queue = deque([end])
+    while queue and start not in back:
+        x = queue.popleft()
+        for y, e in adj.get(x, ()):
+            if y not in back:
+                back[y] = (x, e)
+                queue.append(y)
+    if start not in back:
+        return None
+    steps: list[tuple[str, E]] = []
+    x = start
+    while (step := back[x]) is not None:
+        steps.append(step)
+        x = step[0]
+    return steps
+
+
 def loop_error(T_link: Matrix, P_target: Matrix, P_source: Matrix) -> tuple[float, float]:
     """How far a link is from the relative pose of two solved stations: degrees, metres."""
     rel = invert(P_target) @ P_source
@@ -388,4 +417,5 @@ __all__ = [
     "alternatives_of",
     "bridges",
     "loop_error",
+    "walk",
 ]

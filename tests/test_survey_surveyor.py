@@ -311,3 +311,22 @@ def test_a_wrong_hand_link_is_refused_with_its_loop_error(project, tmp_path):
     assert translation_error_m(np.asarray(e["T_target_source"]), truth) > 0.9  # as given
     assert e["status"] == "rejected" and e["loop_error_m"] > 0.9, e
     assert "loop" in e["why"]
+
+
+def test_rough_positions_link_the_stations_they_put_near_each_other(project, tmp_path):
+    """File-order neighbours leave station_00 -- station_02 unlinked; rough positions put
+    them within reach, so that pair is linked too, seeded by them."""
+    pos = tmp_path / "positions.csv"
+    _positions(project, pos)
+    out = tmp_path / "out"
+    rc, _, err = _survey(project, out, "--set", "pairs=sequential", "--positions", pos)
+    assert rc in (0, 3), err
+    doc = _doc(out)
+    (added,) = _links(doc, "station_00", "station_02")
+    assert added["origin"] == "positions"
+    assert added["T_target_source"] is not None
+    # without positions the pair is not tried
+    out2 = tmp_path / "out2"
+    rc, _, err = _survey(project, out2, "--set", "pairs=sequential")
+    assert rc in (0, 3), err
+    assert not _links(_doc(out2), "station_00", "station_02")

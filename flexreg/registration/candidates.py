@@ -34,6 +34,7 @@ from flexreg.registration.check import TOLERANCE, Check, Judged
 from flexreg.registration.config import JudgeConfig, RegistrationConfig
 from flexreg.stages.alignment import (
     COLLINEAR_RATIO,
+    Window,
     guided_fit,
     spread_ratio,
     squared_residuals,
@@ -441,6 +442,7 @@ def choose(
     counts: str,
     notes: list[str],
     aliases: Aliases | None = None,
+    window: Window | None = None,
 ) -> Coarse:
     """The coarse transform: the best prior family at a coarse tolerance, then its most
     precise member (with the keypoint estimate around the polished winner) at ``thr / 2``.
@@ -448,7 +450,8 @@ def choose(
     ``counts`` (keypoints and descriptor matches) and ``notes`` (why a route gave no prior)
     end the error messages. The twins of the best prior in repeating structure
     (:func:`alias_candidates` of ``aliases``) then compete too: one that scores better takes
-    its place, and all are judged (the verdict duels the answer against them).
+    its place, and all are judged (the verdict duels the answer against them). With a rough
+    prior's ``window`` only the twins inside it compete.
 
     Raises
     ------
@@ -471,6 +474,8 @@ def choose(
             aliases,
             config.judge,
         )
+        if window is not None:
+            twins = [t for t in twins if window.contains(t[1])[0]]
         b2, okbad2, pol2, judged2, top2 = _best_family([[c] for c in twins], check, polish, thr)
         judged = judged + judged2
         if b2 >= 0 and top2 > top + 0.01:

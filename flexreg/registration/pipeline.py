@@ -20,6 +20,7 @@ background threads exactly as a prepare-then-align would compute them.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -70,11 +71,11 @@ from flexreg.registration.result import RegistrationResult
 from flexreg.registration.settle import Settlement, pin_along, settle
 from flexreg.registration.twins import find_twins
 from flexreg.registration.verdict import decide, reasons
-from flexreg.stages.alignment import consistent_subset, ransac_rigid
+from flexreg.stages.alignment import Window, consistent_subset, ransac_rigid, windowed_fit
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
 from flexreg.stages.overlap import measure_overlap
-from flexreg.stages.priors import PlanView, plan_overlays
+from flexreg.stages.priors import PlanView, plan_overlays, windowed_plan_overlays
 from flexreg.stages.refinement import refine
 from flexreg.stages.refinement.projective import point_information
 
@@ -84,23 +85,42 @@ PlanPriors = tuple[list[NDArray[np.float64]], Aliases]
 
 
 def _plan_priors(
-    target: PlanView | str | None, source: PlanView | str | None, config: RegistrationConfig
+    target: PlanView | str | None,
+    source: PlanView | str | None,
+    config: RegistrationConfig,
+    window: Window | None = None,
 ) -> PlanPriors:
-    """The plan overlays of two plan views (raises the reason a scan has none), and the
-    symmetries of each (when ``config.judge.runs("aliases")``)."""
+    """The plan overlays of two plan views (raises the reason a scan has none), the best ones
+    inside a rough prior's ``window`` first (:func:`~flexreg.stages.priors.
+    windowed_plan_overlays`), and the symmetries of each (when
+    ``config.judge.runs("aliases")``)."""
     for p in (target, source):
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
     overlays = plan_overlays(target, source, hypotheses=config.prior.plan_hypotheses)  # type: ignore[arg-type]
+    if window is not None:
+        overlays = (
+            windowed_plan_overlays(
+                target,  # type: ignore[arg-type]
+                source,  # type: ignore[arg-type]
+                window.T_prior,
+                shift_m=window.shift_m,
+                turn_rad=window.turn_rad,
+                hypotheses=config.prior.plan_hypotheses,
+            )
+            + overlays
+        )
     up = np.asarray(target.levelling.up, dtype=np.float64)  # type: ignore[union-attr]
     if not config.judge.runs("aliases"):
         return overlays, Aliases(up=up)
     return overlays, Aliases(self_symmetries(target), self_symmetries(source), up)
 
 
-def _pair_plan_priors(images: list[RangeImage], config: RegistrationConfig) -> PlanPriors:
+def _pair_plan_priors(
+    images: list[RangeImage], config: RegistrationConfig, window: Window | None = None
+) -> PlanPriors:
     t, s = plans_of(images, config)
-    return _plan_priors(t, s, config)
+    return _plan_priors(t, s, config, window)
 
 
 # ------------------------------------------------------------------------------ per pair
@@ -319,12 +339,15 @@ def _finish(
     run: Run,
     init: NDArray[np.float64] | None = None,
     aliases: Aliases | None = None,
+    window: Window | None = None,
 ) -> RegistrationResult:
     """Candidates, the coarse transform and its checks, the refinement (kept when it scores
     better), the verdict, the result.
 
     ``init`` (a given ``T_target_source``) competes as one more prior; with
-    ``config.icp_only`` it is the only one."""
+    ``config.icp_only`` it is the only one. With a ``window`` (``init`` is rough) the search
+    is bounded by it: the window's own fit (:func:`~flexreg.stages.alignment.windowed_fit`)
+    joins the priors, and the global priors outside the window are dropped."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.measured is not None and vt.slack is not None and vt.normals is not None
     assert vs.sample is not None and vs.polish_sample is not None
@@ -334,15 +357,14 @@ def _finish(
     judge = config.judge
     polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if judge.runs("polish") else None
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
-    given: list[Candidate] = [] if init is None else [("init", init)]
-    priors = given if config.icp_only else given + plan_priors + m.priors
+    priors = _priors(init, plan_priors, m, (kt, ks), window, config)
     with run.stage("estimation"):
-        c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases=aliases)
-    settled, pair = Settlement(c), full_pair_of(views)
-    if judge.runs("settle") and not config.icp_only:
-        with run.stage("settling"):
-            settled = settle(c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), judge)
-        c = settled.coarse
+        c = choose(priors, kt, ks, check, polish, thr, config, counts, m.notes, aliases, window)
+    pair = full_pair_of(views)
+    settled = _settled(
+        c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config, window, run
+    )
+    c = settled.coarse
     T, inl = c.T_target_source, c.inliers
     log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
     require_inliers(c, thr, config.min_inliers, counts)
@@ -424,14 +446,102 @@ def _check_upright(config: RegistrationConfig) -> None:
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.prior.upright!r}")
 
 
+def _settled(
+    c: Coarse,
+    pair: Any,
+    check: Check,
+    normals: Any,
+    polish: Any,
+    thr: float,
+    aliases: Aliases | None,
+    kps: tuple[Keypoints3D, Keypoints3D],
+    config: RegistrationConfig,
+    window: Window | None,
+    run: Run,
+) -> Settlement:
+    """The coarse pose settled along a weak axis or a repeat
+    (:func:`~flexreg.registration.settle.settle`) when the judge runs that step; not taken
+    when it leaves a rough prior's ``window``."""
+    if not config.judge.runs("settle") or config.icp_only:
+        return Settlement(c)
+    with run.stage("settling"):
+        settled = settle(c, pair, check, normals, polish, thr, aliases, kps, config.judge)
+    if window is not None and not window.contains(settled.coarse.T_target_source)[0]:
+        log.info("the settled pose leaves the rough prior's window: not taken")
+        return Settlement(c)
+    return settled
+
+
+def _priors(
+    init: NDArray[np.float64] | None,
+    plan_priors: list[Candidate],
+    m: _Matched,
+    kps: tuple[Keypoints3D, Keypoints3D],
+    window: Window | None,
+    config: RegistrationConfig,
+) -> list[Candidate]:
+    """Every prior that competes: the given ``init``, then the plan overlays and the
+    descriptor prior (``init`` alone with ``config.icp_only``); with a rough prior's
+    ``window``, its own fit (:func:`_windowed`) and only the priors inside it."""
+    given: list[Candidate] = [] if init is None else [("init", init)]
+    if config.icp_only:
+        return given
+    if window is None:
+        return given + plan_priors + m.priors
+    inside = [p for p in plan_priors + m.priors if window.contains(p[1])[0]]
+    return given + _windowed(*kps, window, m.thr, config, m.notes) + inside
+
+
+def _windowed(
+    kt: Keypoints3D,
+    ks: Keypoints3D,
+    window: Window,
+    thr: float,
+    config: RegistrationConfig,
+    notes: list[str],
+) -> list[Candidate]:
+    """The rough prior's own fit (:func:`~flexreg.stages.alignment.windowed_fit`), as a
+    prior ``"window"``; none (and a note why) when no pose inside the window is supported."""
+    fit = windowed_fit(
+        kt.features,
+        ks.features,
+        kt.points,
+        ks.points,
+        window,
+        threshold_m=thr,
+        confidence=config.confidence,
+        max_iterations=config.max_iterations,
+        rng=config.seed,
+    )
+    if fit is None:
+        notes.append("no pose inside the rough prior's window is supported by 3 matches")
+        return []
+    log.info("windowed fit: %d inliers", fit.n_inliers)
+    return [("window", fit.T_target_source)]
+
+
 def _check_init(
-    config: RegistrationConfig, init: NDArray[np.float64] | None
+    config: RegistrationConfig,
+    init: NDArray[np.float64] | None,
+    window: tuple[float, float] | None = None,
 ) -> NDArray[np.float64] | None:
+    if window is not None:
+        if init is None:
+            raise ConfigError("a window needs the rough T_target_source it bounds (init)")
+        shift, turn = window
+        if not (math.isfinite(shift) and shift > 0 and math.isfinite(turn) and turn > 0):
+            raise ConfigError(
+                f"a window needs a positive shift (metres) and turn (radians), got {window}"
+            )
     if init is None:
         if config.icp_only:
             raise ConfigError("icp_only needs an initial T_target_source (init)")
         return None
     return as_transform(init, name="init")
+
+
+def _window(init: NDArray[np.float64] | None, window: tuple[float, float] | None) -> Window | None:
+    return None if window is None or init is None else Window(init, *window)
 
 
 def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
@@ -462,6 +572,7 @@ def register(
     progress: Progress = None,
     init: NDArray[np.float64] | None = None,
     images: Sequence[RangeImage | None] | None = None,
+    window: tuple[float, float] | None = None,
 ) -> RegistrationResult:
     """Register ``source`` onto ``target``: returns ``T_target_source``.
 
@@ -492,6 +603,12 @@ def register(
         with the scans, :func:`flexreg.io.read_working_scan`, which then keeps no grid in the
         scans); each scan then serves only for its points. The call holds them no longer
         than it needs them when the caller keeps no reference of its own.
+    window : (float, float), optional
+        ``init`` is rough: the true pose lies within this shift (metres) of its translation
+        and this turn (radians) of its rotation (two stations' rough positions). The search
+        is then bounded by it: a RANSAC that only accepts poses inside the window
+        (:func:`~flexreg.stages.alignment.windowed_fit`) joins the priors, and priors outside
+        it are dropped; the verdict judges as always.
 
     Raises
     ------
@@ -499,10 +616,11 @@ def register(
         Too few matches or inliers, degenerate (collinear) inliers, or ICP without overlap;
         the message gives the counts. No transform is returned then.
     ConfigError
-        ``config.icp_only`` without ``init``.
+        ``config.icp_only`` without ``init``; a ``window`` without ``init`` or not positive.
     """
     _check_upright(config)
-    init = _check_init(config, init)
+    init = _check_init(config, init, window)
+    win = _window(init, window)
     run = Run(progress)
     scans = [target, source]
     given: list[Scan | RangeImage] = [
@@ -516,7 +634,7 @@ def register(
     roles = [(True, False), (False, True)]
     with _single_threaded(2) as pool:
         plan_job = (
-            pool.submit(run.background("plan views", _pair_plan_priors, images, config))
+            pool.submit(run.background("plan views", _pair_plan_priors, images, config, win))
             if _plan_wanted(config, images) and not config.icp_only
             else None
         )
@@ -528,7 +646,7 @@ def register(
         plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
         views = view_job.result()
-    return _finish(scans, kps, views, matched, plans, config, run, init, aliases)
+    return _finish(scans, kps, views, matched, plans, config, run, init, aliases, win)
 
 
 class Registration:
@@ -611,11 +729,13 @@ class Registration:
         *,
         progress: Progress = None,
         init: NDArray[np.float64] | None = None,
+        window: tuple[float, float] | None = None,
     ) -> RegistrationResult:
         """Register two prepared scans: ``T_target_source`` and the evidence (as
-        :func:`register`, ``init`` included)."""
+        :func:`register`, ``init`` and ``window`` included)."""
         config = self.config
-        init = _check_init(config, init)
+        init = _check_init(config, init, window)
+        win = _window(init, window)
         if target.config != config or source.config != config:
             raise ConfigError("align needs scans prepared with the same configuration")
         run = Run(progress)
@@ -626,7 +746,9 @@ class Registration:
         with _single_threaded(1) as pool:
             plan_job = (
                 pool.submit(
-                    run.background("plan views", _plan_priors, target.plan, source.plan, config)
+                    run.background(
+                        "plan views", _plan_priors, target.plan, source.plan, config, win
+                    )
                 )
                 if _plan_wanted(config, images) and not config.icp_only
                 else None
@@ -634,7 +756,7 @@ class Registration:
             matched = _match(images, kps, config, run)
             plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         scans, views = [target.scan, source.scan], [target.view, source.view]
-        return _finish(scans, kps, views, matched, plans, config, run, init, aliases)
+        return _finish(scans, kps, views, matched, plans, config, run, init, aliases, win)
 
 
 __all__ = [

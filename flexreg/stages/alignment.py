@@ -9,6 +9,8 @@
   adaptive stopping by confidence and a final least-squares fit on all inliers.
 - :func:`guided_fit` — guided matching around a prior and least squares with a shrinking
   inlier radius (the prior-driven alternative to RANSAC).
+- :func:`windowed_fit` — RANSAC bounded by a rough prior (:class:`Window`): putative matches
+  where the prior could put them, hypotheses only inside its window.
 
 All transforms are ``T_target_source``: ``target ~= R @ source + t``.
 """
@@ -25,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from flexreg.errors import DegenerateGeometryError, InputError
 from flexreg.stages.keypoints import Features
-from flexreg.stages.matching import match_guided
+from flexreg.stages.matching import match_guided, match_window
 
 log = logging.getLogger(__name__)
 
@@ -251,6 +253,42 @@ class RansacResult:
         return int(self.inliers.sum())
 
 
+@dataclass(frozen=True, eq=False)
+class Window:
+    """Where a rough prior says the true pose lies: within ``shift_m`` of its translation and
+    ``turn_rad`` of its rotation (e.g. two stations' rough positions: a few sigma of both, and
+    both headings' error).
+
+    Attributes
+    ----------
+    T_prior : (4, 4) float64
+        The prior ``T_target_source``.
+    shift_m : float, metres
+    turn_rad : float, radians
+    """
+
+    T_prior: NDArray[np.float64]
+    shift_m: float
+    turn_rad: float
+
+    def contains(self, Ts: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of the ``(B, 4, 4)`` transforms lie inside the window.
+
+        >>> w = Window(np.eye(4), 1.0, math.radians(10))
+        >>> T = np.stack([np.eye(4)] * 3); T[1, 0, 3] = 1.5
+        >>> c, s = math.cos(0.2), math.sin(0.2); T[2, :2, :2] = [[c, -s], [s, c]]
+        >>> w.contains(T).tolist()
+        [True, False, False]
+        """
+        Ts = np.asarray(Ts, dtype=np.float64).reshape(-1, 4, 4)
+        P = np.asarray(self.T_prior, dtype=np.float64)
+        shift = np.linalg.norm(Ts[:, :3, 3] - P[:3, 3], axis=1)
+        # angle of R_prior^T R from its trace
+        tr = np.einsum("ij,bij->b", P[:3, :3], Ts[:, :3, :3])
+        turn = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+        return (shift <= self.shift_m) & (turn <= self.turn_rad)
+
+
 def _rng(rng: RngLike) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
@@ -266,6 +304,7 @@ def ransac_rigid(
     batch: int = 256,
     min_sample_spread_m: float | None = None,
     rng: RngLike = None,
+    window: Window | None = None,
 ) -> RansacResult:
     """Robust rigid transform from putative 3D correspondences.
 
@@ -293,11 +332,15 @@ def ransac_rigid(
         ``3 * threshold_m``): near-coincident samples give unstable rotations.
     rng : Generator, int or None
         Source of randomness; same seed, same result.
+    window : Window, optional
+        Only hypotheses inside it count (a rough prior's bounds); the final fit too must
+        end inside it.
 
     Raises
     ------
     DegenerateGeometryError
-        Fewer than 3 correspondences, no valid sample, too few inliers, or collinear inliers.
+        Fewer than 3 correspondences, no valid sample, too few inliers, collinear inliers,
+        or (with a window) no hypothesis inside the window.
     """
     Q, P = _pairs(target, source)
     n = len(P)
@@ -331,6 +374,10 @@ def ransac_rigid(
         if not ok.any():
             continue
         Ts = _batched_kabsch(Qs[ok], Ps[ok])
+        if window is not None:
+            Ts = Ts[window.contains(Ts)]
+            if not len(Ts):
+                continue
         res = np.einsum("bij,nj->bni", Ts[:, :3, :3], P) + Ts[:, None, :3, 3] - Q[None]
         d2 = np.einsum("bni,bni->bn", res, res)
         score = np.minimum(d2, th2).sum(1)
@@ -356,6 +403,8 @@ def ransac_rigid(
             break
         T = kabsch(Q[inl], P[inl])
         inl = squared_residuals(T, Q, P) < th2
+    if window is not None and not window.contains(T[None])[0]:
+        raise DegenerateGeometryError("the best fit leaves the prior's window")
     if inl.sum() < max(3, min_inliers):
         raise DegenerateGeometryError(
             f"only {int(inl.sum())} inliers of {n} correspondences within {threshold_m:.4g} m "
@@ -553,3 +602,70 @@ def guided_fit(
     if T is None:
         return None
     return GuidedFit(T, pairs, inl)
+
+
+def windowed_fit(
+    target_features: Features,
+    source_features: Features,
+    target_points: NDArray[np.float64],
+    source_points: NDArray[np.float64],
+    window: Window,
+    *,
+    threshold_m: float,
+    k: int = 3,
+    confidence: float = 0.9999,
+    max_iterations: int = 50_000,
+    rng: RngLike = None,
+) -> RansacResult | None:
+    """RANSAC bounded by a rough prior: the ``k`` nearest descriptors where the prior's
+    window could put each source keypoint (:func:`~flexreg.stages.matching.match_window`),
+    then :func:`ransac_rigid` counting only hypotheses inside the window.
+
+    A prior too rough for :func:`guided_fit` (a sketch's position, a heading off by ten
+    degrees) still rules out every look-alike pose beyond its window (the next bay of a
+    warehouse, a room turned a quarter), which a global search among repeating structure
+    cannot; inside the window the matches decide.
+
+    Parameters
+    ----------
+    target_features, source_features : Features
+    target_points, source_points : (K, 3) float64, metres
+        The keypoints lifted to 3D (NaN where they could not be).
+    window : Window
+    threshold_m : float, metres
+        Inlier distance.
+    k : int
+        Candidate partners per source keypoint.
+    confidence, max_iterations, rng
+        As :func:`ransac_rigid`.
+
+    Returns
+    -------
+    RansacResult or None
+        None when no pose inside the window is supported by at least 3 non-collinear matches.
+    """
+    pairs = match_window(
+        target_features,
+        source_features,
+        target_points,
+        source_points,
+        window.T_prior,
+        shift_m=window.shift_m,
+        turn_rad=window.turn_rad,
+        k=k,
+    )
+    if len(pairs) < 3:
+        return None
+    try:
+        return ransac_rigid(
+            target_points[pairs[:, 0]],
+            source_points[pairs[:, 1]],
+            threshold_m=threshold_m,
+            confidence=confidence,
+            max_iterations=max_iterations,
+            rng=rng,
+            window=window,
+        )
+    except DegenerateGeometryError as e:
+        log.debug("windowed fit: %s", e)
+        return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -156,3 +157,68 @@ def match_guided(
     o = o[uniq]
     out = np.column_stack([best_t[o], best_s[o]]).astype(np.int64)
     return out[np.argsort(out[:, 1], kind="stable")]
+
+
+def match_window(
+    target: Features,
+    source: Features,
+    target_xyz: NDArray[np.float64],
+    source_xyz: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    *,
+    shift_m: float,
+    turn_rad: float,
+    k: int = 3,
+) -> NDArray[np.int64]:
+    """Putative matches under a rough prior: each source keypoint with the ``k`` target
+    keypoints of nearest descriptor among those where the prior could have put it.
+
+    A pose within ``shift_m`` of the prior's translation and ``turn_rad`` of its rotation
+    moves a source point at range ``r`` (from the source's origin) at most
+    ``shift_m + 2 sin(turn_rad / 2) r`` from where the prior maps it; the candidates are the
+    target keypoints within that distance. No ratio test: among look-alike structure the
+    right partner is rarely the clear best, so the ``k`` best all go to a robust fit that
+    only accepts poses inside the window (:func:`flexreg.stages.alignment.windowed_fit`).
+
+    Parameters
+    ----------
+    target, source : Features
+    target_xyz, source_xyz : (Kt, 3), (Ks, 3) float64, metres
+        The keypoints' 3D points in their scan frames (NaN: never matched).
+    T_target_source : (4, 4) float64
+        The rough prior.
+    shift_m : float, metres
+    turn_rad : float, radians
+        How far the true pose may be from the prior: translation and rotation angle.
+    k : int
+        Candidates kept per source keypoint.
+
+    Returns
+    -------
+    (Q, 2) int64
+        ``[target index, source index]``, sorted by source index then descriptor distance.
+    """
+    okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
+    oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
+    if len(okt) == 0 or len(oks) == 0 or k < 1:
+        return np.zeros((0, 2), dtype=np.int64)
+    T = np.asarray(T_target_source, dtype=np.float64)
+    q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
+    r = shift_m + 2.0 * math.sin(min(turn_rad, math.pi) / 2.0) * np.linalg.norm(
+        source_xyz[oks], axis=1
+    )
+    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
+    cand = cKDTree(target_xyz[okt]).query_ball_point(q, r)
+    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))
+    if lens.sum() == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    si = np.repeat(oks, lens)
+    ti = okt[np.fromiter((j for c in cand for j in c), dtype=np.int64, count=int(lens.sum()))]
+    d = descriptor_distances(target, source, ti, si)
+    order = np.lexsort((ti, d, si))  # per source: nearest descriptor first (ties: lower index)
+    si, ti = si[order], ti[order]
+    starts = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
+    rank = np.arange(len(si)) - np.repeat(starts, np.diff(np.r_[starts, len(si)]))
+    keep = rank < k
+    return np.column_stack([ti[keep], si[keep]]).astype(np.int64)

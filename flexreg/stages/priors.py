@@ -540,14 +540,7 @@ def plan_overlays(
     )
     plans = refine_plan_matches(target.fine, source.fine, plans, yaw_range_rad=math.radians(1.0))
     dz = height_offset(target.coarse, source.coarse)
-    out = []
-    for m in plans:
-        M = np.eye(4)
-        M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
-        M[:3, 3] = (m.t_xy[0], m.t_xy[1], dz)
-        Lt, Ls = np.eye(4), np.eye(4)
-        Lt[:3, :3], Ls[:3, :3] = lt.R_level, ls.R_level
-        out.append(invert(Lt) @ M @ Ls)
+    out = [_unlevelled(m, dz, target, source) for m in plans]
     log.info(
         "plan overlays: %s (tilts %.2f / %.2f deg, dz %.3f m)",
         ", ".join(f"{math.degrees(m.yaw_rad):.1f} deg score {m.score:.0f}" for m in plans),
@@ -556,6 +549,110 @@ def plan_overlays(
         dz,
     )
     return out
+
+
+def _levellers(
+    target: PlanView, source: PlanView
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    Lt, Ls = np.eye(4), np.eye(4)
+    Lt[:3, :3], Ls[:3, :3] = target.levelling.R_level, source.levelling.R_level
+    return Lt, Ls
+
+
+def _unlevelled(m: PlanMatch, dz: float, target: PlanView, source: PlanView) -> NDArray[np.float64]:
+    """``T_target_source`` of a plan overlay (yaw and offset of the levelled plans)."""
+    M = np.eye(4)
+    M[:3, :3] = rotation_about_axis([0.0, 0.0, 1.0], m.yaw_rad)
+    M[:3, 3] = (m.t_xy[0], m.t_xy[1], dz)
+    Lt, Ls = _levellers(target, source)
+    return invert(Lt) @ M @ Ls
+
+
+def _window_peaks(
+    target: TopView, source: TopView, seed: PlanMatch, turn_rad: float, shift_m: float, k: int
+) -> list[PlanMatch]:
+    """The ``k`` best distinct overlays of ``source`` on ``target`` with yaw within
+    ``turn_rad`` of ``seed``'s (1 degree steps) and offset within ``shift_m`` of its: local
+    maxima of the correlation over (yaw, offset), at least 1 m or 3 degrees apart."""
+    c = target.cell_m
+    rt = int(np.abs(target.cells).max()) + 1
+    w = math.ceil(shift_m / c) + 1
+    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
+    shape = (n, n)
+    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, rt + w), 1.0)
+    FT = np.conj(fft.rfft2(T.astype(np.float32)))
+    near = np.arange(-w, w + 1) % n
+    step = math.radians(1.0)
+    yaws = seed.yaw_rad + np.arange(-turn_rad, turn_rad + 1e-12, step)
+    t0 = np.asarray(seed.t_xy)
+    vol = np.empty((len(yaws), 2 * w + 1, 2 * w + 1))
+    for b0 in range(0, len(yaws), 8):
+        ys = np.ascontiguousarray(yaws[b0 : b0 + 8])
+        R = _rotated_rasters(
+            source.xy, source.values, ys, float(t0[0]), float(t0[1]), float(c), rt + w, n, rt
+        )
+        for i, corr in enumerate(_correlation(R, FT, shape)):
+            vol[b0 + i] = corr[np.ix_(near, near)]
+    d = np.arange(-w, w + 1) * c
+    inside = np.hypot(d[None, :], d[:, None]) <= shift_m
+    vol[:, ~inside] = -np.inf
+    size = (3, 2 * math.ceil(1.0 / c) + 1, 2 * math.ceil(1.0 / c) + 1)
+    peak = (vol == ndimage.maximum_filter(vol, size=size, mode="nearest")) & np.isfinite(vol)
+    idx = np.argwhere(peak)
+    idx = idx[np.argsort(-vol[peak], kind="stable")]
+    out: list[PlanMatch] = []
+    for yi, iy, ix in idx[:k]:
+        # the source at x + d lies on the target at x: move it by -d
+        t = (t0[0] - (ix - w) * c, t0[1] - (iy - w) * c)
+        out.append(PlanMatch(_wrap_angle(float(yaws[yi])), t, float(vol[yi, iy, ix])))
+    return out
+
+
+def windowed_plan_overlays(
+    target: PlanView,
+    source: PlanView,
+    T_prior: NDArray[np.float64],
+    *,
+    shift_m: float,
+    turn_rad: float,
+    hypotheses: int = 3,
+) -> list[NDArray[np.float64]]:
+    """The best plan overlays inside a rough prior's window, best first: yaws within
+    ``turn_rad`` of the prior's (1 degree steps, on the coarse plans) and offsets within
+    ``shift_m`` of its, ``hypotheses`` distinct local maxima of the correlation, each refined
+    on the fine plans as :func:`plan_overlays` refines its overlays.
+
+    Where the plans repeat (a row of bays, look-alike rooms) the global overlays may all be a
+    bay off; a prior that rules the other bays out (rough positions of both stations) leaves
+    the few overlays it allows, for the dense check to judge.
+
+    Parameters
+    ----------
+    target, source : PlanView
+    T_prior : (4, 4) float64
+        The rough ``T_target_source``.
+    shift_m : float, metres
+    turn_rad : float, radians
+        How far the true pose may be from the prior.
+    hypotheses : int
+        Overlays kept.
+
+    Returns
+    -------
+    list of (4, 4) float64
+        ``T_target_source`` of each overlay.
+    """
+    Lt, Ls = _levellers(target, source)
+    M0 = Lt @ np.asarray(T_prior, dtype=np.float64) @ invert(Ls)
+    seed = PlanMatch(math.atan2(M0[1, 0], M0[0, 0]), (float(M0[0, 3]), float(M0[1, 3])), 0.0)
+    plans = _window_peaks(target.coarse, source.coarse, seed, turn_rad, shift_m, hypotheses)
+    plans = refine_plan_matches(target.fine, source.fine, plans, yaw_range_rad=math.radians(1.0))
+    dz = height_offset(target.coarse, source.coarse)
+    log.info(
+        "plan overlays in the window: %s",
+        ", ".join(f"{math.degrees(m.yaw_rad):.1f} deg score {m.score:.0f}" for m in plans),
+    )
+    return [_unlevelled(m, dz, target, source) for m in plans]
 
 
 def upright_priors(
@@ -603,4 +700,5 @@ __all__ = [
     "top_view",
     "top_views",
     "upright_priors",
+    "windowed_plan_overlays",
 ]

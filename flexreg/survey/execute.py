@@ -310,18 +310,24 @@ def _io_error(e: OSError) -> InputError:
 
 
 def link_cache_path(
-    target_file: str, source_file: str, *, seed: NDArray[np.float64] | None = None
+    target_file: str,
+    source_file: str,
+    *,
+    seed: NDArray[np.float64] | None = None,
+    window: tuple[float, float] | None = None,
 ) -> Path:
     """Where a link's result is cached: beside the prepared stations, named by both
     stations' cache keys (file content, setup and configuration) and the pose that seeded
-    it, if any (the stored poses', a hand link's, the rough positions'): the first 12 hex
-    digits of the SHA-256 of its 16 float64 values, so that another seed is registered
-    again and the same one is reused."""
+    it, if any (the stored poses', a hand link's, the rough positions'), with its window
+    when rough: the first 12 hex digits of the SHA-256 of their float64 values, so that
+    another seed is registered again and the same one is reused."""
     t = Path(target_file).name.removesuffix(PREPARED_SUFFIX)
     s = Path(source_file).name.removesuffix(PREPARED_SUFFIX)
     tag = ""
     if seed is not None:
         values = np.ascontiguousarray(seed, dtype="<f8").tobytes()
+        if window is not None:
+            values += np.asarray(window, dtype="<f8").tobytes()
         tag = f".seed-{hashlib.sha256(values).hexdigest()[:12]}"
     return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.npz"
 
@@ -386,15 +392,18 @@ def align_link(
     it wins only when it explains the data better than what the images found (the link
     cache's name then says so). The link keeps the registration's other poses that fit
     almost as well (:func:`~flexreg.survey.links.alternatives_of`); one given by hand is
-    vouched for (:attr:`~flexreg.survey.links.Link.vouched`)."""
-    cache = link_cache_path(target_file, source_file, seed=init)
+    vouched for (:attr:`~flexreg.survey.links.Link.vouched`). A rough seed (the candidate's
+    ``window``: rough positions) bounds the search instead: only poses inside its window
+    compete."""
+    window = cand.window if init is not None else None
+    cache = link_cache_path(target_file, source_file, seed=init, window=window)
     hit = _cached_link(cache, cand)
     if hit is not None:
         return hit
     t0 = time.perf_counter()
     try:
         r = Registration(config).align(
-            load_prepared(target_file), load_prepared(source_file), init=init
+            load_prepared(target_file), load_prepared(source_file), init=init, window=window
         )
     except FlexregError as e:
         link = Link(

@@ -70,6 +70,10 @@ class Candidate:
     T_target_source : (4, 4) float64 or None
         The pose a ``hand`` link is given: it seeds the registration (refined and checked
         like any other answer, :func:`flexreg.survey.execute.align_link`); None otherwise.
+    window : (float, float) or None
+        When the seed is rough (two stations' rough positions): how far off it may be, a
+        shift in metres and a turn in radians; the registration then searches only there
+        (:func:`flexreg.registration.pipeline.register`, ``window``).
     """
 
     target: str
@@ -77,6 +81,7 @@ class Candidate:
     origin: str
     place_score: float | None = None
     T_target_source: NDArray[np.float64] | None = field(default=None, compare=False, repr=False)
+    window: tuple[float, float] | None = field(default=None, compare=False)
 
     @property
     def key(self) -> frozenset[str]:

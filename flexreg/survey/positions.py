@@ -228,19 +228,23 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
 
 
 def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link]:
-    """The links between two stations with positions that the positions could not settle for
-    want of a pose near what they predict: failed, uncertain for a reason other than
-    ambiguity, or with no pose within :data:`AGREE_SIGMAS` (not those where several agree:
-    another seed would not tell them apart); refused ones too. Hand links are left alone."""
+    """The links between two stations with positions that a registration seeded by them
+    (and bounded by their window, :func:`window_of`) may settle: every one that is not
+    confident with its answer near what they predict (within :data:`AGREE_SIGMAS`) -- failed,
+    uncertain, or placing the source elsewhere. Hand links are left alone."""
     out = []
     for e in links:
-        if e.target not in positions or e.source not in positions or e.vouched:
-            continue  # a hand link is vouched for
-        if e.T_target_source is None or not _fitting(e):
-            out.append(e)
+        if e.target not in positions or e.source not in positions or e.vouched == "hand":
             continue
-        if choose(e.poses, positions[e.target], positions[e.source])[1].startswith("no pose"):
-            out.append(e)
+        if (
+            e.T_target_source is not None
+            and e.status != "failed"
+            and e.verdict == "confident"
+            and sigmas_off(e.T_target_source, positions[e.target], positions[e.source])
+            <= AGREE_SIGMAS
+        ):
+            continue
+        out.append(e)
     return out
 
 
@@ -302,6 +306,43 @@ def predicted_T_target_source(target: Position, source: Position) -> Matrix:
     return invert(T_site_station(target)) @ T_site_station(source)
 
 
+def window_of(target: Position, source: Position) -> tuple[float, float] | None:
+    """How far the true ``T_target_source`` may be from what two rough positions predict
+    (:func:`predicted_T_target_source`): :data:`AGREE_SIGMAS` of both positions' sigma
+    (metres) and :data:`AGREE_HEADING_DEG` (radians), the bounds within which they agree
+    with a link (:func:`sigmas_off`). None when a heading is unknown: the predicted offset's
+    direction is then unknown too, and the link is only seeded.
+
+    >>> a = Position(np.zeros(3), False, 0.0, 1.0)
+    >>> shift, turn = window_of(a, a)
+    >>> round(shift, 3), round(math.degrees(turn), 1)
+    (4.243, 30.0)
+    """
+    if target.heading_rad is None or source.heading_rad is None:
+        return None
+    return AGREE_SIGMAS * math.hypot(target.sigma_m, source.sigma_m), math.radians(
+        AGREE_HEADING_DEG
+    )
+
+
+def near_pairs(
+    stems: list[str], positions: Mapping[str, Position], reach_m: float
+) -> list[tuple[str, str]]:
+    """Pairs of stations whose rough positions are within ``reach_m`` of each other, nearest
+    first (in the order of ``stems`` within a pair): the pairs a surveyor would link from a
+    sketch, whatever the place recognition ranks."""
+    order = {s: i for i, s in enumerate(stems)}
+    have = [s for s in stems if s in positions]
+    near = []
+    for i, a in enumerate(have):
+        for b in have[i + 1 :]:
+            d = float(np.linalg.norm(positions[a].xyz[:2] - positions[b].xyz[:2]))
+            if d <= reach_m:
+                near.append((d, order[a], order[b], a, b))
+    near.sort()
+    return [(a, b) for *_, a, b in near]
+
+
 def T_site_station(p: Position) -> Matrix:
     """The rough pose of a station in the site frame (levelled; heading 0 when unknown)."""
     T = np.eye(4)
@@ -321,10 +362,12 @@ __all__ = [
     "T_site_station",
     "apply_positions",
     "choose",
+    "near_pairs",
     "predicted_T_target_source",
     "read_positions_csv",
     "sigmas_off",
     "site_from_positions",
     "stored_positions",
     "unsettled",
+    "window_of",
 ]

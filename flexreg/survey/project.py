@@ -65,11 +65,13 @@ from flexreg.survey.positions import (
     AGREE_SIGMAS,
     Position,
     apply_positions,
+    near_pairs,
     predicted_T_target_source,
     read_positions_csv,
     site_from_positions,
     stored_positions,
     unsettled,
+    window_of,
 )
 from flexreg.survey.stations import (
     Prepared,
@@ -405,28 +407,38 @@ def _positioned(
     config: SurveyConfig,
     priors: dict[str, Position],
     progress: Progress,
+    new_pairs: tuple[list[str], int] = ([], 0),
 ) -> list[Link]:
-    """Rough positions decide each link's pose (:func:`~flexreg.survey.positions.
-    apply_positions`); a link they leave open for want of a pose near what they predict (or
-    that failed) is registered again seeded with that pose, and the new result replaces it
-    (a re-run reuses both from the cache)."""
-    apply_positions(found, priors)
+    """Rough positions seed links and decide each link's pose (:func:`~flexreg.survey.
+    positions.apply_positions`). The pairs of stations they put within ``proximity_m`` of
+    each other that no link joins yet are linked (``new_pairs``: the project's stems and
+    at most how many), and every
+    link they do not find confident near what they predict
+    (:func:`~flexreg.survey.positions.unsettled`) is registered again: both seeded with
+    the pose the positions predict and bounded by their window (:func:`~flexreg.survey.
+    positions.window_of`), the new result replacing the old (a re-run reuses both from
+    the cache)."""
     redo = unsettled(found, priors)
-    if not redo:
+    tried = {frozenset((e.target, e.source)) for e in found}
+    stems, budget = new_pairs
+    new = [
+        (a, b)
+        for a, b in near_pairs(stems, priors, config.proximity_m)
+        if frozenset((a, b)) not in tried
+    ][: max(0, budget)]
+    if not redo and not new:
+        apply_positions(found, priors)
         return found
-    cands = [
-        Candidate(
-            e.target,
-            e.source,
-            e.origin,
-            e.place_score,
-            predicted_T_target_source(priors[e.target], priors[e.source]),
-        )
-        for e in redo
-    ]
-    seeded = _register(client, cands, stores[0], config, progress, stores[1], "positions")
-    again = {id(e): n for e, n in zip(redo, seeded, strict=True)}
-    found = [again.get(id(e), e) for e in found]
+
+    def seeded(t: str, s: str, origin: str, score: float | None) -> Candidate:
+        T = predicted_T_target_source(priors[t], priors[s])
+        return Candidate(t, s, origin, score, T, window_of(priors[t], priors[s]))
+
+    cands = [seeded(e.target, e.source, e.origin, e.place_score) for e in redo]
+    cands += [seeded(a, b, "positions", None) for a, b in new]
+    again = _register(client, cands, stores[0], config, progress, stores[1], "positions")
+    by_id = {id(e): n for e, n in zip(redo, again, strict=False)}
+    found = [by_id.get(id(e), e) for e in found] + again[len(redo) :]
     apply_positions(found, priors)
     return found
 
@@ -658,7 +670,8 @@ def _link_rounds(
     priors = given.positions or stored_positions(stored, config.stored_sigma_m)
     found = _register(client, cands, files, config, progress, stored)
     glances, judge = _glances(client, stems, files, config, progress)
-    found = _positioned(client, found, stores, config, priors, progress)
+    budget = max_links - len(found) if given.automatic else 0  # a pairs CSV: its pairs only
+    found = _positioned(client, found, stores, config, priors, progress, (stems, budget))
     sol = solve_graph(stems, found, config, reference=reference, judge=judge)
     auto = given.automatic and config.pairs == "auto"
     for _ in range(config.proximity_rounds if auto else 0):

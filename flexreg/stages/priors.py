@@ -260,11 +260,13 @@ def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[An
 
 
 def _yaw_peaks(
-    target: TopView, source: TopView, yaws: NDArray[Any], cell_m: float
-) -> list[tuple[float, float, float]]:
-    """For each yaw, the best correlation of the rotated source plan with the target plan over
-    all offsets (FFT), rasterised at ``cell_m``: ``(score, t_x, t_y)`` per yaw, the offset
-    refined to sub-cell by parabolas."""
+    target: TopView, source: TopView, yaws: NDArray[Any], cell_m: float, peaks: int = 1
+) -> list[list[tuple[float, float, float]]]:
+    """For each yaw, the best correlations of the rotated source plan with the target plan
+    over all offsets (FFT), rasterised at ``cell_m``: the ``peaks`` highest local maxima at
+    least :data:`PEAK_SEPARATION_M` apart, best first, as ``(score, t_x, t_y)``, each offset
+    refined to sub-cell by parabolas. More than one peak per yaw is what a row of bays needs:
+    at the right turn, the overlay a bay off may correlate better than the true one."""
     c = cell_m
     tcells = np.floor(target.xy / c + 0.5).astype(np.int64)
     rt = int(np.abs(tcells).max()) + 1
@@ -288,14 +290,25 @@ def _yaw_peaks(
             -1,
         )
         for corr in _correlation(S, FT, shape):
-            iy, ix = divmod(int(np.argmax(corr)), size)
-            best = float(corr[iy, ix])
-            fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
-            fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
-            dx = (ix if ix <= 2 * rs else ix - size) + fx
-            dy = (iy if iy <= 2 * rs else iy - size) + fy
-            # source cell s sits at raster s + rs, target cell t at t + rt: t = s + (rs - rt - d)
-            out.append((best, (rs - rt - dx) * c, (rs - rt - dy) * c))
+            if peaks == 1:
+                tops = [divmod(int(np.argmax(corr)), size)]
+            else:
+                sep = 2 * math.ceil(PEAK_SEPARATION_M / c) + 1
+                top = (corr == ndimage.maximum_filter(corr, size=sep, mode="wrap")) & (corr > 0)
+                flat = np.flatnonzero(top)
+                flat = flat[np.argsort(-corr.ravel()[flat], kind="stable")][:peaks]
+                tops = [divmod(int(f), size) for f in flat] or [divmod(int(np.argmax(corr)), size)]
+            row = []
+            for iy, ix in tops:
+                best = float(corr[iy, ix])
+                fy = _parabola(corr[(iy - 1) % size, ix], best, corr[(iy + 1) % size, ix])
+                fx = _parabola(corr[iy, (ix - 1) % size], best, corr[iy, (ix + 1) % size])
+                dx = (ix if ix <= 2 * rs else ix - size) + fx
+                dy = (iy if iy <= 2 * rs else iy - size) + fy
+                # source cell s sits at raster s + rs, target cell t at t + rt:
+                # t = s + (rs - rt - d)
+                row.append((best, (rs - rt - dx) * c, (rs - rt - dy) * c))
+            out.append(row)
     return out
 
 
@@ -307,6 +320,7 @@ def match_top_views(
     top_k: int = 5,
     min_separation_m: float = 1.0,
     coarse_candidates: int = 8,
+    peaks: int = 1,
 ) -> list[PlanMatch]:
     """Best yaw / horizontal offsets overlaying ``source``'s plan onto ``target``'s.
 
@@ -314,8 +328,10 @@ def match_top_views(
     cross-correlation with the target plan over all offsets is one FFT product. This runs
     first on plans of twice the cell size (a quarter of the FFT work), then at the plans' own
     cell for the ``coarse_candidates`` best yaws there (local maxima over yaw) and their two
-    neighbouring yaws. The ``top_k`` best distinct peaks (different yaw or more than
-    ``min_separation_m`` apart) are returned, each refined to sub-cell offset and sub-step yaw
+    neighbouring yaws, where each yaw gives its ``peaks`` best offsets (:func:`_yaw_peaks`).
+    The ``top_k`` best distinct peaks (different yaw or more than ``min_separation_m`` apart;
+    with several peaks per yaw, also the same yaw more than :data:`PEAK_SEPARATION_M` apart)
+    are returned, each refined to sub-cell offset and, the best of its yaw, to sub-step yaw
     by parabolas through the peak's neighbours.
     """
     c = target.cell_m
@@ -323,22 +339,26 @@ def match_top_views(
         raise ValueError("plans must share their cell size")
     n = max(1, round(2 * math.pi / yaw_step_rad))
     yaws = np.arange(n, dtype=np.float64) * (2 * math.pi / n)
-    coarse = np.array([p[0] for p in _yaw_peaks(target, source, yaws, 2 * c)])
+    coarse = np.array([p[0][0] for p in _yaw_peaks(target, source, yaws, 2 * c)])
     # local maxima over the yaw circle, best first
     left, right = np.roll(coarse, 1), np.roll(coarse, -1)
     maxima = np.flatnonzero((coarse >= left) & (coarse >= right))
     maxima = maxima[np.argsort(-coarse[maxima], kind="stable")][:coarse_candidates]
     ks = sorted({int((k + d) % n) for k in maxima for d in (-1, 0, 1)})
-    fine = dict(zip(ks, _yaw_peaks(target, source, yaws[ks], c), strict=True))
+    fine = dict(zip(ks, _yaw_peaks(target, source, yaws[ks], c, peaks), strict=True))
     out: list[PlanMatch] = []
-    for k in sorted(fine, key=lambda k: (-fine[k][0], k)):
-        best, tx, ty = fine[k]
+    found = [(k, j) for k in fine for j in range(len(fine[k]))]
+    for k, j in sorted(found, key=lambda kj: (-fine[kj[0]][kj[1]][0], kj)):
+        best, tx, ty = fine[k][j]
         prev, nxt = fine.get((k - 1) % n), fine.get((k + 1) % n)
         yaw = float(yaws[k])
-        if prev is not None and nxt is not None:
-            yaw += _parabola(prev[0], best, nxt[0]) * yaw_step_rad
+        if j == 0 and prev is not None and nxt is not None:
+            yaw += _parabola(prev[0][0], best, nxt[0][0]) * yaw_step_rad
         dup = any(
-            abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
+            (
+                abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
+                and (peaks == 1 or math.hypot(tx - m.t_xy[0], ty - m.t_xy[1]) < PEAK_SEPARATION_M)
+            )
             or (
                 math.hypot(tx - m.t_xy[0], ty - m.t_xy[1]) < min_separation_m
                 and abs(_wrap_angle(yaw - m.yaw_rad)) < math.radians(10.0)
@@ -467,6 +487,12 @@ def height_offset(target: TopView, source: TopView, *, max_offset_m: float = 5.0
 #: column of larger images); 300 k at 1024 x 512 already lost the far structure that places a
 #: distant station
 PLAN_PIXELS = 1_000_000
+#: overlays at one turn count as distinct when their offsets are this far apart, metres: less
+#: than a bay of a warehouse or a room of a building, more than a plan cell's uncertainty
+PEAK_SEPARATION_M = 2.0
+#: overlays kept per turn by :func:`plan_overlays` (the true one and the look-alikes a bay or
+#: a room off on either side)
+PEAKS_PER_TURN = 3
 
 
 @dataclass(eq=False)
@@ -527,8 +553,9 @@ def plan_overlays(
     the pair half of :func:`upright_priors`.
 
     The coarse plans are overlaid by FFT correlation over yaw (2 degree steps, 6 coarse yaw
-    candidates, ``hypotheses`` overlays kept), the fine plans refine each over +-1 degree, and
-    the height offset comes from the horizontal surfaces.
+    candidates, :data:`PEAKS_PER_TURN` offsets each, ``hypotheses`` overlays kept), the fine
+    plans refine each over +-1 degree, and the height offset comes from the horizontal
+    surfaces.
     """
     lt, ls = target.levelling, source.levelling
     plans = match_top_views(
@@ -537,6 +564,7 @@ def plan_overlays(
         yaw_step_rad=math.radians(2.0),
         top_k=hypotheses,
         coarse_candidates=6,
+        peaks=PEAKS_PER_TURN,
     )
     plans = refine_plan_matches(target.fine, source.fine, plans, yaw_range_rad=math.radians(1.0))
     dz = height_offset(target.coarse, source.coarse)
@@ -685,6 +713,8 @@ def upright_priors(
 
 __all__ = [
     "MAX_TILT_RAD",
+    "PEAKS_PER_TURN",
+    "PEAK_SEPARATION_M",
     "PLAN_PIXELS",
     "Levelling",
     "PlanMatch",

@@ -54,7 +54,11 @@ Candidate = tuple[str, NDArray[np.float64]]
 #: keypoint inliers): plan-view overlays, a given initial transform and the aliases of the
 #: best prior (:func:`alias_candidates`), and the poses slid along a weak axis or a repeat
 #: (:mod:`flexreg.registration.settle`)
-DENSE_PRIORS = ("plan", "init", "alias", "sweep")
+DENSE_PRIORS = ("plan", "window-plan", "init", "alias", "sweep")
+
+#: the prior polished from afar (:func:`polisher`, ``wide``): a plan overlay inside a rough
+#: prior's window, which a look-alike elsewhere did not outscore
+WIDE_PRIOR = "window-plan"
 
 #: most turns and most shifts of a plan view kept as its symmetries (:func:`self_symmetries`),
 #: and the smallest share of the identity's overlay score they must reach
@@ -145,29 +149,40 @@ class Coarse:
 
 
 def polisher(
-    target: RangeImage, normals: NDArray[np.float32], sample: NDArray[np.float64], thr: float
-) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    target: RangeImage,
+    normals: NDArray[np.float32],
+    sample: NDArray[np.float64],
+    thr: float,
+    wide_m: float = 0.5,
+) -> Callable[..., NDArray[np.float64]]:
     """A quick local ICP of a small even sample of the source (``sample``, about 5000 points)
     against the target's range image (projective,
     :func:`flexreg.stages.refinement.projective.projective_icp`), for judging candidates.
 
+    ``polish(T)`` associates within ``3 thr``; ``polish(T, wide=True)`` first within
+    ``wide_m`` and then half as far each round down to it, for a candidate known only to
+    that accuracy (a plan overlay inside a rough prior's window: about a plan cell, so
+    ``wide_m`` is two plan cells).
+
     ``target`` must have a camera model; ``normals`` are its
     :func:`~flexreg.stages.normals.grid_normals`."""
 
-    def polish(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    def icp(T: NDArray[np.float64], d: float) -> NDArray[np.float64]:
         try:
             r = projective_icp(
-                target,
-                sample,
-                T,
-                max_distance_m=3 * thr,
-                normals=normals,
-                max_iterations=15,
+                target, sample, T, max_distance_m=d, normals=normals, max_iterations=15,
                 tolerance=1e-4,
-            )
+            )  # fmt: skip
         except RegistrationError:
             return T
         return r.T_target_source
+
+    def polish(T: NDArray[np.float64], wide: bool = False) -> NDArray[np.float64]:
+        d = wide_m if wide else 3 * thr
+        while d > 3 * thr:
+            T = icp(T, d)
+            d /= 2
+        return icp(T, 3 * thr)
 
     return polish
 
@@ -222,7 +237,7 @@ def families(
 def _best_family(
     fams: list[list[Candidate]],
     check: Check,
-    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    polish: Callable[..., NDArray[np.float64]] | None,
     thr: float,
 ) -> tuple[int, tuple[float, float], NDArray[np.float64] | None, list[Judged], float]:
     """Index of the winning family (-1 when none), its (consistent, conflicting) fractions,
@@ -234,7 +249,7 @@ def _best_family(
         for origin, T in fam:
             # judged after a quick local ICP: a right but rough candidate improves, a wrong one
             # stays wrong
-            Tj = polish(T) if polish is not None else T
+            Tj = polish(T, wide=origin == WIDE_PRIOR) if polish is not None else T
             score, ok, bad = check.judge(Tj, *TOLERANCE.free(thr))
             moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
@@ -436,7 +451,7 @@ def choose(
     kt: Keypoints3D,
     ks: Keypoints3D,
     check: Check,
-    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    polish: Callable[..., NDArray[np.float64]] | None,
     thr: float,
     config: RegistrationConfig,
     counts: str,
@@ -489,6 +504,9 @@ def choose(
             f"{counts}" + (f"; {'; '.join(notes)}" if notes else "")
         )
     finalists = list(fams[best])
+    if polished is not None and fams[best][0][0] == WIDE_PRIOR:
+        # polished from afar, it is the candidate: the plan overlay itself is a cell off
+        finalists.append((WIDE_PRIOR, polished))
     if polished is not None:
         # the keypoint estimate around the polished winner: a candidate that was far off but
         # converged under the quick ICP still gets a feature-based coarse transform

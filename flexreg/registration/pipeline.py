@@ -81,7 +81,9 @@ from flexreg.stages.refinement.projective import point_information
 
 log = logging.getLogger(__name__)
 
-PlanPriors = tuple[list[NDArray[np.float64]], Aliases]
+#: the plan overlays (origin ``"plan"``, or ``"window-plan"`` inside a rough prior's window)
+#: and the scans' symmetries
+PlanPriors = tuple[list[Candidate], Aliases]
 
 
 def _plan_priors(
@@ -97,19 +99,20 @@ def _plan_priors(
     for p in (target, source):
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
-    overlays = plan_overlays(target, source, hypotheses=config.prior.plan_hypotheses)  # type: ignore[arg-type]
+    overlays: list[Candidate] = [
+        ("plan", T)
+        for T in plan_overlays(target, source, hypotheses=config.prior.plan_hypotheses)  # type: ignore[arg-type]
+    ]
     if window is not None:
-        overlays = (
-            windowed_plan_overlays(
-                target,  # type: ignore[arg-type]
-                source,  # type: ignore[arg-type]
-                window.T_prior,
-                shift_m=window.shift_m,
-                turn_rad=window.turn_rad,
-                hypotheses=config.prior.plan_hypotheses,
-            )
-            + overlays
+        inside = windowed_plan_overlays(
+            target,  # type: ignore[arg-type]
+            source,  # type: ignore[arg-type]
+            window.T_prior,
+            shift_m=window.shift_m,
+            turn_rad=window.turn_rad,
+            hypotheses=config.prior.plan_hypotheses,
         )
+        overlays = [("window-plan", T) for T in inside] + overlays
     up = np.asarray(target.levelling.up, dtype=np.float64)  # type: ignore[union-attr]
     if not config.judge.runs("aliases"):
         return overlays, Aliases(up=up)
@@ -219,7 +222,7 @@ def _plan_candidates(
         notes.append(f"no plan prior ({e})")
         log.info("no plan prior: %s", e)
         return [], None
-    return [("plan", T) for T in overlays], aliases
+    return overlays, aliases
 
 
 def _icp_denominator(icp: Any) -> str:
@@ -350,12 +353,11 @@ def _finish(
     joins the priors, and the global priors outside the window are dropped."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.measured is not None and vt.slack is not None and vt.normals is not None
-    assert vs.sample is not None and vs.polish_sample is not None
-    assert vs.measured is not None and vs.slack is not None and vt.sample is not None
+    assert vs.sample is not None and vs.measured is not None and vs.slack is not None
     check = Check(vt.image, vt.measured, vt.slack, vs.sample)
-    two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
+    two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))  # type: ignore[arg-type]
     judge = config.judge
-    polish = polisher(vt.image, vt.normals, vs.polish_sample, thr) if judge.runs("polish") else None
+    polish = _polisher(vt, vs, thr, config)
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
     priors = _priors(init, plan_priors, m, (kt, ks), window, config)
     with run.stage("estimation"):
@@ -446,6 +448,17 @@ def _check_upright(config: RegistrationConfig) -> None:
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.prior.upright!r}")
 
 
+def _polisher(
+    vt: ScanView, vs: ScanView, thr: float, config: RegistrationConfig
+) -> Callable[..., NDArray[np.float64]] | None:
+    """The candidates' quick local ICP (:func:`~flexreg.registration.candidates.polisher`;
+    from afar within two plan cells), or None when the judge does not polish."""
+    if not config.judge.runs("polish"):
+        return None
+    assert vt.normals is not None and vs.polish_sample is not None
+    return polisher(vt.image, vt.normals, vs.polish_sample, thr, 2 * config.prior.plan_cell_m)
+
+
 def _settled(
     c: Coarse,
     pair: Any,
@@ -501,7 +514,8 @@ def _windowed(
     notes: list[str],
 ) -> list[Candidate]:
     """The rough prior's own fit (:func:`~flexreg.stages.alignment.windowed_fit`), as a
-    prior ``"window"``; none (and a note why) when no pose inside the window is supported."""
+    prior ``"window-matches"``; none (and a note why) when no pose inside the window is
+    supported."""
     fit = windowed_fit(
         kt.features,
         ks.features,
@@ -517,7 +531,7 @@ def _windowed(
         notes.append("no pose inside the rough prior's window is supported by 3 matches")
         return []
     log.info("windowed fit: %d inliers", fit.n_inliers)
-    return [("window", fit.T_target_source)]
+    return [("window-matches", fit.T_target_source)]
 
 
 def _check_init(

@@ -275,7 +275,7 @@ def _yaw_peaks(
     shape = (size, size)
     T = _raster(tcells, target.values, shape, rt).astype(np.float32)
     FT = np.conj(fft.rfft2(T))
-    out: list[tuple[float, float, float]] = []
+    out: list[list[tuple[float, float, float]]] = []
     batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
     for b0 in range(0, len(yaws), batch):
         S = _rotated_rasters(

@@ -75,7 +75,7 @@ class SurveyConfig(Config):
         stations try their next place-recognition candidates.
     proximity_m : float, metres
         Distance between solved station positions under which a pair is tried in a proximity
-        round.
+        round, and between rough positions (``--positions``) under which a pair is linked.
     loop_max_deg : float, degrees
         A link that disagrees by more than this with the cycle it closes is rejected.
     loop_max_m : float, metres

@@ -17,7 +17,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import DegenerateGeometryError
 from flexreg.stages import priors as topview
-from flexreg.stages.priors import Levelling, PlanMatch, TopView
+from flexreg.stages.priors import Levelling, PlanMatch, TopView, match_top_views
 from flexreg.stages.projection import fill_holes, project, range_image
 from flexreg.synth import TLSConfig, scan_tls, station_pair
 
@@ -505,3 +505,40 @@ def test_fill_holes_wraps_on_full_turn_panorama():
     img = _with_holes(from_depth(np.full(part.shape, 5.0), part), [(9, 0)])
     assert not fill_holes(img, min_neighbours=8).valid[9, 0]
     assert fill_holes(img, min_neighbours=5).valid[9, 0]
+
+
+def _racks(xs: list[float], cell_m: float = 0.25) -> TopView:
+    """A plan of racks: 4 m bars along y at the given x (metres), 2 m of wall per cell."""
+    cells = np.array([(round(x / cell_m), iy) for x in xs for iy in range(-8, 8)], dtype=np.int64)
+    return TopView(
+        cells=cells,
+        values=np.full(len(cells), 2.0),
+        cell_m=cell_m,
+        xy=cells * cell_m,
+        heights=np.ones(8),
+        z0_m=0.0,
+        dz_m=0.1,
+    )
+
+
+def test_a_turn_keeps_the_overlays_a_bay_beside_its_best():
+    """Five racks 8 m apart, the source seen from 8 m further along the row: it sees the
+    same five-rack plan as the target. The true offset (8 m) overlays four racks, the one a
+    bay off (0 m) all five and correlates better (as does the row turned end for end). With
+    one offset per turn the truth is never a candidate; with three per turn it is, beside
+    its mirror a bay the other way."""
+    target = source = _racks([0, 8, 16, 24, 32])
+    found = {}
+    for peaks in (1, 3):
+        plans = match_top_views(
+            target, source, yaw_step_rad=np.radians(2.0), top_k=10, coarse_candidates=6,
+            peaks=peaks,
+        )  # fmt: skip
+        found[peaks] = [
+            (round(abs(_wrap_deg(np.degrees(m.yaw_rad)))), round(m.t_xy[0]), round(m.t_xy[1]))
+            for m in plans
+        ]
+    # a bay off, or the row turned end for end: the two five-rack overlays come first
+    assert set(found[1][:2]) == set(found[3][:2]) == {(0, 0, 0), (180, 32, 0)}
+    assert (0, 8, 0) in found[3] and (0, -8, 0) in found[3]
+    assert (0, 8, 0) not in found[1] and (0, -8, 0) not in found[1]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -83,6 +84,36 @@ def descriptor_distances(
     return out
 
 
+def _near_prediction(
+    target: Features,
+    source: Features,
+    target_xyz: NDArray[np.float64],
+    source_xyz: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    radius: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]] | None:
+    """Every (source keypoint, target keypoint within ``radius(q, p)`` of its prediction
+    ``q``; ``p`` the source point) pair with its descriptor distance, sorted by source index
+    then nearest descriptor (ties: lower target index); None when there is none."""
+    okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
+    oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
+    if len(okt) == 0 or len(oks) == 0:
+        return None
+    T = np.asarray(T_target_source, dtype=np.float64)
+    q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
+    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
+
+    cand = cKDTree(target_xyz[okt]).query_ball_point(q, radius(q, source_xyz[oks]))
+    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))
+    if lens.sum() == 0:
+        return None
+    si = np.repeat(oks, lens)
+    ti = okt[np.fromiter((j for c in cand for j in c), dtype=np.int64, count=int(lens.sum()))]
+    d = descriptor_distances(target, source, ti, si)
+    order = np.lexsort((ti, d, si))
+    return si[order], ti[order], d[order]
+
+
 def match_guided(
     target: Features,
     source: Features,
@@ -123,25 +154,17 @@ def match_guided(
         ``[target index, source index]`` per match, sorted by source index; each target
         keypoint used at most once (the pair with the best descriptor distance keeps it).
     """
-    okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
-    oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
-    if len(okt) == 0 or len(oks) == 0:
+    found = _near_prediction(
+        target,
+        source,
+        target_xyz,
+        source_xyz,
+        T_target_source,
+        lambda q, _: radius_m + radius_per_m * np.linalg.norm(q, axis=1),
+    )
+    if found is None:
         return np.zeros((0, 2), dtype=np.int64)
-    T = np.asarray(T_target_source, dtype=np.float64)
-    q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
-    r = radius_m + radius_per_m * np.linalg.norm(q, axis=1)
-    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
-
-    tree = cKDTree(target_xyz[okt])
-    cand = tree.query_ball_point(q, r)
-    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))
-    if lens.sum() == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    si = np.repeat(oks, lens)
-    ti = okt[np.fromiter((j for c in cand for j in c), dtype=np.int64, count=int(lens.sum()))]
-    d = descriptor_distances(target, source, ti, si)
-    order = np.lexsort((ti, d, si))  # per source: nearest descriptor first (ties: lower index)
-    si, ti, d = si[order], ti[order], d[order]
+    si, ti, d = found
     first = np.r_[True, si[1:] != si[:-1]]
     starts = np.flatnonzero(first)
     counts = np.diff(np.r_[starts, len(si)])
@@ -198,26 +221,18 @@ def match_window(
     (Q, 2) int64
         ``[target index, source index]``, sorted by source index then descriptor distance.
     """
-    okt = np.flatnonzero(np.isfinite(target_xyz).all(axis=1))
-    oks = np.flatnonzero(np.isfinite(source_xyz).all(axis=1))
-    if len(okt) == 0 or len(oks) == 0 or k < 1:
-        return np.zeros((0, 2), dtype=np.int64)
-    T = np.asarray(T_target_source, dtype=np.float64)
-    q = source_xyz[oks] @ T[:3, :3].T + T[:3, 3]
-    r = shift_m + 2.0 * math.sin(min(turn_rad, math.pi) / 2.0) * np.linalg.norm(
-        source_xyz[oks], axis=1
+    arc = 2.0 * math.sin(min(turn_rad, math.pi) / 2.0)
+    found = _near_prediction(
+        target,
+        source,
+        target_xyz,
+        source_xyz,
+        T_target_source,
+        lambda _, p: shift_m + arc * np.linalg.norm(p, axis=1),
     )
-    from scipy.spatial import cKDTree  # heavy (0.1 s): the CLI imports this module at start-up
-
-    cand = cKDTree(target_xyz[okt]).query_ball_point(q, r)
-    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(cand))
-    if lens.sum() == 0:
+    if found is None or k < 1:
         return np.zeros((0, 2), dtype=np.int64)
-    si = np.repeat(oks, lens)
-    ti = okt[np.fromiter((j for c in cand for j in c), dtype=np.int64, count=int(lens.sum()))]
-    d = descriptor_distances(target, source, ti, si)
-    order = np.lexsort((ti, d, si))  # per source: nearest descriptor first (ties: lower index)
-    si, ti = si[order], ti[order]
+    si, ti, _ = found
     starts = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
     rank = np.arange(len(si)) - np.repeat(starts, np.diff(np.r_[starts, len(si)]))
     keep = rank < k

@@ -328,11 +328,12 @@ def match_top_views(
     cross-correlation with the target plan over all offsets is one FFT product. This runs
     first on plans of twice the cell size (a quarter of the FFT work), then at the plans' own
     cell for the ``coarse_candidates`` best yaws there (local maxima over yaw) and their two
-    neighbouring yaws, where each yaw gives its ``peaks`` best offsets (:func:`_yaw_peaks`).
-    The ``top_k`` best distinct peaks (different yaw or more than ``min_separation_m`` apart;
-    with several peaks per yaw, also the same yaw more than :data:`PEAK_SEPARATION_M` apart)
-    are returned, each refined to sub-cell offset and, the best of its yaw, to sub-step yaw
-    by parabolas through the peak's neighbours.
+    neighbouring yaws. The ``top_k`` best distinct peaks (different yaw or more than
+    ``min_separation_m`` apart) are returned, each refined to sub-cell offset and sub-step
+    yaw by parabolas through the peak's neighbours; then, with ``peaks`` above 1, the next
+    best offsets of each of their yaws (:func:`_yaw_peaks`), at least
+    :data:`PEAK_SEPARATION_M` from every overlay returned: after the ``top_k``, never in
+    their place.
     """
     c = target.cell_m
     if source.cell_m != c:
@@ -347,18 +348,15 @@ def match_top_views(
     ks = sorted({int((k + d) % n) for k in maxima for d in (-1, 0, 1)})
     fine = dict(zip(ks, _yaw_peaks(target, source, yaws[ks], c, peaks), strict=True))
     out: list[PlanMatch] = []
-    found = [(k, j) for k in fine for j in range(len(fine[k]))]
-    for k, j in sorted(found, key=lambda kj: (-fine[kj[0]][kj[1]][0], kj)):
-        best, tx, ty = fine[k][j]
+    turns: list[int] = []  # the yaw index of each overlay in out
+    for k in sorted(fine, key=lambda k: (-fine[k][0][0], k)):
+        best, tx, ty = fine[k][0]
         prev, nxt = fine.get((k - 1) % n), fine.get((k + 1) % n)
         yaw = float(yaws[k])
-        if j == 0 and prev is not None and nxt is not None:
+        if prev is not None and nxt is not None:
             yaw += _parabola(prev[0][0], best, nxt[0][0]) * yaw_step_rad
         dup = any(
-            (
-                abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
-                and (peaks == 1 or math.hypot(tx - m.t_xy[0], ty - m.t_xy[1]) < PEAK_SEPARATION_M)
-            )
+            abs(_wrap_angle(yaw - m.yaw_rad)) < 3 * yaw_step_rad
             or (
                 math.hypot(tx - m.t_xy[0], ty - m.t_xy[1]) < min_separation_m
                 and abs(_wrap_angle(yaw - m.yaw_rad)) < math.radians(10.0)
@@ -367,8 +365,14 @@ def match_top_views(
         )
         if not dup:
             out.append(PlanMatch(_wrap_angle(yaw), (tx, ty), best))
+            turns.append(k)
         if len(out) >= top_k:
             break
+    # then the further offsets of the turns kept, after all of them (they never displace one)
+    for m, k in list(zip(out, turns, strict=True)):
+        for best, tx, ty in fine[k][1:]:
+            if all(math.hypot(tx - o.t_xy[0], ty - o.t_xy[1]) >= PEAK_SEPARATION_M for o in out):
+                out.append(PlanMatch(m.yaw_rad, (tx, ty), best))
     return out
 
 

@@ -239,10 +239,12 @@ def _best_family(
     check: Check,
     polish: Callable[..., NDArray[np.float64]] | None,
     thr: float,
+    window: Window | None = None,
 ) -> tuple[int, tuple[float, float], NDArray[np.float64] | None, list[Judged], float]:
     """Index of the winning family (-1 when none), its (consistent, conflicting) fractions,
     its polished transform (None without polishing), every candidate as judged, and the
-    winner's score."""
+    winner's score. With a rough prior's ``window`` only a candidate that ends inside it can
+    win; every one is judged (the verdict duels the answer against them all)."""
     judged = []  # (score, moved, family, consistent, conflicting, polished T)
     seen = []
     for i, fam in enumerate(fams):
@@ -255,6 +257,8 @@ def _best_family(
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
             judged.append((score, moved, i, ok, bad, Tj))
             seen.append(Judged(origin, Tj, score, ok, bad))
+    if window is not None:
+        judged = [j for j in judged if window.contains(j[5])[0]]
     if not judged:
         return -1, (0.0, 0.0), None, seen, float("nan")
     top = max(j[0] for j in judged)
@@ -466,7 +470,7 @@ def choose(
     end the error messages. The twins of the best prior in repeating structure
     (:func:`alias_candidates` of ``aliases``) then compete too: one that scores better takes
     its place, and all are judged (the verdict duels the answer against them). With a rough
-    prior's ``window`` only the twins inside it compete.
+    prior's ``window`` only a candidate inside it can be the answer; all are judged.
 
     Raises
     ------
@@ -475,7 +479,7 @@ def choose(
         sample or contradicts more than half of what it explains.
     """
     fams = families(priors, kt, ks, thr, config)
-    best, (ok, bad), polished, judged, top = _best_family(fams, check, polish, thr)
+    best, (ok, bad), polished, judged, top = _best_family(fams, check, polish, thr, window)
     if best < 0:
         raise RegistrationError(
             f"no transform found: {counts}, {len(priors)} priors"
@@ -489,9 +493,9 @@ def choose(
             aliases,
             config.judge,
         )
-        if window is not None:
-            twins = [t for t in twins if window.contains(t[1])[0]]
-        b2, okbad2, pol2, judged2, top2 = _best_family([[c] for c in twins], check, polish, thr)
+        b2, okbad2, pol2, judged2, top2 = _best_family(
+            [[c] for c in twins], check, polish, thr, window
+        )
         judged = judged + judged2
         if b2 >= 0 and top2 > top + 0.01:
             log.info("an alias of the best prior scores better: %.3f > %.3f", top2, top)

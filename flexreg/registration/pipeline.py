@@ -348,9 +348,10 @@ def _finish(
     better), the verdict, the result.
 
     ``init`` (a given ``T_target_source``) competes as one more prior; with
-    ``config.icp_only`` it is the only one. With a ``window`` (``init`` is rough) the search
+    ``config.icp_only`` it is the only one. With a ``window`` (``init`` is rough) the answer
     is bounded by it: the window's own fit (:func:`~flexreg.stages.alignment.windowed_fit`)
-    joins the priors, and the global priors outside the window are dropped."""
+    joins the priors, and only a candidate inside the window can win; the others stay the
+    evidence the verdict duels the answer against."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.measured is not None and vt.slack is not None and vt.normals is not None
     assert vs.sample is not None and vs.measured is not None and vs.slack is not None
@@ -495,14 +496,14 @@ def _priors(
 ) -> list[Candidate]:
     """Every prior that competes: the given ``init``, then the plan overlays and the
     descriptor prior (``init`` alone with ``config.icp_only``); with a rough prior's
-    ``window``, its own fit (:func:`_windowed`) and only the priors inside it."""
+    ``window``, its own fit (:func:`_windowed`) too (only a candidate inside the window can
+    win, :func:`~flexreg.registration.candidates.choose`; all are judged)."""
     given: list[Candidate] = [] if init is None else [("init", init)]
     if config.icp_only:
         return given
     if window is None:
         return given + plan_priors + m.priors
-    inside = [p for p in plan_priors + m.priors if window.contains(p[1])[0]]
-    return given + _windowed(*kps, window, m.thr, config, m.notes) + inside
+    return given + _windowed(*kps, window, m.thr, config, m.notes) + plan_priors + m.priors
 
 
 def _windowed(
@@ -619,10 +620,12 @@ def register(
         than it needs them when the caller keeps no reference of its own.
     window : (float, float), optional
         ``init`` is rough: the true pose lies within this shift (metres) of its translation
-        and this turn (radians) of its rotation (two stations' rough positions). The search
-        is then bounded by it: a RANSAC that only accepts poses inside the window
-        (:func:`~flexreg.stages.alignment.windowed_fit`) joins the priors, and priors outside
-        it are dropped; the verdict judges as always.
+        and this turn (radians) of its rotation (two stations' rough positions). The answer
+        is then bounded by it: the plan overlays and a RANSAC inside the window
+        (:func:`~flexreg.stages.alignment.windowed_fit`) join the priors, and only a
+        candidate inside the window can win; the others are judged all the same, and the
+        verdict duels the answer against them (a look-alike outside the window still makes
+        it ambiguous).
 
     Raises
     ------

@@ -449,6 +449,7 @@ def align_link(
             r.T_target_source, () if v is None else v.runner_up, ev.twins, config.judge
         ),
         vouched=_vouched(cand),
+        windowed=window is not None,
     )
     _store_link(cache, link)
     return link

@@ -152,6 +152,10 @@ class Link:
     undecided : str
         Why rough positions given for both stations left the link as it was (several of its
         poses agree with them, or none is near); empty otherwise.
+    windowed : bool
+        Registered only inside the window of two rough positions
+        (:func:`flexreg.survey.positions.window_of`): its verdict is then partly theirs (they
+        ruled out every pose beyond the window), so even a confident one needs a loop.
     alternatives : list of Alternative
         The clearly different poses the registration found fitting almost as well (its
         runner-ups) or the answer moved a whole bay or room that fits too (its twins):
@@ -193,6 +197,7 @@ class Link:
     picked: str = ""
     refused: str = ""
     undecided: str = ""
+    windowed: bool = False
 
     @property
     def overlap(self) -> float:
@@ -231,8 +236,10 @@ class Link:
     def trusted(self) -> bool:
         """Whether its pose may place stations: confident, or given by the surveyor. Rough
         positions pick which of an uncertain link's poses is meant, not its centimetres (a
-        pose 0.4 m off fits a 1 m sigma): such a link still needs a loop."""
-        return self.verdict == "confident" or self.vouched == "hand"
+        pose 0.4 m off fits a 1 m sigma), and a link registered only inside their window is
+        confident partly by their doing (a doorway pair 14 cm off, confident inside its
+        window, on the held-out building 131): such links still need a loop."""
+        return (self.verdict == "confident" and not self.windowed) or self.vouched == "hand"
 
     @property
     def usable(self) -> bool:
@@ -277,6 +284,7 @@ class Link:
             "vouched": self.vouched or None,
             "picked": self.picked or None,
             "refused": self.refused or None,
+            "windowed": self.windowed,
         }
 
 

@@ -411,34 +411,37 @@ def _positioned(
 ) -> list[Link]:
     """Rough positions seed links and decide each link's pose (:func:`~flexreg.survey.
     positions.apply_positions`). The pairs of stations they put within ``proximity_m`` of
-    each other that no link joins yet are linked (``new_pairs``: the project's stems and
-    at most how many), and every
-    link they do not find confident near what they predict
-    (:func:`~flexreg.survey.positions.unsettled`) is registered again: both seeded with
-    the pose the positions predict and bounded by their window (:func:`~flexreg.survey.
-    positions.window_of`), the new result replacing the old (a re-run reuses both from
-    the cache)."""
-    redo = unsettled(found, priors)
+    each other that no link joins yet are linked as any pair is (``new_pairs``: the
+    project's stems and at most how many), then every link they do not find confident near
+    what they predict (:func:`~flexreg.survey.positions.unsettled`) is registered again:
+    seeded with the pose the positions predict and bounded by their window
+    (:func:`~flexreg.survey.positions.window_of`), the new result replacing the old (a
+    re-run reuses both from the cache)."""
     tried = {frozenset((e.target, e.source)) for e in found}
     stems, budget = new_pairs
     new = [
-        (a, b)
+        Candidate(a, b, "positions")
         for a, b in near_pairs(stems, priors, config.proximity_m)
         if frozenset((a, b)) not in tried
     ][: max(0, budget)]
-    if not redo and not new:
-        apply_positions(found, priors)
-        return found
-
-    def seeded(t: str, s: str, origin: str, score: float | None) -> Candidate:
-        T = predicted_T_target_source(priors[t], priors[s])
-        return Candidate(t, s, origin, score, T, window_of(priors[t], priors[s]))
-
-    cands = [seeded(e.target, e.source, e.origin, e.place_score) for e in redo]
-    cands += [seeded(a, b, "positions", None) for a, b in new]
-    again = _register(client, cands, stores[0], config, progress, stores[1], "positions")
-    by_id = {id(e): n for e, n in zip(redo, again, strict=False)}
-    found = [by_id.get(id(e), e) for e in found] + again[len(redo) :]
+    if new:  # registered as any pair first: a confident answer needs no window
+        found = found + _register(client, new, stores[0], config, progress, stores[1])
+    redo = unsettled(found, priors)
+    if redo:
+        cands = [
+            Candidate(
+                e.target,
+                e.source,
+                e.origin,
+                e.place_score,
+                predicted_T_target_source(priors[e.target], priors[e.source]),
+                window_of(priors[e.target], priors[e.source]),
+            )
+            for e in redo
+        ]
+        again = _register(client, cands, stores[0], config, progress, stores[1], "positions")
+        by_id = {id(e): n for e, n in zip(redo, again, strict=True)}
+        found = [by_id.get(id(e), e) for e in found]
     apply_positions(found, priors)
     return found
 

@@ -170,9 +170,14 @@ def polisher(
     def icp(T: NDArray[np.float64], d: float) -> NDArray[np.float64]:
         try:
             r = projective_icp(
-                target, sample, T, max_distance_m=d, normals=normals, max_iterations=15,
+                target,
+                sample,
+                T,
+                max_distance_m=d,
+                normals=normals,
+                max_iterations=15,
                 tolerance=1e-4,
-            )  # fmt: skip
+            )
         except RegistrationError:
             return T
         return r.T_target_source

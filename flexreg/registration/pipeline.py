@@ -353,10 +353,8 @@ def _finish(
     joins the priors, and only a candidate inside the window can win; the others stay the
     evidence the verdict duels the answer against."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
-    assert vt.measured is not None and vt.slack is not None and vt.normals is not None
-    assert vs.sample is not None and vs.measured is not None and vs.slack is not None
-    check = Check(vt.image, vt.measured, vt.slack, vs.sample)
-    two = TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))  # type: ignore[arg-type]
+    assert vt.normals is not None and vs.sample is not None
+    check, two = _checks(vt, vs)
     judge = config.judge
     polish = _polisher(vt, vs, thr, config)
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
@@ -449,6 +447,14 @@ def _check_upright(config: RegistrationConfig) -> None:
         raise ConfigError(f"upright must be 'auto', 'on' or 'off', got {config.prior.upright!r}")
 
 
+def _checks(vt: ScanView, vs: ScanView) -> tuple[Check, TwoWay]:
+    """The dense check (the source's sample in the target's view) and both directions."""
+    assert vt.measured is not None and vt.slack is not None and vt.sample is not None
+    assert vs.measured is not None and vs.slack is not None and vs.sample is not None
+    check = Check(vt.image, vt.measured, vt.slack, vs.sample)
+    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
+
+
 def _polisher(
     vt: ScanView, vs: ScanView, thr: float, config: RegistrationConfig
 ) -> Callable[..., NDArray[np.float64]] | None:
@@ -539,7 +545,9 @@ def _check_init(
     config: RegistrationConfig,
     init: NDArray[np.float64] | None,
     window: tuple[float, float] | None = None,
-) -> NDArray[np.float64] | None:
+) -> tuple[NDArray[np.float64] | None, Window | None]:
+    """The checked ``init`` and the :class:`~flexreg.stages.alignment.Window` it comes
+    with, if any."""
     if window is not None:
         if init is None:
             raise ConfigError("a window needs the rough T_target_source it bounds (init)")
@@ -551,12 +559,9 @@ def _check_init(
     if init is None:
         if config.icp_only:
             raise ConfigError("icp_only needs an initial T_target_source (init)")
-        return None
-    return as_transform(init, name="init")
-
-
-def _window(init: NDArray[np.float64] | None, window: tuple[float, float] | None) -> Window | None:
-    return None if window is None or init is None else Window(init, *window)
+        return None, None
+    T = as_transform(init, name="init")
+    return T, None if window is None else Window(T, *window)
 
 
 def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
@@ -636,8 +641,7 @@ def register(
         ``config.icp_only`` without ``init``; a ``window`` without ``init`` or not positive.
     """
     _check_upright(config)
-    init = _check_init(config, init, window)
-    win = _window(init, window)
+    init, win = _check_init(config, init, window)
     run = Run(progress)
     scans = [target, source]
     given: list[Scan | RangeImage] = [
@@ -751,8 +755,7 @@ class Registration:
         """Register two prepared scans: ``T_target_source`` and the evidence (as
         :func:`register`, ``init`` and ``window`` included)."""
         config = self.config
-        init = _check_init(config, init, window)
-        win = _window(init, window)
+        init, win = _check_init(config, init, window)
         if target.config != config or source.config != config:
             raise ConfigError("align needs scans prepared with the same configuration")
         run = Run(progress)

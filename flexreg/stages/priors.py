@@ -402,6 +402,54 @@ def refine_plan_match(
     )[0]
 
 
+@dataclass(frozen=True, eq=False)
+class _Offsets:
+    """The target's plan, blurred and transformed once, for correlations with the source's
+    plan turned by several yaws and shifted to a seed offset: the scores of every offset
+    within ``w`` cells of the seed (:meth:`near`)."""
+
+    cell_m: float
+    rt: int
+    w: int
+    n: int
+    FT: Any
+
+    @classmethod
+    def of(cls, target: TopView, shift_m: float) -> _Offsets:
+        c = target.cell_m
+        rt = int(np.abs(target.cells).max()) + 1
+        w = math.ceil(shift_m / c) + 1
+        n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
+        T = ndimage.gaussian_filter(_raster(target.cells, target.values, (n, n), rt + w), 1.0)
+        return cls(c, rt, w, n, np.conj(fft.rfft2(T.astype(np.float32))))
+
+    def near(
+        self, source: TopView, t0: NDArray[np.float64], yaws: NDArray[np.float64]
+    ) -> NDArray[Any]:
+        """``(len(yaws), 2w + 1, 2w + 1)`` correlations of the source turned by each yaw and
+        shifted by ``t0``, at offsets ``d`` in ``[-w, w]^2`` cells (``[iy, ix]`` is
+        ``d = (ix - w, iy - w)``: the source at ``x + d`` lies on the target at ``x``); eight
+        yaws per batched FFT product."""
+        near = np.arange(-self.w, self.w + 1) % self.n
+        out = []
+        for b0 in range(0, len(yaws), 8):
+            rasters = _rotated_rasters(
+                source.xy,
+                source.values,
+                np.ascontiguousarray(yaws[b0 : b0 + 8], dtype=np.float64),
+                float(t0[0]),
+                float(t0[1]),
+                float(self.cell_m),
+                self.rt + self.w,
+                self.n,
+                self.rt,
+            )
+            out += [
+                corr[np.ix_(near, near)] for corr in _correlation(rasters, self.FT, (self.n,) * 2)
+            ]
+        return np.stack(out)
+
+
 def refine_plan_matches(
     target: TopView,
     source: TopView,
@@ -416,26 +464,14 @@ def refine_plan_matches(
     c = target.cell_m
     if source.cell_m != c:
         raise ValueError("plans must share their cell size")
-    rt = int(np.abs(target.cells).max()) + 1
-    w = math.ceil(shift_m / c) + 1
-    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
-    shape = (n, n)
-    off = rt + w
-    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, off), 1.0)
-    FT = np.conj(fft.rfft2(T.astype(np.float32)))
-    near = np.arange(-w, w + 1) % n
+    offsets = _Offsets.of(target, shift_m)
+    w = offsets.w
     out = []
     for match in matches:
         t0 = np.asarray(match.t_xy)
         yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
-        rasters = _rotated_rasters(
-            source.xy, source.values, yaws, float(t0[0]), float(t0[1]), float(c), off, n, rt
-        )
-        # all yaws in one batched FFT product; offsets d in [-w, w]^2 (circular indices)
-        corrs = _correlation(rasters, FT, shape)
         best = []
-        for yaw, corr in zip(yaws, corrs, strict=True):
-            win = corr[np.ix_(near, near)]
+        for yaw, win in zip(yaws, offsets.near(source, t0, yaws), strict=True):
             iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
             b = float(win[iy, ix])
             fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
@@ -607,24 +643,11 @@ def _window_peaks(
     ``turn_rad`` of ``seed``'s (1 degree steps) and offset within ``shift_m`` of its: local
     maxima of the correlation over (yaw, offset), at least 1 m or 3 degrees apart."""
     c = target.cell_m
-    rt = int(np.abs(target.cells).max()) + 1
-    w = math.ceil(shift_m / c) + 1
-    n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
-    shape = (n, n)
-    T = ndimage.gaussian_filter(_raster(target.cells, target.values, shape, rt + w), 1.0)
-    FT = np.conj(fft.rfft2(T.astype(np.float32)))
-    near = np.arange(-w, w + 1) % n
-    step = math.radians(1.0)
-    yaws = seed.yaw_rad + np.arange(-turn_rad, turn_rad + 1e-12, step)
+    offsets = _Offsets.of(target, shift_m)
+    w = offsets.w
+    yaws = seed.yaw_rad + np.arange(-turn_rad, turn_rad + 1e-12, math.radians(1.0))
     t0 = np.asarray(seed.t_xy)
-    vol = np.empty((len(yaws), 2 * w + 1, 2 * w + 1))
-    for b0 in range(0, len(yaws), 8):
-        ys = np.ascontiguousarray(yaws[b0 : b0 + 8])
-        R = _rotated_rasters(
-            source.xy, source.values, ys, float(t0[0]), float(t0[1]), float(c), rt + w, n, rt
-        )
-        for i, corr in enumerate(_correlation(R, FT, shape)):
-            vol[b0 + i] = corr[np.ix_(near, near)]
+    vol = offsets.near(source, t0, yaws).astype(np.float64)
     d = np.arange(-w, w + 1) * c
     inside = np.hypot(d[None, :], d[:, None]) <= shift_m
     vol[:, ~inside] = -np.inf

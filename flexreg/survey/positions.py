@@ -231,10 +231,13 @@ def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link
     """The links between two stations with positions that a registration seeded by them
     (and bounded by their window, :func:`window_of`) may settle: every one that is not
     confident with its answer near what they predict (within :data:`AGREE_SIGMAS`) -- failed,
-    uncertain, or placing the source elsewhere. Hand links are left alone."""
+    uncertain, or placing the source elsewhere. Hand links, and links already registered
+    so, are left alone."""
     out = []
     for e in links:
         if e.target not in positions or e.source not in positions or e.vouched == "hand":
+            continue
+        if e.windowed:
             continue
         if (
             e.T_target_source is not None

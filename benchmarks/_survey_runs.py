@@ -67,16 +67,19 @@ class ProjectSpec:
         ``a_``, ``b_``, ... and no site overlaps another (the truth: separate groups).
     width, height : int
         Station grid.
+    fmt : {"ptx", "e57"}
+        Station file format (PTX unless named: ``-e57`` ends the project's name).
     """
 
     sites: tuple[tuple[str, int, int], ...]
     width: int
     height: int
+    fmt: str = "ptx"
 
     @property
     def name(self) -> str:
         parts = "+".join(f"{k}{n}s{s}" for k, n, s in self.sites)
-        return f"{parts}-{self.width}x{self.height}"
+        return f"{parts}-{self.width}x{self.height}" + ("" if self.fmt == "ptx" else f"-{self.fmt}")
 
     @property
     def stations(self) -> int:
@@ -89,6 +92,7 @@ class ProjectSpec:
             "width": self.width,
             "height": self.height,
             "stations": self.stations,
+            "format": self.fmt,
         }
 
 
@@ -113,7 +117,14 @@ def make_project(spec: ProjectSpec, data: Path) -> Path:
     for i, (kind, n, seed) in enumerate(spec.sites):
         site = chr(ord("a") + i)
         raw = tmp / f"raw-{site}"
-        cfg = SynthConfig(scene=kind, stations=n, width=spec.width, height=spec.height, seed=seed)
+        cfg = SynthConfig(
+            scene=kind,
+            stations=n,
+            width=spec.width,
+            height=spec.height,
+            seed=seed,
+            format=spec.fmt,
+        )
         synthesize(raw, cfg)
         gt = json.loads((raw / "gt.json").read_text())
         for st in gt["stations"]:

@@ -244,8 +244,8 @@ def read_pair_working(
     target: Path, source: Path, *, max_pixels: int, options: tuple[str, str] | None = None
 ) -> WorkingPair:
     """:func:`read_pair` for a command that needs each scan's points and working image only:
-    a PTX file is read straight into both (:func:`flexreg.io.read_working_scan`: no grid
-    index, intensity or colour, 12 bytes per point instead of 24); another file as
+    a PTX or E57 file is read straight into both (:func:`flexreg.io.read_working_scan`: no
+    grid index, intensity or colour, 12 bytes per point instead of 24); another file as
     :func:`read_input` reads it without intensities, and no image. With ``options`` (the
     scanner position options), a cloud in project coordinates is refused naming its
     option, as :func:`read_pair` refuses it."""
@@ -257,7 +257,7 @@ def read_pair_working(
         path = (target, source)[k]
         ref = parse_scan_ref(path)
         option = None if options is None else options[k]
-        if detect_format(ref.path)[1] != "ptx":
+        if detect_format(ref.path)[1] not in ("ptx", "e57"):
             (scan,) = read_input(path, intensity=False, origin_option=option)
             return scan, None
         pairs = read_working_scans(path, max_pixels=max_pixels)

@@ -7,6 +7,17 @@ only the points that hold a return, each with its ``rowIndex`` / ``columnIndex``
 comes from the scan's ``indexBounds``. The row and column directions are whatever the scanner
 vendor chose (in the pump sample rows run upwards and columns against the azimuth); they are
 kept as stored so that writing and reading back is exact.
+
+A survey worker preparing a station needs only its points and its working image
+(:func:`flexreg.stages.projection.working_image`): :func:`read_working` reads the fields it
+needs in blocks of :data:`WORKING_BLOCK_POINTS` points, keeps each block's valid points as
+float32 (float64 when a coordinate lies beyond :data:`~flexreg.core.scan.FLOAT32_MAX_M`) and
+writes those on every ``k``-th row and column of the grid into the working image as they
+stream past: 12 bytes a point, plus the image, plus one block of buffers, where :func:`read`
+asks libE57Format for every field of every point at once as float64 (a 22 M-point
+8192 x 4096 station: 2.7 GB at the peak of its preparation, 0.6 GB so). What is kept and which
+point wins a pixel are those of :func:`read` followed by
+:func:`flexreg.core.range_image.from_grid`.
 """
 
 from __future__ import annotations
@@ -18,16 +29,19 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.scan import Scan
+from flexreg.core.budget import check_memory
+from flexreg.core.range_image import RangeImage, from_grid, working_stride
+from flexreg.core.scan import FLOAT32_MAX_M, Scan
 from flexreg.core.transforms import matrix_to_quat, quat_to_matrix
 from flexreg.errors import InputError
 from flexreg.io.e57_header import check_declared
 from flexreg.io.selector import ScanRef, select_setup
 
-__all__ = ["headers", "read", "read_one", "write"]
+__all__ = ["WORKING_BLOCK_POINTS", "headers", "read", "read_one", "read_working", "write"]
 
 _CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
 _SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
@@ -430,3 +444,237 @@ def _e57_message(exc: BaseException) -> str:
 def _no_options(path: Path, options: dict[str, Any]) -> None:
     if options:
         raise InputError(path, f"unknown E57 option(s): {', '.join(sorted(options))}")
+
+
+# ------------------------------------------------------------------ read block by block
+
+#: points read per block (each field's buffer holds this many values: about 40 MB in all)
+WORKING_BLOCK_POINTS = 1 << 20
+
+
+def read_working(
+    path: Path, *, max_pixels: int, ref: ScanRef | None = None
+) -> list[tuple[Scan, RangeImage | None]]:
+    """Every scan of an E57 file (or the one ``ref`` selects) as its points and working image.
+
+    Parameters
+    ----------
+    path : Path
+        The ``.e57`` file.
+    max_pixels : int, pixels
+        The working image's budget (:func:`~flexreg.core.range_image.working_stride`).
+    ref : ScanRef, optional
+        A ``FILE#N`` / ``FILE#NAME`` selector; only that scan's points are read.
+
+    Returns
+    -------
+    list of (Scan, RangeImage or None)
+        Per scan: a :class:`Scan` of its valid points (N, 3) float32 (float64 beyond
+        :data:`~flexreg.core.scan.FLOAT32_MAX_M`), metres, scanner frame, in file order, with
+        its pose and name but no grid, intensity or colour; and its working image (``xyz``
+        (h, w, 3) of the points' type, ``valid``; ``index`` a read-only -1 view), or None for
+        a scan without row and column indices (the caller projects it).
+
+    Raises
+    ------
+    InputError
+        As :func:`flexreg.io.e57.read`, and for a scan whose points end before its declared
+        count.
+    """
+    with _opened(path) as (e57, count):
+        if ref is None:
+            chosen = list(range(count))
+        else:
+            names = [_name(e57.get_header(i).node, i) for i in range(count)]
+            chosen = [select_setup(names, ref)]
+        out = []
+        for i in chosen:
+            try:
+                out.append(_read_retrying(e57, i, path, max_pixels))
+            except InputError:
+                raise
+            except Exception as exc:
+                msg = f"scan {i} cannot be read: {_e57_message(exc)}"
+                raise InputError(path, msg) from None
+        return out
+
+
+class _Wide(Exception):
+    """A scan read as float32 has coordinates beyond :data:`FLOAT32_MAX_M`."""
+
+
+class _Beyond(Exception):
+    """A point's row or column lies beyond the grid the scan's ``indexBounds`` declare."""
+
+
+def _read_retrying(e57: Any, i: int, path: Path, max_pixels: int) -> tuple[Scan, RangeImage | None]:
+    """:func:`_read` as float32 into an image of the declared grid; read again as float64
+    when a coordinate is too far for float32, and keeping every index (the image made at
+    the end, on the grid the indices span) when one lies beyond the declared grid."""
+    dtype: type = np.float32
+    bounded = True
+    while True:
+        try:
+            return _read(e57, i, path, max_pixels, dtype, bounded)
+        except _Wide:
+            dtype = np.float64
+        except _Beyond:
+            bounded = False
+
+
+def _grid_of(node: Any, fields: set[str]) -> tuple[int, int] | None:
+    """The grid ``(rows, columns)`` a scan's ``indexBounds`` declare (None: no indices, or
+    no bounds: the image is then made once the indices are all read)."""
+    if "rowIndex" not in fields or "columnIndex" not in fields:
+        return None
+    if not node.isDefined("indexBounds"):
+        return None
+    b = node["indexBounds"]
+    if not (b.isDefined("rowMaximum") and b.isDefined("columnMaximum")):
+        return None
+    return int(b["rowMaximum"].value()) + 1, int(b["columnMaximum"].value()) + 1
+
+
+class _Image:
+    """The working image of a grid with known bounds, filled block by block."""
+
+    def __init__(self, grid: tuple[int, int], max_pixels: int, dtype: type) -> None:
+        self.rows, self.cols = grid
+        self.stride = working_stride(self.rows, self.cols, max_pixels)
+        h, w = -(-self.rows // self.stride), -(-self.cols // self.stride)
+        self.xyz: NDArray[np.floating] = np.full((h, w, 3), np.nan, dtype=dtype)
+        self.valid = np.zeros((h, w), dtype=bool)
+
+    def add(self, rows: NDArray[Any], cols: NDArray[Any], pts: NDArray[np.floating]) -> None:
+        """Write a block's points into their pixels.
+
+        Raises
+        ------
+        _Beyond
+            An index lies beyond the declared grid (nothing written).
+        """
+        if len(rows) and (rows.max() >= self.rows or cols.max() >= self.cols):
+            raise _Beyond()
+        _to_image(rows, cols, pts, self.xyz, self.valid, self.stride)
+
+    def image(self) -> RangeImage:
+        return RangeImage(self.xyz, self.valid, np.broadcast_to(np.int64(-1), self.valid.shape))
+
+
+@numba.njit(cache=True, nogil=True)
+def _to_image(rows, cols, pts, xyz, valid, s):  # pragma: no cover - compiled
+    """Points on every ``s``-th row and column into their pixel; a later point wins."""
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        c = cols[i]
+        if r % s == 0 and c % s == 0:
+            xyz[r // s, c // s, 0] = pts[i, 0]
+            xyz[r // s, c // s, 1] = pts[i, 1]
+            xyz[r // s, c // s, 2] = pts[i, 2]
+            valid[r // s, c // s] = True
+
+
+def _block_xyz(data: dict[str, NDArray[Any]], n: int, spherical: bool) -> NDArray[np.float64]:
+    """A block's coordinates (n, 3) float64, cartesian."""
+    if not spherical:
+        return np.stack([data[f][:n] for f in _CARTESIAN], axis=1)
+    r, az, el = (data[f][:n] for f in _SPHERICAL)
+    with np.errstate(invalid="ignore"):
+        return np.stack(
+            [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=1
+        )
+
+
+def _read(
+    e57: Any, i: int, path: Path, max_pixels: int, dtype: type, bounded: bool
+) -> tuple[Scan, RangeImage | None]:
+    """One scan of the open file read block by block (:func:`read_working`); ``bounded``:
+    the image is filled as the blocks stream past when the scan declares its grid."""
+    header = e57.get_header(i)
+    node = header.node
+    name = _name(node, i)
+    label = f"scan {i} ({name})" if node.isDefined("name") else f"scan {i}"
+    fields = set(header.point_fields)
+    n_total = int(header.point_count)
+    if n_total == 0:
+        raise InputError(path, f"{label} holds no points")
+    if all(f in fields for f in _CARTESIAN):
+        coords, state, spherical = _CARTESIAN, "cartesianInvalidState", False
+    elif all(f in fields for f in _SPHERICAL):
+        coords, state, spherical = _SPHERICAL, "sphericalInvalidState", True
+    else:
+        raise InputError(path, f"{label} has neither cartesian nor spherical coordinates")
+    gridded = "rowIndex" in fields and "columnIndex" in fields
+    wanted = [*coords, *([state] if state in fields else [])]
+    wanted += ["rowIndex", "columnIndex"] if gridded else []
+    block = min(n_total, WORKING_BLOCK_POINTS)
+    size = np.dtype(dtype).itemsize
+    check_memory(3 * size * n_total, f"{label}: its {n_total:,} points", source=path)
+    from pye57 import libe57
+
+    data, buffers = {}, libe57.VectorSourceDestBuffer()
+    for f in wanted:
+        data[f], buf = e57.make_buffer(f, block)
+        buffers.append(buf)
+    grid = _grid_of(node, fields)
+    image = _Image(grid, max_pixels, dtype) if grid is not None and bounded else None
+    points: NDArray[np.floating] = np.empty((n_total, 3), dtype=dtype)
+    index: list[NDArray[np.int32]] = []  # every kept point's (row, column), when no image
+    kept = seen = 0
+    reader = header.points.reader(buffers)
+    try:
+        while (n := int(reader.read())) > 0:
+            xyz = _block_xyz(data, n, spherical)
+            keep: NDArray[np.bool_] = np.asarray(np.any(xyz != 0.0, axis=1))
+            if state in data:
+                keep &= data[state][:n] == 0
+            finite: NDArray[np.bool_] = np.asarray(np.isfinite(xyz).all(axis=1))
+            if gridded:
+                keep &= finite
+            elif not finite[keep].all():
+                bad = int(np.count_nonzero(~finite[keep]))
+                raise InputError(
+                    path, f"{label}: {bad} valid-flagged point(s) have NaN or Inf coordinates"
+                )
+            pts = xyz[keep]
+            if dtype == np.float32 and len(pts) and np.abs(pts).max() > FLOAT32_MAX_M:
+                raise _Wide()
+            m = len(pts)
+            points[kept : kept + m] = pts
+            if gridded:
+                rows, cols = data["rowIndex"][:n][keep], data["columnIndex"][:n][keep]
+                if m and (rows.min() < 0 or cols.min() < 0):
+                    raise InputError(path, f"{label} has negative row/column indices")
+                if image is not None:
+                    image.add(rows, cols, points[kept : kept + m])
+                else:
+                    index.append(np.stack([rows, cols], axis=1).astype(np.int32))
+            kept += m
+            seen += n
+    finally:
+        reader.close()
+    if seen != n_total:
+        raise InputError(path, f"{label}: {seen:,} of its {n_total:,} points could be read")
+    if kept == 0:
+        raise InputError(path, f"{label} holds no valid points ({n_total} all flagged invalid)")
+    points.resize((kept, 3), refcheck=False)  # in place: no second copy of the points
+    scan = Scan(points=points, T_world_scanner=_pose(node, path, label), path=path, name=name)
+    if image is not None:
+        return scan, image.image()
+    if not gridded:
+        return scan, None
+    return scan, _image_from_indices(scan, np.concatenate(index), grid, max_pixels)
+
+
+def _image_from_indices(
+    scan: Scan, index: NDArray[np.int32], grid: tuple[int, int] | None, max_pixels: int
+) -> RangeImage:
+    """The working image of a gridded scan whose grid is known only once every index is read
+    (no ``indexBounds``, or indices beyond them): the grid the indices span, at least the
+    declared one, as :func:`flexreg.io.e57.read` sizes it."""
+    rows, cols = int(index[:, 0].max()) + 1, int(index[:, 1].max()) + 1
+    if grid is not None:
+        rows, cols = max(rows, grid[0]), max(cols, grid[1])
+    gridded = Scan(points=scan.points, grid_shape=(rows, cols), grid_index=index)
+    img = from_grid(gridded, stride=working_stride(rows, cols, max_pixels))
+    return RangeImage(img.xyz, img.valid, np.broadcast_to(np.int64(-1), img.valid.shape))

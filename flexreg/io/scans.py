@@ -149,18 +149,25 @@ def read_working_scans(
     ``FILE#N`` / ``FILE#NAME`` selector names), read for a caller that needs their points and
     working images only (a survey worker preparing a station, ``flexreg register``).
 
-    A PTX file is read straight into both (:func:`flexreg.io.ptx.read_working`: no grid
-    index, intensity or colour is stored, 12 bytes per float32 point instead of 24, and the
-    working image of at most ``max_pixels`` pixels is built while the lines stream past).
-    Other formats: :func:`read_scans` without intensities, and None for each image (the
-    caller builds the working images).
+    PTX and E57 files are read straight into both: no grid index, intensity or colour is
+    stored, 12 bytes per float32 point, and the working image of at most ``max_pixels``
+    pixels is built while the lines or blocks stream past (:func:`flexreg.io.ptx.read_working`,
+    :func:`flexreg.io.e57.read_working`: an E57 scan without row and column indices
+    comes with None for its image). Other formats: :func:`read_scans` without intensities,
+    and None for each image (the caller builds the working images).
     """
     ref = parse_scan_ref(path)
     p = ref.path
     mod, _ = detect_format(p)
-    if mod != "ptx":
+    if mod not in ("ptx", "e57"):
         return [(scan, None) for scan in read_scans(path, intensity=False)]
     check_file(p)
+    if mod == "e57":  # only the selected setup's points are read
+        return list(
+            _module(mod).read_working(
+                p, max_pixels=int(max_pixels), ref=ref if ref.selector else None
+            )
+        )
     pairs: list[tuple[Scan, RangeImage | None]] = list(
         _module(mod).read_working(p, max_pixels=int(max_pixels))
     )

@@ -421,7 +421,7 @@ def _read_and_prepare(
     stored pose and whether the file stores one (:func:`flexreg.io.info.pose_stored`). No
     intensities unless the feature image reads them; the checks' inputs after
     the feature stages (``overlap=False``); when the refinement reads only the range images,
-    a PTX station is read straight into its points and working image
+    a PTX or E57 station is read straight into its points and working image
     (:func:`~flexreg.io.read_working_scan`: no grid index), and the points are let go once
     the refinement's sample exists, before the feature stages (``keep_scan=False``: only
     ``prepare`` holds them)."""
@@ -431,7 +431,7 @@ def _read_and_prepare(
         scan = read_scan(station.ref, intensity=config.image == "intensity")
         if station.origin is not None:
             scan = recentre(scan, station.origin)
-    else:  # a PTX station straight into its points and its working image
+    else:  # a PTX or E57 station straight into its points and its working image
         scan, image = read_working_scan(station.ref, max_pixels=config.max_image_pixels)
     if image is None and station.origin is None and (why := centring_problem(scan)):
         raise InputError(

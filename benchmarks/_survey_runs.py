@@ -13,9 +13,11 @@ A *run* is one method on one project in a child process, its output folder
   (:func:`flexreg.baselines.multiway.multiway`, the result written as ``poses.json``).
 
 Measured per run: wall time, exit status, peak memory -- the largest sum of the resident sets
-of the child and all its descendants (Dask workers included), sampled every 0.25 s -- and the
+of the child and all its descendants (Dask workers included), sampled every 0.25 s -- the
 kernel's high-water mark of the largest single process of the tree (``ru_maxrss`` of
-``wait4``).
+``wait4``), and each process's own high-water mark (``VmHWM`` of ``/proc/PID/status``, read
+at every sample: exact, as long as the process lives past one sample), so a Dask worker's
+peak is known apart from the main process's.
 
 ``survey.py`` imports this module as a sibling: ``python benchmarks/survey.py`` puts
 ``benchmarks/`` on ``sys.path``.
@@ -147,8 +149,21 @@ def make_project(spec: ProjectSpec, data: Path) -> Path:
 # ------------------------------------------------------------------ measured child processes
 
 
-def _tree_rss(pid: int) -> int:
-    """Resident bytes of a process and all its descendants (0 once it is gone)."""
+def _high_water_mb(pid: int) -> float | None:
+    """A live process's peak resident set (``VmHWM``), MB; None once it is gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+def _tree_rss(pid: int, peaks: dict[int, tuple[float, str]] | None = None) -> int:
+    """Resident bytes of a process and all its descendants (0 once it is gone); with
+    ``peaks``, each one's high-water mark (MB) and command line are kept there by pid."""
     import psutil
 
     try:
@@ -160,6 +175,9 @@ def _tree_rss(pid: int) -> int:
     for p in procs:
         try:
             total += p.memory_info().rss
+            if peaks is not None and (hwm := _high_water_mb(p.pid)) is not None:
+                cmd = peaks[p.pid][1] if p.pid in peaks else " ".join(p.cmdline())[:120]
+                peaks[p.pid] = (max(hwm, peaks.get(p.pid, (0.0, ""))[0]), cmd)
         except psutil.Error:
             pass
     return total
@@ -173,9 +191,12 @@ def measure(argv: Sequence[str], log: Path, *, timeout_s: float) -> dict[str, An
     dict
         ``exit`` (exit status; None on timeout), ``timeout`` (bool), ``wall_s``,
         ``peak_tree_mb`` (sampled sum over the process tree), ``peak_process_mb``
-        (``ru_maxrss`` of the largest waited-for process of the tree), ``argv``.
+        (``ru_maxrss`` of the largest waited-for process of the tree), ``peak_main_mb`` (the
+        child's own high-water mark), ``peak_other_mb`` (each descendant's: the Dask
+        workers, largest first), ``argv``.
     """
     peak = [0]
+    peaks: dict[int, tuple[float, str]] = {}
     with log.open("w") as out:
         t0 = time.perf_counter()
         p = subprocess.Popen(
@@ -185,7 +206,7 @@ def measure(argv: Sequence[str], log: Path, *, timeout_s: float) -> dict[str, An
 
         def sample() -> None:
             while not done.wait(SAMPLE_S):
-                peak[0] = max(peak[0], _tree_rss(p.pid))
+                peak[0] = max(peak[0], _tree_rss(p.pid, peaks))
 
         th = threading.Thread(target=sample, daemon=True)
         th.start()
@@ -211,6 +232,11 @@ def measure(argv: Sequence[str], log: Path, *, timeout_s: float) -> dict[str, An
         "wall_s": wall,
         "peak_tree_mb": peak[0] / 2**20,
         "peak_process_mb": usage.ru_maxrss / 1024.0,  # Linux: KiB
+        "peak_main_mb": peaks[p.pid][0] if p.pid in peaks else None,
+        "peak_other_mb": sorted(
+            ({"peak_mb": mb, "command": cmd} for pid, (mb, cmd) in peaks.items() if pid != p.pid),
+            key=lambda d: -float(d["peak_mb"]),  # type: ignore[arg-type]
+        ),
     }
 
 
@@ -285,6 +311,51 @@ def run_multiway(scans: Path, out: Path, pairs: str = "all") -> int:
     write_json(tmp, result.to_dict())
     tmp.replace(out / "poses.json")
     return 0
+
+
+#: what the reader measurement runs in its child: one station file read as a survey worker
+#: reads it (its points and working image), the seconds printed
+_READ_ONE = (
+    "import sys, time; from flexreg.io.scans import read_working_scans; "
+    "t = time.perf_counter(); read_working_scans(sys.argv[1], max_pixels=2_500_000); "
+    "print(f'read_s={time.perf_counter() - t:.4f}')"
+)
+
+
+def reader_speed(path: Path, log: Path) -> dict[str, Any]:
+    """How fast a station file is read as a survey worker reads it, against ``cat FILE >
+    /dev/null`` right before it (the page cache warmed by a first ``cat``: both read from
+    memory, so the figure is the parser's cost over copying the bytes).
+
+    Returns
+    -------
+    dict
+        ``file``, ``mb`` (file size, MB), ``cat_s``, ``read_s`` (inside the child, after its
+        imports), ``read_mb_s``, ``cat_mb_s``, ``read_peak_mb`` (the child's ``ru_maxrss``).
+    """
+    mb = path.stat().st_size / 2**20
+    with open(os.devnull, "wb") as null:
+        subprocess.run(["cat", str(path)], stdout=null, check=True)
+        t = time.perf_counter()
+        subprocess.run(["cat", str(path)], stdout=null, check=True)
+        cat_s = time.perf_counter() - t
+    m = measure([str(PYTHON), "-c", _READ_ONE, str(path)], log, timeout_s=1800)
+    line = [x for x in log.read_text().split() if x.startswith("read_s=")]
+    read_s = float(line[-1].split("=")[1]) if line and m["exit"] == 0 else None
+    return {
+        "file": path.name,
+        "mb": mb,
+        "cat_s": cat_s,
+        "cat_mb_s": mb / cat_s,
+        "read_s": read_s,
+        "read_mb_s": mb / read_s if read_s else None,
+        "read_peak_mb": m["peak_process_mb"],
+    }
+
+
+def _bytes(folder: Path) -> int:
+    """Bytes of every file under ``folder`` (0 when it does not exist)."""
+    return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())
 
 
 # ------------------------------------------------------------------ evaluation
@@ -438,15 +509,21 @@ def run_one(
     timeout_s: float,
     label: str | None = None,
     rough: tuple[float, float, float] | None = None,
+    warm: bool = False,
+    reader: bool = False,
 ) -> dict[str, Any]:
     """Make the project (if needed), run one method on it in a measured child process and
     evaluate its ``poses.json``; one JSON-ready record. ``rough``: give the survey rough
-    positions of every station, ``(off_m, heading_deg, sigma_m)`` (:func:`rough_positions`)."""
+    positions of every station, ``(off_m, heading_deg, sigma_m)`` (:func:`rough_positions`).
+    ``warm``: run again in the folder of the run labelled ``label`` without ``-warm``,
+    whose cache it reuses (else the run's folder starts empty: a cold run). ``reader``: after
+    a cold run, measure how fast its first station file is read (:func:`reader_speed`)."""
     project = make_project(spec, data)
     tag = label or method + (f"-pairs-{pairs}" if pairs else "")
-    out = runs / f"{spec.name}--{tag}"
-    shutil.rmtree(out, ignore_errors=True)  # a cold run: no cache from an earlier attempt
-    out.mkdir(parents=True)
+    out = runs / f"{spec.name}--{tag.removesuffix('-warm') if warm else tag}"
+    if not warm:
+        shutil.rmtree(out, ignore_errors=True)  # a cold run: no cache from an earlier attempt
+    out.mkdir(parents=True, exist_ok=True)
     positions = None
     if rough is not None and method == "survey":
         positions = rough_positions(project / "gt.json", out / "positions.csv", *rough)
@@ -459,14 +536,25 @@ def run_one(
         "workers": workers,
         "load_before": list(os.getloadavg()),
     }
-    rec |= measure(argv, out / "log.txt", timeout_s=timeout_s)
+    rec |= measure(argv, out / ("log-warm.txt" if warm else "log.txt"), timeout_s=timeout_s)
     rec["load_after"] = list(os.getloadavg())
+    rec["warm"] = warm
+    rec["input_bytes"] = _bytes(project / "scans")
+    rec["cache_bytes"] = _bytes(out / "cache")
+    rec["run_folder"] = str(out)
+    if reader and not warm:
+        first = sorted((project / "scans").iterdir())[0]
+        rec["reader"] = reader_speed(first, out / "reader-log.txt")
     poses = out / "poses.json"
     if poses.is_file():
         doc = json.loads(poses.read_text())
         gt = json.loads((project / "gt.json").read_text())
         rec["evaluation"] = evaluate(doc, gt)
         rec["summary"] = doc.get("summary")
+        rec["poses"] = {
+            name: st.get("T_reference_station") for name, st in doc.get("stations", {}).items()
+        }
+        rec["points"] = [st.get("points") for st in doc.get("stations", {}).values()]
         rec["timings_s"] = doc.get("timings_s") or (doc.get("summary") or {}).get("timings_s")
     else:
         rec["evaluation"] = None

@@ -13,6 +13,12 @@ made once under ``--data`` and reused):
 * fusion: two sites with no overlap in one folder (6 hall stations, 5 courtyard stations,
   files prefixed ``a_`` and ``b_``, so the file-order neighbours cross the sites): two
   groups, never one;
+* resolution (``--sets resolution``, issue 39; its own section of the docs): one project of
+  ``--resolution-stations`` (12) stations at 2048 x 1024, 4096 x 2048 and 8192 x 4096, as E57
+  and as PTX, surveyed cold and warm with ``--workers`` (2), and the largest grid once with one
+  worker -- wall time by stage, every Dask worker's peak memory, cache against input, how
+  fast one station file is read against ``cat``, and an extrapolation to 100 stations
+  (:mod:`_resolution_report`);
 * scaling: a 36- and a 64-station project (``--scaling-kind``) with ``flexreg survey`` --
   wall time, attempted links and peak memory against N -- and the 36-station project again
   with ``--pairs all``. The baseline's time there is extrapolated from its measured time per
@@ -47,6 +53,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from _resolution_report import plot_resolution, resolution_markdown  # noqa: E402
 from _survey_report import markdown, plot_figures  # noqa: E402
 from _survey_runs import METHODS, ProjectSpec, run_multiway, run_one  # noqa: E402
 
@@ -59,6 +66,11 @@ DATA = RESULTS / "survey-projects"
 SECTION = "## Survey"
 
 LOW, HIGH = (1024, 512), (2048, 1024)
+#: the resolution set's station grids (a Leica RTC360 or FARO Focus at normal resolution is
+#: about 8192 x 4096) and formats
+RESOLUTIONS = ((2048, 1024), (4096, 2048), (8192, 4096))
+RESOLUTION_FORMATS = ("e57", "ptx")
+RESOLUTION_SECTION = "## Survey at scanner resolution"
 #: the project kinds, the multi-station ones first when this version of flexreg has them
 PREFERRED_KINDS = ("building", "warehouse", "street")
 FALLBACK_KINDS = ("hall", "courtyard", "room", "bays-cue")
@@ -110,17 +122,51 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
         if not args.no_pairs_all and "survey" in args.methods:
             spec = ProjectSpec(((kind, sizes[0], args.seed),), *LOW)
             runs.append({"set": "scaling", "spec": spec, "method": "survey", "pairs": "all"})
+    if "resolution" in args.sets:
+        runs += resolution_plan(args)
 
     # flexreg survey first, the baseline next, the longest runs last: a partial run (see
-    # --resume) holds the most useful records
+    # --resume) holds the most useful records; the resolution set as planned (a warm run
+    # right after its cold one)
     def cost(r: dict[str, Any]) -> tuple[int, int]:
+        if r["set"] == "resolution":
+            return (3, 0)
         slow = r["pairs"] == "all" or r["spec"].stations > 40
         return (2 if slow else (0 if r["method"] == "survey" else 1), r["spec"].stations)
 
     return sorted(runs, key=cost)
 
 
-def _key(spec_name: str, method: str, pairs: str | None) -> str:
+def resolution_plan(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The resolution set (issue 39): one project of ``--resolution-stations`` stations per
+    grid of :data:`RESOLUTIONS` and format, surveyed cold and warm (its cache reused) with
+    ``--workers`` (2 unless given), and the largest grid's first format also cold with one
+    worker (the same poses are expected)."""
+    workers = args.workers or 2
+    runs: list[dict[str, Any]] = []
+    grids = [tuple(int(v) for v in g.split("x")) for g in args.resolutions]
+    for fmt in args.formats:
+        for w, h in grids:
+            spec = ProjectSpec(
+                ((args.resolution_kind, args.resolution_stations, args.seed),), w, h, fmt
+            )
+            for warm in (False, True):
+                label = f"survey-w{workers}" + ("-warm" if warm else "")
+                runs.append({"set": "resolution", "spec": spec, "method": "survey", "pairs": None,
+                             "workers": workers, "warm": warm, "label": label})  # fmt: skip
+    w, h = max(grids, key=lambda g: g[0] * g[1])
+    spec = ProjectSpec(
+        ((args.resolution_kind, args.resolution_stations, args.seed),), w, h, args.formats[0]
+    )
+    if workers != 1:
+        runs.append({"set": "resolution", "spec": spec, "method": "survey", "pairs": None,
+                     "workers": 1, "warm": False, "label": "survey-w1"})  # fmt: skip
+    return runs
+
+
+def _key(spec_name: str, method: str, pairs: str | None, label: str | None = None) -> str:
+    if label:
+        return f"{spec_name}--{label}"
     return f"{spec_name}--{method}" + (f"-pairs-{pairs}" if pairs else "")
 
 
@@ -142,7 +188,15 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             },
             "records": [],
         }
-    done = {_key(r["project"]["name"], r["method"], r["pairs"]) for r in state["records"]}
+    done = {
+        _key(
+            r["project"]["name"],
+            r["method"],
+            r["pairs"],
+            r.get("label") if r["set"] == "resolution" else None,
+        )
+        for r in state["records"]
+    }
     todo = plan(args)
     state["plan"] = [
         {"set": r["set"], "project": r["spec"].name, "method": r["method"], "pairs": r["pairs"]}
@@ -151,7 +205,7 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
     write_json(saved, state)
     for i, item in enumerate(todo, start=1):
         spec, method, pairs = item["spec"], item["method"], item["pairs"]
-        key = _key(spec.name, method, pairs)
+        key = _key(spec.name, method, pairs, item.get("label"))
         if key in done:
             continue
         print(f"[{i}/{len(todo)}] {key} ...", flush=True)
@@ -162,9 +216,12 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             data=args.data,
             runs=folder / "runs",
             pairs=pairs,
-            workers=args.workers if method == "survey" else None,
+            workers=item.get("workers", args.workers) if method == "survey" else None,
             timeout_s=args.timeout_min * 60,
             rough=tuple(args.rough_positions) if args.rough_positions else None,
+            label=item.get("label"),
+            warm=item.get("warm", False),
+            reader=item["set"] == "resolution",
         )
         rec["set"] = item["set"]
         state["records"].append(rec)
@@ -191,17 +248,30 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
 
 
 def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:
-    """Figures and Markdown, next to the results and (``write_docs``) into the docs."""
-    figures = plot_figures(state, folder)
-    names = []
-    if write_docs:
-        FIGURES.mkdir(parents=True, exist_ok=True)
-        for f in plot_figures(state, FIGURES):
-            names.append(f.relative_to(DOC.parent).as_posix())
-            print(f"updated {f.relative_to(REPO)}")
-    else:
-        names = [f.name for f in figures]
-    publish(markdown(state, names), folder, doc=DOC if write_docs else None, heading=SECTION)
+    """Figures and Markdown, next to the results and (``write_docs``) into the docs: the
+    resolution set in its own section, the other sets in ``## Survey``."""
+    recs = state["records"]
+    other = [r for r in recs if r["set"] != "resolution"]
+    parts = [
+        (plot_figures, markdown, SECTION, "results.md", other),
+        (plot_resolution, resolution_markdown, RESOLUTION_SECTION, "resolution.md",
+         [r for r in recs if r["set"] == "resolution"]),
+    ]  # fmt: skip
+    for plot, render, heading, name, records in parts:
+        if not records:
+            continue
+        part = state | {"records": records}
+        figures = plot(part, folder)
+        names = []
+        if write_docs:
+            FIGURES.mkdir(parents=True, exist_ok=True)
+            for f in plot(part, FIGURES):
+                names.append(f.relative_to(DOC.parent).as_posix())
+                print(f"updated {f.relative_to(REPO)}")
+        else:
+            names = [f.name for f in figures]
+        doc = DOC if write_docs else None
+        publish(render(part, names), folder, doc=doc, heading=heading, name=name)
     print(f"raw results: {folder / 'results.json'}")
     return 0
 
@@ -209,8 +279,16 @@ def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="1024x512 only, scaling at 36 stations")
-    ap.add_argument("--sets", nargs="+", choices=("accuracy", "fusion", "scaling"),
+    ap.add_argument("--sets", nargs="+", choices=("accuracy", "fusion", "scaling", "resolution"),
                     default=["accuracy", "fusion", "scaling"])  # fmt: skip
+    ap.add_argument("--resolutions", nargs="+", default=[f"{w}x{h}" for w, h in RESOLUTIONS],
+                    help="station grids WIDTHxHEIGHT of the resolution set")  # fmt: skip
+    ap.add_argument("--formats", nargs="+", choices=RESOLUTION_FORMATS,
+                    default=list(RESOLUTION_FORMATS),
+                    help="file formats of the resolution set")  # fmt: skip
+    ap.add_argument("--resolution-kind", default="building", help="scene of the resolution set")
+    ap.add_argument("--resolution-stations", type=int, default=12,
+                    help="stations per project of the resolution set")  # fmt: skip
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     ap.add_argument("--kinds", nargs="+", help="scene kinds of the accuracy set (default: 4)")
     ap.add_argument("--stations", type=int, default=10, help="stations per accuracy project")

@@ -545,44 +545,65 @@ class _Image:
         self.xyz: NDArray[np.floating] = np.full((h, w, 3), np.nan, dtype=dtype)
         self.valid = np.zeros((h, w), dtype=bool)
 
-    def add(self, rows: NDArray[Any], cols: NDArray[Any], pts: NDArray[np.floating]) -> None:
-        """Write a block's points into their pixels.
-
-        Raises
-        ------
-        _Beyond
-            An index lies beyond the declared grid (nothing written).
-        """
-        if len(rows) and (rows.max() >= self.rows or cols.max() >= self.cols):
-            raise _Beyond()
-        _to_image(rows, cols, pts, self.xyz, self.valid, self.stride)
-
     def image(self) -> RangeImage:
         return RangeImage(self.xyz, self.valid, np.broadcast_to(np.int64(-1), self.valid.shape))
 
 
 @numba.njit(cache=True, nogil=True)
-def _to_image(rows, cols, pts, xyz, valid, s):  # pragma: no cover - compiled
-    """Points on every ``s``-th row and column into their pixel; a later point wins."""
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        c = cols[i]
-        if r % s == 0 and c % s == 0:
-            xyz[r // s, c // s, 0] = pts[i, 0]
-            xyz[r // s, c // s, 1] = pts[i, 1]
-            xyz[r // s, c // s, 2] = pts[i, 2]
-            valid[r // s, c // s] = True
+def _keep_block(xyz_in, state, rows, cols, out, kept, grid):  # pragma: no cover - compiled
+    """Append a block's valid points to ``points`` from row ``kept`` on, as
+    :func:`flexreg.io.e57.read` keeps them: not ``(0, 0, 0)``, invalid state 0 (when
+    ``state`` is not empty), finite (a non-finite point of a grid is a no-return; of a
+    scan without grid, counted as bad). ``out``: ``(points, index, xyz, valid)``; each
+    kept point's ``(row, column)`` goes to ``index`` when it is not empty, and, when the
+    stride is not 0, the points on every ``stride``-th row and column into their pixel of
+    ``xyz`` / ``valid`` (a later point wins). ``grid``: ``(stride, rows, columns, far)``.
+    Returns the new number of kept points, the bad ones, whether an index lies beyond the
+    grid and whether a coordinate lies beyond ``far``."""
+    x, y, z = xyz_in
+    points, index, xyz, valid = out
+    s, n_rows, n_cols, far = grid
+    has_state, gridded, keep_index = state.shape[0] > 0, rows.shape[0] > 0, index.shape[0] > 0
+    bad, beyond, wide = 0, False, False
+    for i in range(x.shape[0]):
+        xi, yi, zi = x[i], y[i], z[i]
+        if (xi == 0.0 and yi == 0.0 and zi == 0.0) or (has_state and state[i] != 0):
+            continue
+        if not (np.isfinite(xi) and np.isfinite(yi) and np.isfinite(zi)):
+            if not gridded:
+                bad += 1
+            continue
+        if abs(xi) > far or abs(yi) > far or abs(zi) > far:
+            wide = True
+        points[kept, 0] = xi
+        points[kept, 1] = yi
+        points[kept, 2] = zi
+        if gridded:
+            r, c = np.int64(rows[i]), np.int64(cols[i])
+            if keep_index:
+                index[kept, 0] = r
+                index[kept, 1] = c
+            elif s > 0:
+                if r >= n_rows or c >= n_cols:
+                    beyond = True
+                elif r % s == 0 and c % s == 0:
+                    xyz[r // s, c // s, 0] = points[kept, 0]
+                    xyz[r // s, c // s, 1] = points[kept, 1]
+                    xyz[r // s, c // s, 2] = points[kept, 2]
+                    valid[r // s, c // s] = True
+        kept += 1
+    return kept, bad, beyond, wide
 
 
-def _block_xyz(data: dict[str, NDArray[Any]], n: int, spherical: bool) -> NDArray[np.float64]:
-    """A block's coordinates (n, 3) float64, cartesian."""
+def _block_xyz(
+    data: dict[str, NDArray[Any]], n: int, spherical: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A block's cartesian coordinates, three (n,) float64 arrays."""
     if not spherical:
-        return np.stack([data[f][:n] for f in _CARTESIAN], axis=1)
+        return data["cartesianX"][:n], data["cartesianY"][:n], data["cartesianZ"][:n]
     r, az, el = (data[f][:n] for f in _SPHERICAL)
     with np.errstate(invalid="ignore"):
-        return np.stack(
-            [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], axis=1
-        )
+        return r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)
 
 
 def _read(
@@ -619,37 +640,33 @@ def _read(
     grid = _grid_of(node, fields)
     image = _Image(grid, max_pixels, dtype) if grid is not None and bounded else None
     points: NDArray[np.floating] = np.empty((n_total, 3), dtype=dtype)
-    index: list[NDArray[np.int32]] = []  # every kept point's (row, column), when no image
+    # every kept point's (row, column) when the image is made at the end
+    index = np.empty((n_total if gridded and image is None else 0, 2), dtype=np.int32)
+    img = image or _Image((1, 1), 1, dtype)  # a 1-pixel stand-in the kernel never writes
+    no_state, no_index = np.zeros(0, dtype=np.int8), np.zeros(0, dtype=np.uint16)
+    far = FLOAT32_MAX_M if dtype == np.float32 else np.inf
     kept = seen = 0
     reader = header.points.reader(buffers)
     try:
         while (n := int(reader.read())) > 0:
-            xyz = _block_xyz(data, n, spherical)
-            keep: NDArray[np.bool_] = np.asarray(np.any(xyz != 0.0, axis=1))
-            if state in data:
-                keep &= data[state][:n] == 0
-            finite: NDArray[np.bool_] = np.asarray(np.isfinite(xyz).all(axis=1))
-            if gridded:
-                keep &= finite
-            elif not finite[keep].all():
-                bad = int(np.count_nonzero(~finite[keep]))
+            x, y, z = _block_xyz(data, n, spherical)
+            kept, bad, beyond, wide = _keep_block(
+                (x, y, z),
+                data[state][:n] if state in data else no_state,
+                data["rowIndex"][:n] if gridded else no_index,
+                data["columnIndex"][:n] if gridded else no_index,
+                (points, index, img.xyz, img.valid),
+                kept,
+                (img.stride if image is not None else 0, img.rows, img.cols, far),
+            )
+            if bad:
                 raise InputError(
                     path, f"{label}: {bad} valid-flagged point(s) have NaN or Inf coordinates"
                 )
-            pts = xyz[keep]
-            if dtype == np.float32 and len(pts) and np.abs(pts).max() > FLOAT32_MAX_M:
+            if wide:
                 raise _Wide()
-            m = len(pts)
-            points[kept : kept + m] = pts
-            if gridded:
-                rows, cols = data["rowIndex"][:n][keep], data["columnIndex"][:n][keep]
-                if m and (rows.min() < 0 or cols.min() < 0):
-                    raise InputError(path, f"{label} has negative row/column indices")
-                if image is not None:
-                    image.add(rows, cols, points[kept : kept + m])
-                else:
-                    index.append(np.stack([rows, cols], axis=1).astype(np.int32))
-            kept += m
+            if beyond:
+                raise _Beyond()
             seen += n
     finally:
         reader.close()
@@ -663,7 +680,8 @@ def _read(
         return scan, image.image()
     if not gridded:
         return scan, None
-    return scan, _image_from_indices(scan, np.concatenate(index), grid, max_pixels)
+    index.resize((kept, 2), refcheck=False)
+    return scan, _image_from_indices(scan, index, grid, max_pixels)
 
 
 def _image_from_indices(

@@ -144,7 +144,9 @@ value does not exist (failed link, unplaced station)::
         "exit_status": 0,                    # 0 all verified, 3 not, 1 nothing placed
         "problems": ["station_07: unplaced (no accepted link)"],   # one line each
         "wall_s": 95.2,
-        "timings_s": {"prepare": 60.1, "links": 30.2, "graph": 0.3},
+        "timings_s": {"prepare": 60.1, "read_sum": 40.3, "prepare_sum": 78.9,
+                      "pairs": 0.4, "links": 30.2, "graph": 0.3, "map_check": 4.1,
+                      "refine": 12.0},                # wall s per stage; *_sum: per station
         "workers": 2,
         "prepared": 8, "from_cache": 0,      # stations prepared now / read from the cache
         "links_from_cache": 0                # links read from the cache

@@ -100,6 +100,11 @@ class SurveyResult:
     workers : int
     wall_s : float
     timings_s : dict
+        Wall seconds per stage: ``prepare`` (reading and preparing the stations), ``pairs``,
+        ``links`` (registering them; the map check's glances), ``graph`` (the solves between
+        link rounds), ``map_check``, ``refine`` (the final joint alignment); and seconds
+        summed over the stations (worker time): ``read_sum`` (hashing and reading the files)
+        and ``prepare_sum`` (the rest of their preparation).
     refined : bool
     stored : dict
         Stored poses per station (``T_world_scanner``).
@@ -592,6 +597,9 @@ def run_survey(
             client, prepare_station, items, on_result=_Counter("prepare", len(items), progress)
         )
         timings["prepare"] = time.perf_counter() - t
+        # summed over the stations (worker time, not wall time): reading, and the rest
+        timings["read_sum"] = sum(p.read_seconds for p in prepared_list)
+        timings["prepare_sum"] = sum(p.seconds - p.read_seconds for p in prepared_list)
         prepared = {p.stem: p for p in prepared_list}
         files = {p.stem: p.cache_file for p in prepared_list if p.cache_file is not None}
         stems = [s.stem for s in stations if s.stem in files]
@@ -612,8 +620,9 @@ def run_survey(
             (given, cands, scores, max_links),
             reference,
             progress,
+            timings,
         )
-        timings["links"] = time.perf_counter() - t
+        timings["links"] = time.perf_counter() - t - timings.get("graph", 0.0)
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
         if config.map_check:
@@ -661,13 +670,21 @@ def _link_rounds(
     plan: tuple[_Given, list[Candidate], dict[frozenset[str], int], int],
     reference: str | None,
     progress: Progress,
+    timings: dict[str, float],
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
     """The links of the candidates and the graph they make, then the proximity rounds
     (``stores``: the prepared files and the stored poses; ``plan``: what was given, the
     candidates, the place-recognition scores and the most links). Rough positions (or the
     stored poses, declared rough by ``stored_sigma_m``) seed the links and decide between
     each link's poses before every solve. Returns the links, the solution, the
-    glances and the map's loop judge."""
+    glances and the map's loop judge; the solves' seconds are added to ``timings["graph"]``."""
+
+    def solve(found: list[Link]) -> GraphSolution:
+        t = time.perf_counter()
+        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+        timings["graph"] = timings.get("graph", 0.0) + time.perf_counter() - t
+        return sol
+
     files, stored = stores
     given, cands, scores, max_links = plan
     priors = given.positions or stored_positions(stored, config.stored_sigma_m)
@@ -675,7 +692,7 @@ def _link_rounds(
     glances, judge = _glances(client, stems, files, config, progress)
     budget = max_links - len(found) if given.automatic else 0  # a pairs CSV: its pairs only
     found = _positioned(client, found, stores, config, priors, progress, (stems, budget))
-    sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+    sol = solve(found)
     auto = given.automatic and config.pairs == "auto"
     for _ in range(config.proximity_rounds if auto else 0):
         tried = {frozenset((e.target, e.source)) for e in found}
@@ -684,7 +701,7 @@ def _link_rounds(
             break
         found += _register(client, more, files, config, progress, stored)
         found = _positioned(client, found, stores, config, priors, progress)
-        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+        sol = solve(found)
     return found, sol, glances, judge
 
 

@@ -152,6 +152,9 @@ class Prepared:
     fingerprint : (int, int, str) or None
         The file as it was prepared: size (bytes) and modification time (ns), taken before
         its content was hashed, and that SHA-256 (:func:`unchanged` checks a later read).
+    read_seconds : float
+        Of ``seconds``, those spent reading the file: hashing its content (every run: the
+        cache key) and, when prepared now, reading its points.
     """
 
     stem: str
@@ -162,6 +165,7 @@ class Prepared:
     error: str | None = None
     T_world_scanner: NDArray[np.float64] | None = None
     fingerprint: tuple[int, int, str] | None = None
+    read_seconds: float = 0.0
 
 
 def find_scans(paths: list[Path] | tuple[Path, ...]) -> list[Path]:
@@ -416,9 +420,10 @@ def read_prepared(path: Path | str) -> tuple[PreparedScan, dict[str, Any]]:
 
 def _read_and_prepare(
     station: Station, config: RegistrationConfig
-) -> tuple[PreparedScan, int, NDArray[np.float64], bool]:
+) -> tuple[PreparedScan, int, NDArray[np.float64], bool, float]:
     """The station read and prepared at the lowest peak memory, its number of points, its
-    stored pose and whether the file stores one (:func:`flexreg.io.info.pose_stored`). No
+    stored pose, whether the file stores one (:func:`flexreg.io.info.pose_stored`) and the
+    seconds spent reading it. No
     intensities unless the feature image reads them; the checks' inputs after
     the feature stages (``overlap=False``); when the refinement reads only the range images,
     a PTX or E57 station is read straight into its points and working image
@@ -427,6 +432,7 @@ def _read_and_prepare(
     ``prepare`` holds them)."""
     points_needed = config.refine and not uses_projective(config.icp, config.voxel_m)
     image: RangeImage | None = None
+    t0 = time.perf_counter()
     if points_needed or config.image == "intensity" or station.origin is not None:
         scan = read_scan(station.ref, intensity=config.image == "intensity")
         if station.origin is not None:
@@ -439,6 +445,7 @@ def _read_and_prepare(
             f"not centred on its scanner: {why}; give the scanner positions in the files' "
             "frames with --origins FILE.csv (rows stem,x,y,z, metres)",
         )
+    read_s = time.perf_counter() - t0
     n = len(scan)
     T_world = np.asarray(scan.T_world_scanner, dtype=np.float64)
     explicit = pose_stored(scan)  # a 3DTK .pose file holding the identity is a pose
@@ -447,7 +454,7 @@ def _read_and_prepare(
     prepared = Registration(config).prepare(
         held.pop(0), image=held.pop(), overlap=False, keep_scan=points_needed
     )
-    return _compact(prepared), n, T_world, explicit
+    return _compact(prepared), n, T_world, explicit, read_s
 
 
 def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig) -> Prepared:
@@ -465,6 +472,7 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
         st = station.path.stat()  # before the hash: a later change shows in one or the other
         content = file_hash(station.path)
         fingerprint = (st.st_size, st.st_mtime_ns, content)
+        read_s = time.perf_counter() - t0
     except OSError as e:
         return Prepared(station.stem, None, 0, False, 0.0, f"{station.path}: {e.strerror or e}")
     conf = config_hash(config)
@@ -476,9 +484,9 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     if hit is not None:
         n, T_stored = hit
         dt = time.perf_counter() - t0
-        return Prepared(station.stem, str(entry), n, False, dt, None, T_stored, fingerprint)
+        return Prepared(station.stem, str(entry), n, False, dt, None, T_stored, fingerprint, read_s)
     try:
-        prepared, n, T_world, explicit = _read_and_prepare(station, config)
+        prepared, n, T_world, explicit, dt_read = _read_and_prepare(station, config)
     except (FlexregError, ValueError, MemoryError) as e:
         return Prepared(station.stem, None, 0, False, time.perf_counter() - t0, str(e))
     g = global_descriptor(prepared)
@@ -496,7 +504,9 @@ def prepare_station(station: Station, cache_dir: str, config: RegistrationConfig
     log.info("prepared %s in %.1f s", station.stem, time.perf_counter() - t0)
     dt = time.perf_counter() - t0
     T_stored = _stored_pose(T_world, explicit)
-    return Prepared(station.stem, str(entry), n, True, dt, None, T_stored, fingerprint)
+    return Prepared(
+        station.stem, str(entry), n, True, dt, None, T_stored, fingerprint, read_s + dt_read
+    )
 
 
 def _cached(

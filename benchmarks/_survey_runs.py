@@ -314,42 +314,91 @@ def run_multiway(scans: Path, out: Path, pairs: str = "all") -> int:
 
 
 #: what the reader measurement runs in its child: one station file read as a survey worker
-#: reads it (its points and working image), the seconds printed
-_READ_ONE = (
-    "import sys, time; from flexreg.io.scans import read_working_scans; "
-    "t = time.perf_counter(); read_working_scans(sys.argv[1], max_pixels=2_500_000); "
-    "print(f'read_s={time.perf_counter() - t:.4f}')"
-)
+#: reads it (its points and working image) twice, then prepared as a survey prepares it; the
+#: seconds and high-water marks (MB) printed as key=value
+_READ_ONE = """
+import resource, sys, tempfile, time
+from pathlib import Path
+from flexreg.registration.config import RegistrationConfig
+from flexreg.io.scans import read_working_scans
+from flexreg.survey.stations import prepare_station, stations_of
+def hwm():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(f"base_mb={hwm():.1f}")
+for key in ("first_read_s", "read_s"):
+    t = time.perf_counter()
+    ((scan, image),) = read_working_scans(sys.argv[1], max_pixels=2_500_000)
+    print(f"{key}={time.perf_counter() - t:.4f}")
+    n = len(scan)
+    del scan, image  # one station in memory at a time
+print(f"points={n} read_mb={hwm():.1f}")
+with tempfile.TemporaryDirectory() as d:
+    t = time.perf_counter()
+    p = prepare_station(stations_of([Path(sys.argv[1])])[0], d, RegistrationConfig())
+    print(f"prepare_s={time.perf_counter() - t:.4f} prepare_mb={hwm():.1f} error={p.error}")
+"""
+
+
+def _drop_page_cache() -> bool:
+    """Empty the kernel's page cache (root only), so that the next read comes from the disk."""
+    try:
+        os.sync()
+        Path("/proc/sys/vm/drop_caches").write_text("3\n")
+        return True
+    except OSError:
+        return False
 
 
 def reader_speed(path: Path, log: Path) -> dict[str, Any]:
     """How fast a station file is read as a survey worker reads it, against ``cat FILE >
-    /dev/null`` right before it (the page cache warmed by a first ``cat``: both read from
-    memory, so the figure is the parser's cost over copying the bytes).
+    /dev/null``, and what preparing it costs.
+
+    ``cat`` and the reader's first read both start with the page cache emptied (when this
+    process may: root), so both read from the disk; the reader then reads the file again
+    from memory (its parser's own speed), and prepares it from scratch in the same child
+    process (reading again included).
 
     Returns
     -------
     dict
-        ``file``, ``mb`` (file size, MB), ``cat_s``, ``read_s`` (inside the child, after its
-        imports), ``read_mb_s``, ``cat_mb_s``, ``read_peak_mb`` (the child's ``ru_maxrss``).
+        ``file``, ``mb`` (file size, MB), ``from_disk`` (the page cache was emptied),
+        ``cat_s``, ``cat_mb_s``, ``first_read_s`` (from the disk; it also loads the compiled
+        kernels), ``read_s`` / ``read_mb_s`` (from memory), ``points`` (valid points),
+        ``base_mb`` (the child's high-water mark after its imports), ``read_peak_mb`` (after
+        reading), ``prepare_s``, ``prepare_peak_mb`` (after preparing).
     """
     mb = path.stat().st_size / 2**20
+    from_disk = _drop_page_cache()
     with open(os.devnull, "wb") as null:
-        subprocess.run(["cat", str(path)], stdout=null, check=True)
         t = time.perf_counter()
         subprocess.run(["cat", str(path)], stdout=null, check=True)
         cat_s = time.perf_counter() - t
+    from_disk = from_disk and _drop_page_cache()
     m = measure([str(PYTHON), "-c", _READ_ONE, str(path)], log, timeout_s=1800)
-    line = [x for x in log.read_text().split() if x.startswith("read_s=")]
-    read_s = float(line[-1].split("=")[1]) if line and m["exit"] == 0 else None
+    got: dict[str, str] = {}
+    for word in log.read_text().split():
+        key, _, value = word.partition("=")
+        got[key] = value  # the last of each: the second read
+    ok = m["exit"] == 0 and "prepare_mb" in got
+
+    def num(key: str) -> float | None:
+        return float(got[key]) if ok and key in got else None
+
+    read_s = num("read_s")
     return {
         "file": path.name,
         "mb": mb,
+        "from_disk": from_disk,
+        "first_read_s": num("first_read_s"),
         "cat_s": cat_s,
         "cat_mb_s": mb / cat_s,
         "read_s": read_s,
         "read_mb_s": mb / read_s if read_s else None,
-        "read_peak_mb": m["peak_process_mb"],
+        "points": num("points"),
+        "base_mb": num("base_mb"),
+        "read_peak_mb": num("read_mb"),
+        "prepare_s": num("prepare_s"),
+        "prepare_peak_mb": num("prepare_mb"),
     }
 
 

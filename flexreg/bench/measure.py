@@ -316,6 +316,7 @@ def machine_info() -> dict[str, Any]:
     info: dict[str, Any] = {
         "cores": os.cpu_count(),
         "cpu": _cpu_name(),
+        "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1),
         "platform": platform.platform(),
         "python": platform.python_version(),
         "numpy": np.__version__,

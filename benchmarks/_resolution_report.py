@@ -218,6 +218,7 @@ def acceptance(recs: Sequence[Record]) -> list[tuple[str, str, str]]:
 def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
     """The ``## Survey at scanner resolution`` section."""
     recs = _recs(state)
+    las = state.get("las_reader")
     m = state.get("machine", {})
     loads = [x for r in recs for x in (r["load_before"][0], r["load_after"][0])]
     load = f"{min(loads):.1f}–{max(loads):.1f}" if loads else "?"
@@ -257,7 +258,7 @@ def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
         "Then the station is prepared in the same child (read again included); its peak "
         "over the child's imports is set against its float32 coordinates (12 bytes a point).",
         "",
-        *reader_table(recs),
+        *reader_table(recs + ([{"project": las, "reader": las}] if las else [])),
         "",
         "### 100 stations",
         "",

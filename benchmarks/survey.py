@@ -47,6 +47,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +56,7 @@ sys.path.insert(0, str(REPO))
 
 from _resolution_report import plot_resolution, resolution_markdown  # noqa: E402
 from _survey_report import markdown, plot_figures  # noqa: E402
-from _survey_runs import METHODS, ProjectSpec, run_multiway, run_one  # noqa: E402
+from _survey_runs import METHODS, ProjectSpec, reader_speed, run_multiway, run_one  # noqa: E402
 
 from flexreg.bench.harness import machine_info, publish, results_folder, write_json  # noqa: E402
 
@@ -242,9 +243,33 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             flush=True,
         )
         write_json(saved, state)
+    if "resolution" in args.sets and "las_reader" not in state:
+        state["las_reader"] = las_reader(args)
     state["load_average_end"] = list(os.getloadavg())
     write_json(saved, state)
     return state
+
+
+def las_reader(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The reader measurement (:func:`_survey_runs.reader_speed`) on a LAS file of the
+    resolution set's largest station (the first station of its first format, written once
+    next to the project as ``<project>-las/<station>.las``)."""
+    from flexreg.io import read_scan, write_scan
+
+    grids = [tuple(int(v) for v in g.split("x")) for g in args.resolutions]
+    w, h = max(grids, key=lambda g: g[0] * g[1])
+    site = ((args.resolution_kind, args.resolution_stations, args.seed),)
+    project = args.data / ProjectSpec(site, w, h, args.formats[0]).name
+    if not (project / "scans").is_dir():
+        return None
+    first = sorted((project / "scans").iterdir())[0]
+    las = project.with_name(project.name + "-las") / (first.stem + ".las")
+    if not las.is_file():
+        las.parent.mkdir(parents=True, exist_ok=True)
+        scan = read_scan(first, intensity=False)
+        write_scan(las, replace(scan, grid_shape=None, grid_index=None), resolution_m=1e-4)
+    rec = reader_speed(las, las.with_suffix(".log"))
+    return {"project": {"name": las.parent.name, "width": w, "height": h, "format": "las"}} | rec
 
 
 def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:

@@ -4,6 +4,11 @@ LAS stores integer coordinates with a per-file scale and offset; laspy applies t
 points come out as float64 in the file's units (metres for almost every CRS in use). LAS has
 no scanner grid and no sensor pose: points are usually already in a projected/world frame, so
 ``T_world_scanner`` is the identity.
+
+A survey worker needs a station's points only: :func:`read_working` decodes the file in chunks
+of :data:`WORKING_CHUNK_POINTS` points straight into float32 coordinates (12 bytes a point;
+float64 when a coordinate lies beyond :data:`~flexreg.core.scan.FLOAT32_MAX_M`), where
+:func:`read` holds every point record and its float64 coordinates at once.
 """
 
 from __future__ import annotations
@@ -15,10 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.budget import check_memory, format_bytes
-from flexreg.core.scan import POINT_BYTES, Scan
+from flexreg.core.scan import FLOAT32_MAX_M, POINT_BYTES, Scan
 from flexreg.errors import InputError
 
-__all__ = ["check_declared_points", "read", "write"]
+__all__ = ["WORKING_CHUNK_POINTS", "check_declared_points", "read", "read_working", "write"]
+
+#: points decoded per chunk by :func:`read_working`
+WORKING_CHUNK_POINTS = 1 << 20
 
 #: largest believable ratio of a LAZ file's points uncompressed to its size (LASzip reaches
 #: 5-15 on real data; even constant points stay far below this)
@@ -81,6 +89,70 @@ def read(path: Path, **options: Any) -> list[Scan]:
     if {"red", "green", "blue"} <= names:
         colors = np.stack([_to_8bit(np.asarray(las[c])) for c in ("red", "green", "blue")], axis=1)
     return [Scan(points=xyz, intensity=intensity, colors=colors, path=path, name=path.stem)]
+
+
+def read_working(path: Path, *, max_pixels: int) -> list[tuple[Scan, None]]:
+    """A LAS or LAZ file as :func:`read` reads it, its points only, chunk by chunk.
+
+    Parameters
+    ----------
+    path : Path
+    max_pixels : int
+        Unused (LAS has no grid: the caller projects the points); taken as every format's
+        working reader takes it.
+
+    Returns
+    -------
+    list of (Scan, None)
+        One scan of the points (N, 3), float32 when every coordinate lies within
+        :data:`~flexreg.core.scan.FLOAT32_MAX_M` (as :func:`flexreg.io.read_scan` makes them),
+        else float64; no intensity or colour; no image.
+
+    Raises
+    ------
+    InputError
+        As :func:`read`.
+    """
+    del max_pixels
+    try:
+        return [(_read_points(path, np.float32), None)]
+    except _Wide:
+        return [(_read_points(path, np.float64), None)]
+
+
+class _Wide(Exception):
+    """Coordinates beyond :data:`FLOAT32_MAX_M` in a file read as float32."""
+
+
+def _read_points(path: Path, dtype: type) -> Scan:
+    import laspy
+
+    _check_signature(path)
+    try:
+        with laspy.open(path) as reader:
+            declared = int(reader.header.point_count)
+            if declared == 0:
+                raise InputError(path, "LAS file holds no points (header point count 0)")
+            check_declared_points(path, reader.header)
+            points: NDArray[np.floating] = np.empty((declared, 3), dtype=dtype)
+            n = 0
+            for chunk in reader.chunk_iterator(WORKING_CHUNK_POINTS):
+                m = min(len(chunk), declared - n)
+                for k, axis in enumerate("xyz"):
+                    v = np.asarray(chunk[axis], dtype=np.float64)[:m]
+                    if dtype == np.float32 and m and np.abs(v).max() > FLOAT32_MAX_M:
+                        raise _Wide()
+                    points[n : n + m, k] = v
+                n += m
+    except (InputError, _Wide):
+        raise
+    except MemoryError:
+        raise InputError(path, "out of memory while decoding the points") from None
+    except Exception as exc:  # laspy and lazrs raise many kinds on broken headers and data
+        raise InputError(path, f"not a readable LAS/LAZ file: {exc}") from None
+    if n != declared:
+        raise InputError(path, f"truncated: the header declares {declared} points, {n} were read")
+    return Scan(points=points, path=path, name=path.stem)
 
 
 def _check_signature(path: Path) -> None:

@@ -153,13 +153,15 @@ def read_working_scans(
     stored, 12 bytes per float32 point, and the working image of at most ``max_pixels``
     pixels is built while the lines or blocks stream past (:func:`flexreg.io.ptx.read_working`,
     :func:`flexreg.io.e57.read_working`: an E57 scan without row and column indices
-    comes with None for its image). Other formats: :func:`read_scans` without intensities,
-    and None for each image (the caller builds the working images).
+    comes with None for its image). A LAS/LAZ file is decoded chunk by chunk into its
+    points only (:func:`flexreg.io.las.read_working`), with None for its image. Other
+    formats: :func:`read_scans` without intensities, and None for each image (the caller
+    builds the working images).
     """
     ref = parse_scan_ref(path)
     p = ref.path
     mod, _ = detect_format(p)
-    if mod not in ("ptx", "e57"):
+    if mod not in ("ptx", "e57", "las"):
         return [(scan, None) for scan in read_scans(path, intensity=False)]
     check_file(p)
     if mod == "e57":  # only the selected setup's points are read

@@ -1,6 +1,7 @@
-"""E57 scans read block by block into their points and working image
-(:func:`flexreg.io.e57.read_working`): the points of a full read, in the same order,
-and the working image :func:`working_image` makes of it, whatever the block size; the same
+"""Scans read for a survey worker, block by block: E57 into their points and working image
+(:func:`flexreg.io.e57.read_working`), LAS/LAZ into their points
+(:func:`flexreg.io.las.read_working`) -- the points of a full read, in the same order, and
+the working image :func:`working_image` makes of it, whatever the block size; the same
 errors as a full read."""
 
 from __future__ import annotations
@@ -9,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_io_formats import E57_BAD, PUMP, _raw_e57
+from test_io_formats import E57_BAD, PUMP, _raw_e57, _small_las, _write
 
 from flexreg import Scan, read_scan, read_scans, write_scan
 from flexreg.core.camera import SphericalCamera
 from flexreg.core.scan import FLOAT32_MAX_M
 from flexreg.errors import InputError
-from flexreg.io import e57, read_working_scan
+from flexreg.io import e57, las, read_working_scan
 from flexreg.io.scans import read_working_scans
 from flexreg.stages.projection import working_image
 
@@ -124,6 +125,46 @@ def test_far_coordinates_keep_double_precision(tmp_path, monkeypatch):
 @pytest.mark.parametrize("case", sorted(E57_BAD))
 def test_bad_files_are_refused_naming_the_file(case, tmp_path, shared_data):
     p = E57_BAD[case](tmp_path, shared_data)
+    with pytest.raises(InputError) as info:
+        read_working_scan(p, max_pixels=100)
+    assert str(p) in str(info.value)
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+@pytest.mark.parametrize("chunk", [7, 1 << 20])
+def test_las_in_chunks_gives_the_full_reads_points(tmp_path, rng, monkeypatch, suffix, chunk):
+    """Local coordinates become float32 as a full read makes them; project coordinates
+    (beyond the float32 range) stay float64; no image (LAS has no grid)."""
+    import laspy
+
+    monkeypatch.setattr(las, "WORKING_CHUNK_POINTS", chunk)
+    for offset, dtype in ((0.0, np.float32), (5_316_000.0, np.float64)):
+        header = laspy.LasHeader(point_format=3, version="1.2")
+        header.scales, header.offsets = np.full(3, 0.001), np.array([0.0, offset, 0.0])
+        data = laspy.LasData(header)
+        data.x, data.y, data.z = rng.uniform(-30, 30, (3, 50)) + np.array([[0], [offset], [0]])
+        p = tmp_path / f"c{int(offset)}{suffix}"
+        data.write(p)
+        scan, image = read_working_scan(p, max_pixels=100)
+        full = read_scan(p, intensity=False)
+        assert image is None and scan.points.dtype == full.points.dtype == dtype
+        np.testing.assert_array_equal(scan.points, full.points)
+        assert scan.intensity is None and scan.colors is None and scan.name == full.name
+
+
+@pytest.mark.parametrize("case", ["truncated_records", "truncated_midrecord", "garbage", "zero"])
+def test_las_bad_files_are_refused_naming_the_file(case, tmp_path, monkeypatch):
+    monkeypatch.setattr(las, "WORKING_CHUNK_POINTS", 7)
+    b = _small_las(tmp_path / "ok.las")
+    if case == "truncated_records":
+        p = _write(tmp_path / "short.las", b[: -34 * 3])
+    elif case == "truncated_midrecord":
+        p = _write(tmp_path / "mid.las", b[:-50])
+    elif case == "garbage":
+        p = _write(tmp_path / "junk.las", b"LASF" + bytes(400))
+    else:
+        _small_las(tmp_path / "z.las", 0)
+        p = tmp_path / "z.las"
     with pytest.raises(InputError) as info:
         read_working_scan(p, max_pixels=100)
     assert str(p) in str(info.value)

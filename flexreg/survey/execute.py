@@ -38,6 +38,7 @@ from flexreg.survey.pairs import Candidate
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
     CacheEntryError,
+    Prepared,
     load_prepared,
     read_entry,
     write_entry,
@@ -261,6 +262,44 @@ def dask_client(
         quiet.setLevel(level)
 
 
+class OutcomeCounter:
+    """Counts a phase's outcomes (links confident, uncertain or failed; stations that could
+    not be read) and reports progress; :func:`run_tasks` calls it with each result."""
+
+    def __init__(self, phase: str, total: int, progress: Progress) -> None:
+        self.phase, self.total, self.progress = phase, total, progress
+        self.done = self.confident = self.uncertain = self.failed = 0
+        self.t0 = time.perf_counter()
+        self._emit()
+
+    def _emit(self) -> None:
+        if self.progress is not None:
+            self.progress(
+                ProgressEvent(
+                    self.phase,
+                    self.done,
+                    self.total,
+                    self.confident,
+                    self.uncertain,
+                    self.failed,
+                    time.perf_counter() - self.t0,
+                )
+            )
+
+    def __call__(self, _: int, result: Any) -> None:
+        self.done += 1
+        if isinstance(result, Link):
+            if result.T_target_source is None:
+                self.failed += 1
+            elif result.verdict == "confident":
+                self.confident += 1
+            else:
+                self.uncertain += 1
+        elif isinstance(result, Prepared) and result.error is not None:
+            self.failed += 1
+        self._emit()
+
+
 def run_tasks(
     client: Any,
     fn: Callable[..., Any],
@@ -458,6 +497,7 @@ def align_link(
 __all__ = [
     "AXES",
     "SCHEDULER_PROBE_S",
+    "OutcomeCounter",
     "Progress",
     "ProgressEvent",
     "align_link",

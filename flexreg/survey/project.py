@@ -27,8 +27,8 @@ from flexreg.survey.adjust import STATUSES, Adjustment, adjust
 from flexreg.survey.config import STORED_MAX_DEG, STORED_MAX_M, SurveyConfig
 from flexreg.survey.document import SCHEMA, poses_document
 from flexreg.survey.execute import (
+    OutcomeCounter,
     Progress,
-    ProgressEvent,
     align_link,
     check_workers,
     dashboard_address,
@@ -349,43 +349,6 @@ def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
     return None if v is None else float(v)
 
 
-class _Counter:
-    """Counts link outcomes and reports progress."""
-
-    def __init__(self, phase: str, total: int, progress: Progress) -> None:
-        self.phase, self.total, self.progress = phase, total, progress
-        self.done = self.confident = self.uncertain = self.failed = 0
-        self.t0 = time.perf_counter()
-        self._emit()
-
-    def _emit(self) -> None:
-        if self.progress is not None:
-            self.progress(
-                ProgressEvent(
-                    self.phase,
-                    self.done,
-                    self.total,
-                    self.confident,
-                    self.uncertain,
-                    self.failed,
-                    time.perf_counter() - self.t0,
-                )
-            )
-
-    def __call__(self, _: int, result: Any) -> None:
-        self.done += 1
-        if isinstance(result, Link):
-            if result.T_target_source is None:
-                self.failed += 1
-            elif result.verdict == "confident":
-                self.confident += 1
-            else:
-                self.uncertain += 1
-        elif isinstance(result, Prepared) and result.error is not None:
-            self.failed += 1
-        self._emit()
-
-
 def _register(
     client: Any,
     cands: list[Candidate],
@@ -402,7 +365,9 @@ def _register(
         if seed is None and prior:  # one the files store, if any
             seed = stored_T_target_source(stored, c.target, c.source)
         items.append((files[c.target], files[c.source], config.registration, c, seed))
-    return run_tasks(client, align_link, items, on_result=_Counter(phase, len(items), progress))
+    return run_tasks(
+        client, align_link, items, on_result=OutcomeCounter(phase, len(items), progress)
+    )
 
 
 def _positioned(
@@ -591,27 +556,13 @@ def run_survey(
     with dask_client(workers, scheduler, dashboard=dashboard) as client:
         if client is not None and scheduler is not None:
             n_workers = len(client.scheduler_info().get("workers", {})) or n_workers
-        t = time.perf_counter()
-        items = [(s, str(cache.resolve()), config.registration) for s in stations]
-        prepared_list = run_tasks(
-            client, prepare_station, items, on_result=_Counter("prepare", len(items), progress)
-        )
-        timings["prepare"] = time.perf_counter() - t
-        # summed over the stations (worker time, not wall time): reading, and the rest
-        timings["read_sum"] = sum(p.read_seconds for p in prepared_list)
-        timings["prepare_sum"] = sum(p.seconds - p.read_seconds for p in prepared_list)
-        prepared = {p.stem: p for p in prepared_list}
-        files = {p.stem: p.cache_file for p in prepared_list if p.cache_file is not None}
+        prepared, files, stored = _prepare(client, stations, cache, config, progress, timings)
         stems = [s.stem for s in stations if s.stem in files]
-        if len(stems) < 2:
-            bad = "; ".join(p.error or "" for p in prepared_list if p.error)
-            raise RegistrationError(f"fewer than two readable stations ({bad})")
         t = time.perf_counter()
         max_links = max(1, int(config.max_links_per_station * len(stems)))
         cands, scores = _candidates(stems, files, config, given, max_links)
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
-        stored = _stored_poses(prepared_list, files, config)
         found, sol, glances, judge = _link_rounds(
             client,
             stems,
@@ -705,18 +656,43 @@ def _link_rounds(
     return found, sol, glances, judge
 
 
-def _stored_poses(
-    prepared: list[Prepared], files: dict[str, str], config: SurveyConfig
-) -> dict[str, Any]:
-    """The poses the readable stations' files store (``T_world_scanner``), unless
-    ``stored_poses="ignore"``."""
-    if config.stored_poses == "ignore":
-        return {}
-    return {
+def _prepare(
+    client: Any,
+    stations: list[Station],
+    cache: Path,
+    config: SurveyConfig,
+    progress: Progress,
+    timings: dict[str, float],
+) -> tuple[dict[str, Prepared], dict[str, str], dict[str, Any]]:
+    """Every station prepared (or found in ``cache``): the outcome and, of the readable
+    ones, the prepared file and the pose the file stores (none with
+    ``stored_poses="ignore"``). The stage's wall time, and the stations' reading and the
+    rest of their preparation summed over them (worker time), go into ``timings``.
+
+    Raises
+    ------
+    RegistrationError
+        Fewer than two readable stations.
+    """
+    t = time.perf_counter()
+    items = [(s, str(cache.resolve()), config.registration) for s in stations]
+    done = run_tasks(
+        client, prepare_station, items, on_result=OutcomeCounter("prepare", len(items), progress)
+    )
+    timings["prepare"] = time.perf_counter() - t
+    timings["read_sum"] = sum(p.read_seconds for p in done)
+    timings["prepare_sum"] = sum(p.seconds - p.read_seconds for p in done)
+    files = {p.stem: p.cache_file for p in done if p.cache_file is not None}
+    if len(files) < 2:
+        bad = "; ".join(p.error or "" for p in done if p.error)
+        raise RegistrationError(f"fewer than two readable stations ({bad})")
+    ignore = config.stored_poses == "ignore"
+    stored = {
         p.stem: p.T_world_scanner
-        for p in prepared
-        if p.T_world_scanner is not None and p.stem in files
+        for p in done
+        if p.T_world_scanner is not None and p.stem in files and not ignore
     }
+    return {p.stem: p for p in done}, files, stored
 
 
 def _final_alignment(
@@ -767,7 +743,7 @@ def _map_check(
             client,
             look_from,
             [(files[a], glances[a], todo[a]) for a in order],
-            on_result=_Counter("map check", len(order), progress),
+            on_result=OutcomeCounter("map check", len(order), progress),
         )
         seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
         looks = assemble(pairs, sol.poses, seen)
@@ -792,7 +768,7 @@ def _glances(
         client,
         write_glance,
         [(files[s],) for s in stems],
-        on_result=_Counter("map check", len(stems), progress),
+        on_result=OutcomeCounter("map check", len(stems), progress),
     )
     glances = {s: g for s, g in zip(stems, made, strict=True) if g is not None}
     return glances, PairJudge(files, glances, config)

@@ -13,6 +13,8 @@ float64 when a coordinate lies beyond :data:`~flexreg.core.scan.FLOAT32_MAX_M`),
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -59,22 +61,8 @@ def read(path: Path, **options: Any) -> list[Scan]:
     """
     if options:
         raise InputError(path, f"unknown LAS option(s): {', '.join(sorted(options))}")
-    import laspy
-
-    _check_signature(path)
-    try:
-        with laspy.open(path) as reader:
-            declared = int(reader.header.point_count)
-            if declared == 0:
-                raise InputError(path, "LAS file holds no points (header point count 0)")
-            check_declared_points(path, reader.header)
-            las = reader.read()
-    except InputError:
-        raise
-    except MemoryError:
-        raise InputError(path, "out of memory while decoding the points") from None
-    except Exception as exc:  # laspy and lazrs raise many kinds on broken headers and data
-        raise InputError(path, f"not a readable LAS/LAZ file: {exc}") from None
+    with _opened(path) as (reader, declared):
+        las = reader.read()
     n = len(las.points)
     if n != declared:
         raise InputError(path, f"truncated: the header declares {declared} points, {n} were read")
@@ -124,7 +112,11 @@ class _Wide(Exception):
     """Coordinates beyond :data:`FLOAT32_MAX_M` in a file read as float32."""
 
 
-def _read_points(path: Path, dtype: type) -> Scan:
+@contextmanager
+def _opened(path: Path) -> Iterator[tuple[Any, int]]:
+    """The file open in laspy and its declared point count (checked:
+    :func:`check_declared_points`); laspy's and lazrs's errors in the block become an
+    :class:`InputError` naming the file."""
     import laspy
 
     _check_signature(path)
@@ -134,22 +126,27 @@ def _read_points(path: Path, dtype: type) -> Scan:
             if declared == 0:
                 raise InputError(path, "LAS file holds no points (header point count 0)")
             check_declared_points(path, reader.header)
-            points: NDArray[np.floating] = np.empty((declared, 3), dtype=dtype)
-            n = 0
-            for chunk in reader.chunk_iterator(WORKING_CHUNK_POINTS):
-                m = min(len(chunk), declared - n)
-                for k, axis in enumerate("xyz"):
-                    v = np.asarray(chunk[axis], dtype=np.float64)[:m]
-                    if dtype == np.float32 and m and np.abs(v).max() > FLOAT32_MAX_M:
-                        raise _Wide()
-                    points[n : n + m, k] = v
-                n += m
+            yield reader, declared
     except (InputError, _Wide):
         raise
     except MemoryError:
         raise InputError(path, "out of memory while decoding the points") from None
     except Exception as exc:  # laspy and lazrs raise many kinds on broken headers and data
         raise InputError(path, f"not a readable LAS/LAZ file: {exc}") from None
+
+
+def _read_points(path: Path, dtype: type) -> Scan:
+    with _opened(path) as (reader, declared):
+        points: NDArray[np.floating] = np.empty((declared, 3), dtype=dtype)
+        n = 0
+        for chunk in reader.chunk_iterator(WORKING_CHUNK_POINTS):
+            m = min(len(chunk), declared - n)
+            for k, axis in enumerate("xyz"):
+                v = np.asarray(chunk[axis], dtype=np.float64)[:m]
+                if dtype == np.float32 and m and np.abs(v).max() > FLOAT32_MAX_M:
+                    raise _Wide()
+                points[n : n + m, k] = v
+            n += m
     if n != declared:
         raise InputError(path, f"truncated: the header declares {declared} points, {n} were read")
     return Scan(points=points, path=path, name=path.stem)

@@ -219,6 +219,10 @@ def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
     """The ``## Survey at scanner resolution`` section."""
     recs = _recs(state)
     las = state.get("las_reader")
+    again = ""
+    if state.get("readers_remeasured"):
+        when = state["readers_remeasured"]["when"]
+        again = f" The readers were measured again after the surveys ({when}, newer code)."
     m = state.get("machine", {})
     loads = [x for r in recs for x in (r["load_before"][0], r["load_after"][0])]
     load = f"{min(loads):.1f}–{max(loads):.1f}" if loads else "?"
@@ -256,7 +260,8 @@ def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
         "is emptied before each (`/proc/sys/vm/drop_caches`), so `cat` and the first read "
         "come from the disk; the second read comes from memory (the parser's own speed). "
         "Then the station is prepared in the same child (read again included); its peak "
-        "over the child's imports is set against its float32 coordinates (12 bytes a point).",
+        "above the child's resident set after its imports is set against its float32 "
+        "coordinates (12 bytes a point)." + again,
         "",
         *reader_table(recs + ([{"project": las, "reader": las}] if las else [])),
         "",

@@ -324,7 +324,11 @@ from flexreg.io.scans import read_working_scans
 from flexreg.survey.stations import prepare_station, stations_of
 def hwm():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print(f"base_mb={hwm():.1f}")
+def rss():
+    for line in open("/proc/self/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+print(f"base_mb={rss():.1f}")
 for key in ("first_read_s", "read_s"):
     t = time.perf_counter()
     ((scan, image),) = read_working_scans(sys.argv[1], max_pixels=2_500_000)

@@ -243,8 +243,15 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             flush=True,
         )
         write_json(saved, state)
-    if "resolution" in args.sets and "las_reader" not in state:
+    if "resolution" in args.sets and ("las_reader" not in state or args.remeasure_readers):
         state["las_reader"] = las_reader(args)
+    if args.remeasure_readers:  # the readers changed: measure them again, keep the surveys
+        for rec in state["records"]:
+            if rec.get("reader"):
+                scans = args.data / rec["project"]["name"] / "scans"
+                log = Path(rec["run_folder"]) / "reader-log.txt"
+                rec["reader"] = reader_speed(scans / rec["reader"]["file"], log)
+        state["readers_remeasured"] = {"command": " ".join(sys.argv[1:]), "when": time.ctime()}
     state["load_average_end"] = list(os.getloadavg())
     write_json(saved, state)
     return state
@@ -312,6 +319,8 @@ def _parser() -> argparse.ArgumentParser:
                     default=list(RESOLUTION_FORMATS),
                     help="file formats of the resolution set")  # fmt: skip
     ap.add_argument("--resolution-kind", default="building", help="scene of the resolution set")
+    ap.add_argument("--remeasure-readers", action="store_true",
+                    help="with --resume: measure the readers again, keep the surveys")  # fmt: skip
     ap.add_argument("--resolution-stations", type=int, default=12,
                     help="stations per project of the resolution set")  # fmt: skip
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))

@@ -124,27 +124,31 @@ def reader_table(recs: Sequence[Record]) -> list[str]:
 
 
 def same_poses(recs: Sequence[Record]) -> list[str]:
-    """The largest pose difference between the one-worker run and the others of its project."""
+    """How the one-worker run's poses compare with the other runs of its project: bit for bit
+    (the poses as ``poses.json`` stores them), else the largest difference."""
     out = []
     for one in (r for r in recs if r.get("workers") == 1 and r.get("poses")):
         name = one["project"]["name"]
         for other in recs:
             if other is one or other["project"]["name"] != name or not other.get("poses"):
                 continue
-            rot, trans, missing = 0.0, 0.0, []
+            rot, trans, diff, missing = 0.0, 0.0, 0.0, []
             for st, T in one["poses"].items():
                 U = other["poses"].get(st)
                 if (T is None) != (U is None):
                     missing.append(st)
                 elif T is not None:
                     A, B = np.asarray(T), np.asarray(U)
+                    diff = max(diff, float(np.abs(A - B).max()))
                     rot = max(rot, rotation_error_deg(A, B))
                     trans = max(trans, translation_error_m(A, B))
             placed = "the same stations placed" if not missing else f"placed differ: {missing}"
-            out.append(
-                f"- {name}, 1 worker against {_run(other)}: {placed}; largest difference "
-                f"{rot:.2g}° / {1e3 * trans:.2g} mm."
+            same = (
+                "every pose bit-identical"
+                if diff == 0.0
+                else f"largest difference {rot:.2g}° / {1e3 * trans:.2g} mm"
             )
+            out.append(f"- {name}, 1 worker against {_run(other)}: {placed}; {same}.")
     return out
 
 
@@ -263,7 +267,7 @@ def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
         "above the child's resident set after its imports is set against its float32 "
         "coordinates (12 bytes a point)." + again,
         "",
-        *reader_table(recs + ([{"project": las, "reader": las}] if las else [])),
+        *reader_table(recs + ([{"project": las["project"], "reader": las}] if las else [])),
         "",
         "### 100 stations",
         "",

@@ -317,18 +317,18 @@ def run_multiway(scans: Path, out: Path, pairs: str = "all") -> int:
 #: reads it (its points and working image) twice, then prepared as a survey prepares it; the
 #: seconds and high-water marks (MB) printed as key=value
 _READ_ONE = """
-import resource, sys, tempfile, time
+import sys, tempfile, time
 from pathlib import Path
 from flexreg.registration.config import RegistrationConfig
 from flexreg.io.scans import read_working_scans
 from flexreg.survey.stations import prepare_station, stations_of
-def hwm():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-def rss():
+def status(key):  # this process's own figure (ru_maxrss keeps a forking parent's peak)
     for line in open("/proc/self/status"):
-        if line.startswith("VmRSS:"):
+        if line.startswith(key):
             return int(line.split()[1]) / 1024
-print(f"base_mb={rss():.1f}")
+def hwm():
+    return status("VmHWM:")
+print(f"base_mb={status('VmRSS:'):.1f}")
 for key in ("first_read_s", "read_s"):
     t = time.perf_counter()
     ((scan, image),) = read_working_scans(sys.argv[1], max_pixels=2_500_000)

@@ -23,11 +23,9 @@ raises :class:`~flexreg.errors.InputError` naming the file and the line.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import numba
 import numpy as np
@@ -93,9 +91,7 @@ def _chunks(path: Path, size: int, chunk: int | None = None) -> Iterator[tuple[i
     """The file's lines parsed about :data:`_CHUNK_BYTES` at a time (whole lines only):
     ``(offset of the chunk's first byte, (head, tail, counts, errors))`` of
     :func:`parse_all`. One buffer is reused; it grows only for a line longer than a chunk.
-    ``chunk``: bytes per chunk instead of :func:`_chunk_bytes`. The kernel is asked to read
-    the next chunk ahead while this one is parsed (``posix_fadvise`` ``WILLNEED``), so a file
-    read from the disk is parsed nearly as fast as one in memory."""
+    ``chunk``: bytes per chunk instead of :func:`_chunk_bytes`."""
     buf = np.empty(min(chunk or _chunk_bytes(size), max(size, 1)), dtype=np.uint8)
     filled, offset = 0, 0
     with open(path, "rb") as f:
@@ -104,7 +100,6 @@ def _chunks(path: Path, size: int, chunk: int | None = None) -> Iterator[tuple[i
                 check_memory(2 * len(buf), "a line longer than the buffer", source=path)
                 buf = np.concatenate([buf, np.empty_like(buf)])
             got = f.readinto(memoryview(buf)[filled:])  # type: ignore[arg-type]
-            _read_ahead(f, len(buf))  # the next chunk, while this one is parsed
             if not got:
                 if filled:  # the last line has no newline
                     yield offset, _parse(buf[:filled])
@@ -118,16 +113,6 @@ def _chunks(path: Path, size: int, chunk: int | None = None) -> Iterator[tuple[i
             buf[:rest] = buf[cut:filled].copy()
             offset += cut
             filled = rest
-
-
-def _read_ahead(f: Any, n: int) -> None:
-    """Ask the kernel to start reading the ``n`` bytes after ``f``'s position (where the
-    platform has ``posix_fadvise``; a hint only, never an error)."""
-    if hasattr(os, "posix_fadvise"):
-        try:
-            os.posix_fadvise(f.fileno(), f.tell(), n, os.POSIX_FADV_WILLNEED)
-        except OSError:
-            pass
 
 
 _NO_INTENSITY = np.empty(0, dtype=np.float32)

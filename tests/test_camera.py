@@ -117,3 +117,51 @@ def test_camera_dict_round_trip():
         SphericalCamera.from_reference(10, 5, 0.2, 2.9),
     ):
         assert camera_from_dict(cam.to_dict()) == cam
+
+
+def _extent_by_sorting(P):
+    """The azimuth/polar extent from every sorted azimuth (the definition)."""
+    P = np.asarray(P, dtype=np.float64)
+    r = np.linalg.norm(P, axis=1)
+    P, r = P[r > 0], r[r > 0]
+    phi = np.sort(np.arctan2(P[:, 1], P[:, 0]))
+    theta = np.arccos(np.clip(P[:, 2] / r, -1.0, 1.0))
+    gaps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
+    k = int(np.argmax(gaps))
+    if gaps[k] < np.radians(5.0):
+        return -np.pi, np.pi, theta.min(), theta.max(), True
+    lo, hi = phi[(k + 1) % len(phi)], phi[k]
+    return lo, hi + 2 * np.pi if hi < lo else hi, theta.min(), theta.max(), False
+
+
+@pytest.mark.parametrize(
+    "sectors_deg",
+    [
+        [(-180, 180)],  # a full turn
+        [(10, 100)],  # a quarter
+        [(150, 180), (-180, -120)],  # across the -180/180 cut
+        [(0, 100), (104.9, 250)],  # a 4.9 degree gap, and 110 degrees empty
+        [(-180, 30), (34.9, 180)],  # a 4.9 degree gap only: a full turn
+        [(-180, 30), (35.1, 180)],  # a 5.1 degree gap: not a full turn
+    ],
+)
+def test_azimuth_extent_in_buckets_is_that_of_the_sorted_azimuths(rng, monkeypatch, sectors_deg):
+    """The bucketed extent (no per-point array) equals the one from every sorted azimuth,
+    points at the origin ignored, whatever the chunk size."""
+    import flexreg.core.camera as camera_module
+    from flexreg.core.camera import azimuth_polar_extent
+
+    phi = np.concatenate([np.radians(rng.uniform(a, b, 3000)) for a, b in sectors_deg])
+    phi = np.concatenate(
+        [phi, np.radians([a for a, _ in sectors_deg] + [b for _, b in sectors_deg])]
+    )
+    phi = np.clip(phi, -np.pi, np.pi)
+    th = rng.uniform(0.3, 2.8, len(phi))
+    P = np.stack([np.sin(th) * np.cos(phi), np.sin(th) * np.sin(phi), np.cos(th)], 1) * 7.0
+    P = np.concatenate([P, np.zeros((5, 3))])
+    for chunk in (1 << 18, 1000):
+        monkeypatch.setattr(camera_module, "ANGLE_CHUNK", chunk)
+        got = azimuth_polar_extent(P)
+        want = _extent_by_sorting(P)
+        assert got[4] == want[4]
+        np.testing.assert_array_equal(np.array(got[:4]), np.array(want[:4], dtype=np.float64))

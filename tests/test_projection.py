@@ -230,3 +230,41 @@ def test_samples_and_voxels_of_float32_points_equal_those_of_their_float64_copy(
     np.testing.assert_array_equal(s32, s64)
     np.testing.assert_array_equal(voxel_centroids(p32, 1.5), voxel_centroids(p64, 1.5))
     assert voxel_count(p32, 0.7) == voxel_count(p64, 0.7)
+
+
+@pytest.mark.parametrize("stride", [2, 3, 4])
+def test_projecting_into_every_kth_pixel_is_downsampling_the_full_projection(
+    rng, monkeypatch, stride
+):
+    """``project(..., stride=k)`` is exactly ``downsample_image(project(...), k)`` (the
+    nearest point wins, the first of equal ranges, the camera scaled), in chunks of any size;
+    the angles of an unstructured cloud, computed in chunks, give the same camera; and the
+    working image of such a cloud is the full projection's every k-th pixel."""
+    import flexreg.core.camera as camera_module
+    import flexreg.stages.projection as projection
+    from flexreg.core.range_image import downsample_image, working_stride
+    from flexreg.stages.projection import working_image
+
+    d = rng.normal(size=(20_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    P = d * rng.uniform(1, 20, (len(d), 1))
+    P = np.concatenate([P, P[:500] * 1.5, P[500:800]]).astype(np.float32)  # farther, equal
+    scan = Scan(points=P)
+    cam = auto_spherical_camera(P)
+    full = project(scan, cam)
+    monkeypatch.setattr(projection, "_PROJECT_CHUNK", 1000)
+    monkeypatch.setattr(camera_module, "ANGLE_CHUNK", 777)
+    monkeypatch.setattr(projection, "ANGLE_CHUNK", 777)
+    assert auto_spherical_camera(P) == cam
+    got, expected = project(scan, cam, stride=stride), downsample_image(full, stride)
+    np.testing.assert_array_equal(got.index, expected.index)
+    np.testing.assert_array_equal(got.valid, expected.valid)
+    np.testing.assert_array_equal(got.xyz[got.valid], expected.xyz[expected.valid])
+    assert got.camera == expected.camera
+    budget = full.height * full.width // stride**2
+    k = working_stride(full.height, full.width, budget)
+    assert k > 1
+    np.testing.assert_array_equal(
+        working_image(scan, max_pixels=budget).index,
+        downsample_image(range_image(scan), k).index,
+    )

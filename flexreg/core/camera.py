@@ -10,9 +10,11 @@ convention of the authors' reference implementation (``phi(u) = phi_min + u * dp
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -324,6 +326,25 @@ def camera_from_dict(d: dict[str, object]) -> Camera:
     raise InputError("camera", f"unknown camera model {model!r}")
 
 
+#: an azimuth gap at least this wide (degrees) means the points do not cover a full turn
+FULL_TURN_GAP_DEG = 5.0
+#: points whose angles are computed at a time (a multiple of every SIMD width, so each element
+#: is computed exactly as in one pass over all points)
+ANGLE_CHUNK = 1 << 18
+
+
+@numba.njit(cache=True, nogil=True)
+def _bucket_extent(phi, width, lo, hi):  # pragma: no cover - compiled
+    """Least and greatest azimuth per bucket ``floor((phi + pi) / width)`` (clipped)."""
+    last = lo.shape[0] - 1
+    for i in range(phi.shape[0]):
+        b = min(max(int(np.floor((phi[i] + np.pi) / width)), 0), last)
+        if phi[i] < lo[b]:
+            lo[b] = phi[i]
+        if phi[i] > hi[b]:
+            hi[b] = phi[i]
+
+
 def azimuth_polar_extent(
     points: NDArray[np.floating],
 ) -> tuple[float, float, float, float, bool]:
@@ -334,24 +355,44 @@ def azimuth_polar_extent(
     phi_min, phi_max, theta_min, theta_max : float, radians
         ``phi_max`` may exceed pi when the covered azimuth interval crosses the -pi/pi cut.
     full_turn : bool
-        True when no azimuth gap wider than 5 degrees exists.
+        True when no azimuth gap of :data:`FULL_TURN_GAP_DEG` (5 degrees) or more exists.
     """
-    P = np.asarray(points, dtype=np.float64)
-    if len(P) == 0:
+    n = len(points)
+    if n == 0:
         raise InputError("points", "no points")
-    r = np.linalg.norm(P, axis=1)
-    P = P[r > 0]
-    r = r[r > 0]
-    phi = np.sort(np.arctan2(P[:, 1], P[:, 0]))
-    theta = np.arccos(np.clip(P[:, 2] / r, -1.0, 1.0))
-    gaps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
-    k = int(np.argmax(gaps))
-    full = bool(gaps[k] < np.radians(5.0))
+    # In chunks, with no per-point array kept: each azimuth lands in a bucket of half the
+    # widest gap that can leave the turn full (the buckets keep their least and greatest
+    # azimuth), so a gap that wide lies between two occupied buckets and is found exactly,
+    # as in the sorted azimuths, and one narrower leaves the turn full either way.
+    width = np.radians(FULL_TURN_GAP_DEG) / 2
+    lo_b = np.full(math.ceil(2 * np.pi / width), np.inf)
+    hi_b = np.full(len(lo_b), -np.inf)
+    th_lo, th_hi = np.inf, -np.inf
+    for a in range(0, n, ANGLE_CHUNK):
+        P = np.asarray(points[a : a + ANGLE_CHUNK], dtype=np.float64)
+        r = np.linalg.norm(P, axis=1)
+        P, r = P[r > 0], r[r > 0]
+        if len(P):
+            _bucket_extent(np.arctan2(P[:, 1], P[:, 0]), width, lo_b, hi_b)
+            theta = np.arccos(np.clip(P[:, 2] / r, -1.0, 1.0))
+            th_lo, th_hi = min(th_lo, float(theta.min())), max(th_hi, float(theta.max()))
+    used = np.flatnonzero(lo_b <= hi_b)
+    if len(used) == 0:
+        raise InputError("points", "no points away from the origin")
+    lo_b, hi_b = lo_b[used], hi_b[used]
+    # the gaps between occupied buckets in azimuth order, then the one across the -pi/pi
+    # cut: the first widest wins, as in the sorted azimuths
+    gaps = lo_b[1:] - hi_b[:-1]
+    k = int(np.argmax(gaps)) if len(gaps) else -1
+    widest = float(gaps[k]) if len(gaps) else -np.inf
+    if lo_b[0] + 2 * np.pi - hi_b[-1] > widest:
+        k, widest = len(used) - 1, float(lo_b[0] + 2 * np.pi - hi_b[-1])
+    full = bool(widest < np.radians(FULL_TURN_GAP_DEG))
     if full:
         phi_min, phi_max = -np.pi, np.pi
     else:  # the covered interval starts after the widest gap
-        phi_min = float(phi[(k + 1) % len(phi)])
-        phi_max = float(phi[k])
+        phi_min = float(lo_b[(k + 1) % len(used)])
+        phi_max = float(hi_b[k])
         if phi_max < phi_min:
             phi_max += 2 * np.pi
-    return float(phi_min), float(phi_max), float(theta.min()), float(theta.max()), full
+    return float(phi_min), float(phi_max), th_lo, th_hi, full

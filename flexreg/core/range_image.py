@@ -169,7 +169,7 @@ def from_grid(scan: Scan, *, stride: int = 1) -> RangeImage:
     s = max(1, int(stride))
     # only the kept rows and columns: no full-size index (or point-number array) first
     index = _grid_index(scan.grid_index, (H + s - 1) // s, (W + s - 1) // s, s)
-    camera = scan.camera if s == 1 else _subsampled_camera(scan.camera, H, W, s)
+    camera = scan.camera if s == 1 else subsampled_camera(scan.camera, H, W, s)
     return from_index(scan, index, camera)
 
 
@@ -264,7 +264,7 @@ def from_depth(
     return RangeImage(xyz=xyz, valid=valid, index=index, camera=camera)
 
 
-def _subsampled_camera(camera: Camera | None, H: int, W: int, f: int) -> Camera | None:
+def subsampled_camera(camera: Camera | None, H: int, W: int, f: int) -> Camera | None:
     """The camera of every ``f``-th row and column of an H x W image (pixel ``(u', v')`` is the
     original ``(f u', f v')``), or None when the size is not a multiple of ``f``."""
     c = camera
@@ -295,7 +295,7 @@ def downsample_image(image: RangeImage, factor: int) -> RangeImage:
         xyz=np.ascontiguousarray(image.xyz[::f, ::f]),
         valid=np.ascontiguousarray(image.valid[::f, ::f]),
         index=np.ascontiguousarray(image.index[::f, ::f]),
-        camera=_subsampled_camera(image.camera, image.height, image.width, f),
+        camera=subsampled_camera(image.camera, image.height, image.width, f),
         intensity=None if image.intensity is None else image.intensity[::f, ::f].copy(),
     )
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.budget import check_memory
-from flexreg.core.camera import Camera, SphericalCamera, azimuth_polar_extent
+from flexreg.core.camera import ANGLE_CHUNK, Camera, SphericalCamera, azimuth_polar_extent
 from flexreg.core.grid import wrap_col
 from flexreg.core.range_image import (
     RangeImage,
@@ -23,6 +23,7 @@ from flexreg.core.range_image import (
     float_xyz,
     from_grid,
     from_index,
+    subsampled_camera,
     working_stride,
 )
 from flexreg.core.scan import GRID_CELL_BYTES, Scan
@@ -49,7 +50,7 @@ def _zbuffer(
     return index
 
 
-def project(scan: Scan, camera: Camera) -> RangeImage:
+def project(scan: Scan, camera: Camera, *, stride: int = 1) -> RangeImage:
     """Z-buffer projection of a scan through a camera: the nearest return wins each pixel.
 
     Parameters
@@ -58,6 +59,10 @@ def project(scan: Scan, camera: Camera) -> RangeImage:
         Points in the camera/scanner frame.
     camera : PinholeCamera or SphericalCamera
         Pixel ``[v, u]`` receives the points whose coordinates round to ``(u, v)``.
+    stride : int
+        Keep every ``stride``-th row and column of the image only: exactly
+        ``downsample_image(project(scan, camera), stride)``, without the full-size image or a
+        full-size pixel list (the points off the kept pixels are dropped chunk by chunk).
 
     Returns
     -------
@@ -71,20 +76,36 @@ def project(scan: Scan, camera: Camera) -> RangeImage:
         The image would not fit the memory budget (:mod:`flexreg.core.budget`).
     """
     H, W = camera.shape
+    s = max(1, int(stride))
+    h, w = -(-H // s), -(-W // s)
     check_memory(
-        H * W * GRID_CELL_BYTES,
-        f"a {H} x {W} range image",
+        h * w * GRID_CELL_BYTES,
+        f"a {h} x {w} range image",
         source=scan.path if scan.path is not None else (scan.name or "scan"),
     )
     n = len(scan.points)
-    lin = np.empty(n, dtype=np.int64)
-    d = np.empty(n, dtype=np.float64)
-    for a in range(0, n, _PROJECT_CHUNK):  # elementwise: chunks bound the temporaries
-        b = min(n, a + _PROJECT_CHUNK)
-        lin[a:b], d[a:b] = _pixels(scan.points[a:b], camera)
-    index = _zbuffer(lin, d, H * W).reshape(H, W)
-    del lin, d
-    return from_index(scan, index, camera)
+    if s == 1:
+        lin = np.empty(n, dtype=np.int64)
+        d = np.empty(n, dtype=np.float64)
+        for a in range(0, n, _PROJECT_CHUNK):  # elementwise: chunks bound the temporaries
+            b = min(n, a + _PROJECT_CHUNK)
+            lin[a:b], d[a:b] = _pixels(scan.points[a:b], camera)
+        index = _zbuffer(lin, d, H * W).reshape(H, W)
+        del lin, d
+        return from_index(scan, index, camera)
+    kept: list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]] = []
+    for a in range(0, n, _PROJECT_CHUNK):
+        lin, d = _pixels(scan.points[a : a + _PROJECT_CHUNK], camera)
+        v, u = np.divmod(lin, W)
+        on = np.flatnonzero((lin >= 0) & (v % s == 0) & (u % s == 0))
+        kept.append(((v[on] // s) * w + u[on] // s, d[on], on + a))
+    small = np.concatenate([k[0] for k in kept])
+    depth = np.concatenate([k[1] for k in kept])
+    ids = np.concatenate([k[2] for k in kept])
+    del kept
+    winner = _zbuffer(small, depth, h * w)  # the points in order: ties as in one pass
+    index = np.where(winner >= 0, ids[np.maximum(winner, 0)], -1).reshape(h, w)
+    return from_index(scan, index, subsampled_camera(camera, H, W, s))
 
 
 #: points projected at a time by :func:`project` (a multiple of every SIMD width, so each
@@ -116,13 +137,14 @@ def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | Non
     or range limits keeps its firing pitch, and a few rays more or less (another CPU's ray
     caster, another dropout draw) cannot move it.
     """
-    P = np.asarray(points, dtype=np.float64)
-    if len(P) < 1000:
+    if len(points) < 1000:
         return None
-    r = np.linalg.norm(P, axis=1)
-    th_all = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0))
-    if _polar_runs(th_all, math.radians(0.2)) < 4:
+    if _polar_runs(points, math.radians(0.2)) < 4:
         return None  # fewer than 4 bands: the sort below would find fewer than 4 rings
+    th_all = np.empty(len(points), dtype=np.float64)
+    for a in range(0, len(points), ANGLE_CHUNK):
+        th_all[a : a + ANGLE_CHUNK] = _angles(points[a : a + ANGLE_CHUNK], 0.0, 0.0)[1]
+    P = np.asarray(points, dtype=np.float64)
     order = np.argsort(th_all, kind="stable")
     th = th_all[order]
     gaps = np.diff(th)
@@ -144,18 +166,29 @@ def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | Non
     return n, spacing, pitch
 
 
-def _polar_runs(theta: NDArray[np.float64], gap_rad: float) -> int:
-    """An upper bound of the number of bands of ``theta`` separated by more than ``gap_rad``
-    (what :func:`_lidar_rings` counts after sorting), in one pass: the runs of occupied bins
-    a third of ``gap_rad`` wide. Two sorted neighbours more than ``gap_rad`` apart are more
-    than two bins apart, so an empty bin lies between them and they fall into different
-    runs."""
+def _angles(
+    points: NDArray[np.floating], phi0: float, th0: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Azimuth from ``phi0`` (0 to 2 pi) and polar angle less ``th0`` of points, radians."""
+    P = np.asarray(points, dtype=np.float64)
+    r = np.linalg.norm(P, axis=1)
+    ph = np.mod(np.arctan2(P[:, 1], P[:, 0]) - phi0, 2 * np.pi)
+    th = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)) - th0
+    return ph, th
+
+
+def _polar_runs(points: NDArray[np.floating], gap_rad: float) -> int:
+    """An upper bound of the number of bands of the points' polar angles separated by more
+    than ``gap_rad`` (what :func:`_lidar_rings` counts after sorting), in one pass over the
+    points in chunks: the runs of occupied bins a third of ``gap_rad`` wide. Two sorted
+    neighbours more than ``gap_rad`` apart are more than two bins apart, so an empty bin
+    lies between them and they fall into different runs."""
     w = gap_rad / 3.0
-    t = theta[np.isfinite(theta)]
-    if len(t) == 0:
-        return 0
-    occupied = np.bincount(((t - t.min()) / w).astype(np.int64)) > 0
-    return int(np.count_nonzero(occupied[1:] & ~occupied[:-1])) + 1
+    occupied = np.zeros(int(np.pi / w) + 2, dtype=bool)
+    for a in range(0, len(points), ANGLE_CHUNK):
+        th = _angles(points[a : a + ANGLE_CHUNK], 0.0, 0.0)[1]
+        occupied[(th[np.isfinite(th)] / w).astype(np.int64)] = True
+    return int(np.count_nonzero(occupied[1:] & ~occupied[:-1])) + int(occupied[0])
 
 
 def _ring_azimuth_pitch(P: NDArray[np.float64], ring: NDArray[np.int64]) -> float | None:
@@ -212,17 +245,16 @@ def auto_spherical_camera(
     if angular_resolution_rad is None:
         n = len(points)
         step = math.sqrt(span_phi * span_th / max(n, 1))
-        # occupancy of the domain on a grid 8x coarser than the first guess
-        P = np.asarray(points, dtype=np.float64)
-        r = np.linalg.norm(P, axis=1)
-        ph = np.mod(np.arctan2(P[:, 1], P[:, 0]) - phi_min, 2 * np.pi)
-        th = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)) - th_min
+        # occupancy of the domain on a grid 8x coarser than the first guess (in chunks)
         cell = 8 * step
         nx, ny = max(1, int(span_phi / cell) + 1), max(1, int(span_th / cell) + 1)
         occ = np.zeros((ny, nx), dtype=bool)
-        occ[
-            np.clip((th / cell).astype(int), 0, ny - 1), np.clip((ph / cell).astype(int), 0, nx - 1)
-        ] = True
+        for a in range(0, n, ANGLE_CHUNK):
+            ph, th = _angles(points[a : a + ANGLE_CHUNK], phi_min, th_min)
+            occ[
+                np.clip((th / cell).astype(int), 0, ny - 1),
+                np.clip((ph / cell).astype(int), 0, nx - 1),
+            ] = True
         frac = occ.mean()
         step = math.sqrt(frac * span_phi * span_th / max(n, 1))
     else:
@@ -331,6 +363,13 @@ def working_image(x: Scan | RangeImage, *, max_pixels: int = MAX_IMAGE_PIXELS) -
 
     if isinstance(x, Scan) and x.has_grid and x.grid_shape is not None:
         return from_grid(x, stride=factor(*x.grid_shape))
+    if isinstance(x, Scan) and len(x):  # projected straight into the kept pixels
+        camera = auto_spherical_camera(x.points)
+        k = factor(*camera.shape)
+        log.info(
+            "projecting %d points into every %d-th pixel of %dx%d", len(x), k, *camera.shape[::-1]
+        )
+        return project(x, camera, stride=k)
     img = x if isinstance(x, RangeImage) else range_image(x)
     return downsample_image(img, factor(img.height, img.width))
 

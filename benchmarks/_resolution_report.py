@@ -25,6 +25,16 @@ CACHE_LIMIT = 0.5
 STAGES = ("prepare", "pairs", "links", "graph", "map_check", "refine")
 
 
+def _command(state: Record) -> str:
+    """The run's command with the folders it was given (``--data``, ``--results``,
+    ``--resume``: somewhere outside the repository) as their option names."""
+    words = state["command"].split()
+    for i, w in enumerate(words[:-1]):
+        if w in ("--data", "--results", "--resume"):
+            words[i + 1] = w.removeprefix("--").upper()
+    return " ".join(words)
+
+
 def _recs(state: Record) -> list[Record]:
     return [r for r in state["records"] if r["set"] == "resolution"]
 
@@ -94,14 +104,16 @@ def reader_table(recs: Sequence[Record]) -> list[str]:
     preparation peaks at against its float32 coordinates (12 bytes a point)."""
     lines = [
         "| format | grid | file MB | points | `cat` MB/s (disk) | first read MB/s (disk) | "
-        "read MB/s (memory) | read s | first read / `cat` | prepare s | peak MB: imports / "
-        "read / prepared | prepared peak over imports (× float32 xyz) |",
+        "read MB/s (memory) | read s | first read / `cat` | prepare s | MB: after imports / "
+        "read peak / prepared peak | prepared peak above imports (× float32 xyz) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    seen = set()
     for r in recs:
         rd = r.get("reader")
-        if not rd:
+        if not rd or r["project"]["name"] in seen:  # one row a project
             continue
+        seen.add(r["project"]["name"])
         p = r["project"]
         first = rd.get("first_read_s")
         slower = first / rd["cat_s"] if first else None
@@ -231,7 +243,7 @@ def resolution_markdown(state: Record, figures: Sequence[str]) -> str:
     loads = [x for r in recs for x in (r["load_before"][0], r["load_after"][0])]
     load = f"{min(loads):.1f}–{max(loads):.1f}" if loads else "?"
     lines = [
-        f"Measured with `{state['command']}` on {m.get('cpu', 'this machine')} "
+        f"Measured with `{_command(state)}` on {m.get('cpu', 'this machine')} "
         f"({m.get('cores', '?')} cores, {m.get('memory_gb', '?')} GB), 1-minute load average "
         f"{load} at the starts and ends of the runs (per run in `results.json`). One synthetic "
         "project (`flexreg synth`, the same scene and stations) at each grid and format; each "

@@ -252,6 +252,36 @@ def markdown(state: dict[str, Any], *, figure: str) -> str:
     return "\n".join(out)
 
 
+def hard_markdown(state: dict[str, Any]) -> str:
+    """The harder pairs' section: per size, the call against FPFH + RANSAC + ICP."""
+    m = state.get("machine", {})
+    load = [_load(m.get("load_average")), _load(m.get("load_average_end"))]
+    bins = state.get("bins", {})
+    out = [
+        f"Command: `.venv/bin/python {state['command']}`; {m.get('cores', '?')} cores, "
+        f"{m.get('cpu', '?')}; 1-minute load average {load[0]} at the start, {load[1]} at the "
+        f"end. Pairs of the comparison suite (`flexreg bench --suite synthetic`: a furnished "
+        f"room and a hall in turn) {bins.get('distance_bins_m')} m apart and turned "
+        f"{bins.get('yaw_bins_deg')}° (each pair one bin of each), both methods pair by pair "
+        "in the same run, each call timed alone in its own process (scans in memory).",
+        "",
+        "| size | pairs | flexreg median s | FPFH + RANSAC + ICP median s | median ratio | "
+        "flexreg ok | FPFH ok |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for cmp in state.get("hard", []):
+        w, h = cmp["resolution"]
+        out.append(
+            f"| {w} × {h} | {len(cmp['pairs'])} | {_f(cmp.get('median_flexreg_s'))} | "
+            f"{_f(cmp.get('median_fpfh_s'))} | {_f(cmp.get('median_ratio'), '.2f')}× | "
+            f"{cmp.get('flexreg_success')} | {cmp.get('fpfh_success')} |"
+        )
+    for cmp in state.get("hard", []):
+        w, h = cmp["resolution"]
+        out += ["", f"**{w} × {h}**", "", *_compare_table(cmp)]
+    return "\n".join(out) + "\n"
+
+
 def plot(state: dict[str, Any], path: Path) -> Path:
     """Peak RSS of the whole process against the pair's points, with the targets."""
     import matplotlib

@@ -227,10 +227,11 @@ def prepare_station(path: Path) -> dict[str, Any]:
     }
 
 
-def speed_ratio(pairs: int, seed: int) -> dict[str, Any]:
+def speed_ratio(pairs: int, seed: int, **overrides: Any) -> dict[str, Any]:
     """flexreg's registration call against Open3D FPFH + RANSAC + point-to-plane ICP on the
     synthetic pairs of the comparison suite (``flexreg bench``), pair by pair in one run: the
-    median of the per-pair time ratios (and the ratio of the medians)."""
+    median of the per-pair time ratios (and the ratio of the medians). ``overrides``: fields
+    of :class:`~flexreg.bench.types.BenchConfig` (resolution, distance and yaw bins)."""
     from flexreg.bench.suite import run_bench
     from flexreg.bench.types import BenchConfig
 
@@ -240,6 +241,7 @@ def speed_ratio(pairs: int, seed: int) -> dict[str, Any]:
         pairs=pairs,
         seed=seed,
         sweep_resolutions=(),
+        **overrides,
     )
     result = run_bench(config, command="benchmarks/perf.py")
     by: dict[int, dict[str, dict[str, Any]]] = {}

@@ -45,7 +45,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from _perf_report import markdown, plot  # noqa: E402
+from _perf_report import hard_markdown, markdown, plot  # noqa: E402
 from _perf_runs import (  # noqa: E402
     import_time,
     prepare_station,
@@ -61,6 +61,10 @@ FIGURE = REPO / "docs" / "figures" / "perf-memory.png"
 RESULTS = REPO / "benchmarks" / "results"
 SECTION = "## Memory and speed"
 SIZES = ((1024, 512), (2048, 1024), (4096, 2048), (8192, 4096))
+HARD_SECTION = "## Registration call on harder pairs"
+#: the harder pairs (issue 39): 2 m / 30 degrees and 6 m / 60 degrees apart, in furnished
+#: rooms and halls (the comparison suite alternates the two scenes)
+HARD_BINS = {"distance_bins_m": ((1.5, 2.5), (5.5, 6.5)), "yaw_bins_deg": ((25, 35), (55, 65))}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -89,7 +93,32 @@ def _parser() -> argparse.ArgumentParser:
         "pair folder name -> that pair's entry of another run's results.json 'whole'",
     )
     ap.add_argument("--before-note", default="main", help="what the --before code was")
+    ap.add_argument(
+        "--hard",
+        nargs="+",
+        metavar="WxH",
+        help=f'only the harder pairs at these sizes, flexreg against FPFH ("{HARD_SECTION}")',
+    )
     return ap
+
+
+def _run_hard(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
+    """The registration call against FPFH + RANSAC + ICP on the harder pairs at each size."""
+    state: dict[str, Any] = {
+        "command": f"benchmarks/perf.py --hard {' '.join(args.hard)} --pairs {args.pairs}",
+        "machine": machine_info(),
+        "bins": HARD_BINS,
+        "hard": [],
+    }
+    for x in args.hard:
+        w, h = (int(v) for v in x.lower().split("x"))
+        print(f"harder pairs {w}x{h} (flexreg, fpfh-ransac)", flush=True)
+        cmp = speed_ratio(args.pairs, args.seed, resolution=(w, h), **HARD_BINS)
+        state["hard"].append(cmp)
+        write_json(folder / "results.json", state)
+    state["machine"]["load_average_end"] = machine_info().get("load_average")
+    write_json(folder / "results.json", state)
+    return state
 
 
 def _run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
@@ -130,6 +159,12 @@ def _run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.hard:
+        folder = args.from_json.parent if args.from_json else results_folder(args.results, "perf")
+        hard = json.loads(args.from_json.read_text()) if args.from_json else _run_hard(args, folder)
+        doc = DOC if args.write_docs else None
+        publish(hard_markdown(hard), folder, doc=doc, heading=HARD_SECTION, name="hard.md")
+        return 0
     if args.from_json is not None:
         state = json.loads(args.from_json.read_text())
         folder = args.from_json.parent

@@ -52,13 +52,13 @@ TARGET_WHOLE_S = 2.0
 #: large freed blocks as the command line sets it (``mallopt``). The PTX parsing time is
 #: measured apart, on a read as ``flexreg register`` reads (no intensities).
 _PREPARE_CHILD = """
-import ctypes, gc, json, pickle, sys, tempfile, time
+import ctypes, gc, json, sys, tempfile, time
 from pathlib import Path
 ctypes.CDLL(None).mallopt(-3, 4 << 20)  # M_MMAP_THRESHOLD, as flexreg.cli.app sets it
 from flexreg.bench.measure import reset_high_water_mark
 from flexreg.io import read_scan
 from flexreg.registration import RegistrationConfig
-from flexreg.survey.stations import Station, prepare_station
+from flexreg.survey.stations import Station, prepare_station, read_prepared
 
 def kib(key):
     for line in open("/proc/self/status"):
@@ -81,8 +81,7 @@ for _ in range(2):
         peak, after = kib("VmHWM"), kib("VmRSS")
         if done.error is not None:
             sys.exit(done.error)
-        with open(done.cache_file, "rb") as f:
-            timings = pickle.load(f).timings_s
+        timings = read_prepared(done.cache_file)[0].timings_s
     gc.collect()
     t = time.perf_counter()
     scan = read_scan(path, intensity=False)

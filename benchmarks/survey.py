@@ -138,6 +138,16 @@ def plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     return sorted(runs, key=cost)
 
 
+def _resolution_projects(args: argparse.Namespace) -> tuple[list[ProjectSpec], ProjectSpec]:
+    """The resolution set's projects (each format, each grid) and the largest grid's project
+    of the first format."""
+    grids = [tuple(int(v) for v in g.split("x")) for g in args.resolutions]
+    site = ((args.resolution_kind, args.resolution_stations, args.seed),)
+    specs = [ProjectSpec(site, w, h, fmt) for fmt in args.formats for w, h in grids]
+    w, h = max(grids, key=lambda g: g[0] * g[1])
+    return specs, ProjectSpec(site, w, h, args.formats[0])
+
+
 def resolution_plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     """The resolution set (issue 39): one project of ``--resolution-stations`` stations per
     grid of :data:`RESOLUTIONS` and format, surveyed cold and warm (its cache reused) with
@@ -145,22 +155,14 @@ def resolution_plan(args: argparse.Namespace) -> list[dict[str, Any]]:
     worker (the same poses are expected)."""
     workers = args.workers or 2
     runs: list[dict[str, Any]] = []
-    grids = [tuple(int(v) for v in g.split("x")) for g in args.resolutions]
-    for fmt in args.formats:
-        for w, h in grids:
-            spec = ProjectSpec(
-                ((args.resolution_kind, args.resolution_stations, args.seed),), w, h, fmt
-            )
-            for warm in (False, True):
-                label = f"survey-w{workers}" + ("-warm" if warm else "")
-                runs.append({"set": "resolution", "spec": spec, "method": "survey", "pairs": None,
-                             "workers": workers, "warm": warm, "label": label})  # fmt: skip
-    w, h = max(grids, key=lambda g: g[0] * g[1])
-    spec = ProjectSpec(
-        ((args.resolution_kind, args.resolution_stations, args.seed),), w, h, args.formats[0]
-    )
+    specs, largest = _resolution_projects(args)
+    for spec in specs:
+        for warm in (False, True):
+            label = f"survey-w{workers}" + ("-warm" if warm else "")
+            runs.append({"set": "resolution", "spec": spec, "method": "survey", "pairs": None,
+                         "workers": workers, "warm": warm, "label": label})  # fmt: skip
     if workers != 1:
-        runs.append({"set": "resolution", "spec": spec, "method": "survey", "pairs": None,
+        runs.append({"set": "resolution", "spec": largest, "method": "survey", "pairs": None,
                      "workers": 1, "warm": False, "label": "survey-w1"})  # fmt: skip
     return runs
 
@@ -263,10 +265,8 @@ def las_reader(args: argparse.Namespace) -> dict[str, Any] | None:
     next to the project as ``<project>-las/<station>.las``)."""
     from flexreg.io import read_scan, write_scan
 
-    grids = [tuple(int(v) for v in g.split("x")) for g in args.resolutions]
-    w, h = max(grids, key=lambda g: g[0] * g[1])
-    site = ((args.resolution_kind, args.resolution_stations, args.seed),)
-    project = args.data / ProjectSpec(site, w, h, args.formats[0]).name
+    largest = _resolution_projects(args)[1]
+    project = args.data / largest.name
     if not (project / "scans").is_dir():
         return None
     first = sorted((project / "scans").iterdir())[0]
@@ -276,7 +276,8 @@ def las_reader(args: argparse.Namespace) -> dict[str, Any] | None:
         scan = read_scan(first, intensity=False)
         write_scan(las, replace(scan, grid_shape=None, grid_index=None), resolution_m=1e-4)
     rec = reader_speed(las, las.with_suffix(".log"))
-    return {"project": {"name": las.parent.name, "width": w, "height": h, "format": "las"}} | rec
+    size = {"width": largest.width, "height": largest.height}
+    return {"project": {"name": las.parent.name, **size, "format": "las"}} | rec
 
 
 def finish(state: dict[str, Any], folder: Path, *, write_docs: bool) -> int:

@@ -166,37 +166,55 @@ def _name(node: Any, i: int) -> str:
     return str(node["name"].value()) if node.isDefined("name") else f"scan {i}"
 
 
-def _read_one(e57: Any, i: int, path: Path) -> Scan:
+def _layout(e57: Any, i: int, path: Path) -> tuple[Any, str, str, set[str], int, bool | None]:
+    """A scan's node, name, label for messages, point fields and count, and whether its
+    coordinates are spherical (None: neither cartesian nor spherical ones).
+
+    Raises
+    ------
+    InputError
+        The scan holds no points.
+    """
     header = e57.get_header(i)
     node = header.node
-    named = node.isDefined("name")
     name = _name(node, i)
-    label = f"scan {i} ({name})" if named else f"scan {i}"
+    label = f"scan {i} ({name})" if node.isDefined("name") else f"scan {i}"
     fields = set(header.point_fields)
     n_total = int(header.point_count)
     if n_total == 0:
         raise InputError(path, f"{label} holds no points")
+    spherical = (
+        False
+        if all(f in fields for f in _CARTESIAN)
+        else True
+        if all(f in fields for f in _SPHERICAL)
+        else None
+    )
+    return node, name, label, fields, n_total, spherical
 
+
+def _cartesian(
+    r: NDArray[np.float64], az: NDArray[np.float64], el: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Cartesian coordinates of E57 spherical ones (range, azimuth, elevation)."""
+    with np.errstate(invalid="ignore"):
+        return r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)
+
+
+def _read_one(e57: Any, i: int, path: Path) -> Scan:
+    node, name, label, _, n_total, spherical = _layout(e57, i, path)
     data: dict[str, NDArray[Any]] = e57.read_scan_raw(i, ignore_unsupported_fields=True)
     for key, arr in data.items():
         if len(arr) != n_total:
             raise InputError(
                 path, f"{label}: field {key} has {len(arr)} values for {n_total} points"
             )
-
-    if all(f in fields for f in _CARTESIAN):
-        xyz = np.stack([np.asarray(data[f], dtype=np.float64) for f in _CARTESIAN], axis=1)
-        state_field = "cartesianInvalidState"
-    elif all(f in fields for f in _SPHERICAL):
-        rng, az, el = (np.asarray(data[f], dtype=np.float64) for f in _SPHERICAL)
-        with np.errstate(invalid="ignore"):
-            xyz = np.stack(
-                [rng * np.cos(el) * np.cos(az), rng * np.cos(el) * np.sin(az), rng * np.sin(el)],
-                axis=1,
-            )
-        state_field = "sphericalInvalidState"
-    else:
+    if spherical is None:
         raise InputError(path, f"{label} has neither cartesian nor spherical coordinates")
+    coords = _SPHERICAL if spherical else _CARTESIAN
+    columns = [np.asarray(data[f], dtype=np.float64) for f in coords]
+    xyz = np.stack(_cartesian(*columns) if spherical else columns, axis=1)
+    state_field = "sphericalInvalidState" if spherical else "cartesianInvalidState"
 
     keep: NDArray[np.bool_] = np.any(xyz != 0.0, axis=1)
     if state_field in data:
@@ -602,8 +620,7 @@ def _block_xyz(
     if not spherical:
         return data["cartesianX"][:n], data["cartesianY"][:n], data["cartesianZ"][:n]
     r, az, el = (data[f][:n] for f in _SPHERICAL)
-    with np.errstate(invalid="ignore"):
-        return r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)
+    return _cartesian(r, az, el)
 
 
 def _read(
@@ -611,20 +628,11 @@ def _read(
 ) -> tuple[Scan, RangeImage | None]:
     """One scan of the open file read block by block (:func:`read_working`); ``bounded``:
     the image is filled as the blocks stream past when the scan declares its grid."""
-    header = e57.get_header(i)
-    node = header.node
-    name = _name(node, i)
-    label = f"scan {i} ({name})" if node.isDefined("name") else f"scan {i}"
-    fields = set(header.point_fields)
-    n_total = int(header.point_count)
-    if n_total == 0:
-        raise InputError(path, f"{label} holds no points")
-    if all(f in fields for f in _CARTESIAN):
-        coords, state, spherical = _CARTESIAN, "cartesianInvalidState", False
-    elif all(f in fields for f in _SPHERICAL):
-        coords, state, spherical = _SPHERICAL, "sphericalInvalidState", True
-    else:
+    node, name, label, fields, n_total, spherical = _layout(e57, i, path)
+    if spherical is None:
         raise InputError(path, f"{label} has neither cartesian nor spherical coordinates")
+    coords = _SPHERICAL if spherical else _CARTESIAN
+    state = "sphericalInvalidState" if spherical else "cartesianInvalidState"
     gridded = "rowIndex" in fields and "columnIndex" in fields
     wanted = [*coords, *([state] if state in fields else [])]
     wanted += ["rowIndex", "columnIndex"] if gridded else []
@@ -646,7 +654,7 @@ def _read(
     no_state, no_index = np.zeros(0, dtype=np.int8), np.zeros(0, dtype=np.uint16)
     far = FLOAT32_MAX_M if dtype == np.float32 else np.inf
     kept = seen = 0
-    reader = header.points.reader(buffers)
+    reader = e57.get_header(i).points.reader(buffers)
     try:
         while (n := int(reader.read())) > 0:
             x, y, z = _block_xyz(data, n, spherical)

@@ -141,10 +141,8 @@ def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | Non
         return None
     if _polar_runs(points, math.radians(0.2)) < 4:
         return None  # fewer than 4 bands: the sort below would find fewer than 4 rings
-    th_all = np.empty(len(points), dtype=np.float64)
-    for a in range(0, len(points), ANGLE_CHUNK):
-        th_all[a : a + ANGLE_CHUNK] = _angles(points[a : a + ANGLE_CHUNK], 0.0, 0.0)[1]
     P = np.asarray(points, dtype=np.float64)
+    th_all = _polar(P)
     order = np.argsort(th_all, kind="stable")
     th = th_all[order]
     gaps = np.diff(th)
@@ -166,15 +164,18 @@ def _lidar_rings(points: NDArray[np.floating]) -> tuple[int, float, float] | Non
     return n, spacing, pitch
 
 
+def _polar(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Polar angle of points (N, 3) float64, radians (pi / 2 at the origin)."""
+    r = np.linalg.norm(P, axis=1)
+    return np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0))
+
+
 def _angles(
     points: NDArray[np.floating], phi0: float, th0: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Azimuth from ``phi0`` (0 to 2 pi) and polar angle less ``th0`` of points, radians."""
     P = np.asarray(points, dtype=np.float64)
-    r = np.linalg.norm(P, axis=1)
-    ph = np.mod(np.arctan2(P[:, 1], P[:, 0]) - phi0, 2 * np.pi)
-    th = np.arccos(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)) - th0
-    return ph, th
+    return np.mod(np.arctan2(P[:, 1], P[:, 0]) - phi0, 2 * np.pi), _polar(P) - th0
 
 
 def _polar_runs(points: NDArray[np.floating], gap_rad: float) -> int:
@@ -186,7 +187,7 @@ def _polar_runs(points: NDArray[np.floating], gap_rad: float) -> int:
     w = gap_rad / 3.0
     occupied = np.zeros(int(np.pi / w) + 2, dtype=bool)
     for a in range(0, len(points), ANGLE_CHUNK):
-        th = _angles(points[a : a + ANGLE_CHUNK], 0.0, 0.0)[1]
+        th = _polar(np.asarray(points[a : a + ANGLE_CHUNK], dtype=np.float64))
         occupied[(th[np.isfinite(th)] / w).astype(np.int64)] = True
     return int(np.count_nonzero(occupied[1:] & ~occupied[:-1])) + int(occupied[0])
 

@@ -288,3 +288,30 @@ def test_an_independent_route_verifies(tmp_path) -> None:
     assert all(not p.bridge and p.residual_m is not None for p in adj.pairs)
     s = adj.summary()
     assert s["pairs_checked"] == 3 and s["bundle_error_mm"] is not None and s["redundancy"] == 6
+
+
+def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> None:
+    """Round 2 fits again only a pair whose relative pose moved by the settling step or more
+    since its fit started (0.2 mm here); one moved 0.05 mm keeps its fit, and a round with
+    nothing moved measures nothing."""
+    from flexreg.survey import adjust as adj
+    from flexreg.survey.config import SurveyConfig
+
+    rng = np.random.default_rng(1)
+    A, B = _pose(10, 2, (3.0, 2.5, 1.5)), _pose(-25, 2, (7.0, 5.5, 1.6))
+    clouds = {
+        "a": _box_cloud(tmp_path / "a.npz", A, rng),
+        "b": _box_cloud(tmp_path / "b.npz", B, rng),
+    }
+    clouds["c"] = clouds["b"]
+    poses = {"a": A, "b": B, "c": B.copy()}
+    pairs = [adj.Pair("a", "b", "link"), adj.Pair("a", "c", "overlap")]
+    config = SurveyConfig()
+    assert adj._measure(None, pairs, clouds, poses, config, None, 1) == 2
+    first = [p.fit for p in pairs]
+    assert all(f is not None for f in first)
+    poses["b"] = B @ _pose(0.0, 2, (2e-4, 0.0, 0.0))  # over SETTLED_M (1e-4 m)
+    poses["c"] = B @ _pose(0.0, 2, (5e-5, 0.0, 0.0))  # under it
+    assert adj._measure(None, pairs, clouds, poses, config, None, 2) == 1
+    assert pairs[0].fit is not first[0] and pairs[1].fit is first[1]
+    assert adj._measure(None, pairs, clouds, poses, config, None, 3) == 0

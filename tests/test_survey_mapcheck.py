@@ -167,7 +167,7 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     # the graph's judge scores the same pair the same way, both directions at once, and
     # calls the wrong pose a conflict with the survey's own thresholds, the true one not
     cfg = SurveyConfig()
-    judge = PairJudge(files, glances, cfg, keep=1)
+    judge = PairJudge(files, glances, cfg, keep_bytes=1)  # one view at a time
     look = judge.look("station_00", "station_01", T)
     assert look is not None and look.explained[0] == ok_true and look.conflicting[0] == bad_true
     assert not look.conflicts(cfg)

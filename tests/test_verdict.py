@@ -705,3 +705,22 @@ def test_full_resolution_test_reports_one_free_space_reason():
     ev = _with(free_space__source_conflicting=0.5)
     ev["full_resolution"] = {"points": 757_580, "open_space_share": 0.2}
     assert [r.code for r in decide(ev).reasons] == ["free_space"]
+
+
+def test_classify_points_at_two_tolerances_equals_classifying_twice():
+    """The map check's masks project the sample once for both tolerances: each mask is
+    exactly what :func:`classify_points` gives at that tolerance."""
+    from flexreg.registration.check import TOLERANCE, check_masks
+    from flexreg.stages.verification import classify_points, classify_points_at
+
+    _, two = _views(*BOX, CUPBOARD, _station(0.0, 0.0), _station(1.0, 0.5, 30.0))
+    c = two.forward
+    T = invert(_station(0.0, 0.0)) @ _station(1.2, 0.4, 28.0)  # near, not at, the truth
+    tols = [TOLERANCE.fine(0.05), TOLERANCE.free(0.05), (0.01, 0.0)]
+    both = classify_points_at(c.view, c.sample, T, tols, c.slack, c.measured)
+    for (ok, bad), (m, rel) in zip(both, tols, strict=True):
+        _, ok1, bad1 = classify_points(c.view, c.sample, T, m, rel, c.slack, c.measured)
+        assert np.array_equal(ok, ok1) and np.array_equal(bad, bad1)
+    ok, free = check_masks(c, T, 0.05)
+    assert np.array_equal(ok, both[0][0]) and np.array_equal(free, both[1][1])
+    assert 0 < ok.sum() < len(ok) and free.sum() > 0  # the pose is off: some of each

@@ -34,7 +34,7 @@ from flexreg.registration.config import (
     FULL_DECISIVE_SHARE,
     JudgeConfig,
 )
-from flexreg.stages.verification import classify_points, soft_score
+from flexreg.stages.verification import classify_points, classify_points_at, soft_score
 
 
 @dataclass(frozen=True)
@@ -201,8 +201,14 @@ def check_masks(
     """One direction of :func:`duel_masks`: which of the check's sample ``T`` puts on the
     view's surfaces (half an inlier threshold plus 0.2 %) and which in its free space
     (:meth:`Tolerance.free`: 2.5 inlier thresholds plus 1 %); (N,) bool each."""
-    explained = check.classify(T, *TOLERANCE.fine(threshold_m))[1]
-    free = check.classify(T, *TOLERANCE.free(threshold_m))[2]
+    (explained, _), (_, free) = classify_points_at(
+        check.view,
+        check.sample,
+        T,
+        [TOLERANCE.fine(threshold_m), TOLERANCE.free(threshold_m)],
+        check.slack,
+        check.measured,
+    )
     return explained, free
 
 

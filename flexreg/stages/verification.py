@@ -150,6 +150,31 @@ def classify_points(
     return q, consistent, conflict
 
 
+def classify_points_at(
+    target: RangeImage,
+    ps: NDArray[np.float64],
+    T_target_source: NDArray[np.float64],
+    tolerances: list[tuple[float, float]],
+    slack: NDArray[np.float32] | None = None,
+    ref: NDArray[np.float32] | None = None,
+) -> list[tuple[NDArray[np.bool_], NDArray[np.bool_]]]:
+    """:func:`classify_points` at several tolerances ``(tolerance_m, tolerance_rel)``, the
+    points projected into the target's view once: ``(consistent, conflicting)`` per
+    tolerance, each exactly as :func:`classify_points` gives it."""
+    T = np.asarray(T_target_source, dtype=np.float64)
+    if len(ps) == 0 or target.camera is None:
+        return [classify_points(target, ps, T, m, rel, slack, ref)[1:] for m, rel in tolerances]
+    q = ps @ T[:3, :3].T + T[:3, 3]
+    inside, pix, d = _pixels(target, q)
+    r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
+    out = []
+    for m, rel in tolerances:
+        tol = m + rel * np.abs(d) + extra
+        with np.errstate(invalid="ignore"):
+            out.append((np.abs(d - r) < tol, d < r - tol))
+    return out
+
+
 def _pixels(
     target: RangeImage, q: NDArray[np.float64]
 ) -> tuple[NDArray[np.bool_], tuple[NDArray[np.int64], NDArray[np.int64]], NDArray[np.float64]]:
@@ -178,16 +203,30 @@ def _ray_ranges(
     """Per point (target frame): its range ``d`` along the target's ray, what the target
     measured there ``r`` (NaN outside its view or where it saw nothing) and the tolerance."""
     inside, pix, d = _pixels(target, q)
+    r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
+    tol = tolerance_m + tolerance_rel * np.abs(d) + extra
+    return d, r, tol
+
+
+def _measured_at(
+    target: RangeImage,
+    inside: NDArray[np.bool_],
+    pix: tuple[NDArray[np.int64], NDArray[np.int64]],
+    n: int,
+    slack: NDArray[np.float32] | None,
+    ref: NDArray[np.float32] | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """What the target measured at each of ``n`` points' pixels (NaN outside its view) and
+    the slack there (0 outside)."""
     if ref is None:
         ref = measured_image(target)
     if slack is None:
         slack = range_slack(target, ref)
-    r = np.full(len(q), np.nan)
-    extra = np.zeros(len(q))
+    r = np.full(n, np.nan)
+    extra = np.zeros(n)
     r[inside] = ref[pix]
     extra[inside] = slack[pix]
-    tol = tolerance_m + tolerance_rel * np.abs(d) + extra
-    return d, r, tol
+    return r, extra
 
 
 def soft_score(
@@ -377,6 +416,7 @@ __all__ = [
     "AXES",
     "axis_strength",
     "classify_points",
+    "classify_points_at",
     "measured_image",
     "overlap_score",
     "plane_information",

@@ -11,8 +11,9 @@ its information matrix. A pose graph of these measurements (GTSAM: ``BetweenFact
 per pair with its information as a Gaussian model under a Huber kernel, the reference held
 fixed) is optimised by Levenberg-Marquardt; a pair that still disagrees with the optimised
 poses by more than ``tolerance_mm`` is left out (worst first: the kernel bounds its pull, but
-it still pulls) and the graph optimised again; the pairs are measured again from the new poses,
-until no station moves by more than :data:`SETTLED_M` / :data:`SETTLED_DEG` or
+it still pulls) and the graph optimised again; the pairs are measured again from the new poses
+(those the solution moved by :data:`SETTLED_M` / :data:`SETTLED_DEG` or more since their last
+fit), until no station moves by more than that, no pair needs measuring again, or
 ``refine_iterations`` rounds are done. This is the usual two-step form of a multi-view
 cloud-to-cloud adjustment (Open3D's multiway and the surveying tools' "cloud-to-cloud bundle"
 alike): the pose graph is the least-squares adjustment of every pair's point-to-plane fit,
@@ -85,6 +86,9 @@ class Pair:
         Disagreement of the pair's own fit with the adjusted poses; None while unchecked.
     bridge : bool
         No loop closes through it: its residual is zero by construction (``unchecked``).
+    start : (4, 4) float64 or None
+        The relative pose ``fit`` was started from: a later round measures the pair again
+        only when the solution has moved it by :data:`SETTLED_M` / :data:`SETTLED_DEG` or more.
     """
 
     target: str
@@ -96,6 +100,7 @@ class Pair:
     bridge: bool = False
     why: str | None = None
     left_out_mm: float | None = None
+    start: Matrix | None = None
 
     def to_dict(self) -> dict[str, Any]:
         f = self.fit
@@ -351,15 +356,18 @@ def _measure(
     config: SurveyConfig,
     progress: Progress,
     round_: int,
-) -> None:
+) -> int:
+    """Measure the pairs whose relative pose the solution has moved since their fit (all of
+    them in the first round); returns how many were measured."""
     t0 = time.perf_counter()
     done = [0]
+    todo = [p for p in pairs if _moved(p, poses)]
 
     def report(_: int, __: Any) -> None:
         done[0] += 1
         if progress is not None:
             progress(
-                ProgressEvent("refine", done[0], len(pairs), elapsed_s=time.perf_counter() - t0)
+                ProgressEvent("refine", done[0], len(todo), elapsed_s=time.perf_counter() - t0)
             )
 
     items = [
@@ -369,10 +377,11 @@ def _measure(
             invert(poses[p.target]) @ poses[p.source],
             config.refine_voxel_m,
         )
-        for p in pairs
+        for p in todo
     ]
     fits = run_tasks(client, _fit_or_none, items, on_result=report)
-    for p, args, f in zip(pairs, items, fits, strict=True):
+    for p, args, f in zip(todo, items, fits, strict=True):
+        p.start = args[2]
         if f is None:
             p.fit, p.why = None, "too few overlapping points to align"
             continue
@@ -388,6 +397,18 @@ def _measure(
             )
             continue
         p.fit, p.why, p.left_out_mm = f, None, None
+    return len(todo)
+
+
+def _moved(p: Pair, poses: dict[str, Matrix]) -> bool:
+    """The pair has no fit, or the solution has moved its relative pose from where its fit
+    started by :data:`SETTLED_M` / :data:`SETTLED_DEG` or more (ICP from there ends where it
+    ended, within its own convergence)."""
+    if p.fit is None or p.start is None:
+        return True
+    T = invert(poses[p.target]) @ poses[p.source]
+    moved_m, moved_deg = translation_error_m(T, p.start), rotation_error_deg(T, p.start)
+    return moved_m >= SETTLED_M or moved_deg >= SETTLED_DEG
 
 
 def _fit_or_none(target: str, source: str, T: Matrix, voxel_m: float) -> PairFit | None:
@@ -422,7 +443,9 @@ def adjust(
     result: Any = None
     key: dict[str, int] = {}
     for r in range(1, config.refine_iterations + 1):
-        _measure(client, pairs, clouds, poses, config, progress, r)
+        if _measure(client, pairs, clouds, poses, config, progress, r) == 0 and r > 1:
+            adj.settled = True  # nothing moved since every pair's fit: as in the last round
+            break
         new, graph, result, key = _optimise_robust(stems, ref, pairs, poses, config)
         step = (
             max(max(translation_error_m(new[s], poses[s]), 0.0) for s in stems),
@@ -430,6 +453,8 @@ def adjust(
         )
         poses = new
         adj.rounds = r
+        log.info("final alignment round %d: stations moved up to %.3f mm / %.5f deg", r,
+                 step[0] * 1e3, step[1])  # fmt: skip
         if step[0] < SETTLED_M and step[1] < SETTLED_DEG:
             adj.settled = True
             break

@@ -59,6 +59,10 @@ CORRELATION_M = 2.0
 WITHIN_M = (0.006, 0.010)
 #: most Gauss-Newton steps of one ICP stage
 ICP_ITERATIONS = 30
+#: a capture stage of :func:`fit_pair` (its wide kernels) stops once a step moves the points
+#: by less than this share of its kernel: its pose is only a start for the narrower stage
+#: after it, whose reach is several times that; the last stage runs to 1 um / 1e-7 rad
+CAPTURE_STOP = 0.01
 #: MAD to sigma for Gaussian residuals
 MAD_SIGMA = 1.4826
 
@@ -380,11 +384,13 @@ def _icp(
     T0: NDArray[np.float64],
     max_m: float,
     k_m: float,
+    stop: tuple[float, float] = (1e-7, 1e-6),
 ) -> NDArray[np.float64]:
     """Point-to-plane ICP with Tukey weights (width ``k_m``) on correspondences within
-    ``max_m``: Gauss-Newton steps ``T <- T exp(xi)`` until a step is under 1e-7 rad / 1 um
-    or :data:`ICP_ITERATIONS` are made. Written here rather than Open3D's so that the same
-    inputs give the same bits (its parallel sums do not)."""
+    ``max_m``: Gauss-Newton steps ``T <- T exp(xi)`` until a step is under ``stop``
+    (rad, m: by default 1e-7 rad / 1 um) or :data:`ICP_ITERATIONS` are made. Written here
+    rather than Open3D's so that the same inputs give the same bits (its parallel sums do
+    not)."""
     from scipy.spatial.transform import Rotation
 
     T = np.array(T0, dtype=np.float64)
@@ -406,7 +412,7 @@ def _icp(
         step[:3, :3] = Rotation.from_rotvec(xi[:3]).as_matrix()
         step[:3, 3] = xi[3:]
         T = T @ step
-        if np.linalg.norm(xi[:3]) < 1e-7 and np.linalg.norm(xi[3:]) < 1e-6:
+        if np.linalg.norm(xi[:3]) < stop[0] and np.linalg.norm(xi[3:]) < stop[1]:
             break
     return T
 
@@ -420,7 +426,10 @@ def fit_pair(
     Three stages of point-to-plane ICP with a Tukey kernel (:func:`_icp`): correspondences
     within 8 and then 3 voxels (kernel 4 and 1.5 voxels), then within three kernel widths of
     the residuals' own robust sigma (kernel :data:`TUKEY_C` sigma), so the final weights come
-    from the scans' noise, not from a set distance.
+    from the scans' noise, not from a set distance. The first two only bring the pose within
+    reach of the next and stop once a step moves the points by less than
+    :data:`CAPTURE_STOP` of their kernel (a turn at the source's median range); the last runs
+    to 1 um / 1e-7 rad.
 
     Raises
     ------
@@ -430,13 +439,15 @@ def fit_pair(
     from scipy.spatial import cKDTree
 
     tgt, tgt_n, _ = read_cloud(target_cloud)
-    src, _, _ = read_cloud(source_cloud, sparse=True)
+    src, _, lever_m = read_cloud(source_cloud, sparse=True)
     T = np.asarray(T_init, dtype=np.float64)
     if len(tgt) < 6 or len(src) < 6:
         raise ValueError("too few points to align")
     tree = cKDTree(tgt)
-    T = _icp(tgt, tgt_n, tree, src, T, 8 * voxel_m, 4 * voxel_m)
-    T = _icp(tgt, tgt_n, tree, src, T, 3 * voxel_m, 1.5 * voxel_m)
+    for max_v, k_v in ((8, 4), (3, 1.5)):  # capture: stop at a step of 1 % of the kernel
+        step_m = CAPTURE_STOP * k_v * voxel_m  # (a turn: at the median range)
+        stop = (step_m / max(lever_m, 1.0), step_m)
+        T = _icp(tgt, tgt_n, tree, src, T, max_v * voxel_m, k_v * voxel_m, stop)
     _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma

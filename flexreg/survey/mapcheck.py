@@ -38,7 +38,7 @@ graph solved again; the map is checked again until no pair conflicts.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +61,9 @@ from flexreg.survey.stations import (
 log = logging.getLogger(__name__)
 
 Matrix = NDArray[np.float64]
+
+#: memory the graph's :class:`PairJudge` keeps its stations' views in, bytes
+JUDGE_VIEW_BYTES = 256 * 2**20
 
 
 @dataclass(eq=False)
@@ -242,8 +245,10 @@ class PairJudge:
     The graph asks it, when two groups could be joined in several places, whether the
     stations of the links between them would contradict each other at each placement
     (:mod:`flexreg.survey.consensus`).
-    Views are loaded from the prepared files on first use and the last ``keep`` kept;
-    answers are remembered per pair and pose (to 1 mm / 1e-4 of the rotation).
+    Views are loaded from the prepared files on first use, only what the check reads (the
+    camera, the measured ranges and their slack: 9 bytes a working pixel, not the view's
+    points and normals), and the most recently used kept within ``keep_bytes``; answers are
+    remembered per pair and pose (to 1 mm / 1e-4 of the rotation).
 
     Parameters
     ----------
@@ -251,8 +256,9 @@ class PairJudge:
         Prepared file and glance (:func:`write_glance`) per station stem.
     config : SurveyConfig
         ``map_min_conflict`` and ``map_conflict_ratio``, as :meth:`PairLook.conflicts`.
-    keep : int
-        How many stations' views to hold at once.
+    keep_bytes : int
+        Memory for the views held at once (at least one is held): 256 MiB by default, all
+        of 50 stations of 1024 x 512, or 10 of the largest working images (2.5 Mpx).
     """
 
     def __init__(
@@ -260,24 +266,39 @@ class PairJudge:
         files: dict[str, str],
         glances: dict[str, str],
         config: SurveyConfig,
-        keep: int = 16,
+        keep_bytes: int = JUDGE_VIEW_BYTES,
     ) -> None:
-        self.files, self.glances, self.config, self.keep = files, glances, config, keep
+        self.files, self.glances, self.config = files, glances, config
+        self.keep_bytes = keep_bytes
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
+        self.loads = 0  # prepared files read (a view dropped and needed again is read again)
 
     def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
             return None
-        if stem not in self._views:
-            v = load_prepared(self.files[stem]).view
-            if v.measured is None or v.slack is None:
-                return None
-            sample, thr = _read_glance(self.glances[stem])
-            if len(self._views) >= self.keep:
-                self._views.pop(next(iter(self._views)))
-            self._views[stem] = (v, sample, thr)
+        if stem in self._views:
+            self._views[stem] = self._views.pop(stem)  # most recently used last
+            return self._views[stem]
+        v = load_prepared(self.files[stem]).view
+        self.loads += 1
+        if v.measured is None or v.slack is None:
+            return None
+        sample, thr = _read_glance(self.glances[stem])
+        image = v.image
+        points = np.broadcast_to(np.float32(np.nan), (image.height, image.width, 3))
+        light = replace(v, image=replace(image, xyz=points), normals=None)
+        light = replace(light, sample=None, polish_sample=None, refine_sample=None)
+        self._views[stem] = (light, sample, thr)
+        while len(self._views) > 1 and self._held() > self.keep_bytes:
+            self._views.pop(next(iter(self._views)))  # the least recently used
         return self._views[stem]
+
+    def _held(self) -> int:
+        return sum(
+            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s.nbytes
+            for v, s, _ in self._views.values()
+        )
 
     def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
         """Both directions of the pair at ``T_a_b``; None when a station has no view."""

@@ -192,3 +192,29 @@ def test_the_map_names_the_wrong_link_of_a_triangle_that_does_not_close():
     assert [e.status for e in links] == ["accepted", "accepted", "rejected"]
     assert "loop" in links[2].why and links[2].loop_error_deg > 100
     np.testing.assert_allclose(sol.poses["s2"], invert(P["s0"]) @ P["s2"], atol=1e-6)
+
+
+def _windowed(P, a, b, T=None):
+    """A link confident inside rough positions' window, vouched for by them."""
+    e = _link(P, a, b, T=T)
+    e.windowed, e.vouched = True, "positions"
+    return e
+
+
+def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
+    """s3 registered only inside rough positions' windows: one such link, confident, places
+    nothing on its own (a pose slid inside a window can be confident); two of them, to
+    different stations of the group, that agree around the loop place it; two that disagree
+    by a slide of 14 cm (a wall's thickness) place nothing."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    one = [_windowed(P, "s2", "s3")]
+    sol = solve_graph(sorted(P), [*base, *one], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0] and one[0].status != "accepted"
+    two = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3")]
+    sol = solve_graph(sorted(P), [*base, *two], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in two)
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    slid = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3", _moved(P, "s1", "s3", [0.14, 0, 0]))]
+    sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]

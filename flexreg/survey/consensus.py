@@ -20,8 +20,9 @@ of stations, the way PCM merges the maps of several robots.
    close through the groups' own poses meets (PCM's test, the groups' poses in the role of
    odometry). Sets rank by trusted answers, their firm votes, links, all votes, the
    surveyor's word, then weight. The best set of the whole project merges its groups when a
-   loop of trusted answers confirms it (two of them in it, or a firm vote) and no distinct
-   placement of the same groups is as well supported; then everything is looked at again.
+   loop of confident answers confirms it (two of them in it, trusted or confident inside
+   rough positions' windows, or a firm vote) and no distinct placement of the same groups is
+   as well supported; then everything is looked at again.
    Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
    the same way. Where distinct placements compete, the map's free-space check may pick the
    one under which the groups' nearest stations see each other without contradiction, every
@@ -123,6 +124,15 @@ class Hypothesis:
     def firm(self) -> bool:
         """A trusted answer: confident, or vouched for."""
         return self.alternative is None and self.link.trusted
+
+    @property
+    def confident(self) -> bool:
+        """An answer its own registration calls confident (inside a rough positions' window
+        too), or one the surveyor gave: two of them agreeing around a loop are two
+        independent registrations of it (:attr:`_Set.firmly_confirmed`)."""
+        return self.alternative is None and (
+            self.link.verdict == "confident" or self.link.vouched == "hand"
+        )
 
     @property
     def weight(self) -> float:
@@ -387,9 +397,13 @@ class _Set:
 
     @property
     def firmly_confirmed(self) -> bool:
-        """A loop of trusted answers closes through it (two of its links are, or a cycle of
-        them closes through one)."""
-        return sum(h.firm for h in self.members) >= 2 or any(h.firm_votes for h in self.members)
+        """A loop of confident answers closes through it: two of its links are (trusted, or
+        confident inside rough positions' windows: each registered on its own scans, they
+        agree to the loop tolerance, which a pose slid or a bay off in one of them does not),
+        or a cycle of trusted answers closes through one."""
+        return sum(h.confident for h in self.members) >= 2 or any(
+            h.firm_votes for h in self.members
+        )
 
 
 def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:

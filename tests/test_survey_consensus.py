@@ -215,6 +215,7 @@ def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
     sol = solve_graph(sorted(P), [*base, *two], SurveyConfig(), reference="s0")
     assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in two)
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert sol.confidence["s3"] == "confident"  # a loop of confident links placed it
     slid = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3", _moved(P, "s1", "s3", [0.14, 0, 0]))]
     sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]

@@ -206,10 +206,13 @@ def _reference(
 
 
 def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
-    """``confident`` when joined to ``ref`` by confident accepted links alone."""
+    """``confident`` when joined to ``ref`` by confident accepted links alone (a link
+    confident inside rough positions' window counts once accepted: a loop of confident links
+    confirmed it)."""
     adj: dict[str, list[str]] = {s: [] for s in group}
     for e in links:
-        if e.status == "accepted" and e.trusted and e.target in adj:
+        confident = e.verdict == "confident" or e.vouched == "hand"
+        if e.status == "accepted" and confident and e.target in adj:
             adj[e.target].append(e.source)
             adj[e.source].append(e.target)
     seen, queue = {ref}, deque([ref])

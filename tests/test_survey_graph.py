@@ -446,3 +446,25 @@ def test_planted_wrong_hypotheses_among_right_ones_are_left_out():
             assert translation_error_m(e.T_target_source, truth) < 1e-9, i
         else:
             assert e.status == "rejected" and i % 2 == 1
+
+
+def test_a_separate_group_no_loop_checks_is_not_posed():
+    """Apart from the reference's group, two stations joined by one confident link form no
+    group: nothing checks that link (a look-alike answer would pose them wrongly in their own
+    frame), so each is listed alone, saying a single link places nothing; a separate
+    triangle is posed."""
+    P = _grid(3, seed=7)
+    names = sorted(P)
+    tri = [_link(P, "s00", "s01"), _link(P, "s01", "s02"), _link(P, "s00", "s02")]
+    lone = _link(P, "s06", "s07")
+    sol = solve_graph(names, [*tri, lone])
+    assert sorted(sol.groups[0]) == ["s00", "s01", "s02"]
+    assert all(len(g) == 1 for g in sol.groups[1:])
+    assert "s06" not in sol.poses and "s07" not in sol.poses
+    assert lone.status == "rejected" and "single link" in lone.why
+    assert "single link places no station" in sol.reasons["s07"]
+    sol = solve_graph(
+        names,
+        [*tri, *(_link(P, a, b) for a, b in (("s06", "s07"), ("s07", "s08"), ("s06", "s08")))],
+    )
+    assert sorted(sol.groups[1]) == ["s06", "s07", "s08"]

@@ -409,6 +409,34 @@ def _worst_residual(links: list[Link], config: SurveyConfig) -> tuple[Link, str]
     )
 
 
+def _unchecked_groups_apart(
+    ordered: list[list[str]],
+    grefs: list[str],
+    links: list[Link],
+    poses: dict[str, Matrix],
+    confidence: dict[str, str],
+) -> tuple[list[list[str]], list[str]]:
+    """A separate group (not the reference's) whose accepted links close no loop is given no
+    pose: nothing checks it, and one confident look-alike answer would pose it wrongly in its
+    own frame (the 64-station warehouse: two stations four bays apart). Its links are
+    rejected and its stations listed alone, each saying what would place it."""
+    keep_g, keep_r, apart = [ordered[0]], [grefs[0]], []
+    for g, r in zip(ordered[1:], grefs[1:], strict=True):
+        members = set(g)
+        kept = [e for e in links if e.status == "accepted" and e.target in members]
+        if len(g) > 1 and len(bridges([(e.target, e.source) for e in kept])) == len(kept):
+            for e in kept:
+                _reject(e, "no loop checks it: a single link places no station on its own")
+            for x in g:
+                poses.pop(x, None)
+                confidence.pop(x, None)
+            apart += [[x] for x in g]
+            continue
+        keep_g.append(g)
+        keep_r.append(r)
+    return keep_g + apart, keep_r + [g[0] for g in apart]
+
+
 def _solve_once(
     stations: list[str],
     links: list[Link],
@@ -487,6 +515,7 @@ def _solve_once(
             e.loop_error_deg, e.loop_error_m = loop_error(
                 np.asarray(e.T_target_source), poses[e.target], poses[e.source]
             )
+    ordered, grefs = _unchecked_groups_apart(ordered, grefs, links, poses, confidence)
     placed = set(ordered[0]) if len(ordered[0]) > 1 else set()
     reasons = {s: _why_unplaced(s, g, links, placed) for g in ordered[1:] for s in g}
     if len(ordered[0]) < 2:

@@ -167,8 +167,9 @@ def _name(node: Any, i: int) -> str:
 
 
 def _layout(e57: Any, i: int, path: Path) -> tuple[Any, str, str, set[str], int, bool | None]:
-    """A scan's node, name, label for messages, point fields and count, and whether its
-    coordinates are spherical (None: neither cartesian nor spherical ones).
+    """A scan's header (pye57's: its ``node``, its ``points``), name, label for messages,
+    point fields and count, and whether its coordinates are spherical (None: neither
+    cartesian nor spherical ones).
 
     Raises
     ------
@@ -190,7 +191,7 @@ def _layout(e57: Any, i: int, path: Path) -> tuple[Any, str, str, set[str], int,
         if all(f in fields for f in _SPHERICAL)
         else None
     )
-    return node, name, label, fields, n_total, spherical
+    return header, name, label, fields, n_total, spherical
 
 
 def _cartesian(
@@ -202,7 +203,8 @@ def _cartesian(
 
 
 def _read_one(e57: Any, i: int, path: Path) -> Scan:
-    node, name, label, _, n_total, spherical = _layout(e57, i, path)
+    header, name, label, _, n_total, spherical = _layout(e57, i, path)
+    node = header.node
     data: dict[str, NDArray[Any]] = e57.read_scan_raw(i, ignore_unsupported_fields=True)
     for key, arr in data.items():
         if len(arr) != n_total:
@@ -628,7 +630,8 @@ def _read(
 ) -> tuple[Scan, RangeImage | None]:
     """One scan of the open file read block by block (:func:`read_working`); ``bounded``:
     the image is filled as the blocks stream past when the scan declares its grid."""
-    node, name, label, fields, n_total, spherical = _layout(e57, i, path)
+    header, name, label, fields, n_total, spherical = _layout(e57, i, path)
+    node = header.node
     if spherical is None:
         raise InputError(path, f"{label} has neither cartesian nor spherical coordinates")
     coords = _SPHERICAL if spherical else _CARTESIAN
@@ -654,7 +657,7 @@ def _read(
     no_state, no_index = np.zeros(0, dtype=np.int8), np.zeros(0, dtype=np.uint16)
     far = FLOAT32_MAX_M if dtype == np.float32 else np.inf
     kept = seen = 0
-    reader = e57.get_header(i).points.reader(buffers)
+    reader = header.points.reader(buffers)
     try:
         while (n := int(reader.read())) > 0:
             x, y, z = _block_xyz(data, n, spherical)

@@ -103,8 +103,8 @@ def read_working(path: Path, *, max_pixels: int) -> list[tuple[Scan, None]]:
     """
     del max_pixels
     try:
-        return [(_read_points(path, np.float32), None)]
-    except _Wide:
+        return [(_read_points(path, None), None)]
+    except _Wide:  # the header's bounds said float32 would do, and a point says otherwise
         return [(_read_points(path, np.float64), None)]
 
 
@@ -135,8 +135,15 @@ def _opened(path: Path) -> Iterator[tuple[Any, int]]:
         raise InputError(path, f"not a readable LAS/LAZ file: {exc}") from None
 
 
-def _read_points(path: Path, dtype: type) -> Scan:
+def _read_points(path: Path, dtype: type | None) -> Scan:
+    """The file's points as ``dtype``; None: float64 when the header's bounds reach beyond
+    :data:`FLOAT32_MAX_M` (a georeferenced file, read once), else float32 (:class:`_Wide`
+    when a point does after all)."""
     with _opened(path) as (reader, declared):
+        if dtype is None:
+            h = reader.header
+            far = float(np.abs(np.concatenate([h.mins, h.maxs])).max())
+            dtype = np.float64 if far > FLOAT32_MAX_M else np.float32
         points: NDArray[np.floating] = np.empty((declared, 3), dtype=dtype)
         n = 0
         for chunk in reader.chunk_iterator(WORKING_CHUNK_POINTS):
@@ -149,6 +156,8 @@ def _read_points(path: Path, dtype: type) -> Scan:
             n += m
     if n != declared:
         raise InputError(path, f"truncated: the header declares {declared} points, {n} were read")
+    if points.dtype == np.float64 and np.abs(points).max() <= FLOAT32_MAX_M:
+        points = points.astype(np.float32)  # bounds wider than the points: float32 after all
     return Scan(points=points, path=path, name=path.stem)
 
 

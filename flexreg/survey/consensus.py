@@ -127,12 +127,8 @@ class Hypothesis:
 
     @property
     def confident(self) -> bool:
-        """An answer its own registration calls confident (inside a rough positions' window
-        too), or one the surveyor gave: two of them agreeing around a loop are two
-        independent registrations of it (:attr:`_Set.firmly_confirmed`)."""
-        return self.alternative is None and (
-            self.link.verdict == "confident" or self.link.vouched == "hand"
-        )
+        """A confident link's answer (:attr:`~flexreg.survey.links.Link.confident`)."""
+        return self.alternative is None and self.link.confident
 
     @property
     def weight(self) -> float:

@@ -211,8 +211,7 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
     confirmed it)."""
     adj: dict[str, list[str]] = {s: [] for s in group}
     for e in links:
-        confident = e.verdict == "confident" or e.vouched == "hand"
-        if e.status == "accepted" and confident and e.target in adj:
+        if e.status == "accepted" and e.confident and e.target in adj:
             adj[e.target].append(e.source)
             adj[e.source].append(e.target)
     seen, queue = {ref}, deque([ref])

@@ -233,6 +233,13 @@ class Link:
         return fits[0] if len(fits) == 1 else None
 
     @property
+    def confident(self) -> bool:
+        """Its own registration calls it confident (inside rough positions' window too), or
+        the surveyor gave it: two such links that agree around a loop are two independent
+        registrations (:mod:`flexreg.survey.consensus`)."""
+        return self.verdict == "confident" or self.vouched == "hand"
+
+    @property
     def trusted(self) -> bool:
         """Whether its pose may place stations: confident, or given by the surveyor. Rough
         positions pick which of an uncertain link's poses is meant, not its centimetres (a

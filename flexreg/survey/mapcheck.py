@@ -272,7 +272,6 @@ class PairJudge:
         self.keep_bytes = keep_bytes
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
-        self.loads = 0  # prepared files read (a view dropped and needed again is read again)
 
     def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
@@ -281,14 +280,19 @@ class PairJudge:
             self._views[stem] = self._views.pop(stem)  # most recently used last
             return self._views[stem]
         v = load_prepared(self.files[stem]).view
-        self.loads += 1
         if v.measured is None or v.slack is None:
             return None
         sample, thr = _read_glance(self.glances[stem])
         image = v.image
         points = np.broadcast_to(np.float32(np.nan), (image.height, image.width, 3))
-        light = replace(v, image=replace(image, xyz=points), normals=None)
-        light = replace(light, sample=None, polish_sample=None, refine_sample=None)
+        light = replace(
+            v,
+            image=replace(image, xyz=points),
+            normals=None,
+            sample=None,
+            polish_sample=None,
+            refine_sample=None,
+        )
         self._views[stem] = (light, sample, thr)
         while len(self._views) > 1 and self._held() > self.keep_bytes:
             self._views.pop(next(iter(self._views)))  # the least recently used

@@ -8,7 +8,12 @@ import importlib
 
 import pytest
 
-MODULES = ["flexreg.survey.c2c", "flexreg.survey.links", "flexreg.cli.register"]
+MODULES = [
+    "flexreg.survey.c2c",
+    "flexreg.survey.links",
+    "flexreg.cli.register",
+    "flexreg.stages.verification",
+]
 
 
 @pytest.mark.parametrize("name", MODULES)

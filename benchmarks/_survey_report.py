@@ -337,7 +337,8 @@ def markdown(state: Record, figures: Sequence[str]) -> str:
         f"({m.get('cores', '?')} cores), **measured under load**: the machine was shared with "
         f"other work while it ran (1-minute load average {load} at the starts and ends of the "
         "runs, per run in `results.json`), so wall times are upper bounds, far above what the "
-        "same runs take on an idle machine. Synthetic projects from `flexreg synth` (seed 0); "
+        "same runs take on an idle machine. Synthetic projects from `flexreg synth` "
+        f"(seed {state.get('seed', 0)}); "
         "each method runs as a child process; peak memory is the largest sampled sum of the "
         "resident sets of its process tree (Dask workers included) / the largest single "
         "process.",

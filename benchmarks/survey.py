@@ -185,6 +185,7 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
             "command": " ".join([".venv/bin/python benchmarks/survey.py", *sys.argv[1:]]),
             "machine": machine_info(),
             "measured_under_load": True,
+            "seed": args.seed,
             "criteria": {
                 "success": "within 0.05 deg and 1 cm of the truth (aligned on the reference)",
                 "wrong": "posed but off by more than 1 deg or 10 cm, or fused with another site",

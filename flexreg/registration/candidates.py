@@ -60,6 +60,12 @@ DENSE_PRIORS = ("plan", "window-plan", "init", "alias", "sweep")
 #: prior's window, which a look-alike elsewhere did not outscore
 WIDE_PRIOR = "window-plan"
 
+#: the priors known only to about a plan cell, polished from afar (:func:`polisher`,
+#: ``wide``): the plan overlays. Polished within three inlier thresholds only, an overlay
+#: that lays the far face of a wall on the near one (a doorway between two rooms) stays
+#: there: the surfaces that fix the pose across the wall are a wall's thickness away
+WIDE_PRIORS = ("plan", WIDE_PRIOR)
+
 #: most turns and most shifts of a plan view kept as its symmetries (:func:`self_symmetries`),
 #: and the smallest share of the identity's overlay score they must reach
 SYMMETRIES, SYMMETRY_SHARE = 3, 0.5
@@ -260,7 +266,7 @@ def _best_family(
         for origin, T in fam:
             # judged after a quick local ICP: a right but rough candidate improves, a wrong one
             # stays wrong
-            Tj = polish(T, wide=origin == WIDE_PRIOR) if polish is not None else T
+            Tj = polish(T, wide=origin in WIDE_PRIORS) if polish is not None else T
             score, ok, bad = check.judge(Tj, *TOLERANCE.free(thr))
             moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
@@ -517,9 +523,9 @@ def choose(
             f"{counts}" + (f"; {'; '.join(notes)}" if notes else "")
         )
     finalists = list(fams[best])
-    if polished is not None and fams[best][0][0] == WIDE_PRIOR:
+    if polished is not None and fams[best][0][0] in WIDE_PRIORS:
         # polished from afar, it is the candidate: the plan overlay itself is a cell off
-        finalists.append((WIDE_PRIOR, polished))
+        finalists.append((fams[best][0][0], polished))
     if polished is not None:
         # the keypoint estimate around the polished winner: a candidate that was far off but
         # converged under the quick ICP still gets a feature-based coarse transform

@@ -14,8 +14,7 @@ tests are built so that nothing but a real disagreement counts:
   thresholds plus 1 % of the range) plus the point's own range slack: thin bars, hangers and
   silhouettes seen from two viewpoints do not count;
 * a point whose surface, at the pose, faces away from the other scanner explains nothing
-  (:func:`~flexreg.stages.verification.back_facing`: the other face of a wall), unless its
-  range lies within the pixel's range slack (an edge, whose surfaces face either way);
+  (:func:`~flexreg.stages.verification.back_facing`: the other face of a wall);
 * points on their own scan's silhouettes (range slack above :data:`MAX_SLACK_PER_M` of their
   range) take no part.
 
@@ -205,8 +204,7 @@ def _check_loop(
             tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
             free = free_m + free_rel * d + own_i
             ok = abs(e) < tol
-            if ok and facing and not abs(e) < np.float64(slack[iv, iu]):
-                # off an edge its surface must face this scanner (back_facing)
+            if ok and facing:  # its surface must face this scanner (back_facing)
                 q2 = qx * qx + qy * qy + qz * qz
                 ok = -(nx * qx + ny * qy + nz * qz) >= back_cos * math.sqrt(q2)
             bad = d < nearest[iv, iu] - free
@@ -251,10 +249,9 @@ def _check_full(
     (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
     A point is explained only where its surface (``normals``, when as long as ``points``)
-    faces the view's scanner, or within the pixel's range slack. Adds each pose's score to
-    ``scores[k]`` (and its count of points in open space to ``opens[k]`` when ``opens`` has
-    a slot per pose); fills ``explained`` and ``open_space`` (one pose) when they are as long
-    as ``points``."""
+    faces the view's scanner. Adds each pose's score to ``scores[k]`` (and its count of
+    points in open space to ``opens[k]`` when ``opens`` has a slot per pose); fills
+    ``explained`` and ``open_space`` (one pose) when they are as long as ``points``."""
     if kind == 0:
         _check_loop(
             True, points, own, normals, R, t, cam, measured, slack, nearest, threshold_m,

@@ -10,11 +10,9 @@ scan once and checks many candidates), :func:`range_slack` the per-pixel range t
 A surface is seen from its front: with the points' normals (each scan's
 :func:`~flexreg.stages.normals.grid_normals`, which face its own scanner) a point counts as
 consistent only where its surface, at the pose, also faces the scanner of the view it is
-checked in (:func:`back_facing`), or where its range lies within its pixel's own range slack
-(the pixel spans an edge or a grazing stretch: the rims of a niche, a cabinet's sides).
-Without that test the two faces of a wall explain each other: a scanner in the next room
-seen through a doorway fits 14-16 cm off, its side of the wall laid on ours (the wall's
-thickness).
+checked in (:func:`back_facing`). Without that test the two faces of a wall explain each
+other: a scanner in the next room seen through a doorway fits 14-16 cm off, its side of the
+wall laid on ours (the wall's thickness), with more points explained than at the truth.
 """
 
 from __future__ import annotations
@@ -60,14 +58,12 @@ def range_slack(
     return out
 
 
-#: a point's surface faces away from a scanner when the cosine between its normal and the
-#: direction to the scanner is below this: seen from behind within about 37 degrees of head
-#: on. The far face of a wall laid on the near one is seen so over most of it; thin things
-#: seen from both sides (a cabinet's sheet metal, a cable tray) lie within the tolerance of
-#: each other at the truth and are seen from behind at grazing angles, where range-grid
-#: normals are also least certain: at -0.2 (12 degrees past grazing) the test took the cue's
-#: evidence from four of the verdict benchmark's six tunnel pairs
-BACK_FACING_COS = -0.8
+#: a point's surface faces a scanner when the cosine between its normal and the direction to
+#: the scanner is above this: the surface may be turned up to about 12 degrees past grazing
+#: (normals of a range grid are that uncertain at grazing incidence, where a surface spans
+#: many centimetres of range in one pixel); the other face of a wall is turned 90 degrees
+#: or more past it
+BACK_FACING_COS = -0.2
 
 
 def back_facing(q: NDArray[np.float64], normals: NDArray[np.floating]) -> NDArray[np.bool_]:
@@ -102,18 +98,12 @@ def _front(
     q: NDArray[np.float64],
     normals: NDArray[np.floating] | None,
     R: NDArray[np.float64],
-    edge: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """``consistent`` without the points whose surfaces (``normals``, source frame, turned by
-    ``R``) face away from the target's scanner, unless ``edge``: their range lies within
-    their pixel's own range slack (the pixel spans an edge or a grazing stretch, whose
-    surfaces may face either way)."""
+    ``R``) face away from the target's scanner."""
     if normals is None:
         return consistent
-    back = back_facing(q, np.asarray(normals, dtype=np.float64) @ R.T)
-    if edge is not None:
-        back &= ~edge
-    return consistent & ~back
+    return consistent & ~back_facing(q, np.asarray(normals, dtype=np.float64) @ R.T)
 
 
 def overlap_score(
@@ -213,12 +203,11 @@ def classify_points(
         dist, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
         ok = dist < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
         return q, _front(ok, q, normals, T[:3, :3]), np.zeros(len(q), dtype=bool)
-    d, r, tol, extra = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
         consistent = np.abs(d - r) < tol
         conflict = d < r - tol
-        edge = np.abs(d - r) < extra
-    return q, _front(consistent, q, normals, T[:3, :3], edge), conflict
+    return q, _front(consistent, q, normals, T[:3, :3]), conflict
 
 
 def classify_points_at(
@@ -241,9 +230,7 @@ def classify_points_at(
     q = ps @ T[:3, :3].T + T[:3, 3]
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
-    with np.errstate(invalid="ignore"):
-        edge = np.abs(d - r) < extra
-    front = _front(np.ones(len(q), dtype=bool), q, normals, T[:3, :3], edge)
+    front = _front(np.ones(len(q), dtype=bool), q, normals, T[:3, :3])
     out = []
     for m, rel in tolerances:
         tol = m + rel * np.abs(d) + extra
@@ -278,12 +265,11 @@ def _ray_ranges(
     ref: NDArray[np.float32] | None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per point (target frame): its range ``d`` along the target's ray, what the target
-    measured there ``r`` (NaN outside its view or where it saw nothing), the tolerance and
-    the pixel's range slack in it."""
+    measured there ``r`` (NaN outside its view or where it saw nothing) and the tolerance."""
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
     tol = tolerance_m + tolerance_rel * np.abs(d) + extra
-    return d, r, tol, extra
+    return d, r, tol
 
 
 def _measured_at(
@@ -344,9 +330,9 @@ def soft_score(
         return (float(ok.mean() - 3 * bad.mean()) if len(q) else 0.0), q, ok, bad
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
-    d, r, tol, extra = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
-        ok = _front(np.abs(d - r) < tol, q, normals, T[:3, :3], np.abs(d - r) < extra)
+        ok = _front(np.abs(d - r) < tol, q, normals, T[:3, :3])
         bad = d < r - tol
     w = np.zeros(len(q))
     w[ok] = 1.0 - ((d[ok] - r[ok]) / tol[ok]) ** 2

@@ -383,8 +383,8 @@ def projective_icp(
     source_point_normals, target_point_normals : (N, 3) / (M, 3) float, optional
         The normals of ``source_points`` (source frame) and of ``target_points`` (target
         frame), facing their own scanners: a point is not paired with a pixel whose normal
-        is turned away from its own by more than about 143 degrees (their cosine below
-        :data:`~flexreg.stages.verification.BACK_FACING_COS`); the two faces of a wall seen
+        is turned away from its own by more than about 100 degrees
+        (:data:`~flexreg.stages.verification.BACK_FACING_COS`); the two faces of a wall seen
         from two rooms are not one surface.
     max_iterations : int
         Per level (the last level's final convergence gets as many again).

@@ -60,12 +60,6 @@ DENSE_PRIORS = ("plan", "window-plan", "init", "alias", "sweep")
 #: prior's window, which a look-alike elsewhere did not outscore
 WIDE_PRIOR = "window-plan"
 
-#: the priors known only to about a plan cell, polished from afar (:func:`polisher`,
-#: ``wide``): the plan overlays. Polished within three inlier thresholds only, an overlay
-#: that lays the far face of a wall on the near one (a doorway between two rooms) stays
-#: there: the surfaces that fix the pose across the wall are a wall's thickness away
-WIDE_PRIORS = ("plan", WIDE_PRIOR)
-
 #: most turns and most shifts of a plan view kept as its symmetries (:func:`self_symmetries`),
 #: and the smallest share of the identity's overlay score they must reach
 SYMMETRIES, SYMMETRY_SHARE = 3, 0.5
@@ -160,8 +154,6 @@ def polisher(
     sample: NDArray[np.float64],
     thr: float,
     wide_m: float = 0.5,
-    *,
-    sample_normals: NDArray[np.floating] | None = None,
 ) -> Callable[..., NDArray[np.float64]]:
     """A quick local ICP of a small even sample of the source (``sample``, about 5000 points)
     against the target's range image (projective,
@@ -173,8 +165,7 @@ def polisher(
     ``wide_m`` is two plan cells).
 
     ``target`` must have a camera model; ``normals`` are its
-    :func:`~flexreg.stages.normals.grid_normals`; ``sample_normals`` the sample's (no point is
-    paired with a surface facing the other way)."""
+    :func:`~flexreg.stages.normals.grid_normals`."""
 
     def icp(T: NDArray[np.float64], d: float) -> NDArray[np.float64]:
         try:
@@ -184,7 +175,6 @@ def polisher(
                 T,
                 max_distance_m=d,
                 normals=normals,
-                source_point_normals=sample_normals,
                 max_iterations=15,
                 tolerance=1e-4,
             )
@@ -266,7 +256,7 @@ def _best_family(
         for origin, T in fam:
             # judged after a quick local ICP: a right but rough candidate improves, a wrong one
             # stays wrong
-            Tj = polish(T, wide=origin in WIDE_PRIORS) if polish is not None else T
+            Tj = polish(T, wide=origin == WIDE_PRIOR) if polish is not None else T
             score, ok, bad = check.judge(Tj, *TOLERANCE.free(thr))
             moved = translation_error_m(Tj, T) / thr + rotation_error_deg(Tj, T)
             log.info("%s: overlap %.3f, conflict %.3f, moved %.2f", origin, ok, bad, moved)
@@ -523,9 +513,9 @@ def choose(
             f"{counts}" + (f"; {'; '.join(notes)}" if notes else "")
         )
     finalists = list(fams[best])
-    if polished is not None and fams[best][0][0] in WIDE_PRIORS:
+    if polished is not None and fams[best][0][0] == WIDE_PRIOR:
         # polished from afar, it is the candidate: the plan overlay itself is a cell off
-        finalists.append((fams[best][0][0], polished))
+        finalists.append((WIDE_PRIOR, polished))
     if polished is not None:
         # the keypoint estimate around the polished winner: a candidate that was far off but
         # converged under the quick ICP still gets a feature-based coarse transform

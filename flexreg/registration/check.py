@@ -115,25 +115,18 @@ class Check:
         :func:`~flexreg.stages.verification.range_slack`.
     sample : (N, 3) float64
         The source's points spread evenly over its surfaces.
-    normals : (N, 3) float32 or None
-        Their surface normals (source frame): a point whose surface faces away from the
-        target's scanner is not explained
-        (:func:`~flexreg.stages.verification.back_facing`).
     """
 
     view: RangeImage
     measured: NDArray[np.float32]
     slack: NDArray[np.float32]
     sample: NDArray[np.float64]
-    normals: NDArray[np.float32] | None = None
 
     def classify(
         self, T: NDArray[np.float64], tol: float, rel: float
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
         """The sample in the target frame, and which points are consistent / conflicting."""
-        return classify_points(
-            self.view, self.sample, T, tol, rel, self.slack, self.measured, self.normals
-        )
+        return classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
 
     def judge(self, T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
         """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
@@ -159,7 +152,7 @@ class TwoWay:
 
     @staticmethod
     def _args(c: Check, T: NDArray[np.float64], tol: float) -> tuple[Any, ...]:
-        return c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured, c.normals
+        return c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured
 
 
 @dataclass(eq=False)
@@ -215,7 +208,6 @@ def check_masks(
         [TOLERANCE.fine(threshold_m), TOLERANCE.free(threshold_m)],
         check.slack,
         check.measured,
-        check.normals,
     )
     return explained, free
 

@@ -13,8 +13,6 @@ tests are built so that nothing but a real disagreement counts:
   5 x 5 neighbourhood of its pixel, by more than the free-space tolerance (2.5 inlier
   thresholds plus 1 % of the range) plus the point's own range slack: thin bars, hangers and
   silhouettes seen from two viewpoints do not count;
-* a point whose surface, at the pose, faces away from the other scanner explains nothing
-  (:func:`~flexreg.stages.verification.back_facing`: the other face of a wall);
 * points on their own scan's silhouettes (range slack above :data:`MAX_SLACK_PER_M` of their
   range) take no part.
 
@@ -44,7 +42,6 @@ from flexreg.core.transforms import invert
 from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
-from flexreg.stages.verification import BACK_FACING_COS
 
 #: points whose own range slack exceeds this share of their range (silhouettes, grazing
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
@@ -134,7 +131,6 @@ def _check_loop(
     spherical,
     points,
     own,
-    normals,
     R,
     t,
     cam,
@@ -154,9 +150,8 @@ def _check_loop(
     H, W = measured.shape[0], measured.shape[1]
     wrap = spherical and cam[4] > 0.5
     masks = explained.shape[0] == points.shape[0]
-    facing = normals.shape[0] == points.shape[0]
     K = t.shape[0]
-    fine_rel, free_k, free_rel, back_cos = tolerance
+    fine_rel, free_k, free_rel = tolerance
     free_m = free_k * threshold_m
     explain_m = free_m if coarse else threshold_m / 2
     explain_rel = free_rel if coarse else fine_rel
@@ -171,14 +166,6 @@ def _check_loop(
         ry = r10 * px + r11 * py + r12 * pz
         rz = r20 * px + r21 * py + r22 * pz
         own_i = np.float64(own[i])
-        nx = ny = nz = 0.0  # no normal: no facing test (0 < 0.2 |q|)
-        if facing:
-            ax, ay = np.float64(normals[i, 0]), np.float64(normals[i, 1])
-            az = np.float64(normals[i, 2])
-            if ax == ax and ay == ay and az == az:  # NaN: unknown
-                nx = r00 * ax + r01 * ay + r02 * az
-                ny = r10 * ax + r11 * ay + r12 * az
-                nz = r20 * ax + r21 * ay + r22 * az
         ok = bad = False
         for k in range(K):
             qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
@@ -204,9 +191,6 @@ def _check_loop(
             tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
             free = free_m + free_rel * d + own_i
             ok = abs(e) < tol
-            if ok and facing:  # its surface must face this scanner (back_facing)
-                q2 = qx * qx + qy * qy + qz * qz
-                ok = -(nx * qx + ny * qy + nz * qz) >= back_cos * math.sqrt(q2)
             bad = d < nearest[iv, iu] - free
             r = e / tol
             total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
@@ -225,7 +209,6 @@ def _check_loop(
 def _check_full(
     points,
     own,
-    normals,
     R,
     t,
     kind,
@@ -244,37 +227,32 @@ def _check_full(
     """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
     the points, without temporaries, for the poses ``(R, t[k])`` at the tolerances
     ``tolerance`` (``fine_rel, free_k, free_rel`` of a
-    :class:`~flexreg.registration.check.Tolerance`, and
-    :data:`~flexreg.stages.verification.BACK_FACING_COS`): each point turned by ``R``
+    :class:`~flexreg.registration.check.Tolerance`): each point turned by ``R``
     (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
-    A point is explained only where its surface (``normals``, when as long as ``points``)
-    faces the view's scanner. Adds each pose's score to ``scores[k]`` (and its count of
-    points in open space to ``opens[k]`` when ``opens`` has a slot per pose); fills
-    ``explained`` and ``open_space`` (one pose) when they are as long as ``points``."""
+    Adds each pose's score to ``scores[k]`` (and its count of points in open space to
+    ``opens[k]`` when ``opens`` has a slot per pose); fills ``explained`` and ``open_space``
+    (one pose) when they are as long as ``points``."""
     if kind == 0:
         _check_loop(
-            True, points, own, normals, R, t, cam, measured, slack, nearest, threshold_m,
-            tolerance, coarse, explained, open_space, scores, opens,
+            True, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
+            coarse, explained, open_space, scores, opens,
         )  # fmt: skip
     else:
         _check_loop(
-            False, points, own, normals, R, t, cam, measured, slack, nearest, threshold_m,
-            tolerance, coarse, explained, open_space, scores, opens,
+            False, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
+            coarse, explained, open_space, scores, opens,
         )  # fmt: skip
 
 
 _NO_COUNT = np.zeros(0, dtype=np.int64)
-_NO_NORMALS = np.zeros((0, 3), dtype=np.float32)
 
 
-def _kernel_tolerance() -> tuple[float, float, float, float]:
-    """The dense check's :data:`~flexreg.registration.check.TOLERANCE` and
-    :data:`~flexreg.stages.verification.BACK_FACING_COS` as the kernel takes them: an
-    argument, not a global (a compiled kernel keeps a global's value in its cache, and the
+def _kernel_tolerance() -> tuple[float, float, float]:
+    """The dense check's :data:`~flexreg.registration.check.TOLERANCE` as the kernel takes it:
+    an argument, not a global (a compiled kernel keeps a global's value in its cache, and the
     cache follows this file only)."""
-    t = TOLERANCE
-    return float(t.fine_rel), float(t.free_k), float(t.free_rel), float(BACK_FACING_COS)
+    return float(TOLERANCE.fine_rel), float(TOLERANCE.free_k), float(TOLERANCE.free_rel)
 
 
 def _floats(a: NDArray[Any]) -> NDArray[Any]:
@@ -287,7 +265,6 @@ def _run_check(
     view: FullView,
     points: NDArray[np.floating[Any]],
     point_slack: NDArray[np.floating[Any]],
-    normals: NDArray[np.floating[Any]] | None,
     T: NDArray[np.float64],
     shifts: NDArray[np.float64] | None,
     threshold_m: float,
@@ -307,7 +284,6 @@ def _run_check(
     _check_full(  # float32 inputs stay float32 (read as float64 in the kernel: no copies)
         _floats(points),
         _floats(point_slack),
-        _NO_NORMALS if normals is None else _floats(normals),
         np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(t.reshape(-1, 3)), kind, cam,
         np.ascontiguousarray(view.measured, dtype=np.float32),
         np.ascontiguousarray(view.slack, dtype=np.float32),
@@ -327,7 +303,6 @@ def full_masks(
     point_slack: NDArray[np.floating[Any]],
     T_view_points: NDArray[np.float64],
     threshold_m: float,
-    normals: NDArray[np.floating[Any]] | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Which of ``points`` a pose explains in ``view`` and which it puts in open space.
 
@@ -352,9 +327,6 @@ def full_masks(
         Maps the points into the view's frame.
     threshold_m : float, metres
         The registration's inlier threshold.
-    normals : (N, 3) float32, optional
-        The points' surface normals (their :attr:`FullView.normals`): a point whose surface
-        faces away from the view's scanner is not explained.
 
     Returns
     -------
@@ -363,9 +335,8 @@ def full_masks(
     explained = np.zeros(len(points), dtype=bool)
     open_space = np.zeros(len(points), dtype=bool)
     _run_check(
-        view, points, point_slack, normals, T_view_points, None, threshold_m, False, explained,
-        open_space,
-    )  # fmt: skip
+        view, points, point_slack, T_view_points, None, threshold_m, False, explained, open_space
+    )
     return explained, open_space
 
 
@@ -377,7 +348,6 @@ def full_score(
     threshold_m: float,
     *,
     coarse: bool = False,
-    normals: NDArray[np.floating[Any]] | None = None,
 ) -> float:
     """A pose's soft score on full-resolution points: each explained point counts
     ``1 - (e / tol)^2`` (``e`` its range residual, 1 when exact), each point in open space
@@ -385,14 +355,13 @@ def full_score(
 
     It peaks where a cue fits exactly, so a pose can be placed along an axis that only the
     cue fixes. With ``coarse`` a point counts as explained within the open-space tolerance
-    (for poses not yet polished). ``normals``: as :func:`full_masks`.
+    (for poses not yet polished).
     """
     return float(
         _run_check(
-            view, points, point_slack, normals, T_view_points, None, threshold_m, coarse,
-            _NO_MASK, _NO_MASK,
+            view, points, point_slack, T_view_points, None, threshold_m, coarse, _NO_MASK, _NO_MASK
         )[0]
-    )  # fmt: skip
+    )
 
 
 def full_scores(
@@ -405,7 +374,6 @@ def full_scores(
     *,
     coarse: bool = False,
     open_counts: NDArray[np.int64] | None = None,
-    normals: NDArray[np.floating[Any]] | None = None,
 ) -> NDArray[np.float64]:
     """:func:`full_score` of ``T_view_points`` moved by each of ``shifts_m`` (added to its
     translation, view frame), in one pass over the points: each point is turned once and looked
@@ -414,7 +382,7 @@ def full_scores(
 
     Parameters
     ----------
-    view, points, point_slack, T_view_points, threshold_m, coarse, normals
+    view, points, point_slack, T_view_points, threshold_m, coarse
         As :func:`full_score`.
     shifts_m : (K, 3) float64, metres
     open_counts : (K,) int64, optional
@@ -428,7 +396,7 @@ def full_scores(
     shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
     opens = _NO_COUNT if open_counts is None else open_counts
     return _run_check(
-        view, points, point_slack, normals, T_view_points, shifts, threshold_m, coarse, _NO_MASK,
+        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK,
         _NO_MASK, opens,
     )  # fmt: skip
 
@@ -512,8 +480,8 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
         )
         return ((a, b), (c, d))
     out = (
-        full_masks(t, s.points, s.point_slack, T, threshold_m, s.normals),
-        full_masks(s, t.points, t.point_slack, invert(T), threshold_m, t.normals),
+        full_masks(t, s.points, s.point_slack, T, threshold_m),
+        full_masks(s, t.points, t.point_slack, invert(T), threshold_m),
     )
     pair.masks[key] = [np.packbits(m) for direction in out for m in direction]
     while sum(p.nbytes for v in pair.masks.values() for p in v) > MASKS_BUDGET_BYTES:

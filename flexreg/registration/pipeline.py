@@ -451,10 +451,8 @@ def _checks(vt: ScanView, vs: ScanView) -> tuple[Check, TwoWay]:
     """The dense check (the source's sample in the target's view) and both directions."""
     assert vt.measured is not None and vt.slack is not None and vt.sample is not None
     assert vs.measured is not None and vs.slack is not None and vs.sample is not None
-    check = Check(vt.image, vt.measured, vt.slack, vs.sample, vs.sample_normals)
-    return check, TwoWay(
-        check, Check(vs.image, vs.measured, vs.slack, vt.sample, vt.sample_normals)
-    )
+    check = Check(vt.image, vt.measured, vt.slack, vs.sample)
+    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
 
 
 def _polisher(
@@ -465,14 +463,7 @@ def _polisher(
     if not config.judge.runs("polish"):
         return None
     assert vt.normals is not None and vs.polish_sample is not None
-    return polisher(
-        vt.image,
-        vt.normals,
-        vs.polish_sample,
-        thr,
-        2 * config.prior.plan_cell_m,
-        sample_normals=vs.polish_normals,
-    )
+    return polisher(vt.image, vt.normals, vs.polish_sample, thr, 2 * config.prior.plan_cell_m)
 
 
 def _settled(

@@ -37,7 +37,7 @@ from flexreg.stages.overlap import keep_overlap_inputs
 from flexreg.stages.priors import PlanView, TopView, plan_view
 from flexreg.stages.projection import fill_holes, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
-from flexreg.stages.sampling import area_sample_cell, area_sample_pixels
+from flexreg.stages.sampling import area_sample_cell, area_sample_image
 from flexreg.stages.verification import measured_image, range_slack
 
 log = logging.getLogger(__name__)
@@ -84,13 +84,8 @@ class ScanView:
     sample : (N, 3) float64 or None
         Even sample of the working image for the dense checks (as source; as target for the
         verdict's check in the other direction).
-    sample_normals : (N, 3) float32 or None
-        The sample's surface normals (from ``normals``): the checks explain no point whose
-        surface faces away from the other scanner.
     polish_sample : (N, 3) float64 or None
         As source: even sample for the quick ICP.
-    polish_normals : (N, 3) float32 or None
-        Its surface normals: the quick ICP pairs no point with the other face of a wall.
     refine_sample : (float, (M, 3) float64) or None
         The projective refinement's even sample of the whole scan and its cell, metres.
     """
@@ -100,9 +95,7 @@ class ScanView:
     slack: NDArray[np.float32] | None = None
     normals: NDArray[np.float32] | None = None
     sample: NDArray[np.float64] | None = None
-    sample_normals: NDArray[np.float32] | None = None
     polish_sample: NDArray[np.float64] | None = None
-    polish_normals: NDArray[np.float32] | None = None
     refine_sample: tuple[float, NDArray[np.float64]] | None = None
 
 
@@ -248,17 +241,15 @@ def _scan_view(
     """The parts of :class:`ScanView` the scan's roles need (the refinement's sample only
     with ``scan``: the caller computed it otherwise)."""
     v = ScanView(with_camera(image))
+    projective = config.refine and uses_projective(config.icp, config.voxel_m)
     # both roles: the verdict checks the transform in both directions
     v.measured = measured_image(v.image)
     v.slack = range_slack(v.image, v.measured)
-    # both roles: the sample's normals (the checks) come from them
-    v.normals = grid_normals(v.image)
-    v.sample, pixels = area_sample_pixels(image.xyz, image.valid, CHECK_POINTS)
-    own = v.normals if v.image.xyz is image.xyz else grid_normals(image)  # same pixels?
-    v.sample_normals = np.ascontiguousarray(own.reshape(-1, 3)[pixels])
+    if target or (source and projective):
+        v.normals = grid_normals(v.image)
+    v.sample = area_sample_image(image.xyz, image.valid, CHECK_POINTS)  # no copy of the points
     if source:
-        v.polish_sample, pixels = area_sample_pixels(image.xyz, image.valid, POLISH_POINTS)
-        v.polish_normals = np.ascontiguousarray(own.reshape(-1, 3)[pixels])
+        v.polish_sample = area_sample_image(image.xyz, image.valid, POLISH_POINTS)
     if scan is not None:
         v.refine_sample = refinement_sample(scan, config)
     return v

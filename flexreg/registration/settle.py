@@ -185,7 +185,6 @@ class _Scorer:
     target: FullView
     points: NDArray[np.floating[Any]]
     slack: NDArray[np.floating[Any]]
-    normals: NDArray[np.floating[Any]]
     threshold_m: float
 
     @classmethod
@@ -193,20 +192,16 @@ class _Scorer:
         s = pair.source
         k = max(1, -(-len(s.points) // points))
         pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
-        return cls(pair.target, pts, slack, np.ascontiguousarray(s.normals[::k]), threshold_m)
+        return cls(pair.target, pts, slack, threshold_m)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
-        return full_score(
-            self.target, self.points, self.slack, T, self.threshold_m, coarse=True,
-            normals=self.normals,
-        )  # fmt: skip
+        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
 
     def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
         """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
         return full_scores(
-            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True,
-            normals=self.normals,
-        )  # fmt: skip
+            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
+        )
 
 
 def _facing(
@@ -232,7 +227,6 @@ class _FacingScorer:
     target: FullView
     points: NDArray[np.floating[Any]]
     slack: NDArray[np.floating[Any]]
-    normals: NDArray[np.floating[Any]]
     threshold_m: float
 
     @classmethod
@@ -242,22 +236,18 @@ class _FacingScorer:
         s = pair.source
         idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
         idx = idx[:: max(1, -(-len(idx) // FACING_POINTS))]
-        return cls(pair.target, s.points[idx], s.point_slack[idx], s.normals[idx], thr)
+        return cls(pair.target, s.points[idx], s.point_slack[idx], thr)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
         if len(self.points) == 0:
             return 0.0
-        return full_score(
-            self.target, self.points, self.slack, T, self.threshold_m, coarse=True,
-            normals=self.normals,
-        )  # fmt: skip
+        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
 
     def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
         """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
         return full_scores(
-            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True,
-            normals=self.normals,
-        )  # fmt: skip
+            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
+        )
 
 
 def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
@@ -385,15 +375,13 @@ def place_along(
     n = s.normals @ T[:3, :3].T
     with np.errstate(invalid="ignore"):
         facing = np.abs(n @ direction) >= 0.5
-    pts, slack, normals = s.points[facing], s.point_slack[facing], s.normals[facing]
+    pts, slack = s.points[facing], s.point_slack[facing]
     if len(pts) == 0:
         return T
     best = 0.0
     for step in (span_m / 10, span_m / 100):
         offsets = best + np.arange(-10, 11) * step
-        scores = full_scores(
-            pair.target, pts, slack, T, offsets[:, None] * direction, threshold_m, normals=normals
-        )
+        scores = full_scores(pair.target, pts, slack, T, offsets[:, None] * direction, threshold_m)
         best = float(offsets[int(np.argmax(scores))])
     return _shifted(T, best * direction)
 

@@ -125,10 +125,8 @@ def shares(pair: FullPair, T: NDArray[np.float64], threshold_m: float) -> tuple[
     (:func:`~flexreg.registration.fullres.full_masks`)."""
     s, t = pair.source, pair.target
     ks, kt = _every(len(s.points), CHECK_POINTS), _every(len(t.points), CHECK_POINTS)
-    fe, fo = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m, s.normals[::ks])
-    be, bo = full_masks(
-        s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m, t.normals[::kt]
-    )
+    fe, fo = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m)
+    be, bo = full_masks(s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m)
     n = len(fe) + len(be)
     if n == 0:
         return 0.0, 0.0
@@ -227,7 +225,6 @@ def find_twins(
     s = pair.source
     k = _every(len(s.points), SWEEP_POINTS)
     pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
-    normals = np.ascontiguousarray(s.normals[::k])
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins: list[dict[str, Any]] = []
@@ -238,7 +235,7 @@ def find_twins(
         opens = np.zeros(len(offsets), dtype=np.int64)
         scores = full_scores(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True,
-            open_counts=opens, normals=normals,
+            open_counts=opens,
         )  # fmt: skip
         m = max(1, len(pts))
         for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets):

@@ -70,37 +70,22 @@ def area_sample_image(
     -------
     (M, 3) float64
     """
-    return area_sample_pixels(xyz, valid, samples)[0]
-
-
-def area_sample_pixels(
-    xyz: NDArray[np.floating], valid: NDArray[np.bool_], samples: int
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """:func:`area_sample_image` and the pixels its points come from (flat indices into the
-    ``H * W`` pixels, e.g. to look up their normals).
-
-    Returns
-    -------
-    points : (M, 3) float64
-    pixels : (M,) int64
-    """
     v = np.ascontiguousarray(valid, dtype=np.bool_)
     n = int(np.count_nonzero(v))
-    step = 1 if n <= samples else max(1, n // (20 * samples))
-    x = np.ascontiguousarray(xyz)
-    q, pixels = _valid_every(x.reshape(-1, 3), v.reshape(-1), step, -(-n // step))
     if n <= samples:
-        return q, pixels
+        return np.asarray(xyz[v], dtype=np.float64)
+    step = max(1, n // (20 * samples))
+    x = np.ascontiguousarray(xyz)
+    q = _valid_every(x.reshape(-1, 3), v.reshape(-1), step, -(-n // step))
     _, first = _thinned_cells(q, samples)
-    return q[first], pixels[first]
+    return q[first]
 
 
 @numba.njit(cache=True, nogil=True)
 def _valid_every(xyz, valid, step, m):  # pragma: no cover - compiled
     """(m, 3) float64: every ``step``-th of the points ``xyz[valid]`` (in order), from the
-    first, and their (m,) flat indices."""
+    first."""
     out = np.empty((m, 3), dtype=np.float64)
-    index = np.empty(m, dtype=np.int64)
     k = 0
     j = 0
     for i in range(valid.shape[0]):
@@ -108,10 +93,9 @@ def _valid_every(xyz, valid, step, m):  # pragma: no cover - compiled
             if k % step == 0:
                 for c in range(3):
                     out[j, c] = xyz[i, c]
-                index[j] = i
                 j += 1
             k += 1
-    return out[:j], index[:j]
+    return out[:j]
 
 
 def area_cell(points: NDArray[np.floating], samples: int) -> float:
@@ -501,7 +485,6 @@ __all__ = [
     "area_sample",
     "area_sample_cell",
     "area_sample_image",
-    "area_sample_pixels",
     "median_spacing",
     "thin",
     "thin_random",

@@ -6,13 +6,6 @@ surface at its range and in conflict when it lies clearly in front of what the t
 :func:`classify_points` is its core on points already sampled (the registration samples each
 scan once and checks many candidates), :func:`range_slack` the per-pixel range tolerance and
 :func:`measured_image` what the camera measures per pixel.
-
-A surface is seen from its front: with the points' normals (each scan's
-:func:`~flexreg.stages.normals.grid_normals`, which face its own scanner) a point counts as
-consistent only where its surface, at the pose, also faces the scanner of the view it is
-checked in (:func:`back_facing`). Without that test the two faces of a wall explain each
-other: a scanner in the next room seen through a doorway fits 14-16 cm off, its side of the
-wall laid on ours (the wall's thickness), with more points explained than at the truth.
 """
 
 from __future__ import annotations
@@ -56,54 +49,6 @@ def range_slack(
                     out[:, -1] = np.maximum(out[:, -1], d[:, -1])
                     out[:, 0] = np.maximum(out[:, 0], d[:, -1])
     return out
-
-
-#: a point's surface faces a scanner when the cosine between its normal and the direction to
-#: the scanner is above this: the surface may be turned up to about 12 degrees past grazing
-#: (normals of a range grid are that uncertain at grazing incidence, where a surface spans
-#: many centimetres of range in one pixel); the other face of a wall is turned 90 degrees
-#: or more past it
-BACK_FACING_COS = -0.2
-
-
-def back_facing(q: NDArray[np.float64], normals: NDArray[np.floating]) -> NDArray[np.bool_]:
-    """Which points' surfaces face away from the scanner at the origin of their frame.
-
-    Parameters
-    ----------
-    q : (N, 3) float64, metres
-        The points in the scanner's frame.
-    normals : (N, 3) float, unit
-        Their surfaces' normals in the same frame (NaN where unknown: never back-facing).
-
-    Returns
-    -------
-    (N,) bool
-        ``n . (-q) < BACK_FACING_COS |q|``.
-
-    Examples
-    --------
-    >>> q = np.array([[2.0, 0, 0], [2.0, 0, 0], [2.0, 0, 0]])
-    >>> back_facing(q, np.array([[-1.0, 0, 0], [1.0, 0, 0], [np.nan] * 3])).tolist()
-    [False, True, False]
-    """
-    n = np.asarray(normals, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        c = -np.einsum("ij,ij->i", n, q)
-        return np.asarray(c < BACK_FACING_COS * np.sqrt(np.einsum("ij,ij->i", q, q)))
-
-
-def _front(
-    consistent: NDArray[np.bool_],
-    q: NDArray[np.float64],
-    normals: NDArray[np.floating] | None,
-    R: NDArray[np.float64],
-) -> NDArray[np.bool_]:
-    """``consistent`` without the points whose surfaces (``normals``, source frame, turned by
-    ``R``) face away from the target's scanner."""
-    if normals is None:
-        return consistent
-    return consistent & ~back_facing(q, np.asarray(normals, dtype=np.float64) @ R.T)
 
 
 def overlap_score(
@@ -162,7 +107,6 @@ def classify_points(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    normals: NDArray[np.floating] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """Source points checked against the target's view: the core of :func:`overlap_score`.
 
@@ -180,10 +124,6 @@ def classify_points(
         :func:`range_slack` of the target, when at hand.
     ref : (H, W) float32, optional
         :func:`measured_image` of the target, when at hand.
-    normals : (N, 3) float, optional
-        The points' surface normals (source frame, facing the source's scanner): a point
-        whose surface faces away from the target's scanner is not consistent
-        (:func:`back_facing`).
 
     Returns
     -------
@@ -202,12 +142,12 @@ def classify_points(
 
         dist, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
         ok = dist < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
-        return q, _front(ok, q, normals, T[:3, :3]), np.zeros(len(q), dtype=bool)
+        return q, ok, np.zeros(len(q), dtype=bool)
     d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
         consistent = np.abs(d - r) < tol
         conflict = d < r - tol
-    return q, _front(consistent, q, normals, T[:3, :3]), conflict
+    return q, consistent, conflict
 
 
 def classify_points_at(
@@ -217,25 +157,21 @@ def classify_points_at(
     tolerances: list[tuple[float, float]],
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    normals: NDArray[np.floating] | None = None,
 ) -> list[tuple[NDArray[np.bool_], NDArray[np.bool_]]]:
     """:func:`classify_points` at several tolerances ``(tolerance_m, tolerance_rel)``, the
     points projected into the target's view once: ``(consistent, conflicting)`` per
     tolerance, each exactly as :func:`classify_points` gives it."""
     T = np.asarray(T_target_source, dtype=np.float64)
     if len(ps) == 0 or target.camera is None:
-        return [
-            classify_points(target, ps, T, m, rel, slack, ref, normals)[1:] for m, rel in tolerances
-        ]
+        return [classify_points(target, ps, T, m, rel, slack, ref)[1:] for m, rel in tolerances]
     q = ps @ T[:3, :3].T + T[:3, 3]
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
-    front = _front(np.ones(len(q), dtype=bool), q, normals, T[:3, :3])
     out = []
     for m, rel in tolerances:
         tol = m + rel * np.abs(d) + extra
         with np.errstate(invalid="ignore"):
-            out.append(((np.abs(d - r) < tol) & front, d < r - tol))
+            out.append((np.abs(d - r) < tol, d < r - tol))
     return out
 
 
@@ -301,7 +237,6 @@ def soft_score(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    normals: NDArray[np.floating] | None = None,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """A continuous version of the dense check: how well ``T_target_source`` explains the
     target's view of the points ``ps``, sensitive to changes far below the tolerance.
@@ -313,7 +248,7 @@ def soft_score(
 
     Parameters
     ----------
-    target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref, normals
+    target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         As :func:`classify_points`.
 
     Returns
@@ -325,14 +260,14 @@ def soft_score(
     """
     if len(ps) == 0 or target.camera is None:
         q, ok, bad = classify_points(
-            target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref, normals
+            target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         )
         return (float(ok.mean() - 3 * bad.mean()) if len(q) else 0.0), q, ok, bad
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
     d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
-        ok = _front(np.abs(d - r) < tol, q, normals, T[:3, :3])
+        ok = np.abs(d - r) < tol
         bad = d < r - tol
     w = np.zeros(len(q))
     w[ok] = 1.0 - ((d[ok] - r[ok]) / tol[ok]) ** 2

@@ -140,10 +140,9 @@ class Link:
     vouched : str
         Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
-        :mod:`flexreg.survey.positions`); empty for none. A hand link places stations on
-        its own where no loop reaches them, and loops still check it; positions pick a pose,
-        they do not confirm its centimetres (an uncertain link they vouch for still needs a
-        loop).
+        :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
+        on its own where no loop reaches them (a hand link only: positions pick a pose, they
+        do not confirm its centimetres), and loops still check it.
     picked : str
         What picked one of its alternatives over its answer (the answer is then among the
         alternatives), in words; empty when it keeps its answer.
@@ -155,9 +154,8 @@ class Link:
         poses agree with them, or none is near); empty otherwise.
     windowed : bool
         Registered only inside the window of two rough positions
-        (:func:`flexreg.survey.positions.window_of`): every pose beyond the window was ruled
-        out by them, every pose inside it by the scans (a confident verdict inside it is
-        trusted as any other).
+        (:func:`flexreg.survey.positions.window_of`): its verdict is then partly theirs (they
+        ruled out every pose beyond the window), so even a confident one needs a loop.
     alternatives : list of Alternative
         The clearly different poses the registration found fitting almost as well (its
         runner-ups) or the answer moved a whole bay or room that fits too (its twins):
@@ -243,14 +241,12 @@ class Link:
 
     @property
     def trusted(self) -> bool:
-        """Whether its pose may place stations: confident (inside rough positions' window
-        too), or given by the surveyor. Rough positions pick which of an uncertain link's
-        poses is meant, not its centimetres (a pose 0.4 m off fits a 1 m sigma): such a link
-        still needs a loop. A confident verdict inside the window was not trusted until the
-        dense checks stopped explaining a surface by its back (a doorway pair confident 14 cm
-        off, the wall's thickness, inside its window on the held-out building 131; none of
-        its links is confident and wrong since)."""
-        return self.confident
+        """Whether its pose may place stations: confident, or given by the surveyor. Rough
+        positions pick which of an uncertain link's poses is meant, not its centimetres (a
+        pose 0.4 m off fits a 1 m sigma), and a link registered only inside their window is
+        confident partly by their doing (a doorway pair 14 cm off, confident inside its
+        window, on the held-out building 131): such links still need a loop."""
+        return (self.verdict == "confident" and not self.windowed) or self.vouched == "hand"
 
     @property
     def usable(self) -> bool:

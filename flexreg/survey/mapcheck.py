@@ -62,30 +62,6 @@ log = logging.getLogger(__name__)
 
 Matrix = NDArray[np.float64]
 
-
-@dataclass(frozen=True)
-class Glance:
-    """What other stations need to score one station (:func:`write_glance`).
-
-    Attributes
-    ----------
-    sample : (N, 3) float64, metres
-        Its even sample.
-    normals : (N, 3) float32
-        The sample's surface normals (facing the station's scanner; NaN where unknown).
-    threshold_m : float, metres
-        Its inlier threshold.
-    """
-
-    sample: NDArray[np.float64]
-    normals: NDArray[np.float32]
-    threshold_m: float
-
-    @property
-    def nbytes(self) -> int:
-        return int(self.sample.nbytes + self.normals.nbytes)
-
-
 #: memory the graph's :class:`PairJudge` keeps its stations' views in, bytes
 JUDGE_VIEW_BYTES = 256 * 2**20
 
@@ -169,12 +145,11 @@ def glance_path(cache_file: str) -> Path:
 
 
 def write_glance(cache_file: str) -> str | None:
-    """Write (once) what other stations need to score this one (a :class:`Glance`): its even
-    sample, (N, 3) float64 metres, the sample's normals, and its inlier threshold (metres, as
-    the registration derives it from the keypoints' pixel footprints). Runs on a worker;
-    returns the file, or None when the station has no sample. A glance already written is used
-    when it reads back whole (:func:`~flexreg.survey.stations.read_entry`), else written again
-    after one warning."""
+    """Write (once) what other stations need to score this one: its even sample, (N, 3)
+    float64 metres, and its inlier threshold (metres, as the registration derives it from
+    the keypoints' pixel footprints). Runs on a worker; returns the file, or None when the
+    station has no sample. A glance already written is used when it reads back whole
+    (:func:`~flexreg.survey.stations.read_entry`), else written again after one warning."""
     path = glance_path(cache_file)
     if path.exists():
         try:
@@ -183,8 +158,8 @@ def write_glance(cache_file: str) -> str | None:
         except CacheEntryError as e:
             log.warning("%s: unusable cache entry (%s); writing it again", path, e)
     p = load_prepared(cache_file)
-    sample, normals = p.view.sample, p.view.sample_normals
-    if sample is None or normals is None or len(sample) == 0:
+    sample = p.view.sample
+    if sample is None or len(sample) == 0:
         return None
     cfg = p.config
     if cfg.threshold_m is not None:
@@ -193,17 +168,15 @@ def write_glance(cache_file: str) -> str | None:
         kp = p.keypoints
         xy = kp.features.xy[kp.lifted]
         thr = derive_threshold(p.image, p.image, xy, xy[:0], threshold_px=cfg.threshold_px)
-    arrays = {
-        "sample": np.asarray(sample, dtype=np.float64),
-        "normals": np.asarray(normals, dtype=np.float32),
-        "threshold_m": np.float64(thr),
-    }
+    arrays = {"sample": np.asarray(sample, dtype=np.float64), "threshold_m": np.float64(thr)}
     write_entry(path, "glance", arrays, {"of": Path(cache_file).name})
     return str(path)
 
 
-def _read_glance_entry(path: Path | str, cache_file: str | None) -> Glance:
-    """A glance; ``cache_file``: the prepared station it must be of.
+def _read_glance_entry(
+    path: Path | str, cache_file: str | None
+) -> tuple[NDArray[np.float64], float]:
+    """A glance's sample and threshold; ``cache_file``: the prepared station it must be of.
 
     Raises
     ------
@@ -213,28 +186,28 @@ def _read_glance_entry(path: Path | str, cache_file: str | None) -> Glance:
     if cache_file is not None and meta.get("of") != Path(cache_file).name:
         raise CacheEntryError("made of another station")
     try:
-        sample, normals, thr = z["sample"], z["normals"], z["threshold_m"]
+        sample, thr = z["sample"], z["threshold_m"]
         if sample.dtype != np.float64 or sample.ndim != 2 or sample.shape[1] != 3:
             raise CacheEntryError("not a station sample")
-        if normals.dtype != np.float32 or normals.shape != sample.shape:
-            raise CacheEntryError("not the sample's normals")
-        return Glance(sample, normals, float(thr))
+        return sample, float(thr)
     except (KeyError, TypeError, ValueError) as e:
         raise CacheEntryError(f"not a station sample ({e})") from None
 
 
-def _read_glance(path: str) -> Glance:
+def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
     try:
         return _read_glance_entry(path, None)
     except CacheEntryError as e:
         raise InputError(path, f"unreadable station sample ({e})") from None
 
 
-def _shares(view: Any, thr_a: float, other: Glance, T: Matrix) -> tuple[float, float, int]:
-    """Explained and conflicting shares of another station's sample (``other``, posed by
-    ``T``) in the view of a station, on the registration's dense check."""
-    check = Check(view.image, view.measured, view.slack, other.sample, other.normals)
-    ok, bad = check_masks(check, np.asarray(T, dtype=np.float64), max(thr_a, other.threshold_m))
+def _shares(
+    view: Any, thr_a: float, sample: NDArray[np.float64], thr_b: float, T: Matrix
+) -> tuple[float, float, int]:
+    """Explained and conflicting shares of ``sample`` (another station's, posed by ``T``)
+    in the view of a station, on the registration's dense check."""
+    check = Check(view.image, view.measured, view.slack, sample)
+    ok, bad = check_masks(check, np.asarray(T, dtype=np.float64), max(thr_a, thr_b))
     n = len(ok)
     return (float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n)
 
@@ -256,12 +229,13 @@ def look_from(
     list of (stem, explained share, conflicting share, sample size)
     """
     v = load_prepared(cache_file).view
-    thr_a = _read_glance(glance).threshold_m
+    _, thr_a = _read_glance(glance)
     if v.measured is None or v.slack is None:
         return []
     out: list[tuple[str, float, float, int]] = []
     for stem, g, T in others:
-        out.append((stem, *_shares(v, thr_a, _read_glance(g), T)))
+        sample, thr_b = _read_glance(g)
+        out.append((stem, *_shares(v, thr_a, sample, thr_b, T)))
     return out
 
 
@@ -296,10 +270,10 @@ class PairJudge:
     ) -> None:
         self.files, self.glances, self.config = files, glances, config
         self.keep_bytes = keep_bytes
-        self._views: dict[str, tuple[Any, Glance]] = {}
+        self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
 
-    def _view(self, stem: str) -> tuple[Any, Glance] | None:
+    def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
             return None
         if stem in self._views:
@@ -308,7 +282,7 @@ class PairJudge:
         v = load_prepared(self.files[stem]).view
         if v.measured is None or v.slack is None:
             return None
-        glance = _read_glance(self.glances[stem])
+        sample, thr = _read_glance(self.glances[stem])
         image = v.image
         points = np.broadcast_to(np.float32(np.nan), (image.height, image.width, 3))
         light = replace(
@@ -316,19 +290,18 @@ class PairJudge:
             image=replace(image, xyz=points),
             normals=None,
             sample=None,
-            sample_normals=None,
             polish_sample=None,
             refine_sample=None,
         )
-        self._views[stem] = (light, glance)
+        self._views[stem] = (light, sample, thr)
         while len(self._views) > 1 and self._held() > self.keep_bytes:
             self._views.pop(next(iter(self._views)))  # the least recently used
         return self._views[stem]
 
     def _held(self) -> int:
         return sum(
-            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + g.nbytes
-            for v, g in self._views.values()
+            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s.nbytes
+            for v, s, _ in self._views.values()
         )
 
     def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
@@ -339,8 +312,8 @@ class PairJudge:
             va, vb = self._view(a), self._view(b)
             look = None
             if va is not None and vb is not None:
-                ab = _shares(va[0], va[1].threshold_m, vb[1], T)
-                ba = _shares(vb[0], vb[1].threshold_m, va[1], invert(T))
+                ab = _shares(va[0], va[2], vb[1], vb[2], T)
+                ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
                 look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
                 log.debug("map judge %s <- %s: %s", a, b, look.describe())
             self._memo[key] = look
@@ -424,7 +397,6 @@ def plan_looks(
 
 
 __all__ = [
-    "Glance",
     "PairJudge",
     "PairLook",
     "assemble",

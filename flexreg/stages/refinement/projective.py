@@ -32,7 +32,6 @@ from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import ConfigError, RegistrationError
 from flexreg.stages.normals import grid_normals, masked_xyz
 from flexreg.stages.refinement.result import IcpResult
-from flexreg.stages.verification import BACK_FACING_COS
 
 log = logging.getLogger(__name__)
 
@@ -116,12 +115,10 @@ def spherical_pixel(qx, qy, qz, r, c0, c1, c2, c3, c4, W):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _associate_chunk(
-    ch, pts, pnrm, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, back_cos, Ac, bc, cc, out_q,
-    out_r,
-):  # fmt: skip  # pragma: no cover
+    ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+):  # pragma: no cover
     """Chunk ``ch`` of :func:`_associate` (its points' pairs summed into ``Ac[ch]``,
     ``bc[ch]``, ``cc[ch]``)."""
-    facing = pnrm.shape[0] == pts.shape[0]
     H, W = xyz.shape[0], xyz.shape[1]
     wrap = kind == 0 and cam[4] > 0.5
     k0, k1, k2, k3, k4 = cam[0], cam[1], cam[2], cam[3], cam[4]
@@ -168,16 +165,6 @@ def _associate_chunk(
         else:
             mx, my, mz = qx, qy, qz
             dx, dy, dz = qx - x0, qy - x1, qz - x2
-        if facing:  # the two faces of a wall are no pair: normals turned apart (target frame)
-            a0, a1, a2 = np.float64(pnrm[i, 0]), np.float64(pnrm[i, 1]), np.float64(pnrm[i, 2])
-            if not reverse:
-                a0, a1, a2 = (
-                    M[0, 0] * a0 + M[0, 1] * a1 + M[0, 2] * a2,
-                    M[1, 0] * a0 + M[1, 1] * a1 + M[1, 2] * a2,
-                    M[2, 0] * a0 + M[2, 1] * a1 + M[2, 2] * a2,
-                )
-            if a0 * nx + a1 * ny + a2 * nz < back_cos:  # NaN passes
-                continue
         res = nx * dx + ny * dy + nz * dz
         if not abs(res) < dist:
             continue
@@ -214,7 +201,7 @@ def _sum_chunks(Ac, bc, cc, A, b):  # pragma: no cover
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _associate(
-    pts, pnrm, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, back_cos, A, b, out_q, out_r
+    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """Pair points with the pixels their rays hit in an image and add the Tukey-weighted
     point-to-plane normal equations of ``T`` (a left increment) to ``A``, ``b``.
@@ -224,23 +211,20 @@ def _associate(
     ``M = T^-1`` maps them into the source image's frame, and the pixel's point and plane,
     mapped into the target frame by ``T``, move against the fixed target point.
     ``out_q`` receives the moving point of each pair (target frame), ``out_r`` its residual
-    (NaN when unpaired). With ``pnrm`` as long as ``pts`` (the points' normals, their own
-    frame), a point and a pixel whose normals, in the target frame, have a cosine below
-    ``back_cos`` are not paired: two faces of a wall. Returns the number of pairs."""
+    (NaN when unpaired). Returns the number of pairs."""
     Ac = np.zeros((_CHUNKS, 6, 6))
     bc = np.zeros((_CHUNKS, 6))
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in prange(_CHUNKS):
         _associate_chunk(
-            ch, pts, pnrm, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, back_cos, Ac, bc,
-            cc, out_q, out_r,
-        )  # fmt: skip
+            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+        )
     return _sum_chunks(Ac, bc, cc, A, b)
 
 
 @numba.njit(cache=True, nogil=True)
 def _associate_serial(
-    pts, pnrm, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, back_cos, A, b, out_q, out_r
+    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """:func:`_associate` on the calling thread alone: the same chunks summed in the same order, so
     the same result, without a parallel region (whose start costs more than a few thousand
@@ -250,9 +234,8 @@ def _associate_serial(
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in range(_CHUNKS):
         _associate_chunk(
-            ch, pts, pnrm, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, back_cos, Ac, bc,
-            cc, out_q, out_r,
-        )  # fmt: skip
+            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+        )
     return _sum_chunks(Ac, bc, cc, A, b)
 
 
@@ -301,17 +284,11 @@ class _Side:
         normals: NDArray[np.float32] | None,
         points: NDArray[np.float64],
         reverse: bool,
-        point_normals: NDArray[np.floating] | None = None,
     ) -> None:
         self.kind, self.cam = camera_params(image)
         self.normals = grid_normals(image) if normals is None else normals
         self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
-        self.pnrm = (
-            np.zeros((0, 3))
-            if point_normals is None
-            else np.ascontiguousarray(point_normals, dtype=np.float64)
-        )
         self.reverse = reverse
         self.lateral = 2.0 * angular_step(image)
         self.q = np.empty_like(self.pts)
@@ -324,8 +301,8 @@ class _Side:
         kernel = _associate if len(self.pts) >= PARALLEL_MIN_POINTS else _associate_serial
         return int(
             kernel(
-                self.pts, self.pnrm, M, T, self.reverse, self.xyz, self.normals, self.kind,
-                self.cam, dist, self.lateral, BACK_FACING_COS, A, b, self.q, self.res,
+                self.pts, M, T, self.reverse, self.xyz, self.normals, self.kind, self.cam,
+                dist, self.lateral, A, b, self.q, self.res,
             )
         )  # fmt: skip
 
@@ -341,8 +318,6 @@ def projective_icp(
     source: RangeImage | None = None,
     target_points: NDArray[np.float64] | None = None,
     source_normals: NDArray[np.float32] | None = None,
-    source_point_normals: NDArray[np.floating] | None = None,
-    target_point_normals: NDArray[np.floating] | None = None,
     max_iterations: int = 30,
     levels: int = 3,
     tolerance: float = 1e-6,
@@ -380,12 +355,6 @@ def projective_icp(
         Target points in the target frame, for the symmetric association.
     source_normals : (H', W', 3) float32, optional
         The source's :func:`grid_normals` (computed when omitted).
-    source_point_normals, target_point_normals : (N, 3) / (M, 3) float, optional
-        The normals of ``source_points`` (source frame) and of ``target_points`` (target
-        frame), facing their own scanners: a point is not paired with a pixel whose normal
-        is turned away from its own by more than about 100 degrees
-        (:data:`~flexreg.stages.verification.BACK_FACING_COS`); the two faces of a wall seen
-        from two rooms are not one surface.
     max_iterations : int
         Per level (the last level's final convergence gets as many again).
     levels : int
@@ -411,9 +380,9 @@ def projective_icp(
         raise ConfigError(f"ICP distance must be positive, got {max_distance_m}")
     if (source is None) != (target_points is None):
         raise ConfigError("symmetric projective ICP needs both the source image and target points")
-    sides = [_Side(target, normals, source_points, False, source_point_normals)]
+    sides = [_Side(target, normals, source_points, False)]
     if source is not None and target_points is not None:
-        sides.append(_Side(source, source_normals, target_points, True, target_point_normals))
+        sides.append(_Side(source, source_normals, target_points, True))
     n_points = sum(len(sd.pts) for sd in sides)
     if n_points < 6:
         raise RegistrationError(f"projective ICP needs at least 6 points, got {n_points}")

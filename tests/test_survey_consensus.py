@@ -166,14 +166,58 @@ def test_a_hand_link_places_a_station_alone_and_a_wrong_one_is_refused_by_its_lo
     sol = solve_graph(sorted(P), [*base, hand], SurveyConfig(), reference="s0")
     assert "s3" in sol.groups[0] and hand.status == "accepted"
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
-    # one metre off, with two automatic links that agree on s3: refused, with its loop error
+    # one metre off, with two confident automatic links that agree on s3 (a loop of
+    # confident links): refused, with its loop error
     hand = _link(P, "s2", "s3", T=_moved(P, "s2", "s3", [1.0, 0, 0]))
     hand.vouched = "hand"
-    auto = [_link(P, "s1", "s3"), _link(P, "s0", "s3", "uncertain")]
+    auto = [_link(P, "s1", "s3"), _link(P, "s0", "s3")]
     sol = solve_graph(sorted(P), [*base, hand, *auto], SurveyConfig(), reference="s0")
     assert hand.status == "rejected" and "loop" in hand.why
     assert abs(hand.loop_error_m - 1.0) < 1e-6
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+
+
+def test_uncertain_links_do_not_settle_a_dispute_between_confident_ones():
+    """The surveyor's link s2-s3 is a metre off and one confident link s1-s3 disagrees;
+    beside it only an uncertain link s0-s3 (in look-alike rooms several are wrong the same
+    way, and may side with the wrong one). Neither is placed on that: s3 stays unplaced and
+    its reason names the two links that disagree."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    hand = _link(P, "s2", "s3", T=_moved(P, "s2", "s3", [1.0, 0, 0]))
+    hand.vouched = "hand"
+    auto = [_link(P, "s1", "s3"), _link(P, "s0", "s3", "uncertain")]
+    sol = solve_graph(sorted(P), [*base, hand, *auto], SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert "s2 <- s3" in sol.reasons["s3"] and "s1 <- s3" in sol.reasons["s3"]
+    assert hand.status == auto[0].status == "rejected" and "does not close" in hand.why
+
+
+def test_a_half_turned_group_backed_by_one_station_is_not_placed():
+    """Held-out building 727: a group of three stations (s3-s5, confident among them) is
+    joined to the reference's group (s0-s2) by one confident link s2-s5 that is right and
+    one confident link s0-s5 that turns the group half round into a look-alike room, with
+    two uncertain links s0-s3, s0-s4 that agree with the turn (a room of s0 that looks the
+    same turned round aliases all of its links alike). The confident links contradict each
+    other and only uncertain links side with one: the group is not placed (before, it was
+    placed half turned, 'verified'); with the map the right placement wins."""
+    P = _poses(6)
+    turn = make_transform(rotation_about_axis([0, 0, 1], np.pi), [6.0, 3.0, 0.0])
+
+    def links():
+        pairs = [("s0", "s1"), ("s1", "s2"), ("s0", "s2"), ("s3", "s4"), ("s4", "s5"), ("s3", "s5")]
+        inside = [_link(P, a, b) for a, b in pairs]
+        turned = [("s5", "confident"), ("s3", "uncertain"), ("s4", "uncertain")]
+        alias = [_link(P, "s0", b, v, T=turn @ invert(P["s0"]) @ P[b]) for b, v in turned]
+        return [*inside, *alias, _link(P, "s2", "s5")]
+
+    sol = solve_graph(sorted(P), links(), SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    assert "s0 <- s5" in sol.reasons["s5"] and "s2 <- s5" in sol.reasons["s5"]
+    sol = solve_graph(sorted(P), links(), SurveyConfig(), reference="s0", judge=_Judge(P))
+    assert sorted(sol.groups[0]) == sorted(P)
+    for s in P:
+        np.testing.assert_allclose(sol.poses[s], invert(P["s0"]) @ P[s], atol=1e-6)
 
 
 def test_the_map_names_the_wrong_link_of_a_triangle_that_does_not_close():

@@ -523,20 +523,23 @@ def _finish(
         acc = _accuracy(cov, adj.poses[s], median_range(clouds[s]))
         adj.accuracy[s] = acc
         worst = max(acc.radius95_mm, acc.rotation95_mm)
-        if worst > config.tolerance_mm:
+        over = (
+            f"its 95 % error is {worst:.1f} mm, over the {config.tolerance_mm:g} mm "
+            "tolerance (the overlapping surfaces do not fix it well enough)"
+        )
+        if s not in confirmed:  # unconfirmed comes first: a slid or look-alike pose is no
+            adj.status[s] = "placed"  # noise, and its 95 % error does not bound it
+            adj.why[s] = (
+                "one cloud-to-cloud pair alone places it (no independent route confirms it, "
+                "and its accuracy does not cover a wrong link); add a scan between it and "
+                "its neighbours, or check that pair"
+                + (f"; {over}" if worst > config.tolerance_mm else "")
+            )
+        elif worst > config.tolerance_mm:
             adj.status[s] = "outside_tolerance"
-            adj.why[s] = (
-                f"its 95 % error is {worst:.1f} mm, over the {config.tolerance_mm:g} mm "
-                "tolerance (the overlapping surfaces do not fix it well enough)"
-            )
-        elif s in confirmed:
-            adj.status[s] = "verified"
+            adj.why[s] = over
         else:
-            adj.status[s] = "placed"
-            adj.why[s] = (
-                "one cloud-to-cloud pair alone places it (no independent route confirms it); "
-                "add a scan between it and its neighbours, or check that pair"
-            )
+            adj.status[s] = "verified"
 
 
 __all__ = ["STATUSES", "Accuracy", "Adjustment", "Pair", "adjust"]

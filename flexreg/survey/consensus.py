@@ -24,13 +24,19 @@ of stations, the way PCM merges the maps of several robots.
    rough positions' windows, or a firm vote) and no distinct placement of the same groups is
    as well supported; then everything is looked at again.
    Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
-   the same way. Where distinct placements compete, the map's free-space check may pick the
-   one under which the groups' nearest stations see each other without contradiction, every
-   other contradicting decisively more. Once no such merge is left, a lone trusted answer
-   (or the surveyor's word) places its stations unchecked unless the map check refutes it;
-   one that a cycle of trusted answers contradicts, only where the map sees the groups at
-   ease, and when nothing else is left the map may name the wrong link of such a cycle
-   (:func:`_blame`).
+   the same way. Nor do they settle a dispute between trusted answers: one that a cycle of
+   trusted answers contradicts and none confirms is *disputed* (one link of that cycle is
+   wrong, and nothing says it is not this one), and a cycle through it is no firm vote;
+   where two distinct placements of the same groups each hold a trusted answer and the best
+   is contradicted, only the map decides. (A room that looks the same turned half round
+   aliases every link of its station alike: a confident answer and the uncertain links of
+   that station then agree on the turn.) Where distinct placements compete, the map's free-
+   space check may pick the one under which the groups' nearest stations see each other
+   without contradiction, every other contradicting decisively more. Once no such merge is
+   left, a lone trusted answer (or the surveyor's word) places its stations unchecked unless
+   the map check refutes it; one that a cycle of trusted answers contradicts, only where the
+   map sees the groups at ease, and when nothing else is left the map may name the wrong
+   link of such a cycle (:func:`_blame`).
 3. **Inside a group**, every other link keeps the hypothesis that agrees with the group's
    poses (a loop picks an alias pair's right pose), or is rejected with its loop error.
 
@@ -46,7 +52,7 @@ from __future__ import annotations
 import itertools
 import logging
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -97,7 +103,10 @@ class Hypothesis:
     votes : int
         Cycles it closes (within the loop tolerance).
     firm_votes : int
-        Those of them whose other links are all trusted answers (confident, or vouched for).
+        Those of them whose other links are all trusted answers (confident, or vouched for)
+        and none of them disputed: a trusted answer that a cycle of trusted answers
+        contradicts and none confirms may be the wrong one of that cycle, and confirms
+        nothing (:func:`cycle_votes`).
     misfit : float
         Over those cycles, how far each closes at best, as a share of the tolerance
         (rotation and translation added): which of equally voted hypotheses fits tightest.
@@ -115,6 +124,7 @@ class Hypothesis:
     misfit: float = 0.0
     against: int = 0
     blamed: bool = False
+    rests: list[tuple[Hypothesis, ...]] = field(default_factory=list)
 
     @property
     def vouched(self) -> bool:
@@ -233,7 +243,7 @@ def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
         if not len(closing):
             continue
         misfit = deg / tol.max_deg + m / tol.metres(len(cyc))
-        fit: dict[int, tuple[float, Hypothesis, bool]] = {}
+        fit: dict[int, tuple[float, Hypothesis, tuple[Hypothesis, ...] | None]] = {}
         nl1 = len(left[1][0])
         nr1 = len(right[1][0]) if len(right) == 2 else 1
         for i, k in closing:
@@ -245,15 +255,30 @@ def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
             )
             for h in members:
                 f = float(misfit[i, k])
-                firm = all(o.firm for o in members if o is not h)
+                rest = tuple(o for o in members if o is not h)
+                firm = rest if all(o.firm for o in rest) else None
                 was = fit.get(id(h))
-                if was is None or (firm, -f) > (was[2], -was[0]):
+                if was is None or (firm is not None, -f) > (was[2] is not None, -was[0]):
                     fit[id(h)] = (f, h, firm)
         for f, h, firm in fit.values():
             _vote(h, f, firm)
     closed = _tree_votes(hyps, tol)
     log.debug("%d short cycles, %d longer ones closed", n, closed)
+    _settle_firm_votes(hyps)
     return broken
+
+
+def _settle_firm_votes(hyps: dict[frozenset[str], list[Hypothesis]]) -> None:
+    """Firm votes only through undisputed trusted answers. A trusted answer is disputed when
+    a cycle of trusted answers through it does not close and none closes: one link of that
+    cycle is wrong and nothing says it is not this one (a confident answer into a look-alike
+    room, agreeing with the alias of every other link of the same station). One confirmed by
+    a closing cycle of trusted answers stays undisputed: the broken cycle's wrong link is
+    another."""
+    every = [h for hs in hyps.values() for h in hs]
+    disputed = {id(h) for h in every if h.firm and h.against and not h.firm_votes}
+    for h in every:
+        h.firm_votes = sum(all(id(o) not in disputed for o in rest) for rest in h.rests)
 
 
 def _contradict(closes: np.ndarray, *sides: list[tuple[list[Hypothesis], np.ndarray]]) -> bool:
@@ -277,10 +302,14 @@ def _contradict(closes: np.ndarray, *sides: list[tuple[list[Hypothesis], np.ndar
     return True
 
 
-def _vote(h: Hypothesis, misfit: float, firm: bool) -> None:
+def _vote(h: Hypothesis, misfit: float, firm: tuple[Hypothesis, ...] | None) -> None:
+    """One closing cycle for ``h``; ``firm``: the rest of the cycle when it is all trusted
+    answers (a firm vote), else None."""
     h.votes += 1
-    h.firm_votes += firm
     h.misfit += misfit
+    if firm is not None:
+        h.firm_votes += 1
+        h.rests.append(firm)
 
 
 def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> int:
@@ -322,9 +351,11 @@ def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
             if tol.agrees(err, len(path) + 1):
                 closed += 1
                 f = err[0] / tol.max_deg + err[1] / tol.metres(len(path) + 1)
-                _vote(h, f, True)  # the rest of its cycle: the forest's trusted answers
-                for _, e in path:
-                    _vote(e, f, h.firm)
+                edges = [e for _, e in path]
+                _vote(h, f, tuple(edges))  # the rest of its cycle: the forest's trusted answers
+                for e in edges:
+                    rest = tuple(o for o in [h, *edges] if o is not e)
+                    _vote(e, f, rest if h.firm else None)
             elif h.firm:  # a cycle of trusted answers that does not close
                 for k in [h, *(e for _, e in path)]:
                     k.against += 1
@@ -544,7 +575,15 @@ def _decide(
         return _Pick(top, "loop")
     vouched = any(h.vouched for h in top.members)
     contradicted = any(h.against for h in top.members)
-    if clear and (vouched or (top.rank[0] and alone)) and (alone or not contradicted):
+    # two trusted answers that place the groups apart, a cycle of trusted answers through
+    # one broken: one of them is wrong, and only the map may tell which
+    disputed = contradicted and rival is not None and rival.rank[0] > 0 and not vouched
+    if (
+        clear
+        and (vouched or (top.rank[0] and alone))
+        and (alone or not contradicted)
+        and not disputed
+    ):
         # placed unchecked (the map check and the final alignment's pairs check it later),
         # unless the map check refutes it; where a cycle of trusted answers contradicts it,
         # only where the groups see each other, the least contradicted first

@@ -131,6 +131,13 @@ def _choose(
     return place
 
 
+#: Why a confident link between two groups placed nothing when confident links disagree.
+CONTESTED = (
+    "a loop of confident links through it does not close: it or another of them is wrong, "
+    "and no other loop nor the map tells which"
+)
+
+
 def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
     """Why a link between two groups placed nothing, in words."""
     n = 1 + len(e.alternatives)
@@ -139,6 +146,8 @@ def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
             f"fits {n} poses (look-alike rooms or bays), and no loop or rough position tells "
             "which is right"
         )
+    if e.trusted and any(h.against for h in hyps[frozenset((e.target, e.source))]):
+        return CONTESTED
     if e.trusted:
         return "no loop checks it: a single link places no station on its own"
     return "uncertain (see the link's reasons), and no loop confirms it"
@@ -233,8 +242,13 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     other = near[0] if near else "STATION"
     side = next(iter(sorted(members & {x for e in toward for x in (e.target, e.source)})), stem)
     hand = f"--link {other} {side} T.txt (a transform from flexreg register {other} {side})"
+    rivals = [e for e in toward if e.why == CONTESTED]
     what = (
-        f"in a separate group of {len(group)} stations: no confident link, nor one a loop "
+        f"confident links place it apart ({', '.join(f'{e.target} <- {e.source}' for e in rivals)}"
+        "): one of them is wrong"
+        + (f" (in a separate group of {len(group)} stations)" if len(group) > 1 else "")
+        if len(rivals) > 1
+        else f"in a separate group of {len(group)} stations: no confident link, nor one a loop "
         "confirms, joins it to the reference's group"
         if len(group) > 1
         else "no link was tried (no other scan seemed to see the same place)"
@@ -249,6 +263,8 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     said = next((e.undecided for e in toward if e.undecided), "")
     if said:
         return f"{what}; the rough positions cannot place it ({said}): {hand}"
+    if len(rivals) > 1:
+        return f"{what}; rough positions (--positions) would tell which, or {hand}"
     if n > 1:
         return (
             f"{what}; its link with {other} fits {n} poses (look-alike rooms or bays): rough "

@@ -264,7 +264,11 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     if said:
         return f"{what}; the rough positions cannot place it ({said}): {hand}"
     if len(rivals) > 1:
-        return f"{what}; rough positions (--positions) would tell which, or {hand}"
+        pairs = " or ".join(f"--link {e.target} {e.source} T.txt" for e in rivals[:2])
+        return (
+            f"{what}; rough positions (--positions) would tell which, or {pairs} with the "
+            "transform you check to be right (flexreg register TARGET SOURCE gives it)"
+        )
     if n > 1:
         return (
             f"{what}; its link with {other} fits {n} poses (look-alike rooms or bays): rough "

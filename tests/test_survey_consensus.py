@@ -263,3 +263,16 @@ def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
     slid = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3", _moved(P, "s1", "s3", [0.14, 0, 0]))]
     sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]
+
+
+def test_a_station_one_confident_link_fixes_is_single():
+    """s3 hangs on one confident link s2-s3; an uncertain link s1-s3 agrees with it (a view
+    that repeats bay by bay aliases every link alike, so it adds no independent check): s3 is
+    ``single``; the triangle's stations, two confident links each, are ``confident``."""
+    P = _poses(4)
+    links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2"),
+             _link(P, "s2", "s3"), _link(P, "s1", "s3", "uncertain")]  # fmt: skip
+    sol = solve_graph(sorted(P), links, SurveyConfig(), reference="s0")
+    assert sorted(sol.groups[0]) == sorted(P) and all(e.status == "accepted" for e in links)
+    assert sol.confidence == {"s0": "confident", "s1": "confident", "s2": "confident",
+                              "s3": "single"}  # fmt: skip

@@ -65,8 +65,10 @@ value does not exist (failed link, unplaced station)::
           "degree": 3,                       # accepted links at this station
           "links_attempted": 5,
           "confidence": "confident",         # "confident": placed through confident links;
-                                             # "uncertain": only loop-confirmed uncertain
-                                             # links hold it; null: unplaced
+                                             # "single": so, but only one confident link
+                                             # at it (status "placed"); "uncertain": only
+                                             # loop-confirmed uncertain links hold it;
+                                             # null: unplaced
           "reason": null,                    # unplaced: why, in words
           "error": null,                     # unreadable: the one-line error
           "status": "verified",              # verified | placed | outside_tolerance | unplaced

@@ -217,7 +217,10 @@ def _reference(
 def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
     """``confident`` when joined to ``ref`` by confident accepted links alone (a link
     confident inside rough positions' window counts once accepted: a loop of confident links
-    confirmed it)."""
+    confirmed it), ``single`` when so but only one confident link is accepted at the station
+    (besides ``ref``): one registration fixes it, and the uncertain links that agree with it
+    may be wrong the same way (a view that repeats bay by bay aliases every link alike);
+    else ``uncertain``."""
     adj: dict[str, list[str]] = {s: [] for s in group}
     for e in links:
         if e.status == "accepted" and e.confident and e.target in adj:
@@ -229,7 +232,22 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
             if b not in seen:
                 seen.add(b)
                 queue.append(b)
-    return {s: "confident" if s in seen else "uncertain" for s in group}
+    return {
+        s: "uncertain"
+        if s not in seen
+        else "single"
+        if s != ref and len(adj[s]) < 2
+        else "confident"
+        for s in group
+    }
+
+
+def single_link(stem: str, links: list[Link]) -> str:
+    """The one confident accepted link at a ``single`` station, as ``target <- source``."""
+    e = next(
+        e for e in links if e.status == "accepted" and e.confident and stem in (e.target, e.source)
+    )
+    return f"{e.target} <- {e.source}"
 
 
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
@@ -542,4 +560,4 @@ def _solve_once(
     return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
 
 
-__all__ = ["GraphSolution", "Judge", "Link", "Veto", "loop_error", "solve_graph"]
+__all__ = ["GraphSolution", "Judge", "Link", "Veto", "loop_error", "single_link", "solve_graph"]

@@ -37,7 +37,7 @@ from flexreg.survey.execute import (
     run_tasks,
 )
 from flexreg.survey.frames import Frame, read_origins_csv, site_of_reference
-from flexreg.survey.graph import GraphSolution, Link, Veto, solve_graph
+from flexreg.survey.graph import GraphSolution, Link, Veto, single_link, solve_graph
 from flexreg.survey.links import Matrix
 from flexreg.survey.mapcheck import (
     PairJudge,
@@ -181,8 +181,11 @@ class SurveyResult:
             return "unplaced"
         adj = self.adjustment
         st = adj.status.get(stem, "placed") if adj is not None else "placed"
-        if st == "verified" and self.solution.confidence.get(stem) == "uncertain":
+        conf = self.solution.confidence.get(stem)
+        if st == "verified" and conf == "uncertain":
             return "placed"  # only uncertain links chose where it is: not independent
+        if st in ("verified", "outside_tolerance") and conf == "single":
+            return "placed"  # one registration fixes it; the final pairs start from its pose
         return st
 
     def status_why(self, stem: str) -> str | None:
@@ -197,6 +200,14 @@ class SurveyResult:
             return "accuracy unchecked: the final alignment was off (--no-refine)"
         if self.solution.confidence.get(stem) == "uncertain" and stem not in self.adjustment.why:
             return "placed only through uncertain links that a loop confirms; check them"
+        if self.solution.confidence.get(stem) == "single":
+            why = self.adjustment.why.get(stem)
+            return (
+                f"one confident link alone fixes it ({single_link(stem, self.links)}): the final "
+                "alignment starts from its pose and cannot tell a look-alike bay or a pose "
+                "slid along a wall; a second link (a scan between it and its neighbours, "
+                "--link, or rough positions) would verify it" + (f"; {why}" if why else "")
+            )
         return self.adjustment.why.get(stem, "")
 
     def status_counts(self) -> dict[str, int]:

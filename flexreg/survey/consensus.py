@@ -30,13 +30,13 @@ of stations, the way PCM merges the maps of several robots.
    where two distinct placements of the same groups each hold a trusted answer and the best
    is contradicted, only the map decides. (A room that looks the same turned half round
    aliases every link of its station alike: a confident answer and the uncertain links of
-   that station then agree on the turn.) Where distinct placements compete, the map's free-
-   space check may pick the one under which the groups' nearest stations see each other
-   without contradiction, every other contradicting decisively more. Once no such merge is
-   left, a lone trusted answer (or the surveyor's word) places its stations unchecked unless
-   the map check refutes it; one that a cycle of trusted answers contradicts, only where the
-   map sees the groups at ease, and when nothing else is left the map may name the wrong
-   link of such a cycle (:func:`_blame`).
+   that station then agree on the turn.) Where distinct placements compete, the map's
+   free-space check may pick the one under which the groups' nearest stations see each
+   other without contradiction, every other contradicting decisively more. Once no such
+   merge is left, a lone trusted answer (or the surveyor's word) places its stations
+   unchecked unless the map check refutes it; one that a cycle of trusted answers
+   contradicts, only where the map sees the groups at ease, and when nothing else is left
+   the map may name the wrong link of such a cycle (:func:`_blame`).
 3. **Inside a group**, every other link keeps the hypothesis that agrees with the group's
    poses (a loop picks an alias pair's right pose), or is rejected with its loop error.
 

@@ -243,11 +243,13 @@ def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]
 
 
 def single_link(stem: str, links: list[Link]) -> str:
-    """The one confident accepted link at a ``single`` station, as ``target <- source``."""
-    e = next(
+    """The one confident accepted link at a ``single`` station, as ``target <- source``
+    (``"its link"`` when none is, any more)."""
+    at = (
         e for e in links if e.status == "accepted" and e.confident and stem in (e.target, e.source)
     )
-    return f"{e.target} <- {e.source}"
+    e = next(at, None)
+    return "its link" if e is None else f"{e.target} <- {e.source}"
 
 
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:

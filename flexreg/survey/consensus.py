@@ -124,7 +124,7 @@ class Hypothesis:
     misfit: float = 0.0
     against: int = 0
     blamed: bool = False
-    rests: list[tuple[Hypothesis, ...]] = field(default_factory=list)
+    rests: list[tuple[Hypothesis, ...]] = field(default_factory=list)  # of its firm votes
 
     @property
     def vouched(self) -> bool:
@@ -276,7 +276,7 @@ def _settle_firm_votes(hyps: dict[frozenset[str], list[Hypothesis]]) -> None:
     a closing cycle of trusted answers stays undisputed: the broken cycle's wrong link is
     another."""
     every = [h for hs in hyps.values() for h in hs]
-    disputed = {id(h) for h in every if h.firm and h.against and not h.firm_votes}
+    disputed = {id(h) for h in every if h.firm and h.against and not h.rests}
     for h in every:
         h.firm_votes = sum(all(id(o) not in disputed for o in rest) for rest in h.rests)
 
@@ -304,11 +304,10 @@ def _contradict(closes: np.ndarray, *sides: list[tuple[list[Hypothesis], np.ndar
 
 def _vote(h: Hypothesis, misfit: float, firm: tuple[Hypothesis, ...] | None) -> None:
     """One closing cycle for ``h``; ``firm``: the rest of the cycle when it is all trusted
-    answers (a firm vote), else None."""
+    answers (a firm vote, counted by :func:`_settle_firm_votes`), else None."""
     h.votes += 1
     h.misfit += misfit
     if firm is not None:
-        h.firm_votes += 1
         h.rests.append(firm)
 
 

@@ -401,10 +401,10 @@ def test_refine_merged_cloud_and_e57(first, project, tmp_path):
 
 
 def test_a_station_one_confident_link_fixes_is_placed_not_verified(first, project, tmp_path):
-    """File-order pairs only: station_02 hangs on one confident link. The final alignment's
-    pairs all start from that link's pose and cannot tell a look-alike bay from the truth, so
-    the station is ``placed`` (not verified), naming the link and what would verify it;
-    station_01, fixed by two confident links, is verified."""
+    """File-order pairs only: a chain of confident links, none closing a loop. The final
+    alignment's pairs all start from those links' poses and cannot tell a look-alike bay from
+    the truth, so station_02 and station_01 are ``placed`` (not verified), each naming the
+    link it rests on and what would verify it; nothing is verified."""
     out = _with_cache(first[3], tmp_path)
     result = run_survey(_files(project), out, SurveyConfig(pairs="sequential"), workers=1)
     doc = result.to_dict()
@@ -412,7 +412,14 @@ def test_a_station_one_confident_link_fixes_is_placed_not_verified(first, projec
     assert doc["reference"] == "station_00"
     assert st["station_02"]["confidence"] == "single" and st["station_02"]["status"] == "placed"
     why = st["station_02"]["status_why"]
-    assert "one confident link alone fixes it (station_01 <- station_02)" in why
+    assert (
+        "confident links that no loop checks fix it, one after the other "
+        "(station_01 <- station_02, station_00 <- station_01)" in why
+    )
     assert "--link" in why and "rough positions" in why
-    assert st["station_01"]["confidence"] == "confident"
-    assert st["station_01"]["status"] == "verified" and result.exit_status == 3
+    assert st["station_01"]["confidence"] == "single" and st["station_01"]["status"] == "placed"
+    assert (
+        "one confident link alone fixes it (station_00 <- station_01)"
+        in st["station_01"]["status_why"]
+    )
+    assert result.exit_status == 3

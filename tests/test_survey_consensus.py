@@ -265,6 +265,35 @@ def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
     assert "s3" not in sol.groups[0]
 
 
+def test_a_block_hanging_from_one_link_is_single_and_the_frame_is_the_largest_block():
+    """Two blocks that loops of confident links hold together (a triangle s0-s2, a square
+    with a diagonal s3-s6) joined by one confident link s2-s3: it closes no loop, so one
+    registration fixes where each block lies from the other (a bay or a wall's thickness off
+    in it moves the whole block, every station of it still two links deep). Without a
+    reference given, the frame is the larger block's (its first station): its stations are
+    ``confident``, the triangle's ``single``, resting on s2 <- s3; a reference given in the
+    triangle makes the square ``single`` instead."""
+    from flexreg.survey.graph import single_link
+
+    P = _poses(7)
+    tri = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    square = [_link(P, "s3", "s4"), _link(P, "s4", "s5"), _link(P, "s5", "s6"),
+              _link(P, "s3", "s6"), _link(P, "s3", "s5")]  # fmt: skip
+    links = [*tri, _link(P, "s2", "s3"), *square]
+    sol = solve_graph(sorted(P), links, SurveyConfig())
+    assert sorted(sol.groups[0]) == sorted(P) and all(e.status == "accepted" for e in links)
+    assert sol.reference == "s3"
+    np.testing.assert_allclose(sol.poses["s0"], invert(P["s3"]) @ P["s0"], atol=1e-6)
+    assert sol.confidence == {**dict.fromkeys(["s0", "s1", "s2"], "single"),
+                              **dict.fromkeys(["s3", "s4", "s5", "s6"], "confident")}  # fmt: skip
+    assert single_link("s0", sol.reference, links) == "one confident link alone fixes it (s2 <- s3)"
+    sol = solve_graph(sorted(P), links, SurveyConfig(), reference="s1")
+    assert sol.reference == "s1"
+    assert sol.confidence == {**dict.fromkeys(["s0", "s1", "s2"], "confident"),
+                              **dict.fromkeys(["s3", "s4", "s5", "s6"], "single")}  # fmt: skip
+    assert single_link("s6", "s1", links) == "one confident link alone fixes it (s2 <- s3)"
+
+
 def test_a_station_one_confident_link_fixes_is_single():
     """s3 hangs on one confident link s2-s3; an uncertain link s1-s3 agrees with it (a view
     that repeats bay by bay aliases every link alike, so it adds no independent check): s3 is

@@ -64,9 +64,10 @@ value does not exist (failed link, unplaced station)::
                                              # is not the reference's: nothing is lost)
           "degree": 3,                       # accepted links at this station
           "links_attempted": 5,
-          "confidence": "confident",         # "confident": placed through confident links;
-                                             # "single": so, but only one confident link
-                                             # at it (status "placed"); "uncertain": only
+          "confidence": "confident",         # "confident": placed through confident links
+                                             # that close loops; "single": so, but through
+                                             # a confident link that closes no loop (status
+                                             # "placed"); "uncertain": only
                                              # loop-confirmed uncertain links hold it;
                                              # null: unplaced
           "reason": null,                    # unplaced: why, in words

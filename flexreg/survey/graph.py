@@ -214,42 +214,85 @@ def _reference(
     return max(stems, key=lambda s: (size[comp[s]], -stems.index(s)))
 
 
-def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
-    """``confident`` when joined to ``ref`` by confident accepted links alone (a link
-    confident inside rough positions' window counts once accepted: a loop of confident links
-    confirmed it), ``single`` when so but only one confident link is accepted at the station
-    (besides ``ref``): one registration fixes it, and the uncertain links that agree with it
-    may be wrong the same way (a view that repeats bay by bay aliases every link alike);
-    else ``uncertain``."""
-    adj: dict[str, list[str]] = {s: [] for s in group}
-    for e in links:
-        if e.status == "accepted" and e.confident and e.target in adj:
-            adj[e.target].append(e.source)
-            adj[e.source].append(e.target)
-    seen, queue = {ref}, deque([ref])
+def _firm_edges(group: list[str], links: list[Link]) -> tuple[list[tuple[str, str]], set[int]]:
+    """The confident accepted links inside ``group`` (a link confident inside rough
+    positions' window counts once accepted: a loop of confident links confirmed it) as
+    station pairs, and the indices of those among them that close no loop (bridges)."""
+    members = set(group)
+    edges = [
+        (e.target, e.source)
+        for e in links
+        if e.status == "accepted" and e.confident and e.target in members and e.source in members
+    ]
+    return edges, bridges(edges)
+
+
+def _reached(start: str, edges: Sequence[tuple[str, str]]) -> set[str]:
+    adj: dict[str, list[str]] = {}
+    for a, b in edges:
+        adj.setdefault(a, []).append(b)
+        adj.setdefault(b, []).append(a)
+    seen, queue = {start}, deque([start])
     while queue:
-        for b in adj[queue.popleft()]:
+        for b in adj.get(queue.popleft(), []):
             if b not in seen:
                 seen.add(b)
                 queue.append(b)
+    return seen
+
+
+def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
+    """``confident`` when joined to ``ref`` by confident accepted links that each close a
+    loop of them (one 2-edge-connected block with ``ref``): no single registration decides
+    where the station lies from ``ref``; ``single`` when joined by confident links but
+    through one that closes no loop (a bridge: the station alone at the end of one link, or a
+    block of stations hanging from the rest by one link): that registration fixes it, and the
+    uncertain links that agree with it may be wrong the same way (a view that repeats bay by
+    bay aliases every link alike); else ``uncertain``."""
+    edges, alone = _firm_edges(group, links)
+    joined = _reached(ref, edges)
+    firm = _reached(ref, [x for i, x in enumerate(edges) if i not in alone])
     return {
-        s: "uncertain"
-        if s not in seen
-        else "single"
-        if s != ref and len(adj[s]) < 2
-        else "confident"
-        for s in group
+        s: "uncertain" if s not in joined else "confident" if s in firm else "single" for s in group
     }
 
 
-def single_link(stem: str, links: list[Link]) -> str:
-    """The one confident accepted link at a ``single`` station, as ``target <- source``
-    (``"its link"`` when none is, any more)."""
-    at = (
-        e for e in links if e.status == "accepted" and e.confident and stem in (e.target, e.source)
-    )
-    e = next(at, None)
-    return "its link" if e is None else f"{e.target} <- {e.source}"
+def _firm_reference(group: list[str], links: list[Link]) -> str:
+    """The first station by name of the largest block of ``group`` that confident links
+    closing loops hold together (:func:`_confidence`): the frame every confirmed pose is
+    given in, so that a block hanging from one link is the one reported as such."""
+    edges, alone = _firm_edges(group, links)
+    kept = [x for i, x in enumerate(edges) if i not in alone]
+    best: tuple[int, str] | None = None
+    done: set[str] = set()
+    for s in group:  # in name order: the first of each block
+        if s in done:
+            continue
+        block = _reached(s, kept)
+        done |= block
+        if best is None or len(block) > best[0]:
+            best = (len(block), s)
+    return group[0] if best is None else best[1]
+
+
+def single_link(stem: str, ref: str, links: list[Link]) -> str:
+    """What a ``single`` station's pose from ``ref`` rests on, in words: the confident
+    accepted links on the way from the station to ``ref`` that close no loop (its own link
+    when it hangs alone; the one its block hangs from), as ``target <- source``, nearest the
+    station first."""
+    ok = [e for e in links if e.status == "accepted" and e.confident]
+    alone = bridges([(e.target, e.source) for e in ok])
+    adj: dict[str, list[tuple[str, int]]] = {}
+    for i, e in enumerate(ok):
+        adj.setdefault(e.target, []).append((e.source, i))
+        adj.setdefault(e.source, []).append((e.target, i))
+    named = [
+        f"{ok[i].target} <- {ok[i].source}" for _, i in walk(adj, stem, ref) or [] if i in alone
+    ]
+    if len(named) == 1:
+        return f"one confident link alone fixes it ({named[0]})"
+    what = ", ".join(named) if named else "its links"
+    return f"confident links that no loop checks fix it, one after the other ({what})"
 
 
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
@@ -531,7 +574,6 @@ def _solve_once(
             start = solved
             if not late:
                 break
-        poses.update(start)
         kept = [e for e in links if e.status == "pending" and e.target in start]
         alone = bridges([(e.target, e.source) for e in kept])  # they close no loop: unchecked
         for i, e in enumerate(kept):
@@ -540,6 +582,13 @@ def _solve_once(
                 e.loop_error_deg, e.loop_error_m = loop_error(
                     np.asarray(e.T_target_source), start[e.target], start[e.source]
                 )
+        if gref != reference:  # not the surveyor's: the frame of the largest confirmed block
+            firm = _firm_reference(g, links)
+            inv = invert(start[firm])
+            start = {s: inv @ P for s, P in start.items()}
+            ref = firm if gref == ref else ref
+            gref = grefs[-1] = firm
+        poses.update(start)
         confidence.update(_confidence(g, gref, links))
     for e in links:  # anything left (between groups) was never confirmed
         if e.status == "pending":

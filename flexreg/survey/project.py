@@ -114,8 +114,7 @@ class SurveyResult:
         Every conflict the map checks found (each cut the most doubtful link between its
         two stations).
     adjustment : Adjustment or None
-        The final joint alignment (None when off or nothing is placed): accuracies and
-        statuses.
+        The final joint alignment (None when off or nothing placed): accuracies, statuses.
     frame : {"reference", "stored"}
         The frame the poses are written in besides the reference's (``T_site_station``).
     positions : dict of str -> Position
@@ -202,11 +201,12 @@ class SurveyResult:
             return "placed only through uncertain links that a loop confirms; check them"
         if self.solution.confidence.get(stem) == "single":
             why = self.adjustment.why.get(stem)
+            link = single_link(stem, self.solution.reference, self.links)
             return (
-                f"one confident link alone fixes it ({single_link(stem, self.links)}): the final "
-                "alignment starts from its pose and cannot tell a look-alike bay or a pose "
-                "slid along a wall; a second link (a scan between it and its neighbours, "
-                "--link, or rough positions) would verify it" + (f"; {why}" if why else "")
+                f"{link}: the final alignment starts from "
+                "its pose and cannot tell a look-alike bay or a pose slid along a wall; a "
+                "second link (a scan between it and its neighbours, --link, or rough "
+                "positions) would verify it" + (f"; {why}" if why else "")
             )
         return self.adjustment.why.get(stem, "")
 

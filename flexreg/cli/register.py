@@ -345,7 +345,7 @@ def register_command(
         threshold_m=threshold,
         seed=seed,
         icp_only=icp_only,
-        **{"prior.upright": upright},
+        **_dotted("prior.upright", upright),
     )
     frame = _check_options(config, init, txt, txt_frame)
     outputs = [
@@ -674,3 +674,8 @@ def _print_summary(
     console.print(t)
     with np.printoptions(precision=6, suppress=True):
         console.print(str(r.T_target_source), markup=False)
+
+
+def _dotted(key: str, value: Any) -> dict[str, Any]:
+    """A configuration value whose key is not a Python name (a nested field)."""
+    return {key: value}

@@ -211,7 +211,8 @@ def _refuted_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
 def _twin_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     """A twin of the answer fits (:mod:`flexreg.registration.twins`): it puts at most
     ``judge.twin_fit_open`` in open space and explains ``TWIN_MIN_RATIO`` of the answer's."""
-    a = (ev.twins or {}).get("answer")
+    twins = ev.twins or {}
+    a = twins.get("answer")
     if not a:
         return None
     limit = max(judge.twin_fit_open, 2 * a["open_share"])
@@ -219,7 +220,7 @@ def _twin_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     won, lost = "full_refuted_share", "full_refuting_share"
     fits = [  # a weak twin the answer beats on every pixel does not count
         t
-        for t in ev.twins.get("twins", ())
+        for t in twins.get("twins", ())
         if t["open_share"] <= limit
         and t["explained_share"] >= least
         and not decisive_full(

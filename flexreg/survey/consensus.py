@@ -256,12 +256,12 @@ def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance
             for h in members:
                 f = float(misfit[i, k])
                 rest = tuple(o for o in members if o is not h)
-                firm = rest if all(o.firm for o in rest) else None
+                backed = rest if all(o.firm for o in rest) else None
                 was = fit.get(id(h))
-                if was is None or (firm is not None, -f) > (was[2] is not None, -was[0]):
-                    fit[id(h)] = (f, h, firm)
-        for f, h, firm in fit.values():
-            _vote(h, f, firm)
+                if was is None or (backed is not None, -f) > (was[2] is not None, -was[0]):
+                    fit[id(h)] = (f, h, backed)
+        for f, h, backed in fit.values():
+            _vote(h, f, backed)
     closed = _tree_votes(hyps, tol)
     log.debug("%d short cycles, %d longer ones closed", n, closed)
     _settle_firm_votes(hyps)
@@ -602,11 +602,11 @@ def _decide(
             distinct.append(s)
     if len(distinct) > MAP_PLACEMENTS:
         return None
-    said = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
-    best = _decisive(said, judge, decisive)
+    judged = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
+    best = _decisive(judged, judge, decisive)
     if best is None:
         return None
-    return _Pick(distinct[best], "map", min(x[0] for x in said if x is not None))
+    return _Pick(distinct[best], "map", min(x[0] for x in judged if x is not None))
 
 
 def _decisive(
@@ -714,9 +714,9 @@ def merge_groups(
                     continue
                 p = pick.set
                 overlap = sum(h.link.overlap for h in p.members)
-                key = (*p.rank[:5], -pick.contradiction, -p.misfit, p.rank[5], overlap)
-                if best is None or key > best[0]:
-                    best = (key, g1, g2, pick)
+                rank = (*p.rank[:5], -pick.contradiction, -p.misfit, p.rank[5], overlap)
+                if best is None or rank > best[0]:
+                    best = (rank, g1, g2, pick)
             if best is not None:
                 break
         if best is None:
@@ -726,9 +726,9 @@ def merge_groups(
             return place, chosen
         _, g1, g2, picked = best
         memo = {k: v for k, v in memo.items() if g1 not in k and g2 not in k}
-        how, pick = picked.how, _medoid(picked.set, place, g1, g2)
+        how, med = picked.how, _medoid(picked.set, place, g1, g2)
         for s in place.members(g2):
-            place.pose[s] = pick.X @ place.pose[s]
+            place.pose[s] = med.X @ place.pose[s]
             place.root[s] = g1
-        for h in pick.members:
-            chosen[id(h.link)] = Chosen(h, h is pick.centre, how, pick.firmly_confirmed)
+        for h in med.members:
+            chosen[id(h.link)] = Chosen(h, h is med.centre, how, med.firmly_confirmed)

@@ -331,6 +331,7 @@ def register_command(
     from flexreg.io.setups import stored_T_target_source
     from flexreg.registration.pipeline import register
 
+    nested: dict[str, Any] = {"prior.upright": upright}  # a key that is not a Python name
     config = build_config(
         RegistrationConfig,
         config_file,
@@ -345,7 +346,7 @@ def register_command(
         threshold_m=threshold,
         seed=seed,
         icp_only=icp_only,
-        **_dotted("prior.upright", upright),
+        **nested,
     )
     frame = _check_options(config, init, txt, txt_frame)
     outputs = [
@@ -674,8 +675,3 @@ def _print_summary(
     console.print(t)
     with np.printoptions(precision=6, suppress=True):
         console.print(str(r.T_target_source), markup=False)
-
-
-def _dotted(key: str, value: Any) -> dict[str, Any]:
-    """A configuration value whose key is not a Python name (a nested field)."""
-    return {key: value}

@@ -214,15 +214,19 @@ def _reference(
     return max(stems, key=lambda s: (size[comp[s]], -stems.index(s)))
 
 
-def _firm_edges(group: list[str], links: list[Link]) -> tuple[list[tuple[str, str]], set[int]]:
-    """The confident accepted links inside ``group`` (a link confident inside rough
-    positions' window counts once accepted: a loop of confident links confirmed it) as
-    station pairs, and the indices of those among them that close no loop (bridges)."""
-    members = set(group)
+def _firm_edges(
+    links: list[Link], group: list[str] | None = None
+) -> tuple[list[tuple[str, str]], set[int]]:
+    """The confident accepted links (inside ``group``, when given) as station pairs (a link
+    confident inside rough positions' window counts once accepted: a loop of confident links
+    confirmed it), and the indices of those among them that close no loop (bridges)."""
+    members = None if group is None else set(group)
     edges = [
         (e.target, e.source)
         for e in links
-        if e.status == "accepted" and e.confident and e.target in members and e.source in members
+        if e.status == "accepted"
+        and e.confident
+        and (members is None or (e.target in members and e.source in members))
     ]
     return edges, bridges(edges)
 
@@ -241,27 +245,31 @@ def _reached(start: str, edges: Sequence[tuple[str, str]]) -> set[str]:
     return seen
 
 
-def _confidence(group: list[str], ref: str, links: list[Link]) -> dict[str, str]:
+def _confidence(
+    group: list[str], ref: str, firm: tuple[list[tuple[str, str]], set[int]]
+) -> dict[str, str]:
     """``confident`` when joined to ``ref`` by confident accepted links that each close a
     loop of them (one 2-edge-connected block with ``ref``): no single registration decides
     where the station lies from ``ref``; ``single`` when joined by confident links but
     through one that closes no loop (a bridge: the station alone at the end of one link, or a
     block of stations hanging from the rest by one link): that registration fixes it, and the
     uncertain links that agree with it may be wrong the same way (a view that repeats bay by
-    bay aliases every link alike); else ``uncertain``."""
-    edges, alone = _firm_edges(group, links)
+    bay aliases every link alike); else ``uncertain``. ``firm``: :func:`_firm_edges` of the
+    group."""
+    edges, alone = firm
     joined = _reached(ref, edges)
-    firm = _reached(ref, [x for i, x in enumerate(edges) if i not in alone])
+    held = _reached(ref, [x for i, x in enumerate(edges) if i not in alone])
     return {
-        s: "uncertain" if s not in joined else "confident" if s in firm else "single" for s in group
+        s: "uncertain" if s not in joined else "confident" if s in held else "single" for s in group
     }
 
 
-def _firm_reference(group: list[str], links: list[Link]) -> str:
+def _firm_reference(group: list[str], firm: tuple[list[tuple[str, str]], set[int]]) -> str:
     """The first station by name of the largest block of ``group`` that confident links
-    closing loops hold together (:func:`_confidence`): the frame every confirmed pose is
-    given in, so that a block hanging from one link is the one reported as such."""
-    edges, alone = _firm_edges(group, links)
+    closing loops hold together (:func:`_confidence`; ``firm``: :func:`_firm_edges` of the
+    group): the frame every confirmed pose is given in, so that a block hanging from one link
+    is the one reported as such."""
+    edges, alone = firm
     kept = [x for i, x in enumerate(edges) if i not in alone]
     best: tuple[int, str] | None = None
     done: set[str] = set()
@@ -280,15 +288,12 @@ def single_link(stem: str, ref: str, links: list[Link]) -> str:
     accepted links on the way from the station to ``ref`` that close no loop (its own link
     when it hangs alone; the one its block hangs from), as ``target <- source``, nearest the
     station first."""
-    ok = [e for e in links if e.status == "accepted" and e.confident]
-    alone = bridges([(e.target, e.source) for e in ok])
+    edges, alone = _firm_edges(links)
     adj: dict[str, list[tuple[str, int]]] = {}
-    for i, e in enumerate(ok):
-        adj.setdefault(e.target, []).append((e.source, i))
-        adj.setdefault(e.source, []).append((e.target, i))
-    named = [
-        f"{ok[i].target} <- {ok[i].source}" for _, i in walk(adj, stem, ref) or [] if i in alone
-    ]
+    for i, (a, b) in enumerate(edges):
+        adj.setdefault(a, []).append((b, i))
+        adj.setdefault(b, []).append((a, i))
+    named = [" <- ".join(edges[i]) for _, i in walk(adj, stem, ref) or [] if i in alone]
     if len(named) == 1:
         return f"one confident link alone fixes it ({named[0]})"
     what = ", ".join(named) if named else "its links"
@@ -582,14 +587,16 @@ def _solve_once(
                 e.loop_error_deg, e.loop_error_m = loop_error(
                     np.asarray(e.T_target_source), start[e.target], start[e.source]
                 )
+        firm = _firm_edges(links, g)
         if gref != reference:  # not the surveyor's: the frame of the largest confirmed block
-            firm = _firm_reference(g, links)
-            inv = invert(start[firm])
+            frame = _firm_reference(g, firm)
+            inv = invert(start[frame])
             start = {s: inv @ P for s, P in start.items()}
-            ref = firm if gref == ref else ref
-            gref = grefs[-1] = firm
+            if gref == ref:
+                ref = frame
+            gref = grefs[-1] = frame
         poses.update(start)
-        confidence.update(_confidence(g, gref, links))
+        confidence.update(_confidence(g, gref, firm))
     for e in links:  # anything left (between groups) was never confirmed
         if e.status == "pending":
             _reject(e, "joins two groups with no confirming loop")

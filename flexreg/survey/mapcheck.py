@@ -49,7 +49,6 @@ from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.registration.check import Check, check_masks
 from flexreg.stages.correspondences import derive_threshold
-from flexreg.stages.verification import own_slack
 from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
@@ -139,21 +138,15 @@ class PairLook:
         }
 
 
-#: bumped when a glance's content changes (2: the sample's own range slack)
-GLANCE_FORMAT = 2
-
-
 def glance_path(cache_file: str) -> Path:
-    """Where a station's sample, its own range slack and inlier threshold are kept beside its
-    prepared file (:data:`GLANCE_FORMAT` in the name)."""
+    """Where a station's sample and inlier threshold are kept beside its prepared file."""
     p = Path(cache_file)
-    return p.with_name(p.name.removesuffix(PREPARED_SUFFIX) + f".v{GLANCE_FORMAT}.glance.npz")
+    return p.with_name(p.name.removesuffix(PREPARED_SUFFIX) + ".glance.npz")
 
 
 def write_glance(cache_file: str) -> str | None:
     """Write (once) what other stations need to score this one: its even sample, (N, 3)
-    float64 metres, the sample's own range slack (:func:`~flexreg.stages.verification.
-    own_slack`) and its inlier threshold (metres, as the registration derives it from
+    float64 metres, and its inlier threshold (metres, as the registration derives it from
     the keypoints' pixel footprints). Runs on a worker; returns the file, or None when the
     station has no sample. A glance already written is used when it reads back whole
     (:func:`~flexreg.survey.stations.read_entry`), else written again after one warning."""
@@ -175,22 +168,15 @@ def write_glance(cache_file: str) -> str | None:
         kp = p.keypoints
         xy = kp.features.xy[kp.lifted]
         thr = derive_threshold(p.image, p.image, xy, xy[:0], threshold_px=cfg.threshold_px)
-    sample = np.asarray(sample, dtype=np.float64)
-    own = (
-        own_slack(p.view.image, p.view.slack, sample)
-        if p.view.slack is not None
-        else np.full(len(sample), np.inf)
-    )
-    arrays = {"sample": sample, "own_slack": own, "threshold_m": np.float64(thr)}
+    arrays = {"sample": np.asarray(sample, dtype=np.float64), "threshold_m": np.float64(thr)}
     write_entry(path, "glance", arrays, {"of": Path(cache_file).name})
     return str(path)
 
 
 def _read_glance_entry(
     path: Path | str, cache_file: str | None
-) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
-    """A glance's sample, threshold and the sample's own slack; ``cache_file``: the prepared
-    station it must be of.
+) -> tuple[NDArray[np.float64], float]:
+    """A glance's sample and threshold; ``cache_file``: the prepared station it must be of.
 
     Raises
     ------
@@ -200,17 +186,15 @@ def _read_glance_entry(
     if cache_file is not None and meta.get("of") != Path(cache_file).name:
         raise CacheEntryError("made of another station")
     try:
-        sample, thr, own = z["sample"], z["threshold_m"], z["own_slack"]
+        sample, thr = z["sample"], z["threshold_m"]
         if sample.dtype != np.float64 or sample.ndim != 2 or sample.shape[1] != 3:
             raise CacheEntryError("not a station sample")
-        if own.dtype != np.float64 or own.shape != (len(sample),):
-            raise CacheEntryError("not the sample's own slack")
-        return sample, float(thr), own
+        return sample, float(thr)
     except (KeyError, TypeError, ValueError) as e:
         raise CacheEntryError(f"not a station sample ({e})") from None
 
 
-def _read_glance(path: str) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
     try:
         return _read_glance_entry(path, None)
     except CacheEntryError as e:
@@ -218,16 +202,11 @@ def _read_glance(path: str) -> tuple[NDArray[np.float64], float, NDArray[np.floa
 
 
 def _shares(
-    view: Any,
-    thr_a: float,
-    sample: tuple[NDArray[np.float64], NDArray[np.float64]],
-    thr_b: float,
-    T: Matrix,
+    view: Any, thr_a: float, sample: NDArray[np.float64], thr_b: float, T: Matrix
 ) -> tuple[float, float, int]:
-    """Explained and conflicting shares of ``sample`` (another station's points and their
-    own slack, posed by ``T``) in the view of a station, on the registration's dense
-    check."""
-    check = Check(view.image, view.measured, view.slack, *sample)
+    """Explained and conflicting shares of ``sample`` (another station's, posed by ``T``)
+    in the view of a station, on the registration's dense check."""
+    check = Check(view.image, view.measured, view.slack, sample)
     ok, bad = check_masks(check, np.asarray(T, dtype=np.float64), max(thr_a, thr_b))
     n = len(ok)
     return (float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n)
@@ -250,18 +229,14 @@ def look_from(
     list of (stem, explained share, conflicting share, sample size)
     """
     v = load_prepared(cache_file).view
-    _, thr_a, _ = _read_glance(glance)
+    _, thr_a = _read_glance(glance)
     if v.measured is None or v.slack is None:
         return []
     out: list[tuple[str, float, float, int]] = []
     for stem, g, T in others:
-        sample, thr_b, own = _read_glance(g)
-        out.append((stem, *_shares(v, thr_a, (sample, own), thr_b, T)))
+        sample, thr_b = _read_glance(g)
+        out.append((stem, *_shares(v, thr_a, sample, thr_b, T)))
     return out
-
-
-#: a station's sample and its own range slack
-Sample = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
 class PairJudge:
@@ -295,10 +270,10 @@ class PairJudge:
     ) -> None:
         self.files, self.glances, self.config = files, glances, config
         self.keep_bytes = keep_bytes
-        self._views: dict[str, tuple[Any, Sample, float]] = {}
+        self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
 
-    def _view(self, stem: str) -> tuple[Any, Sample, float] | None:
+    def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
             return None
         if stem in self._views:
@@ -307,7 +282,7 @@ class PairJudge:
         v = load_prepared(self.files[stem]).view
         if v.measured is None or v.slack is None:
             return None
-        sample, thr, own = _read_glance(self.glances[stem])
+        sample, thr = _read_glance(self.glances[stem])
         image = v.image
         points = np.broadcast_to(np.float32(np.nan), (image.height, image.width, 3))
         light = replace(
@@ -318,14 +293,14 @@ class PairJudge:
             polish_sample=None,
             refine_sample=None,
         )
-        self._views[stem] = (light, (sample, own), thr)
+        self._views[stem] = (light, sample, thr)
         while len(self._views) > 1 and self._held() > self.keep_bytes:
             self._views.pop(next(iter(self._views)))  # the least recently used
         return self._views[stem]
 
     def _held(self) -> int:
         return sum(
-            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s[0].nbytes + s[1].nbytes
+            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s.nbytes
             for v, s, _ in self._views.values()
         )
 

@@ -34,11 +34,7 @@ from flexreg.registration.config import (
     FULL_DECISIVE_SHARE,
     JudgeConfig,
 )
-from flexreg.stages.verification import (
-    classify_points,
-    classify_points_at,
-    soft_score,
-)
+from flexreg.stages.verification import classify_points, classify_points_at, soft_score
 
 
 @dataclass(frozen=True)
@@ -119,25 +115,18 @@ class Check:
         :func:`~flexreg.stages.verification.range_slack`.
     sample : (N, 3) float64
         The source's points spread evenly over its surfaces.
-    own : (N,) float64 or None
-        The sample's own range slack (:func:`~flexreg.stages.verification.own_slack`): a point
-        is in open space only when in front by the tolerance plus the larger of both pixels'
-        slacks, never on its own silhouette; None: by the tolerance plus the target pixel's.
     """
 
     view: RangeImage
     measured: NDArray[np.float32]
     slack: NDArray[np.float32]
     sample: NDArray[np.float64]
-    own: NDArray[np.float64] | None = None
 
     def classify(
         self, T: NDArray[np.float64], tol: float, rel: float
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
         """The sample in the target frame, and which points are consistent / conflicting."""
-        return classify_points(
-            self.view, self.sample, T, tol, rel, self.slack, self.measured, self.own
-        )
+        return classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
 
     def judge(self, T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
         """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
@@ -163,7 +152,7 @@ class TwoWay:
 
     @staticmethod
     def _args(c: Check, T: NDArray[np.float64], tol: float) -> tuple[Any, ...]:
-        return c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured, c.own
+        return c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured
 
 
 @dataclass(eq=False)
@@ -219,7 +208,6 @@ def check_masks(
         [TOLERANCE.fine(threshold_m), TOLERANCE.free(threshold_m)],
         check.slack,
         check.measured,
-        check.own,
     )
     return explained, free
 

@@ -42,7 +42,10 @@ from flexreg.core.transforms import invert
 from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
-from flexreg.stages.verification import MAX_SLACK_PER_M
+
+#: points whose own range slack exceeds this share of their range (silhouettes, grazing
+#: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
+MAX_SLACK_PER_M = 0.05
 
 #: the open-space test looks at the smallest range over this many pixels square around a
 #: point's pixel: a thin bar, a cabinet's edge or a sill seen edge-on covers less than a pixel

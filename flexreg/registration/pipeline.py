@@ -72,7 +72,6 @@ from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
 from flexreg.stages.overlap import measure_overlap
 from flexreg.stages.priors import PlanView, plan_overlays, windowed_plan_overlays
-from flexreg.stages.verification import own_slack
 
 log = logging.getLogger(__name__)
 
@@ -308,13 +307,11 @@ def _check_upright(config: RegistrationConfig) -> None:
 
 
 def _checks(vt: ScanView, vs: ScanView) -> tuple[Check, TwoWay]:
-    """The dense check (the source's sample in the target's view) and both directions, each
-    sample with its own range slack."""
+    """The dense check (the source's sample in the target's view) and both directions."""
     assert vt.measured is not None and vt.slack is not None and vt.sample is not None
     assert vs.measured is not None and vs.slack is not None and vs.sample is not None
-    fwd, bwd = own_slack(vs.image, vs.slack, vs.sample), own_slack(vt.image, vt.slack, vt.sample)
-    check = Check(vt.image, vt.measured, vt.slack, vs.sample, fwd)
-    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample, bwd))
+    check = Check(vt.image, vt.measured, vt.slack, vs.sample)
+    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
 
 
 def _polisher(

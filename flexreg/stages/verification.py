@@ -6,14 +6,6 @@ surface at its range and in conflict when it lies clearly in front of what the t
 :func:`classify_points` is its core on points already sampled (the registration samples each
 scan once and checks many candidates), :func:`range_slack` the per-pixel range tolerance and
 :func:`measured_image` what the camera measures per pixel.
-
-A point sampled from a scan can carry its *own* range slack (:func:`own_slack`: the slack of
-its pixel in its own scan): it is then in the target's open space only when in front of what
-the target measured by the tolerance plus the larger of both pixels' slacks, and never on its
-own silhouette. A rack's beam, a roof truss or a shelf edge that one scanner sees edge-on
-covers less than a pixel of the other, which sees past it; counted as open space, such points
-are a tenth or more of a warehouse's sample under the true pose (the full-resolution check of
-:mod:`flexreg.registration.fullres` leaves them out the same way).
 """
 
 from __future__ import annotations
@@ -57,42 +49,6 @@ def range_slack(
                     out[:, -1] = np.maximum(out[:, -1], d[:, -1])
                     out[:, 0] = np.maximum(out[:, 0], d[:, -1])
     return out
-
-
-#: points whose own range slack exceeds this share of their range (silhouettes, grazing
-#: surfaces beyond about 3 degrees of incidence) are never taken as in open space
-MAX_SLACK_PER_M = 0.05
-
-
-def own_slack(
-    image: RangeImage, slack: NDArray[np.float32], points: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """(N,) each point's own range slack, metres: :func:`range_slack` of the scan it was
-    sampled from (``image``, its own frame) at its pixel; ``inf`` on its silhouette (over
-    :data:`MAX_SLACK_PER_M` of its range) or outside the image: such a point is never taken
-    as in another scan's open space (:func:`classify_points`)."""
-    own = np.full(len(points), np.inf)
-    if image.camera is not None and len(points):
-        inside, pix, d = _pixels(image, np.asarray(points, dtype=np.float64))
-        s = np.asarray(slack, dtype=np.float64)[pix]
-        own[inside] = np.where(s <= MAX_SLACK_PER_M * np.abs(d[inside]), s, np.inf)
-    return own
-
-
-def _conflicting(
-    d: NDArray[np.float64],
-    r: NDArray[np.float64],
-    tol: NDArray[np.float64],
-    base: NDArray[np.float64],
-    own: NDArray[np.float64] | None,
-) -> NDArray[np.bool_]:
-    """In front of what the target measured by ``tol`` (its pixel's slack included) and,
-    with ``own``, by ``base`` (the tolerance without slack) plus the point's own slack."""
-    with np.errstate(invalid="ignore"):
-        bad = d < r - tol
-        if own is not None:
-            bad &= d < r - (base + own)
-    return bad
 
 
 def overlap_score(
@@ -151,7 +107,6 @@ def classify_points(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    own: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """Source points checked against the target's view: the core of :func:`overlap_score`.
 
@@ -169,9 +124,6 @@ def classify_points(
         :func:`range_slack` of the target, when at hand.
     ref : (H, W) float32, optional
         :func:`measured_image` of the target, when at hand.
-    own : (N,) float64, optional
-        The points' own range slack (:func:`own_slack`): a point then conflicts only when
-        also in front by the tolerance plus it (never on its own silhouette).
 
     Returns
     -------
@@ -191,9 +143,10 @@ def classify_points(
         dist, _ = cKDTree(pt).query(q, distance_upper_bound=4 * tolerance_m)
         ok = dist < tolerance_m + tolerance_rel * np.linalg.norm(q, axis=1)
         return q, ok, np.zeros(len(q), dtype=bool)
-    d, r, tol, conflict = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref, own)
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
         consistent = np.abs(d - r) < tol
+        conflict = d < r - tol
     return q, consistent, conflict
 
 
@@ -204,26 +157,21 @@ def classify_points_at(
     tolerances: list[tuple[float, float]],
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    own: NDArray[np.float64] | None = None,
 ) -> list[tuple[NDArray[np.bool_], NDArray[np.bool_]]]:
     """:func:`classify_points` at several tolerances ``(tolerance_m, tolerance_rel)``, the
     points projected into the target's view once: ``(consistent, conflicting)`` per
     tolerance, each exactly as :func:`classify_points` gives it."""
     T = np.asarray(T_target_source, dtype=np.float64)
     if len(ps) == 0 or target.camera is None:
-        return [
-            classify_points(target, ps, T, m, rel, slack, ref, own)[1:] for m, rel in tolerances
-        ]
+        return [classify_points(target, ps, T, m, rel, slack, ref)[1:] for m, rel in tolerances]
     q = ps @ T[:3, :3].T + T[:3, 3]
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
     out = []
     for m, rel in tolerances:
-        base = m + rel * np.abs(d)
-        tol = base + extra
-        bad = _conflicting(d, r, tol, base, own)
+        tol = m + rel * np.abs(d) + extra
         with np.errstate(invalid="ignore"):
-            out.append((np.abs(d - r) < tol, bad))
+            out.append((np.abs(d - r) < tol, d < r - tol))
     return out
 
 
@@ -251,16 +199,13 @@ def _ray_ranges(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None,
     ref: NDArray[np.float32] | None,
-    own: NDArray[np.float64] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Per point (target frame): its range ``d`` along the target's ray, what the target
-    measured there ``r`` (NaN outside its view or where it saw nothing), the tolerance and
-    whether it conflicts (:func:`_conflicting`; ``own``: the points' own slack)."""
+    measured there ``r`` (NaN outside its view or where it saw nothing) and the tolerance."""
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
-    base = tolerance_m + tolerance_rel * np.abs(d)
-    tol = base + extra
-    return d, r, tol, _conflicting(d, r, tol, base, own)
+    tol = tolerance_m + tolerance_rel * np.abs(d) + extra
+    return d, r, tol
 
 
 def _measured_at(
@@ -292,7 +237,6 @@ def soft_score(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
-    own: NDArray[np.float64] | None = None,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """A continuous version of the dense check: how well ``T_target_source`` explains the
     target's view of the points ``ps``, sensitive to changes far below the tolerance.
@@ -304,7 +248,7 @@ def soft_score(
 
     Parameters
     ----------
-    target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref, own
+    target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         As :func:`classify_points`.
 
     Returns
@@ -316,14 +260,15 @@ def soft_score(
     """
     if len(ps) == 0 or target.camera is None:
         q, ok, bad = classify_points(
-            target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref, own
+            target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         )
         return (float(ok.mean() - 3 * bad.mean()) if len(q) else 0.0), q, ok, bad
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
-    d, r, tol, bad = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref, own)
+    d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
         ok = np.abs(d - r) < tol
+        bad = d < r - tol
     w = np.zeros(len(q))
     w[ok] = 1.0 - ((d[ok] - r[ok]) / tol[ok]) ** 2
     return float(w.mean() - 3 * bad.mean()), q, ok, bad

@@ -184,10 +184,9 @@ def test_bridges_and_two_edge_connectivity() -> None:
     # a triangle a-b-c, a tail c-d, and a double link d-e (two pairs close a loop of two)
     edges = [("a", "b"), ("b", "c"), ("c", "a"), ("c", "d"), ("d", "e"), ("d", "e")]
     assert bridges(edges) == {3}
-    stems = ["a", "b", "c", "d", "e"]
-    assert _two_edge_connected(stems, "a", edges) == {"a", "b", "c"}
-    assert _two_edge_connected(stems, "d", edges) == {"d", "e"}
-    assert _two_edge_connected(stems, "a", []) == {"a"}
+    assert _two_edge_connected("a", edges) == {"a", "b", "c"}
+    assert _two_edge_connected("d", edges) == {"d", "e"}
+    assert _two_edge_connected("a", []) == {"a"}
 
 
 def test_accuracy_turns_the_covariance_into_the_reference_frame() -> None:

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,7 +56,7 @@ from flexreg.core.transforms import invert, rotation_error_deg, translation_erro
 from flexreg.survey.c2c import PairFit, adjustment_cloud, fit_pair, median_range
 from flexreg.survey.config import MIN_EXPLAINED, SurveyConfig
 from flexreg.survey.execute import Progress, ProgressEvent, run_tasks
-from flexreg.survey.links import GraphSolution, Link, Matrix, bridges
+from flexreg.survey.links import GraphSolution, Link, Matrix, bridges, reached
 
 log = logging.getLogger(__name__)
 
@@ -313,23 +312,12 @@ def _optimise_robust(
 
 
 def _two_edge_connected(
-    stems: list[str], ref: str, edges: list[tuple[str, str]], cut: set[int] | None = None
+    ref: str, edges: list[tuple[str, str]], cut: set[int] | None = None
 ) -> set[str]:
     """Stations still joined to ``ref`` after any one edge is removed (``cut``: the edges'
     :func:`~flexreg.survey.links.bridges`, when known)."""
     cut = bridges(edges) if cut is None else cut
-    adj: dict[str, list[str]] = {s: [] for s in stems}
-    for j, (x, y) in enumerate(edges):
-        if j not in cut:
-            adj[x].append(y)
-            adj[y].append(x)
-    seen, queue = {ref}, deque([ref])
-    while queue:
-        for y in adj[queue.popleft()]:
-            if y not in seen:
-                seen.add(y)
-                queue.append(y)
-    return seen
+    return reached(ref, [x for j, x in enumerate(edges) if j not in cut])
 
 
 def _accuracy(cov: NDArray[np.float64], pose: Matrix, lever_m: float) -> Accuracy:
@@ -503,7 +491,7 @@ def _finish(
                 covs[s] = factor * np.asarray(marg.marginalCovariance(key[s]))
     except (RuntimeError, IndexError):  # an indeterminate system: a station no pair fixes
         covs = {}
-    confirmed = _two_edge_connected(stems, ref, edges, alone)
+    confirmed = _two_edge_connected(ref, edges, alone)
     touched = {s for p in used for s in (p.target, p.source)}
     for s in stems:
         if s == ref:

@@ -27,7 +27,6 @@ information matrix. A wrong link must not place a station:
 from __future__ import annotations
 
 import logging
-from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
@@ -51,6 +50,7 @@ from flexreg.survey.links import (
     Veto,
     bridges,
     loop_error,
+    reached,
     walk,
 )
 
@@ -231,20 +231,6 @@ def _firm_edges(
     return edges, bridges(edges)
 
 
-def _reached(start: str, edges: Sequence[tuple[str, str]]) -> set[str]:
-    adj: dict[str, list[str]] = {}
-    for a, b in edges:
-        adj.setdefault(a, []).append(b)
-        adj.setdefault(b, []).append(a)
-    seen, queue = {start}, deque([start])
-    while queue:
-        for b in adj.get(queue.popleft(), []):
-            if b not in seen:
-                seen.add(b)
-                queue.append(b)
-    return seen
-
-
 def _confidence(
     group: list[str], ref: str, firm: tuple[list[tuple[str, str]], set[int]]
 ) -> dict[str, str]:
@@ -257,8 +243,8 @@ def _confidence(
     bay aliases every link alike); else ``uncertain``. ``firm``: :func:`_firm_edges` of the
     group."""
     edges, alone = firm
-    joined = _reached(ref, edges)
-    held = _reached(ref, [x for i, x in enumerate(edges) if i not in alone])
+    joined = reached(ref, edges)
+    held = reached(ref, [x for i, x in enumerate(edges) if i not in alone])
     return {
         s: "uncertain" if s not in joined else "confident" if s in held else "single" for s in group
     }
@@ -276,7 +262,7 @@ def _firm_reference(group: list[str], firm: tuple[list[tuple[str, str]], set[int
     for s in group:  # in name order: the first of each block
         if s in done:
             continue
-        block = _reached(s, kept)
+        block = reached(s, kept)
         done |= block
         if best is None or len(block) > best[0]:
             best = (len(block), s)

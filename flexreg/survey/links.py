@@ -353,6 +353,25 @@ class GraphSolution:
         raise KeyError(stem)
 
 
+def reached(start: str, edges: Sequence[tuple[str, str]]) -> set[str]:
+    """The stations ``edges`` (station pairs) join to ``start``, ``start`` included.
+
+    >>> sorted(reached("a", [("a", "b"), ("c", "d")]))
+    ['a', 'b']
+    """
+    adj: dict[str, list[str]] = {}
+    for x, y in edges:
+        adj.setdefault(x, []).append(y)
+        adj.setdefault(y, []).append(x)
+    seen, queue = {start}, deque([start])
+    while queue:
+        for y in adj.get(queue.popleft(), []):
+            if y not in seen:
+                seen.add(y)
+                queue.append(y)
+    return seen
+
+
 def bridges(edges: list[tuple[str, str]]) -> set[int]:
     """Indices of the edges that close no loop: removing one disconnects its two stations
     (a link between two stations linked twice closes a loop of two).
@@ -360,22 +379,11 @@ def bridges(edges: list[tuple[str, str]]) -> set[int]:
     >>> sorted(bridges([("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")]))
     [3]
     """
-    out = set()
-    for i, (a, b) in enumerate(edges):
-        adj: dict[str, list[str]] = {}
-        for j, (x, y) in enumerate(edges):
-            if j != i:
-                adj.setdefault(x, []).append(y)
-                adj.setdefault(y, []).append(x)
-        seen, queue = {a}, deque([a])
-        while queue:
-            for y in adj.get(queue.popleft(), []):
-                if y not in seen:
-                    seen.add(y)
-                    queue.append(y)
-        if b not in seen:
-            out.add(i)
-    return out
+    return {
+        i
+        for i, (a, b) in enumerate(edges)
+        if b not in reached(a, [x for j, x in enumerate(edges) if j != i])
+    }
 
 
 def walk(
@@ -432,5 +440,6 @@ __all__ = [
     "alternatives_of",
     "bridges",
     "loop_error",
+    "reached",
     "walk",
 ]

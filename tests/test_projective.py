@@ -125,3 +125,20 @@ def test_pipeline_refine_is_symmetric_projective_by_default(room_pair):
     # GICP keeps Open3D's nearest-neighbour ICP
     g = refine(room_pair.target, room_pair.source, T0 @ gt, threshold_m=0.05, method="gicp")
     assert g.association == "nearest"
+
+
+def test_projective_icp_pairs_no_point_with_the_back_of_a_wall():
+    """The target camera sees the front of a wall 2 m ahead (normals towards it). Points of
+    the wall's back face 10 cm behind, seen by a scanner standing behind the wall, are not
+    the same surface: none is paired, though each is 10 cm from the front face along its
+    normal. The same points seen from in front of the wall are paired and pulled onto it."""
+    target = _plane_image(2.0)
+    g = np.stack(np.meshgrid(np.linspace(-0.5, 0.5, 30), np.linspace(-0.4, 0.4, 30)), -1)
+    wall = np.column_stack([g.reshape(-1, 2), np.full(900, 2.1)])  # target frame, metres
+    behind = make_transform(np.eye(3), [0.0, 0.0, 4.0])  # T_target_source: scanner at z = 4
+    with pytest.raises(RegistrationError, match="paired 0 points"):
+        projective_icp(target, wall - [0, 0, 4.0], behind, max_distance_m=0.3)
+    ahead = make_transform(np.eye(3), [0.0, 0.0, 0.5])  # a scanner at z = 0.5, in front
+    r = projective_icp(target, wall - [0, 0, 0.5], ahead, max_distance_m=0.3)
+    moved = (wall - [0, 0, 0.5]) @ r.T_target_source[:3, :3].T + r.T_target_source[:3, 3]
+    assert r.fitness > 0.9 and np.abs(moved[:, 2] - 2.0).max() < 1e-3

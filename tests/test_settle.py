@@ -97,12 +97,23 @@ def test_pin_along_keeps_the_placed_position_along_the_axis_only():
     placed = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.5])
     slid = make_transform(rotation_about_axis([0, 0, 1], 0.301), [1.2, 2.03, 0.5])
     axis = np.array([1.0, 0.0, 0.0])
-    settled = Settlement(coarse=None, won=True, axis=axis)  # type: ignore[arg-type]
+    weak = {"kind": "weak_axis"}
+    settled = Settlement(coarse=None, sweep=weak, won=True, axis=axis)  # type: ignore[arg-type]
     pinned = pin_along(settled, slid, placed)
     np.testing.assert_allclose(pinned[:3, 3], [1.0, 2.03, 0.5], atol=1e-12)
     np.testing.assert_array_equal(pinned[:3, :3], slid[:3, :3])
     unsettled = Settlement(coarse=None)  # type: ignore[arg-type]
     np.testing.assert_array_equal(pin_along(unsettled, slid, placed), slid)
+
+
+def test_a_repeat_is_not_pinned():
+    """Along a row of bays (a repeat, the axis not weak) the overlap's structure holds ICP:
+    the refined pose stays as ICP left it."""
+    placed = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.0, 2.0, 0.5])
+    slid = make_transform(rotation_about_axis([0, 0, 1], 0.3), [1.009, 2.0, 0.5])
+    repeat = {"kind": "repeat"}
+    settled = Settlement(coarse=None, sweep=repeat, won=True, axis=np.array([1.0, 0.0, 0.0]))  # type: ignore[arg-type]
+    np.testing.assert_array_equal(pin_along(settled, slid, placed), slid)
 
 
 def test_a_turned_pose_beside_the_walls_is_slid_back_across_the_axis():

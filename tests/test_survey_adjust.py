@@ -317,3 +317,17 @@ def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> N
     assert adj._measure(None, pairs, clouds, poses, config, None, 2) == 1
     assert pairs[0].fit is not first[0] and pairs[1].fit is first[1]
     assert adj._measure(None, pairs, clouds, poses, config, None, 3) == 0
+
+
+def test_cloud_to_cloud_pairs_only_normals_facing_the_same_side():
+    """A wall's front face (target, normals towards its scanner: -x) and points 1 cm off it:
+    seen by a source scanner on the same side (normals -x) they overlap; seen from behind
+    the wall (normals +x: its back face) none does."""
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11)), -1).reshape(-1, 2)
+    tgt = np.column_stack([np.full(len(g), 3.0), g])
+    n = np.tile([-1.0, 0.0, 0.0], (len(g), 1))
+    src = tgt + [0.01, 0.0, 0.0]
+    front = cloud_figures(tgt, n, src, np.eye(4), 0.05, src_n=n)
+    back = cloud_figures(tgt, n, src, np.eye(4), 0.05, src_n=-n)
+    assert front.overlap == 1.0 and abs(front.rms_mm - 10.0) < 1e-6
+    assert back.overlap == 0.0 and back.points == 0 and back.rms_mm is None

@@ -305,3 +305,39 @@ def test_a_station_one_confident_link_fixes_is_single():
     assert sorted(sol.groups[0]) == sorted(P) and all(e.status == "accepted" for e in links)
     assert sol.confidence == {"s0": "confident", "s1": "confident", "s2": "confident",
                               "s3": "single"}  # fmt: skip
+
+
+def test_a_twin_closing_a_loop_with_a_bay_shifted_confident_link_confirms_nothing():
+    """A hall of identical 6 m bays: s3 seen from s0 by a confident link one bay off, and
+    from s2 by an uncertain link two bays off whose twin (one bay along) closes the triangle
+    with it. A twin is no independent route (one of them agrees with any answer a whole
+    number of bays off): s3 is not confirmed by that loop, and the map, knowing the truth,
+    leaves it unplaced."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    bay = np.array([6.0, 0.0, 0.0])
+
+    def shifted(a, k):
+        return invert(P[a]) @ make_transform(np.eye(3), k * bay) @ P["s3"]
+
+    def links():
+        wrong = _link(P, "s0", "s3", T=shifted("s0", 1))
+        seq = _link(P, "s2", "s3", "uncertain", T=shifted("s2", 2))
+        seq.alternatives = [Alternative(shifted("s2", 1), "twin", 0.9)]
+        return wrong, seq
+
+    wrong, seq = links()
+    solve_graph(sorted(P), [*base, wrong, seq], SurveyConfig(), reference="s0")
+    assert not wrong.confirmed_by_loop and not seq.confirmed_by_loop
+    wrong, seq = links()
+    sol = solve_graph(sorted(P), [*base, wrong, seq], SurveyConfig(), reference="s0",
+                      judge=_Judge(P))  # fmt: skip
+    assert "s3" not in sol.groups[0] and wrong.status == "rejected"
+    # the same twin beside a right confident link: s3 placed (the twin is picked inside)
+    right = _link(P, "s0", "s3")
+    seq = _link(P, "s2", "s3", "uncertain", T=shifted("s2", 1))
+    seq.alternatives = [Alternative(shifted("s2", 0), "twin", 0.9)]
+    sol = solve_graph(sorted(P), [*base, right, seq], SurveyConfig(), reference="s0",
+                      judge=_Judge(P))  # fmt: skip
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert seq.status == "accepted" and "twin" in (seq.picked or "")

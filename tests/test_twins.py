@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_verdict import BOX, CUPBOARD, _full_pair, _station
+from test_verdict import BOX, CUPBOARD, _full_pair, _station, _views
 
 from flexreg.core.transforms import invert, make_transform
 from flexreg.registration.candidates import polisher
 from flexreg.registration.config import JudgeConfig
-from flexreg.registration.twins import find_twins, horizontal_axes, shares
+from flexreg.registration.fullres import pose_masks
+from flexreg.registration.settle import open_share
+from flexreg.registration.twins import find_twins, horizontal_axes, shares, slide_refuted
 from flexreg.registration.verdict import decide
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.sampling import area_sample
@@ -112,3 +114,42 @@ def test_a_twin_counts_when_it_fits_and_explains_a_fifth(explained, open_share, 
 def test_twins_need_a_twin():
     ev = {"twins": {"answer": {"explained_share": 0.8, "open_share": 0.0}, "twins": []}}
     assert decide(ev).confident
+
+
+#: the hall ending 6 m behind the target station: the end wall is the one thing that tells
+#: one bay from the next
+END_HALL = ([-6.0, -4.0, -1.5], [52.0, 4.0, 1.5])
+END_PILLARS = [p for p in PILLARS if p[0][0] > END_HALL[0][0]]
+
+
+def _slid(hall, blocks, shift_bays):
+    """:func:`slide_refuted` of the truth moved ``shift_bays`` bays along the hall (the
+    stations a bay apart), with the truth and the moved pose."""
+    T_wt, T_ws = _station(0.0, 0.0), _station(BAY, 0.5, 20)
+    pair, T = _full_pair(*hall, blocks, T_wt, T_ws)
+    wrong = invert(T_wt) @ make_transform(np.eye(3), [shift_bays * BAY, 0.0, 0.0]) @ T_ws
+    (_, _), two = _views(*hall, blocks, T_wt, T_ws)
+    src = pair.source.image
+    sample = area_sample(src.xyz[src.valid].astype(np.float64), 5000)
+    polish = polisher(pair.target.image, grid_normals(pair.target.image), sample, THR)
+    won = slide_refuted(pair, wrong, UP, polish, two.forward, THR, JudgeConfig())
+    return pair, T, wrong, won
+
+
+@pytest.mark.parametrize("shift_bays", [-2, -1, 1])
+def test_an_answer_bays_off_that_the_end_wall_refutes_slides_back_onto_the_truth(shift_bays):
+    """Bays off, the answer puts the end wall (or what the source saw in front of it) where
+    the other scanner saw through; slid along the hall, it fits again at the truth only,
+    which beats it."""
+    pair, T, wrong, won = _slid(END_HALL, END_PILLARS, shift_bays)
+    assert open_share(pose_masks(pair, wrong, THR)) > 1e-3
+    assert won is not None and won.origin == "slide"
+    assert np.linalg.norm(won.T_target_source[:3, 3] - T[:3, 3]) < 0.05
+    assert open_share(pose_masks(pair, won.T_target_source, THR)) <= 1e-3
+
+
+def test_without_a_cue_no_slide_is_preferred():
+    """Far from both ends every bay fits alike: no slid pose beats the answer a bay off,
+    none is returned (the verdict's twins say the answer is ambiguous)."""
+    *_, won = _slid(HALL, PILLARS, -1)
+    assert won is None

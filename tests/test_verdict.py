@@ -402,17 +402,17 @@ def test_normal_synthetic_pair_is_confident_with_every_field():
 
 def test_refinement_guard_keeps_the_coarse_transform_when_icp_is_worse(monkeypatch):
     """An ICP that wanders off is discarded: the result is the coarse transform, noted."""
-    import flexreg.registration.pipeline as pipeline
+    import flexreg.registration.conclude as conclude
 
     pair = station_pair("room", seed=2, resolution=(512, 256))
-    real = pipeline.refine
+    real = conclude.refine
 
     def wandering(*args, **kwargs):
         r = real(*args, **kwargs)
         off = make_transform(rotation_about_axis([0, 0, 1], np.radians(2.0)), [0.1, 0, 0])
         return replace(r, T_target_source=off @ r.T_target_source)
 
-    monkeypatch.setattr(pipeline, "refine", wandering)
+    monkeypatch.setattr(conclude, "refine", wandering)
     r = register(pair.target, pair.source, RegistrationConfig())
     assert np.array_equal(r.T_target_source, r.T_coarse)
     ref = r.verdict.evidence["refinement"]

@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -35,7 +35,6 @@ from numpy.typing import NDArray
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
-from flexreg.core.results import Verdict
 from flexreg.core.scan import Scan, as_points
 from flexreg.core.transforms import as_transform
 from flexreg.errors import ConfigError, DegenerateGeometryError, RegistrationError
@@ -45,15 +44,14 @@ from flexreg.registration.candidates import (
     Coarse,
     Keypoints3D,
     choose,
-    dense_prior,
     polisher,
     require_inliers,
     self_symmetries,
 )
-from flexreg.registration.check import TOLERANCE, Check, Scored, TwoWay
-from flexreg.registration.config import GUARD_MARGIN, RegistrationConfig
-from flexreg.registration.evidence import MAX_RIVALS, full_evidence, gather, runner_ups
-from flexreg.registration.fullres import FullPair, full_pair_of
+from flexreg.registration.check import Check, TwoWay
+from flexreg.registration.conclude import Judging, conclude, slid_answer
+from flexreg.registration.config import RegistrationConfig
+from flexreg.registration.fullres import full_pair_of
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
@@ -68,16 +66,12 @@ from flexreg.registration.preparation import (
     timed_stage,
 )
 from flexreg.registration.result import RegistrationResult
-from flexreg.registration.settle import Settlement, pin_along, settle
-from flexreg.registration.twins import find_twins
-from flexreg.registration.verdict import decide, reasons
+from flexreg.registration.settle import Settlement, settle
 from flexreg.stages.alignment import Window, consistent_subset, ransac_rigid, windowed_fit
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.stages.matching import match
 from flexreg.stages.overlap import measure_overlap
 from flexreg.stages.priors import PlanView, plan_overlays, windowed_plan_overlays
-from flexreg.stages.refinement import refine
-from flexreg.stages.refinement.projective import point_information
 
 log = logging.getLogger(__name__)
 
@@ -225,113 +219,6 @@ def _plan_candidates(
     return overlays, aliases
 
 
-def _icp_denominator(icp: Any) -> str:
-    if icp.association == "projective":
-        return (
-            f"{icp.source_points} points of both scans spread evenly over their surfaces (one "
-            f"per {icp.voxel_m:.3g} m cell) within {icp.max_distance_m:.3g} m of the other "
-            "scan's surface on their ray"
-        )
-    return (
-        f"{icp.source_points} source points ({icp.voxel_m:.3g} m voxels, thinned) "
-        f"with a target point within {icp.max_distance_m:.3g} m"
-    )
-
-
-def _refine(
-    scans: list[Scan | RangeImage],
-    views: list[ScanView],
-    T: NDArray[np.float64],
-    thr: float,
-    check: Check,
-    config: RegistrationConfig,
-    run: Run,
-) -> Any:
-    """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`)."""
-    vt, vs = views
-    samples = None
-    if vs.refine_sample is not None and vt.refine_sample is not None:
-        samples = (vs.refine_sample[0], vs.refine_sample[1], vt.refine_sample[1])
-    with run.stage("refinement"):
-        return refine(
-            scans[0],
-            scans[1],
-            T,
-            threshold_m=thr,
-            method=config.icp,
-            voxel_m=config.voxel_m,
-            check=lambda T_: check.judge(T_, *TOLERANCE.fine(thr))[0],
-            target_image=vt.image,
-            target_normals=vt.normals,
-            source_image=vs.image,
-            source_normals=vs.normals,
-            samples=samples,
-        )
-
-
-def _verdict(
-    c: Coarse,
-    scored: Scored,
-    two: TwoWay,
-    vt: ScanView,
-    stage: tuple[float, float, str],
-    thr: float,
-    refinement: dict[str, Any] | None,
-    config: RegistrationConfig,
-    settled: Settlement,
-    full_pair: Callable[[], FullPair],
-    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
-    up: NDArray[np.float64] | None,
-) -> Verdict:
-    """The evidence on the final transform (:mod:`.evidence`), measured once, and the one
-    decision on it (:mod:`.verdict`). An answer no test doubts on the samples is also
-    checked at full resolution (when the settling did not compare the scans there) and, for
-    two levelled scans (``up``: the target's vertical), has its twins along the target's
-    walls measured (:mod:`.twins`)."""
-    ups = runner_ups(
-        c.judged,
-        scored.T,
-        c.score,
-        config.judge,
-        ratio=config.judge.ambiguity_ratio,
-    )
-    rivals = runner_ups(
-        c.judged,
-        scored.T,
-        c.score,
-        config.judge,
-        ratio=-np.inf,
-        limit=MAX_RIVALS,
-    )
-    ev = gather(
-        two,
-        scored,
-        target_normals=vt.normals,
-        inlier_points=c.target_points[c.inliers],
-        matches=len(c.pairs),
-        fit_to_matches="keypoints" in c.origin or not dense_prior(c.origin),
-        runner_up=ups,
-        candidates=len(c.judged),
-        inlier_rmse_m=stage[0],
-        fitness=stage[1],
-        residual_kind=stage[2],
-        threshold_m=thr,
-        refinement=refinement,
-        rivals=rivals,
-        full=settled.pair,
-        full_ratio=config.judge.ambiguity_ratio,
-        sweep=None if settled.sweep is None else settled.sweep | {"settled": settled.won},
-    )
-    judge = config.judge
-    # measured further only where the answer still stands on what is measured so far
-    if not reasons(ev, judge) and settled.pair is None and judge.runs("full"):
-        ev = replace(ev, full_resolution=full_evidence(full_pair(), scored.T, thr, "check")[0])
-    if not reasons(ev, judge) and up is not None and judge.runs("twins"):
-        pair = settled.pair if settled.pair is not None else full_pair()
-        ev = replace(ev, twins=find_twins(pair, scored.T, up, polish, thr, judge, settled.axis))
-    return decide(ev, ups, judge)
-
-
 def _finish(
     scans: list[Scan | RangeImage],
     kps: list[Keypoints3D],
@@ -351,11 +238,12 @@ def _finish(
     ``config.icp_only`` it is the only one. With a ``window`` (``init`` is rough) the answer
     is bounded by it: the window's own fit (:func:`~flexreg.stages.alignment.windowed_fit`)
     joins the priors, and only a candidate inside the window can win; the others stay the
-    evidence the verdict duels the answer against."""
+    evidence the verdict duels the answer against. An answer the verdict refutes in open
+    space may be replaced by its slide along the walls
+    (:func:`~flexreg.registration.conclude.slid_answer`), judged again."""
     (kt, ks), (vt, vs), thr = kps, views, m.thr
     assert vt.normals is not None and vs.sample is not None
     check, two = _checks(vt, vs)
-    judge = config.judge
     polish = _polisher(vt, vs, thr, config)
     counts = f"{len(kt.features)}/{len(ks.features)} keypoints, {len(m.pairs)} descriptor matches"
     priors = _priors(init, plan_priors, m, (kt, ks), window, config)
@@ -366,49 +254,19 @@ def _finish(
         c, pair, check, vt.normals, polish, thr, aliases, (kt, ks), config, window, run
     )
     c = settled.coarse
-    T, inl = c.T_target_source, c.inliers
-    log.info("coarse estimate from %s: %d/%d keypoint inliers", c.origin, inl.sum(), len(inl))
-    require_inliers(c, thr, config.min_inliers, counts)
-    T_coarse = T.copy()
-    rmse = float(np.sqrt(c.residuals2[inl].mean())) if inl.any() else float("nan")
-    fine_tol, fine_rel = TOLERANCE.fine(thr)
-    q, cons, _ = check.classify(T, fine_tol, fine_rel)
-    fitness = float(cons.mean())
-    denom = (
-        f"{len(vs.sample)} source points spread evenly over its surfaces, within {fine_tol:.3g} m "
-        "+ 0.2% of range of what the target saw"
+    log.info(
+        "coarse estimate from %s: %d/%d keypoint inliers", c.origin, c.inliers.sum(), len(c.inliers)
     )
-    info = point_information(q[cons])
-    refinement = None
-    icp = _refine(scans, views, T, thr, check, config, run) if config.refine else None
-    if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
-        icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, T))
-    with run.stage("verdict"):
-        scored = coarse = two.score(T_coarse, fine_tol)
-        kind = "keypoints"
-        if icp is not None:
-            refined = two.score(icp.T_target_source, fine_tol)
-            kept = not judge.runs("guard") or refined.value >= coarse.value - GUARD_MARGIN
-            refinement = {
-                "kept": kept,
-                "score_coarse": round(coarse.value, 6),
-                "score_refined": round(refined.value, 6),
-                "guard": judge.runs("guard"),
-                "margin": GUARD_MARGIN,
-                "method": config.icp,
-            }
-            if kept:
-                T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
-                info, denom, scored = icp.information, _icp_denominator(icp), refined
-                kind = "point-to-plane" if icp.association == "projective" else "open3d"
-            else:
-                log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
-        stage = (rmse, fitness, kind)
-        up = aliases.up if aliases is not None else None
-        verdict = _verdict(
-            c, scored, two, vt, stage, thr, refinement, config, settled, pair, polish, up
-        )
-    log.info("verdict: %s", verdict.summary())
+    require_inliers(c, thr, config.min_inliers, counts)
+    up = aliases.up if aliases is not None else None
+    judging = Judging(scans, views, check, two, thr, config, run, pair, polish, up)
+    done = conclude(c, settled, judging)
+    slid = slid_answer(c, done, (kt, ks), judging) if window is None else None
+    if slid is not None:
+        c, settled = slid, Settlement(slid, settled.pair, settled.sweep, settled.players)
+        done = conclude(c, settled, judging)
+    log.info("verdict: %s", done.verdict.summary())
+    T = done.T
     with run.stage("overlap"):
         overlap = measure_overlap(
             as_points(scans[0], keep_float32=True),
@@ -417,15 +275,16 @@ def _finish(
             open3d_check=config.judge.runs("open3d"),
         )
     log.info("overlap %s", overlap.headline())
+    inl = c.inliers
     return RegistrationResult(
         T_target_source=T,
-        T_coarse=T_coarse,
+        T_coarse=done.T_coarse,
         matches=len(c.pairs),
         inliers=int(inl.sum()),
-        inlier_rmse_m=rmse,
-        fitness=fitness,
-        fitness_denominator=denom,
-        information=info,
+        inlier_rmse_m=done.rmse,
+        fitness=done.fitness,
+        fitness_denominator=done.denom,
+        information=done.info,
         timings_s=run.timings,
         threshold_m=thr,
         config=config,
@@ -434,7 +293,7 @@ def _finish(
         keypoints=(kt.features.xy[c.pairs[:, 0]], ks.features.xy[c.pairs[:, 1]]),
         prior=c.origin,
         wall_s=time.perf_counter() - run.start,
-        verdict=verdict,
+        verdict=done.verdict,
         overlap=overlap,
     )
 

@@ -618,8 +618,9 @@ def pin_along(
     The cue fixes that one coordinate; ICP, with nothing but grazing floors and walls to pull
     on along a tunnel, slides by a decimetre or more while the two-way soft score that the
     guard reads barely moves (docs/benchmarks.md, Verdict). ICP keeps the other five degrees
-    of freedom."""
-    if settled.axis is None:
+    of freedom. Only a weak axis is pinned: along a repeat (a row of bays, the axis not weak)
+    the overlap's own structure holds ICP, finer than the cue's placement."""
+    if settled.axis is None or (settled.sweep or {}).get("kind") != "weak_axis":
         return T
     u = settled.axis / np.linalg.norm(settled.axis)
     out = np.array(T, dtype=np.float64, copy=True)

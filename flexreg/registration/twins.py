@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -33,8 +33,9 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from flexreg.core.transforms import invert
-from flexreg.registration.check import Masks, duel
+from flexreg.registration.check import TOLERANCE, Check, Judged, Masks, duel
 from flexreg.registration.config import (
+    SWEEP_RANGE_M,
     TWIN_MIN_RATIO,
     TWIN_RANGE_M,
     TWIN_STEP_M,
@@ -48,6 +49,7 @@ from flexreg.registration.fullres import (
     full_scores,
     pose_masks,
 )
+from flexreg.registration.settle import rescue
 
 log = logging.getLogger(__name__)
 
@@ -140,16 +142,20 @@ SWEEP_OPEN = 0.01
 
 
 def _candidates(
-    explained: NDArray[np.float64], opens: NDArray[np.float64], offsets: NDArray[np.float64]
+    explained: NDArray[np.float64],
+    opens: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    answer_factor: float = 2.0,
 ) -> list[int]:
     """Indices of the slid poses worth polishing: the local minima of the open-space share
-    (over two steps either way) at most :data:`SWEEP_OPEN` (or twice the answer's) and at
+    (over two steps either way) at most :data:`SWEEP_OPEN` (or ``answer_factor`` times the
+    answer's, at offset 0) and at
     least :data:`MIN_SHIFT_M` from the answer, the :data:`PEAKS` that explain most, each
     more than two steps from a better one. Along a hall the explained share falls steadily
     with the distance from the answer (the scans overlap less), so its peaks miss the bays;
     the open space drops to nothing at each bay, where the uprights fit again."""
     centre = int(np.argmin(np.abs(offsets)))
-    limit = max(SWEEP_OPEN, 2.0 * float(opens[centre]))
+    limit = max(SWEEP_OPEN, answer_factor * float(opens[centre]))
     low = opens == ndimage.minimum_filter1d(opens, size=5, mode="nearest")
     idx = np.flatnonzero(low & (opens <= limit) & (np.abs(offsets) >= MIN_SHIFT_M))
     out: list[int] = []
@@ -159,6 +165,37 @@ def _candidates(
         if len(out) >= PEAKS:
             break
     return out
+
+
+def _slides(
+    pair: FullPair,
+    T: NDArray[np.float64],
+    axes: list[NDArray[np.float64]],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    threshold_m: float,
+    offsets: NDArray[np.float64],
+    answer_factor: float,
+) -> Iterator[NDArray[np.float64]]:
+    """``T`` slid by ``offsets`` (metres) along each of ``axes`` (target frame), scored on a
+    sample of the source at full resolution: the :func:`_candidates` (open-space share at
+    most :data:`SWEEP_OPEN`, or ``answer_factor`` times ``T``'s) polished, those that stay at least
+    :data:`MIN_SHIFT_M` from ``T``."""
+    s = pair.source
+    k = _every(len(s.points), SWEEP_POINTS)
+    pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
+    m = max(1, len(pts))
+    for a in axes:
+        opens = np.zeros(len(offsets), dtype=np.int64)
+        scores = full_scores(
+            pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True,
+            open_counts=opens,
+        )  # fmt: skip
+        for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets, answer_factor):
+            Tk = T.copy()
+            Tk[:3, 3] += offsets[i] * a
+            Tk = polish(Tk) if polish is not None else Tk
+            if float(np.linalg.norm(Tk[:3, 3] - T[:3, 3])) >= MIN_SHIFT_M:
+                yield Tk  # else polished back onto the answer
 
 
 def find_twins(
@@ -222,45 +259,30 @@ def find_twins(
         ) * float(np.linalg.norm(settled_axis))
         (settled if along else axes).append(a)
     x0, o0 = shares(pair, T, threshold_m)
-    s = pair.source
-    k = _every(len(s.points), SWEEP_POINTS)
-    pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
     n = math.floor(range_m / step_m)
     offsets: NDArray[np.float64] = np.arange(-n, n + 1, dtype=np.float64) * step_m
     twins: list[dict[str, Any]] = []
     limit = max(judge.twin_fit_open, 2.0 * o0)
     weak = (TWIN_MIN_RATIO * x0, TWIN_STRONG_RATIO * x0)
     answer: list[Masks] = []  # the answer's full-resolution masks, once a twin needs them
-    for a in axes:
-        opens = np.zeros(len(offsets), dtype=np.int64)
-        scores = full_scores(
-            pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True,
-            open_counts=opens,
-        )  # fmt: skip
-        m = max(1, len(pts))
-        for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets):
-            Tk = T.copy()
-            Tk[:3, 3] += offsets[i] * a
-            Tk = polish(Tk) if polish is not None else Tk
-            d = Tk[:3, 3] - T[:3, 3]
-            if float(np.linalg.norm(d)) < MIN_SHIFT_M:  # polished back onto the answer
-                continue
-            x, o = shares(pair, Tk, threshold_m)
-            twin: dict[str, Any] = {
-                "offset_m": [round(float(v), 3) for v in d],
-                "shift_m": round(float(np.linalg.norm(d)), 3),
-                "explained_share": round(x, 5),
-                "open_share": round(o, 6),
+    for Tk in _slides(pair, T, axes, polish, threshold_m, offsets, 2.0):
+        d = Tk[:3, 3] - T[:3, 3]
+        x, o = shares(pair, Tk, threshold_m)
+        twin: dict[str, Any] = {
+            "offset_m": [round(float(v), 3) for v in d],
+            "shift_m": round(float(np.linalg.norm(d)), 3),
+            "explained_share": round(x, 5),
+            "open_share": round(o, 6),
+        }
+        if o <= limit and weak[0] <= x < weak[1]:
+            answer = answer or [pose_masks(pair, T, threshold_m)]
+            won, lost = duel(answer[0], pose_masks(pair, Tk, threshold_m))
+            twin |= {
+                "full_refuted_share": round(won, 7),
+                "full_refuting_share": round(lost, 7),
+                "full_points": pair.points,
             }
-            if o <= limit and weak[0] <= x < weak[1]:
-                answer = answer or [pose_masks(pair, T, threshold_m)]
-                won, lost = duel(answer[0], pose_masks(pair, Tk, threshold_m))
-                twin |= {
-                    "full_refuted_share": round(won, 7),
-                    "full_refuting_share": round(lost, 7),
-                    "full_points": pair.points,
-                }
-            twins.append(twin)
+        twins.append(twin)
     log.debug("twins of the answer: %s", twins)
     return {
         "axes_target": [[round(float(v), 4) for v in a] for a in axes],
@@ -270,6 +292,65 @@ def find_twins(
         "answer": {"explained_share": round(x0, 5), "open_share": round(o0, 6)},
         "twins": twins,
     }
+
+
+def slide_refuted(
+    pair: FullPair,
+    W: NDArray[np.float64],
+    up: NDArray[np.float64],
+    polish: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    check: Check,
+    threshold_m: float,
+    judge: JudgeConfig,
+) -> Judged | None:
+    """A pose for an answer ``W`` the verdict refutes in open space, or None.
+
+    In a hall of identical bays a pairwise answer a bay or more off the truth overlays the
+    racks of the wrong bays, and where the scans see different ends of the hall, it puts
+    what one scanner saw where the other saw through (the truth, a bay or two away, puts
+    nothing there). The answer is slid along the target's two wall directions
+    (:func:`horizontal_axes`) over :data:`~flexreg.registration.config.SWEEP_RANGE_M`
+    either way in :data:`~flexreg.registration.config.TWIN_STEP_M` steps; the slid poses
+    where the open space drops to a local minimum of at most :data:`SWEEP_OPEN` are
+    polished, those that explain less than half as much as the answer (slid out of the hall,
+    clean only by seeing less) are dropped, and
+    :func:`~flexreg.registration.settle.rescue` keeps the one that puts
+    (almost) nothing in open space, beats the answer decisively at full resolution,
+    explains at least half as much and leaves no other clean pose unbeaten. It is then
+    judged as any answer is.
+
+    Parameters
+    ----------
+    pair : FullPair
+    W : (4, 4) float64
+        The refuted answer, ``T_target_source``.
+    up : (3,) float64
+        The target's vertical (its frame).
+    polish : callable or None
+        The quick local ICP.
+    check : Check
+        The dense check (scores each slid pose as the candidates are scored).
+    threshold_m : float, metres
+    judge : JudgeConfig
+
+    Returns
+    -------
+    Judged or None
+        Origin ``"slide"``.
+    """
+    axes = horizontal_axes(pair.target, up)
+    n = math.floor(SWEEP_RANGE_M / TWIN_STEP_M)
+    offsets = np.arange(-n, n + 1, dtype=np.float64) * TWIN_STEP_M
+    free = TOLERANCE.free(threshold_m)
+    least = 0.5 * shares(pair, W, threshold_m)[0]
+    slid = [
+        Judged("slide", Tk, *check.judge(Tk, *free))
+        for Tk in _slides(pair, W, axes, polish, threshold_m, offsets, 0.0)
+        if shares(pair, Tk, threshold_m)[0] >= least  # not clean merely by seeing less
+    ]
+    if not slid:
+        return None
+    return rescue(pose_masks(pair, W, threshold_m), slid, W, pair, threshold_m, judge)
 
 
 __all__ = [
@@ -283,4 +364,5 @@ __all__ = [
     "find_twins",
     "horizontal_axes",
     "shares",
+    "slide_refuted",
 ]

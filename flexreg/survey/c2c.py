@@ -232,13 +232,20 @@ def _correspond(
     T: NDArray[np.float64],
     max_m: float,
     tree: Any,
+    src_n: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
     """Source indices, target indices and signed point-to-plane residuals (m) of the source
-    points with a target point within ``max_m`` at ``T``."""
+    points with a target point within ``max_m`` at ``T``. With the source normals
+    ``src_n``, only pairs whose normals face the same side: each scanner's normals point to
+    it, so a pair facing apart joins the two faces of a wall (seen from both sides through a
+    doorway or a window), never one surface."""
     moved = src @ T[:3, :3].T + T[:3, 3]
     d, j = tree.query(moved, k=1, distance_upper_bound=max_m)
     i = np.flatnonzero(np.isfinite(d))
     j = j[i]
+    if src_n is not None:
+        same = np.einsum("ij,ij->i", src_n[i] @ T[:3, :3].T, tgt_n[j]) > 0.0
+        i, j = i[same], j[same]
     r = np.einsum("ij,ij->i", moved[i] - tgt[j], tgt_n[j])
     return i, j, r
 
@@ -252,6 +259,7 @@ def cloud_figures(
     *,
     inlier_m: float | None = None,
     tree: Any = None,
+    src_n: NDArray[np.float64] | None = None,
 ) -> CloudFigures:
     """The cloud-to-cloud figures of ``src`` moved by ``T_target_source`` against ``tgt``.
 
@@ -268,6 +276,11 @@ def cloud_figures(
         The RMS is of the overlapping points whose point-to-plane distance is under this
         (default ``max_m``): the inlier RMS, as Open3D's ``inlier_rmse``; the shares within
         6 mm and 1 cm are of every overlapping point.
+    tree : scipy.spatial.cKDTree, optional
+        Of ``tgt``, when already at hand.
+    src_n : (N, 3) float64, optional
+        Source unit normals (pointing to the source scanner): a source point overlaps only
+        where its normal and its target point's face the same side.
 
     Examples
     --------
@@ -284,7 +297,8 @@ def cloud_figures(
     from scipy.spatial import cKDTree
 
     tree = tree if tree is not None else cKDTree(tgt)
-    i, j, r = _correspond(tgt, tgt_n, src, np.asarray(T_target_source, np.float64), max_m, tree)
+    T = np.asarray(T_target_source, np.float64)
+    i, j, r = _correspond(tgt, tgt_n, src, T, max_m, tree, src_n)
     k = len(i)
     if k == 0:
         return CloudFigures(None, 0.0, 0.0, 0.0, 0.0, 0, len(src))
@@ -381,21 +395,22 @@ def _icp(
     tgt_n: NDArray[np.float64],
     tree: Any,
     src: NDArray[np.float64],
+    src_n: NDArray[np.float64],
     T0: NDArray[np.float64],
     max_m: float,
     k_m: float,
     stop: tuple[float, float] = (1e-7, 1e-6),
 ) -> NDArray[np.float64]:
     """Point-to-plane ICP with Tukey weights (width ``k_m``) on correspondences within
-    ``max_m``: Gauss-Newton steps ``T <- T exp(xi)`` until a step is under ``stop``
-    (rad, m: by default 1e-7 rad / 1 um) or :data:`ICP_ITERATIONS` are made. Written here
-    rather than Open3D's so that the same inputs give the same bits (its parallel sums do
-    not)."""
+    ``max_m`` whose normals face the same side (:func:`_correspond`): Gauss-Newton steps
+    ``T <- T exp(xi)`` until a step is under ``stop`` (rad, m: by default 1e-7 rad / 1 um)
+    or :data:`ICP_ITERATIONS` are made. Written here rather than Open3D's so that the same
+    inputs give the same bits (its parallel sums do not)."""
     from scipy.spatial.transform import Rotation
 
     T = np.array(T0, dtype=np.float64)
     for _ in range(ICP_ITERATIONS):
-        i, j, r = _correspond(tgt, tgt_n, src, T, max_m, tree)
+        i, j, r = _correspond(tgt, tgt_n, src, T, max_m, tree, src_n)
         if len(i) < 6:
             break
         u = np.clip(np.abs(r) / k_m, 0.0, 1.0)
@@ -439,7 +454,7 @@ def fit_pair(
     from scipy.spatial import cKDTree
 
     tgt, tgt_n, _ = read_cloud(target_cloud)
-    src, _, lever_m = read_cloud(source_cloud, sparse=True)
+    src, src_n, lever_m = read_cloud(source_cloud, sparse=True)
     T = np.asarray(T_init, dtype=np.float64)
     if len(tgt) < 6 or len(src) < 6:
         raise ValueError("too few points to align")
@@ -447,12 +462,12 @@ def fit_pair(
     for max_v, k_v in ((8, 4), (3, 1.5)):  # capture: stop at a step of 1 % of the kernel
         step_m = CAPTURE_STOP * k_v * voxel_m  # (a turn: at the median range)
         stop = (step_m / max(lever_m, 1.0), step_m)
-        T = _icp(tgt, tgt_n, tree, src, T, max_v * voxel_m, k_v * voxel_m, stop)
-    _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree)
+        T = _icp(tgt, tgt_n, tree, src, src_n, T, max_v * voxel_m, k_v * voxel_m, stop)
+    _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree, src_n)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma
-    T = _icp(tgt, tgt_n, tree, src, T, 3 * k, k)
-    i, j, r = _correspond(tgt, tgt_n, src, T, 3 * k, tree)
+    T = _icp(tgt, tgt_n, tree, src, src_n, T, 3 * k, k)
+    i, j, r = _correspond(tgt, tgt_n, src, T, 3 * k, tree, src_n)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma
     u = np.clip(np.abs(r) / k, 0.0, 1.0)
@@ -461,7 +476,7 @@ def fit_pair(
     model = information(src[i], n_src, w, sigma, CORRELATION_M)
     cov = np.linalg.pinv(model) + cluster_covariance(src[i], n_src, w, r, CORRELATION_M)
     info = np.linalg.pinv(0.5 * (cov + cov.T))
-    figures = cloud_figures(tgt, tgt_n, src, T, 3 * k, inlier_m=k, tree=tree)
+    figures = cloud_figures(tgt, tgt_n, src, T, 3 * k, inlier_m=k, tree=tree, src_n=src_n)
     if len(i) < 6 or figures.rms_mm is None:
         raise ValueError("too few overlapping points to align")
     return PairFit(T, info, sigma, figures)

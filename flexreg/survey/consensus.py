@@ -21,7 +21,8 @@ of stations, the way PCM merges the maps of several robots.
    odometry). Sets rank by trusted answers, their firm votes, links, all votes, the
    surveyor's word, then weight. The best set of the whole project merges its groups when a
    loop of confident answers confirms it (two of them in it, trusted or confident inside
-   rough positions' windows, or a firm vote) and no distinct placement of the same groups is
+   rough positions' windows, or a firm vote of a link's answer: a twin or runner-up
+   closing a cycle is no independent route) and no distinct placement of the same groups is
    as well supported; then everything is looked at again.
    Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
    the same way. Nor do they settle a dispute between trusted answers: one that a cycle of
@@ -426,9 +427,12 @@ class _Set:
         """A loop of confident answers closes through it: two of its links are (trusted, or
         confident inside rough positions' windows: each registered on its own scans, they
         agree to the loop tolerance, which a pose slid or a bay off in one of them does not),
-        or a cycle of trusted answers closes through one."""
+        or a cycle of trusted answers closes through one of its links' answers. An
+        alternative closing such a cycle is no independent route: an uncertain link's twins
+        offer its pose one bay along each way, so in a hall of identical bays one of them
+        agrees with any trusted answer a whole number of bays off."""
         return sum(h.confident for h in self.members) >= 2 or any(
-            h.firm_votes for h in self.members
+            h.firm_votes for h in self.members if h.alternative is None
         )
 
 

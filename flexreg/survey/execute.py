@@ -360,6 +360,11 @@ def _io_error(e: OSError) -> InputError:
     return InputError(e.filename or "cache", f"{e.strerror or e}")
 
 
+#: bumped when the pairwise registration's answers change: links cached by older code are
+#: registered again (the prepared stations stay valid)
+LINK_FORMAT = 2
+
+
 def link_cache_path(
     target_file: str,
     source_file: str,
@@ -371,7 +376,7 @@ def link_cache_path(
     stations' cache keys (file content, setup and configuration) and the pose that seeded
     it, if any (the stored poses', a hand link's, the rough positions'), with its window
     when rough: the first 12 hex digits of the SHA-256 of their float64 values, so that
-    another seed is registered again and the same one is reused."""
+    another seed is registered again and the same one is reused; then :data:`LINK_FORMAT`."""
     t = Path(target_file).name.removesuffix(PREPARED_SUFFIX)
     s = Path(source_file).name.removesuffix(PREPARED_SUFFIX)
     tag = ""
@@ -380,7 +385,7 @@ def link_cache_path(
         if window is not None:
             values += np.asarray(window, dtype="<f8").tobytes()
         tag = f".seed-{hashlib.sha256(values).hexdigest()[:12]}"
-    return Path(target_file).parent / "links" / f"{t}__{s}{tag}.link.npz"
+    return Path(target_file).parent / "links" / f"{t}__{s}{tag}.v{LINK_FORMAT}.link.npz"
 
 
 #: a link's fields stored as arrays in its cache entry (the rest as JSON)
@@ -508,6 +513,7 @@ def align_link(
 
 __all__ = [
     "AXES",
+    "LINK_FORMAT",
     "SCHEDULER_PROBE_S",
     "OutcomeCounter",
     "Progress",

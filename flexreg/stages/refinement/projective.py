@@ -168,6 +168,15 @@ def _associate_chunk(
         res = nx * dx + ny * dy + nz * dz
         if not abs(res) < dist:
             continue
+        # both scanners see the pixel's surface from the side its normal faces (the normal
+        # points to its own scanner): a point the other scanner saw lies on that face, not
+        # on the back of a wall a doorway or a window shows from the other side
+        if reverse:  # the target scanner, at the target frame's origin
+            facing = -(nx * mx + ny * my + nz * mz)
+        else:  # the source scanner, at T's translation in the target frame
+            facing = nx * (T[0, 3] - x0) + ny * (T[1, 3] - x1) + nz * (T[2, 3] - x2)
+        if not facing > 0.0:
+            continue
         # the pixel's point lies on the ray's surface within about a pixel footprint
         reach = dist + lateral * rq
         if dx * dx + dy * dy + dz * dz > reach * reach:

@@ -368,7 +368,10 @@ def main(argv: list[str] | None = None) -> int:
             state["records"] += more["records"]
             state["command"] += "; " + more["command"]
         return finish(state, args.from_json[0].parent, write_docs=args.write_docs)
-    folder = args.resume or results_folder(args.results, "survey")
+    # the runs are child processes started in the repository: paths given relative to
+    # where this was started are made absolute first
+    folder = (args.resume or results_folder(args.results, "survey")).resolve()
+    args.data = args.data.resolve()
     folder.mkdir(parents=True, exist_ok=True)
     args.data.mkdir(parents=True, exist_ok=True)
     print(f"results: {folder}", flush=True)

@@ -735,4 +735,7 @@ def merge_groups(
             place.pose[s] = med.X @ place.pose[s]
             place.root[s] = g1
         for h in med.members:
-            chosen[id(h.link)] = Chosen(h, h is med.centre, how, med.firmly_confirmed)
+            # an uncertain pose agreeing with the merge closes a loop with its own link: the
+            # loop confirms it (though, no independent route, it confirms nothing else)
+            loop = med.firmly_confirmed or (h is not med.centre and not h.firm)
+            chosen[id(h.link)] = Chosen(h, h is med.centre, how, loop)

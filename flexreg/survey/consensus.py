@@ -605,7 +605,11 @@ def _decide(
         if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
             distinct.append(s)
     if len(distinct) > MAP_PLACEMENTS:
-        return None
+        # every pose of every link is a placement: where too many are, only those that two
+        # links or more agree on (a cycle through the groups) compete for the map
+        distinct = [s for s in distinct if len(s.members) > 1]
+        if not distinct or len(distinct) > MAP_PLACEMENTS:
+            return None
     judged = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
     best = _decisive(judged, judge, decisive)
     if best is None:

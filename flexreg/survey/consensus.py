@@ -67,7 +67,8 @@ log = logging.getLogger(__name__)
 #: alternative half its support (a runner-up's score ratio, a twin's share of the answer's).
 UNCERTAIN_WEIGHT = 0.5
 #: Most distinct placements of two groups the map's free-space check looks at: where more
-#: remain, the groups stay apart (a periodic hall offers one per bay).
+#: remain, only those two links or more agree on, and where still more, the groups stay
+#: apart (a periodic hall offers one per bay).
 MAP_PLACEMENTS = 6
 #: Pairs of stations, one of each group, the map's check scores per placement: the nearest.
 MAP_PAIRS = 8

@@ -67,8 +67,7 @@ log = logging.getLogger(__name__)
 #: alternative half its support (a runner-up's score ratio, a twin's share of the answer's).
 UNCERTAIN_WEIGHT = 0.5
 #: Most distinct placements of two groups the map's free-space check looks at: where more
-#: remain, only those two links or more agree on, and where still more, the groups stay
-#: apart (a periodic hall offers one per bay).
+#: remain, the groups stay apart (a periodic hall offers one per bay).
 MAP_PLACEMENTS = 6
 #: Pairs of stations, one of each group, the map's check scores per placement: the nearest.
 MAP_PAIRS = 8
@@ -606,11 +605,7 @@ def _decide(
         if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
             distinct.append(s)
     if len(distinct) > MAP_PLACEMENTS:
-        # every pose of every link is a placement: where too many are, only those that two
-        # links or more agree on (a cycle through the groups) compete for the map
-        distinct = [s for s in distinct if len(s.members) > 1]
-        if not distinct or len(distinct) > MAP_PLACEMENTS:
-            return None
+        return None
     judged = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
     best = _decisive(judged, judge, decisive)
     if best is None:

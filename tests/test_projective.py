@@ -137,8 +137,8 @@ def test_projective_icp_pairs_no_point_with_the_back_of_a_wall():
     wall = np.column_stack([g.reshape(-1, 2), np.full(900, 2.1)])  # target frame, metres
     behind = make_transform(np.eye(3), [0.0, 0.0, 4.0])  # T_target_source: scanner at z = 4
     with pytest.raises(RegistrationError, match="paired 0 points"):
-        projective_icp(target, wall - [0, 0, 4.0], behind, max_distance_m=0.3)
+        projective_icp(target, wall - [0, 0, 4.0], behind, max_distance_m=0.3, facing=True)
     ahead = make_transform(np.eye(3), [0.0, 0.0, 0.5])  # a scanner at z = 0.5, in front
-    r = projective_icp(target, wall - [0, 0, 0.5], ahead, max_distance_m=0.3)
+    r = projective_icp(target, wall - [0, 0, 0.5], ahead, max_distance_m=0.3, facing=True)
     moved = (wall - [0, 0, 0.5]) @ r.T_target_source[:3, :3].T + r.T_target_source[:3, 3]
     assert r.fitness > 0.9 and np.abs(moved[:, 2] - 2.0).max() < 1e-3

@@ -122,6 +122,7 @@ def refine(
             source=vs,
             target_points=tgt_sample,
             source_normals=source_normals if source_image is not None else None,
+            facing=True,
         )
         return replace(r, voxel_m=cell_s, source_points=len(src_sample) + len(tgt_sample))
     sp = as_points(source, name="source")

@@ -115,7 +115,23 @@ def spherical_pixel(qx, qy, qz, r, c0, c1, c2, c3, c4, W):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _associate_chunk(
-    ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+    ch,
+    pts,
+    M,
+    T,
+    reverse,
+    facing_only,
+    xyz,
+    nrm,
+    kind,
+    cam,
+    dist,
+    lateral,
+    Ac,
+    bc,
+    cc,
+    out_q,
+    out_r,
 ):  # pragma: no cover
     """Chunk ``ch`` of :func:`_associate` (its points' pairs summed into ``Ac[ch]``,
     ``bc[ch]``, ``cc[ch]``)."""
@@ -168,14 +184,14 @@ def _associate_chunk(
         res = nx * dx + ny * dy + nz * dz
         if not abs(res) < dist:
             continue
-        # both scanners see the pixel's surface from the side its normal faces (the normal
-        # points to its own scanner): a point the other scanner saw lies on that face, not
-        # on the back of a wall a doorway or a window shows from the other side
+        # with ``facing_only``, both scanners see the pixel's surface from the side its normal
+        # faces (the normal points to its own scanner): a point the other scanner saw lies on
+        # that face, not on the back of a wall a doorway or a window shows from the other side
         if reverse:  # the target scanner, at the target frame's origin
             facing = -(nx * mx + ny * my + nz * mz)
         else:  # the source scanner, at T's translation in the target frame
             facing = nx * (T[0, 3] - x0) + ny * (T[1, 3] - x1) + nz * (T[2, 3] - x2)
-        if not facing > 0.0:
+        if facing_only and not facing > 0.0:
             continue
         # the pixel's point lies on the ray's surface within about a pixel footprint
         reach = dist + lateral * rq
@@ -210,7 +226,7 @@ def _sum_chunks(Ac, bc, cc, A, b):  # pragma: no cover
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _associate(
-    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+    pts, M, T, reverse, facing_only, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """Pair points with the pixels their rays hit in an image and add the Tukey-weighted
     point-to-plane normal equations of ``T`` (a left increment) to ``A``, ``b``.
@@ -226,14 +242,30 @@ def _associate(
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in prange(_CHUNKS):
         _associate_chunk(
-            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+            ch,
+            pts,
+            M,
+            T,
+            reverse,
+            facing_only,
+            xyz,
+            nrm,
+            kind,
+            cam,
+            dist,
+            lateral,
+            Ac,
+            bc,
+            cc,
+            out_q,
+            out_r,
         )
     return _sum_chunks(Ac, bc, cc, A, b)
 
 
 @numba.njit(cache=True, nogil=True)
 def _associate_serial(
-    pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+    pts, M, T, reverse, facing_only, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """:func:`_associate` on the calling thread alone: the same chunks summed in the same order, so
     the same result, without a parallel region (whose start costs more than a few thousand
@@ -243,7 +275,23 @@ def _associate_serial(
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in range(_CHUNKS):
         _associate_chunk(
-            ch, pts, M, T, reverse, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
+            ch,
+            pts,
+            M,
+            T,
+            reverse,
+            facing_only,
+            xyz,
+            nrm,
+            kind,
+            cam,
+            dist,
+            lateral,
+            Ac,
+            bc,
+            cc,
+            out_q,
+            out_r,
         )
     return _sum_chunks(Ac, bc, cc, A, b)
 
@@ -293,12 +341,14 @@ class _Side:
         normals: NDArray[np.float32] | None,
         points: NDArray[np.float64],
         reverse: bool,
+        facing: bool = False,
     ) -> None:
         self.kind, self.cam = camera_params(image)
         self.normals = grid_normals(image) if normals is None else normals
         self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
         self.reverse = reverse
+        self.facing = facing
         self.lateral = 2.0 * angular_step(image)
         self.q = np.empty_like(self.pts)
         self.res = np.empty(len(self.pts))
@@ -310,8 +360,8 @@ class _Side:
         kernel = _associate if len(self.pts) >= PARALLEL_MIN_POINTS else _associate_serial
         return int(
             kernel(
-                self.pts, M, T, self.reverse, self.xyz, self.normals, self.kind, self.cam,
-                dist, self.lateral, A, b, self.q, self.res,
+                self.pts, M, T, self.reverse, self.facing, self.xyz, self.normals, self.kind,
+                self.cam, dist, self.lateral, A, b, self.q, self.res,
             )
         )  # fmt: skip
 
@@ -330,6 +380,7 @@ def projective_icp(
     max_iterations: int = 30,
     levels: int = 3,
     tolerance: float = 1e-6,
+    facing: bool = False,
 ) -> IcpResult:
     """Refine ``T_target_source`` by point-to-plane ICP with projective data association.
 
@@ -370,6 +421,13 @@ def projective_icp(
         Most distance levels.
     tolerance : float
         Convergence on the size of the update.
+    facing : bool
+        Pair a point only where the scanner that saw it stands on the side of the pixel's
+        plane its normal faces (each image's normals point to its own scanner): the back of a
+        wall a doorway shows is not its front, a wall's thickness away along the normal. The
+        refinement's answer (:func:`~flexreg.stages.refinement.refine`) uses it; the quick
+        polishes that compare hypotheses (candidates, twins, slides) do not, their thresholds
+        having been set on every pair.
 
     Returns
     -------
@@ -389,9 +447,9 @@ def projective_icp(
         raise ConfigError(f"ICP distance must be positive, got {max_distance_m}")
     if (source is None) != (target_points is None):
         raise ConfigError("symmetric projective ICP needs both the source image and target points")
-    sides = [_Side(target, normals, source_points, False)]
+    sides = [_Side(target, normals, source_points, False, facing)]
     if source is not None and target_points is not None:
-        sides.append(_Side(source, source_normals, target_points, True))
+        sides.append(_Side(source, source_normals, target_points, True, facing))
     n_points = sum(len(sd.pts) for sd in sides)
     if n_points < 6:
         raise RegistrationError(f"projective ICP needs at least 6 points, got {n_points}")

@@ -115,23 +115,7 @@ def spherical_pixel(qx, qy, qz, r, c0, c1, c2, c3, c4, W):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _associate_chunk(
-    ch,
-    pts,
-    M,
-    T,
-    reverse,
-    facing_only,
-    xyz,
-    nrm,
-    kind,
-    cam,
-    dist,
-    lateral,
-    Ac,
-    bc,
-    cc,
-    out_q,
-    out_r,
+    ch, pts, M, T, reverse, front, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc, out_q, out_r
 ):  # pragma: no cover
     """Chunk ``ch`` of :func:`_associate` (its points' pairs summed into ``Ac[ch]``,
     ``bc[ch]``, ``cc[ch]``)."""
@@ -184,14 +168,14 @@ def _associate_chunk(
         res = nx * dx + ny * dy + nz * dz
         if not abs(res) < dist:
             continue
-        # with ``facing_only``, both scanners see the pixel's surface from the side its normal
+        # with ``front``, both scanners see the pixel's surface from the side its normal
         # faces (the normal points to its own scanner): a point the other scanner saw lies on
         # that face, not on the back of a wall a doorway or a window shows from the other side
         if reverse:  # the target scanner, at the target frame's origin
             facing = -(nx * mx + ny * my + nz * mz)
         else:  # the source scanner, at T's translation in the target frame
             facing = nx * (T[0, 3] - x0) + ny * (T[1, 3] - x1) + nz * (T[2, 3] - x2)
-        if facing_only and not facing > 0.0:
+        if front and not facing > 0.0:
             continue
         # the pixel's point lies on the ray's surface within about a pixel footprint
         reach = dist + lateral * rq
@@ -226,7 +210,7 @@ def _sum_chunks(Ac, bc, cc, A, b):  # pragma: no cover
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _associate(
-    pts, M, T, reverse, facing_only, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+    pts, M, T, reverse, front, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """Pair points with the pixels their rays hit in an image and add the Tukey-weighted
     point-to-plane normal equations of ``T`` (a left increment) to ``A``, ``b``.
@@ -247,7 +231,7 @@ def _associate(
             M,
             T,
             reverse,
-            facing_only,
+            front,
             xyz,
             nrm,
             kind,
@@ -265,7 +249,7 @@ def _associate(
 
 @numba.njit(cache=True, nogil=True)
 def _associate_serial(
-    pts, M, T, reverse, facing_only, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
+    pts, M, T, reverse, front, xyz, nrm, kind, cam, dist, lateral, A, b, out_q, out_r
 ):  # pragma: no cover
     """:func:`_associate` on the calling thread alone: the same chunks summed in the same order, so
     the same result, without a parallel region (whose start costs more than a few thousand
@@ -280,7 +264,7 @@ def _associate_serial(
             M,
             T,
             reverse,
-            facing_only,
+            front,
             xyz,
             nrm,
             kind,

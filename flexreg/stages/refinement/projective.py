@@ -226,24 +226,9 @@ def _associate(
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in prange(_CHUNKS):
         _associate_chunk(
-            ch,
-            pts,
-            M,
-            T,
-            reverse,
-            front,
-            xyz,
-            nrm,
-            kind,
-            cam,
-            dist,
-            lateral,
-            Ac,
-            bc,
-            cc,
-            out_q,
-            out_r,
-        )
+            ch, pts, M, T, reverse, front, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc,
+            out_q, out_r,
+        )  # fmt: skip
     return _sum_chunks(Ac, bc, cc, A, b)
 
 
@@ -259,24 +244,9 @@ def _associate_serial(
     cc = np.zeros(_CHUNKS, dtype=np.int64)
     for ch in range(_CHUNKS):
         _associate_chunk(
-            ch,
-            pts,
-            M,
-            T,
-            reverse,
-            front,
-            xyz,
-            nrm,
-            kind,
-            cam,
-            dist,
-            lateral,
-            Ac,
-            bc,
-            cc,
-            out_q,
-            out_r,
-        )
+            ch, pts, M, T, reverse, front, xyz, nrm, kind, cam, dist, lateral, Ac, bc, cc,
+            out_q, out_r,
+        )  # fmt: skip
     return _sum_chunks(Ac, bc, cc, A, b)
 
 

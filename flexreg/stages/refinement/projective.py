@@ -168,15 +168,16 @@ def _associate_chunk(
         res = nx * dx + ny * dy + nz * dz
         if not abs(res) < dist:
             continue
-        # with ``front``, both scanners see the pixel's surface from the side its normal
-        # faces (the normal points to its own scanner): a point the other scanner saw lies on
-        # that face, not on the back of a wall a doorway or a window shows from the other side
-        if reverse:  # the target scanner, at the target frame's origin
-            facing = -(nx * mx + ny * my + nz * mz)
-        else:  # the source scanner, at T's translation in the target frame
-            facing = nx * (T[0, 3] - x0) + ny * (T[1, 3] - x1) + nz * (T[2, 3] - x2)
-        if front and not facing > 0.0:
-            continue
+        if front:
+            # both scanners see the pixel's surface from the side its normal faces (the
+            # normal points to its own scanner): a point the other scanner saw lies on that
+            # face, not on the back of a wall a doorway or a window shows from the other side
+            if reverse:  # the target scanner, at the target frame's origin
+                facing = -(nx * mx + ny * my + nz * mz)
+            else:  # the source scanner, at T's translation in the target frame
+                facing = nx * (T[0, 3] - x0) + ny * (T[1, 3] - x1) + nz * (T[2, 3] - x2)
+            if not facing > 0.0:
+                continue
         # the pixel's point lies on the ray's surface within about a pixel footprint
         reach = dist + lateral * rq
         if dx * dx + dy * dy + dz * dz > reach * reach:
@@ -302,7 +303,7 @@ class _Side:
         self.xyz = masked_xyz(image)
         self.pts = np.ascontiguousarray(points, dtype=np.float64)
         self.reverse = reverse
-        self.facing = facing
+        self.front = facing
         self.lateral = 2.0 * angular_step(image)
         self.q = np.empty_like(self.pts)
         self.res = np.empty(len(self.pts))
@@ -314,7 +315,7 @@ class _Side:
         kernel = _associate if len(self.pts) >= PARALLEL_MIN_POINTS else _associate_serial
         return int(
             kernel(
-                self.pts, M, T, self.reverse, self.facing, self.xyz, self.normals, self.kind,
+                self.pts, M, T, self.reverse, self.front, self.xyz, self.normals, self.kind,
                 self.cam, dist, self.lateral, A, b, self.q, self.res,
             )
         )  # fmt: skip

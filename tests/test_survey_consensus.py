@@ -265,6 +265,46 @@ def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
     assert "s3" not in sol.groups[0]
 
 
+def _picked(P, a, b, right=True):
+    """An uncertain link whose scans fit two poses a bay (6 m) apart, the rough positions
+    having picked one (``right``: the true one) as its pose, the other kept as its twin."""
+    true, bay = invert(P[a]) @ P[b], _moved(P, a, b, [6.0, 0, 0])
+    e = _link(P, a, b, "uncertain", T=true if right else bay)
+    e.reasons = [{"code": "ambiguous", "message": "two poses a bay apart fit"}]
+    e.alternatives = [Alternative(bay if right else true, "twin", 0.95)]
+    e.vouched = "positions"
+    return e
+
+
+def test_a_pose_rough_positions_picked_confirms_a_windowed_link_around_a_loop():
+    """s3 seen from s2 by a link confident inside rough positions' window and from s1 by an
+    uncertain one whose two poses a bay apart the positions decided between: when they
+    agree around the loop s3 is placed (each pose registered on its own scans, the bay
+    picked by the positions); the uncertain link alone places nothing, nor does one whose
+    pose, undecided, is only its answer; a picked pose a bay off the windowed one places
+    nothing either, nor do two picked poses that agree with no confident registration
+    among them (positions pick a bay, not centimetres)."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    two = [_windowed(P, "s2", "s3"), _picked(P, "s1", "s3")]
+    sol = solve_graph(sorted(P), [*base, *two], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in two)
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    alone = [_picked(P, "s1", "s3")]
+    sol = solve_graph(sorted(P), [*base, *alone], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    undecided = [_windowed(P, "s2", "s3"), _picked(P, "s1", "s3")]
+    undecided[1].vouched = ""
+    sol = solve_graph(sorted(P), [*base, *undecided], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    apart = [_windowed(P, "s2", "s3"), _picked(P, "s1", "s3", right=False)]
+    sol = solve_graph(sorted(P), [*base, *apart], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    both = [_picked(P, "s2", "s3"), _picked(P, "s1", "s3")]  # no registration confident
+    sol = solve_graph(sorted(P), [*base, *both], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+
+
 def test_a_block_hanging_from_one_link_is_single_and_the_frame_is_the_largest_block():
     """Two blocks that loops of confident links hold together (a triangle s0-s2, a square
     with a diagonal s3-s6) joined by one confident link s2-s3: it closes no loop, so one

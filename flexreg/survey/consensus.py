@@ -21,9 +21,10 @@ of stations, the way PCM merges the maps of several robots.
    odometry). Sets rank by trusted answers, their firm votes, links, all votes, the
    surveyor's word, then weight. The best set of the whole project merges its groups when a
    loop of confident answers confirms it (two of them in it, trusted or confident inside
-   rough positions' windows, or a firm vote of a link's answer: a twin or runner-up
-   closing a cycle is no independent route) and no distinct placement of the same groups is
-   as well supported; then everything is looked at again.
+   rough positions' windows, or one and an uncertain link's pose the positions picked, or a
+   firm vote of a link's answer: a twin or runner-up closing a cycle is no independent
+   route) and no distinct placement of the same groups is as well supported; then
+   everything is looked at again.
    Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
    the same way. Nor do they settle a dispute between trusted answers: one that a cycle of
    trusted answers contradicts and none confirms is *disputed* (one link of that cycle is
@@ -140,6 +141,12 @@ class Hypothesis:
     def confident(self) -> bool:
         """A confident link's answer (:attr:`~flexreg.survey.links.Link.confident`)."""
         return self.alternative is None and self.link.confident
+
+    @property
+    def sited(self) -> bool:
+        """The pose of the link the surveyor's rough positions picked, alone of its fitting
+        poses within their window (:func:`flexreg.survey.positions.choose`)."""
+        return self.alternative is None and self.link.vouched == "positions"
 
     @property
     def weight(self) -> float:
@@ -430,8 +437,15 @@ class _Set:
         or a cycle of trusted answers closes through one of its links' answers. An
         alternative closing such a cycle is no independent route: an uncertain link's twins
         offer its pose one bay along each way, so in a hall of identical bays one of them
-        agrees with any trusted answer a whole number of bays off."""
-        return sum(h.confident for h in self.members) >= 2 or any(
+        agrees with any trusted answer a whole number of bays off. With one confident answer,
+        the pose rough positions picked of an uncertain link counts as the second: the
+        positions decided which bay that link means (none other of its fitting poses lay
+        within their window) and the loop, with a registration confident on its own, holds
+        it to the centimetre. Two picked poses alone do not: positions pick a bay, not
+        centimetres, and two uncertain links may be slid alike."""
+        confident = sum(h.confident for h in self.members)
+        sited = sum(h.sited and not h.confident for h in self.members)
+        return confident >= 2 or (confident == 1 and sited >= 1) or any(
             h.firm_votes for h in self.members if h.alternative is None
         )
 

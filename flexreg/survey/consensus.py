@@ -445,8 +445,10 @@ class _Set:
         centimetres, and two uncertain links may be slid alike."""
         confident = sum(h.confident for h in self.members)
         sited = sum(h.sited and not h.confident for h in self.members)
-        return confident >= 2 or (confident == 1 and sited >= 1) or any(
-            h.firm_votes for h in self.members if h.alternative is None
+        return (
+            confident >= 2
+            or (confident == 1 and sited >= 1)
+            or any(h.firm_votes for h in self.members if h.alternative is None)
         )
 
 

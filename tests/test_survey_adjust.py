@@ -293,9 +293,10 @@ def test_an_independent_route_verifies(tmp_path) -> None:
 
 
 def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> None:
-    """Round 2 fits again only a pair whose relative pose moved by the settling step or more
-    since its fit started (0.2 mm here); one moved 0.05 mm keeps its fit, and a round with
-    nothing moved measures nothing."""
+    """Round 2 fits again only a pair whose relative pose moved by its fit's kernel width
+    (TUKEY_C residual sigmas) or more since its fit started; one moved a fifth of it keeps
+    its fit, one turned by twice the kernel at the source's median range is fitted again,
+    and a round with nothing moved measures nothing, a pair left out included."""
     from flexreg.survey import adjust as adj
     from flexreg.survey.config import SurveyConfig
 
@@ -312,11 +313,19 @@ def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> N
     assert adj._measure(None, pairs, clouds, poses, config, None, 1) == 2
     first = [p.fit for p in pairs]
     assert all(f is not None for f in first)
-    poses["b"] = B @ _pose(0.0, 2, (2e-4, 0.0, 0.0))  # over SETTLED_M (1e-4 m)
-    poses["c"] = B @ _pose(0.0, 2, (5e-5, 0.0, 0.0))  # under it
+    kernels = [p.kernel_m for p in pairs]
+    assert kernels == [adj.TUKEY_C * f.sigma_m for f in first]
+    poses["b"] = B @ _pose(0.0, 2, (1.5 * kernels[0], 0.0, 0.0))  # over its kernel
+    poses["c"] = B @ _pose(0.0, 2, (0.2 * kernels[1], 0.0, 0.0))  # well inside it
     assert adj._measure(None, pairs, clouds, poses, config, None, 2) == 1
     assert pairs[0].fit is not first[0] and pairs[1].fit is first[1]
     assert adj._measure(None, pairs, clouds, poses, config, None, 3) == 0
+    turn = np.degrees(2 * kernels[1] / adj.median_range(clouds["c"]))
+    poses["c"] = B @ _pose(turn, 2, (0.0, 0.0, 0.0))
+    assert adj._measure(None, pairs, clouds, poses, config, None, 4) == 1
+    assert pairs[1].fit is not first[1]
+    pairs[1].fit = None  # left out by the adjustment: measured again only once moved
+    assert adj._measure(None, pairs, clouds, poses, config, None, 5) == 0
 
 
 def test_cloud_to_cloud_pairs_only_normals_facing_the_same_side():

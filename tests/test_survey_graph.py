@@ -282,18 +282,20 @@ def _assert_plain(text: str, *, link: bool = True) -> None:
 
 
 def _lone_doubtful():
-    """s0-s1-s2 a loop; s3 hangs on s2 by an uncertain link, and on s1 by another uncertain
-    link two metres off."""
+    """s0-s1-s2 a loop; s3 hangs on s2 by an uncertain link whose scans overlap most, and on
+    s1 by another uncertain link two metres off."""
     P = {f"s{i}": make_transform(rotation_about_axis([0, 0, 1], 0.3 * i), [5.0 * i, 0, 0])
          for i in range(4)}  # fmt: skip
     off = make_transform(np.eye(3), [2.0, 0, 0])
     links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2"),
-             _link(P, "s2", "s3", "uncertain"),
+             _link(P, "s2", "s3", "uncertain", overlap=0.6),
              _link(P, "s1", "s3", "uncertain", T=off @ invert(P["s1"]) @ P["s3"])]  # fmt: skip
     return sorted(P), links, SurveyConfig()
 
 
 def test_an_unplaced_station_says_what_is_wrong_and_what_to_do():
+    """The reasons, and the pair worth aligning by hand: the one whose scans overlap most
+    (s2, not s1, the first by name)."""
     names, links, config = _lone_doubtful()
     sol = solve_graph(names, links, config, reference="s0")
     assert "s3" not in sol.groups[0]
@@ -302,8 +304,8 @@ def test_an_unplaced_station_says_what_is_wrong_and_what_to_do():
     reason = sol.reasons["s3"]
     assert reason.startswith("no link places it (2 tried: uncertain (see the link's reasons)")
     assert reason.endswith(
-        "; to place it: --link s1 s3 T.txt (a transform from flexreg register s1 s3), rough "
-        "positions (--positions) to confirm a link, or a scan between it and s1"
+        "; to place it: --link s2 s3 T.txt (a transform from flexreg register s2 s3), rough "
+        "positions (--positions) to confirm a link, or a scan between it and s2"
     )
     _assert_plain(reason, link=False)
     for e in links[3:]:

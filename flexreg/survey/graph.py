@@ -286,6 +286,13 @@ def single_link(stem: str, ref: str, links: list[Link]) -> str:
     return f"confident links that no loop checks fix it, one after the other ({what})"
 
 
+def _partner(e: Link | None, members: set[str]) -> str:
+    """The station of link ``e`` outside ``members``."""
+    if e is None:
+        return "STATION"
+    return e.source if e.target in members else e.target
+
+
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
     """Why a station is not placed, and the one thing that would place it."""
     members = set(group)
@@ -295,6 +302,12 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     near = sorted({x for e in toward or mine for x in (e.target, e.source)} - members)
     other = near[0] if near else "STATION"
     side = next(iter(sorted(members & {x for e in toward for x in (e.target, e.source)})), stem)
+    seen = [e for e in toward if e.usable and e.overlap > 0]
+    if seen:  # the pair whose scans see most of each other: the one worth aligning by hand
+        best = max(seen, key=lambda e: e.overlap)
+        other, side = (
+            (best.target, best.source) if best.target in placed else (best.source, best.target)
+        )
     hand = f"--link {other} {side} T.txt (a transform from flexreg register {other} {side})"
     rivals = [e for e in toward if e.why == CONTESTED]
     what = (
@@ -313,7 +326,8 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         + "; ".join(sorted({e.why or e.status for e in mine if e.status != "accepted"}))
         + ")"
     )
-    n = max((1 + len(e.alternatives) for e in toward if e.usable), default=1)
+    many = max((e for e in toward if e.usable), key=lambda e: len(e.alternatives), default=None)
+    n = 1 + len(many.alternatives) if many is not None else 1
     said = next((e.undecided for e in toward if e.undecided), "")
     if said:
         return f"{what}; the rough positions cannot place it ({said}): {hand}"
@@ -325,8 +339,8 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         )
     if n > 1:
         return (
-            f"{what}; its link with {other} fits {n} poses (look-alike rooms or bays): rough "
-            f"positions of both (--positions) would pick one, or {hand}"
+            f"{what}; its link with {_partner(many, members)} fits {n} poses (look-alike "
+            f"rooms or bays): rough positions of both (--positions) would pick one, or {hand}"
         )
     return (
         f"{what}; to place it: {hand}, rough positions (--positions) to confirm a link, or a "

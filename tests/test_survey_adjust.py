@@ -328,6 +328,46 @@ def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> N
     assert adj._measure(None, pairs, clouds, poses, config, None, 5) == 0
 
 
+def test_a_later_run_recalls_the_kept_fits_and_measures_only_what_it_moved(tmp_path) -> None:
+    """Each measured fit is kept beside the adjustment clouds: a later run (new pairs, the
+    same clouds) recalls it with the pose it started from and measures nothing while the
+    solution stays within the fit's kernel; a pair moved beyond it, or whose kept fit is
+    damaged, is measured again."""
+    from flexreg.survey import adjust as adj
+    from flexreg.survey.c2c import fit_cache_path
+    from flexreg.survey.config import SurveyConfig
+
+    rng = np.random.default_rng(2)
+    A, B = _pose(10, 2, (3.0, 2.5, 1.5)), _pose(-25, 2, (7.0, 5.5, 1.6))
+    clouds = {
+        "a": _box_cloud(tmp_path / "a.npz", A, rng),
+        "b": _box_cloud(tmp_path / "b.npz", B, rng),
+    }
+    clouds["c"] = _box_cloud(tmp_path / "c.npz", B, rng)
+    poses = {"a": A, "b": B, "c": B.copy()}
+    config = SurveyConfig()
+
+    def fresh() -> list:
+        return [adj.Pair("a", "b", "link"), adj.Pair("a", "c", "overlap")]
+
+    first = fresh()
+    assert adj._recall(first, clouds, config) == 0
+    assert adj._measure(None, first, clouds, poses, config, None, 1) == 2
+    again = fresh()
+    assert adj._recall(again, clouds, config) == 2
+    assert adj._measure(None, again, clouds, poses, config, None, 1) == 0
+    for old, new in zip(first, again, strict=True):
+        np.testing.assert_array_equal(new.fit.T_target_source, old.fit.T_target_source)
+        np.testing.assert_array_equal(new.fit.information, old.fit.information)
+        assert new.fit.figures == old.fit.figures and new.kernel_m == old.kernel_m
+    poses["b"] = B @ _pose(0.0, 2, (1.5 * again[0].kernel_m, 0.0, 0.0))
+    with open(fit_cache_path(clouds["a"], clouds["c"]), "wb") as f:
+        f.write(b"not a fit")
+    later = fresh()
+    assert adj._recall(later, clouds, config) == 1  # the damaged one is not recalled
+    assert adj._measure(None, later, clouds, poses, config, None, 1) == 2
+
+
 def test_cloud_to_cloud_pairs_only_normals_facing_the_same_side():
     """A wall's front face (target, normals towards its scanner: -x) and points 1 cm off it:
     seen by a source scanner on the same side (normals -x) they overlap; seen from behind

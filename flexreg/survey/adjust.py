@@ -57,7 +57,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
-from flexreg.survey.c2c import TUKEY_C, PairFit, adjustment_cloud, fit_pair, median_range
+from flexreg.survey.c2c import (
+    TUKEY_C,
+    PairFit,
+    adjustment_cloud,
+    fit_cache_path,
+    fit_pair,
+    load_fit,
+    median_range,
+    save_fit,
+)
 from flexreg.survey.config import MIN_EXPLAINED, SurveyConfig
 from flexreg.survey.execute import Progress, ProgressEvent, run_tasks
 from flexreg.survey.links import GraphSolution, Link, Matrix, bridges, reached
@@ -352,8 +361,9 @@ def _measure(
     progress: Progress,
     round_: int,
 ) -> int:
-    """Measure the pairs whose relative pose the solution has moved since their fit (all of
-    them in the first round); returns how many were measured."""
+    """Measure the pairs whose relative pose the solution has moved since their fit (in the
+    first round every pair no earlier run fitted), keeping each fit for later runs; returns
+    how many were measured."""
     t0 = time.perf_counter()
     done = [0]
     todo = [p for p in pairs if _moved(p, poses, median_range(clouds[p.source]))]
@@ -376,24 +386,46 @@ def _measure(
     ]
     fits = run_tasks(client, _fit_or_none, items, on_result=report)
     for p, args, f in zip(todo, items, fits, strict=True):
-        p.start = args[2]
-        p.kernel_m = TUKEY_C * (config.refine_voxel_m if f is None else f.sigma_m)
-        if f is None:
-            p.fit, p.why = None, "too few overlapping points to align"
-            continue
-        moved = (
-            rotation_error_deg(f.T_target_source, args[2]),
-            translation_error_m(f.T_target_source, args[2]),
-        )
-        if moved[0] > config.loop_max_deg or moved[1] > config.loop_max_m:
-            p.fit = None
-            p.why = (
-                f"its cloud-to-cloud fit moved {moved[0]:.3f}° / {moved[1] * 1e3:.1f} mm from "
-                f"the solved poses (round {round_}): left out"
-            )
-            continue
-        p.fit, p.why, p.left_out_mm = f, None, None
+        if f is not None:
+            save_fit(fit_cache_path(args[0], args[1]), args[2], f)
+        _take(p, args[2], f, config, f"round {round_}")
     return len(todo)
+
+
+def _take(p: Pair, start: Matrix, f: PairFit | None, config: SurveyConfig, when: str) -> None:
+    """Let ``f``, fitted from ``start``, be the pair's measurement, unless there is none or
+    it moved beyond the loop tolerance from where it started (the pair is then left out)."""
+    p.start = start
+    p.kernel_m = TUKEY_C * (config.refine_voxel_m if f is None else f.sigma_m)
+    if f is None:
+        p.fit, p.why = None, "too few overlapping points to align"
+        return
+    moved = (
+        rotation_error_deg(f.T_target_source, start),
+        translation_error_m(f.T_target_source, start),
+    )
+    if moved[0] > config.loop_max_deg or moved[1] > config.loop_max_m:
+        p.fit = None
+        p.why = (
+            f"its cloud-to-cloud fit moved {moved[0]:.3f}° / {moved[1] * 1e3:.1f} mm from "
+            f"the solved poses ({when}): left out"
+        )
+        return
+    p.fit, p.why, p.left_out_mm = f, None, None
+
+
+def _recall(pairs: list[Pair], clouds: dict[str, str], config: SurveyConfig) -> int:
+    """Give each pair the fit an earlier run kept (:func:`~flexreg.survey.c2c.save_fit`), with
+    the pose it started from: a round measures it again only if the solution moved it
+    beyond that fit's kernel (:func:`_moved`), so a re-run of the same project, or one with a
+    link added, measures only the pairs it changed. Returns how many were recalled."""
+    n = 0
+    for p in pairs:
+        kept = load_fit(fit_cache_path(clouds[p.target], clouds[p.source]))
+        if kept is not None:
+            _take(p, kept[0], kept[1], config, "kept from an earlier run")
+            n += 1
+    return n
 
 
 def _moved(p: Pair, poses: dict[str, Matrix], lever_m: float) -> bool:
@@ -442,6 +474,8 @@ def adjust(
     clouds = dict(zip(stems, made, strict=True))
     levers = {s: median_range(clouds[s]) for s in stems}
     pairs = _pairs(sol, links, looks, config)
+    kept = _recall(pairs, clouds, config)
+    log.info("final alignment: %d of %d pairs fitted by an earlier run", kept, len(pairs))
     poses = {s: np.asarray(sol.poses[s], np.float64) for s in stems}
     adj = Adjustment(poses=poses, pairs=pairs)
     graph: Any = None

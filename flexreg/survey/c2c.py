@@ -482,6 +482,56 @@ def fit_pair(
     return PairFit(T, info, sigma, figures)
 
 
+#: bumped when :func:`fit_pair`'s results change: fits kept by older code are measured again
+FIT_FORMAT = 1
+
+
+def fit_cache_path(target_cloud: str, source_cloud: str) -> str:
+    """Where a pair's last fit is kept: beside the adjustment clouds, named by both (their
+    stations' cache keys and the voxel) and :data:`FIT_FORMAT`."""
+    t = os.path.basename(target_cloud).removesuffix(".npz")
+    s = os.path.basename(source_cloud).removesuffix(".npz")
+    return os.path.join(os.path.dirname(target_cloud), "fits", f"{t}__{s}.v{FIT_FORMAT}.fit.npz")
+
+
+def save_fit(path: str, start: NDArray[np.float64], fit: PairFit) -> None:
+    """Keep a pair's fit and the relative pose it started from (written whole or not at all;
+    a cache that cannot be written is only a warning: the next run measures the pair again)."""
+    f = fit.figures
+    figures = [np.nan if f.rms_mm is None else f.rms_mm, f.within_6mm, f.within_1cm, f.overlap,
+               f.balance, f.points, f.source_points]  # fmt: skip
+    tmp = f"{path}.{os.getpid()}.tmp.npz"
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        np.savez(tmp, start=np.asarray(start, dtype=np.float64), T=fit.T_target_source,
+                 information=fit.information, sigma_m=np.float64(fit.sigma_m),
+                 figures=np.asarray(figures, dtype=np.float64))  # fmt: skip
+        os.replace(tmp, path)
+    except OSError as e:
+        log.warning("%s: cannot keep the pair's fit (%s)", path, e.strerror or e)
+
+
+def load_fit(path: str) -> tuple[NDArray[np.float64], PairFit] | None:
+    """A kept fit and the pose it started from (:func:`save_fit`); None when there is none
+    or it is damaged (then the pair is measured again)."""
+    if not os.path.isfile(path):
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            start, T, info = z["start"], z["T"], z["information"]
+            sigma, fig = float(z["sigma_m"]), z["figures"]
+        ok = start.shape == T.shape == (4, 4) and info.shape == (6, 6) and fig.shape == (7,)
+        if not ok or not (np.isfinite(start).all() and np.isfinite(T).all() and sigma > 0):
+            raise ValueError("unexpected arrays")
+    except (OSError, ValueError, KeyError) as e:
+        log.warning("%s: unusable kept fit (%s); measuring the pair again", path, e)
+        return None
+    rms = None if np.isnan(fig[0]) else float(fig[0])
+    figures = CloudFigures(rms, float(fig[1]), float(fig[2]), float(fig[3]), float(fig[4]),
+                           int(fig[5]), int(fig[6]))  # fmt: skip
+    return start, PairFit(T, info, sigma, figures)
+
+
 def _robust_sigma(r: NDArray[np.float64], voxel_m: float) -> float:
     """Robust sigma (1.4826 MAD) of residuals, metres; never under a twentieth of a voxel
     (the averaging floor of a voxel's points)."""
@@ -494,15 +544,19 @@ def _robust_sigma(r: NDArray[np.float64], voxel_m: float) -> float:
 __all__ = [
     "CELL_VOXELS",
     "CORRELATION_M",
+    "FIT_FORMAT",
     "CloudFigures",
     "PairFit",
     "adjustment_cloud",
     "cloud_figures",
     "cloud_path",
     "cluster_covariance",
+    "fit_cache_path",
     "fit_pair",
     "information",
     "jacobian",
+    "load_fit",
     "median_range",
     "read_cloud",
+    "save_fit",
 ]

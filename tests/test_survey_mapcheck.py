@@ -178,6 +178,19 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     assert x_true > 0.1  # the right pose explains much of both
     assert r_true < 0.2 < 0.5 < r_moved and c_moved >= bad_moved
     assert judge("station_00", "nowhere", T) is None
+    # kept for a later run: a new judge answers the same from the cache, without a view
+    judge.keep()
+    later = PairJudge(files, glances, cfg)
+    again = later.look("station_00", "station_01", T)
+    assert again is not None and (again.explained, again.conflicting, again.samples) == (
+        look.explained, look.conflicting, look.samples)  # fmt: skip
+    assert later("station_00", "station_01", moved) == judge("station_00", "station_01", moved)
+    assert later._views == {}  # nothing was scored again
+    with open(later.kept_path(), "wb") as f:  # damaged: scored again, with a warning
+        f.write(b"not looks")
+    third = PairJudge(files, glances, cfg)
+    assert third.look("station_00", "station_01", T).explained == look.explained
+    assert third._views != {}
 
 
 def test_two_stations_placed_at_one_spot_must_see_the_same_scene():

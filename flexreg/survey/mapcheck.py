@@ -37,7 +37,9 @@ graph solved again; the map is checked again until no pair conflicts.
 
 from __future__ import annotations
 
+import hashlib
 import logging
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -47,7 +49,7 @@ from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
-from flexreg.registration.check import Check, check_masks
+from flexreg.registration.check import TOLERANCE, Check, check_masks
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
 from flexreg.survey.stations import (
@@ -64,6 +66,10 @@ Matrix = NDArray[np.float64]
 
 #: memory the graph's :class:`PairJudge` keeps its stations' views in, bytes
 JUDGE_VIEW_BYTES = 256 * 2**20
+
+#: bumped when a look's scores change (the dense check's tests, the glances): looks kept by
+#: older code are scored again
+LOOK_FORMAT = 1
 
 
 @dataclass(eq=False)
@@ -194,6 +200,11 @@ def _read_glance_entry(
         raise CacheEntryError(f"not a station sample ({e})") from None
 
 
+def _kernel_tolerances() -> tuple[float, ...]:
+    """The dense check's tolerances a look's scores follow (what names the kept looks)."""
+    return (float(TOLERANCE.fine_rel), float(TOLERANCE.free_k), float(TOLERANCE.free_rel))
+
+
 def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
     try:
         return _read_glance_entry(path, None)
@@ -248,7 +259,10 @@ class PairJudge:
     Views are loaded from the prepared files on first use, only what the check reads (the
     camera, the measured ranges and their slack: 9 bytes a working pixel, not the view's
     points and normals), and the most recently used kept within ``keep_bytes``; answers are
-    remembered per pair and pose (to 1 mm / 1e-4 of the rotation).
+    remembered per pair and pose (to 1 mm / 1e-4 of the rotation), and kept for later runs
+    by :meth:`keep` in the cache (:meth:`kept_path`: named by the dense check's tolerances and
+    :data:`LOOK_FORMAT`, each look by both stations' cache keys and the pose), so a re-run
+    scores only the placements it has not seen.
 
     Parameters
     ----------
@@ -272,6 +286,49 @@ class PairJudge:
         self.keep_bytes = keep_bytes
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
+        self._kept: dict[str, NDArray[np.float64]] | None = None  # read on first use
+        self._new = 0
+
+    def kept_path(self) -> str | None:
+        """Where the looks are kept: beside the prepared stations (None without any)."""
+        if not self.files:
+            return None
+        tol = np.asarray(_kernel_tolerances(), dtype="<f8").tobytes()
+        tag = hashlib.sha256(tol).hexdigest()[:8]
+        folder = os.path.dirname(next(iter(sorted(self.files.values()))))
+        return os.path.join(folder, f"looks-{tag}.v{LOOK_FORMAT}.npz")
+
+    def _kept_looks(self) -> dict[str, NDArray[np.float64]]:
+        if self._kept is None:
+            self._kept = {}
+            path = self.kept_path()
+            if path is not None and os.path.isfile(path):
+                try:
+                    with np.load(path, allow_pickle=False) as z:
+                        keys, values = z["keys"], z["values"]
+                    if values.shape != (len(keys), 6) or not np.isfinite(values).all():
+                        raise ValueError("unexpected arrays")
+                    self._kept = {str(k): v for k, v in zip(keys, values, strict=True)}
+                except (OSError, ValueError, KeyError) as e:
+                    log.warning("%s: unusable kept looks (%s); scoring them again", path, e)
+        return self._kept
+
+    def keep(self) -> None:
+        """Write the looks for later runs (when any is new; a cache that cannot be written
+        is only a warning)."""
+        path = self.kept_path()
+        if path is None or not self._new:
+            return
+        kept = self._kept_looks()
+        keys = sorted(kept)
+        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        try:
+            values = np.asarray([kept[k] for k in keys], dtype=np.float64).reshape(-1, 6)
+            np.savez(tmp, keys=np.asarray(keys, dtype=str), values=values)
+            os.replace(tmp, path)
+            self._new = 0
+        except OSError as e:
+            log.warning("%s: cannot keep the map's looks (%s)", path, e.strerror or e)
 
     def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
         if stem not in self.files or stem not in self.glances:
@@ -309,15 +366,30 @@ class PairJudge:
         T = np.asarray(T_a_b, dtype=np.float64)
         key = (a, b, np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes())
         if key not in self._memo:
-            va, vb = self._view(a), self._view(b)
+            stored = self._stored_key(a, b, key[2])
+            kept = self._kept_looks().get(stored) if stored is not None else None
             look = None
-            if va is not None and vb is not None:
+            if kept is not None:
+                look = PairLook(a, b, T, (kept[0], kept[1]), (kept[2], kept[3]),
+                                (int(kept[4]), int(kept[5])))  # fmt: skip
+            elif (va := self._view(a)) is not None and (vb := self._view(b)) is not None:
                 ab = _shares(va[0], va[2], vb[1], vb[2], T)
                 ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
                 look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
                 log.debug("map judge %s <- %s: %s", a, b, look.describe())
+                if stored is not None:
+                    self._kept_looks()[stored] = np.asarray([*look.explained,
+                        *look.conflicting, *look.samples], dtype=np.float64)  # fmt: skip
+                    self._new += 1
             self._memo[key] = look
         return self._memo[key]
+
+    def _stored_key(self, a: str, b: str, pose: bytes) -> str | None:
+        """A look's name among the kept ones: both stations' cache keys and the pose."""
+        if a not in self.files or b not in self.files:
+            return None
+        ka, kb = (os.path.basename(self.files[s]).removesuffix(PREPARED_SUFFIX) for s in (a, b))
+        return f"{ka}|{kb}|{pose.hex()}"
 
     def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, float] | None:
         """How much ``a`` and ``b`` contradict each other at ``T_a_b`` (see
@@ -397,6 +469,7 @@ def plan_looks(
 
 
 __all__ = [
+    "LOOK_FORMAT",
     "PairJudge",
     "PairLook",
     "assemble",

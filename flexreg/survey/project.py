@@ -1,13 +1,11 @@
 """:func:`run_survey`: a whole project of stations, from scan files to poses.
 
 Prepare every station once (cached), choose the candidate links, register them on Dask, solve
-the graph, try the pairs the first solution suggests (stations whose solved positions are
-close, unplaced stations' next candidates), optionally refine jointly, and return a
-:class:`SurveyResult` whose :meth:`~SurveyResult.to_dict` is poses.json.
+the graph, try the pairs the first solution suggests (close solved positions, unplaced
+stations' next candidates), refine jointly, and return a :class:`SurveyResult` (poses.json).
 
-The surveyor may name pairs (a CSV: exactly these, or added to the automatic candidates) and
-give links by hand with their ``T_target_source`` (:func:`~flexreg.survey.pairs.hand_links`):
-each is registered like any other link, seeded with the given pose.
+The surveyor may name pairs (a CSV: exactly these, or added to the automatic ones) and give
+links by hand (:func:`~flexreg.survey.pairs.hand_links`), registered seeded with their pose.
 """
 
 from __future__ import annotations
@@ -602,6 +600,8 @@ def run_survey(
                 progress,
             )
             timings["map_check"] = time.perf_counter() - t
+        if judge is not None:
+            judge.keep()  # the map's looks, for a re-run
         adjustment = _final_alignment(client, sol, (found, looks), files, config, progress, timings)
     sol = _with_unreadable(sol, stations, prepared)
     log.info("survey: %d of %d stations placed", len(sol.groups[0]), len(stations))

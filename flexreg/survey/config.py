@@ -101,7 +101,7 @@ class SurveyConfig(Config):
         sub-millimetre pairs on indoor scans).
     refine_iterations : int
         Most rounds of cloud-to-cloud fits + pose-graph adjustment, in [1, 10]; it stops
-        earlier once no station moves by 0.1 mm / 0.001 degrees.
+        earlier once no pair needs measuring again (none moved by its fit's kernel width).
     tolerance_mm : float, millimetres
         A placed station whose 95 % error (position, or rotation at its median range)
         exceeds this, or at which a pair disagrees with the adjusted poses by more, is

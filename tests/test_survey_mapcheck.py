@@ -186,6 +186,17 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
         look.explained, look.conflicting, look.samples)  # fmt: skip
     assert later("station_00", "station_01", moved) == judge("station_00", "station_01", moved)
     assert later._views == {}  # nothing was scored again
+    other = make_transform(np.eye(3), [0.0, 0.0, 0.5]) @ T  # a new placement: kept alone
+    assert later.look("station_00", "station_01", other) is not None
+    later.keep()
+    with np.load(later.kept_path()) as z:
+        assert len(z["keys"]) == 3  # the two it recalled and the new one
+    last = PairJudge(files, glances, cfg)
+    last.look("station_00", "station_01", other)
+    last._new = 1  # as if it had scored something: only what it asked for is kept
+    last.keep()
+    with np.load(last.kept_path()) as z:
+        assert len(z["keys"]) == 1
     with open(later.kept_path(), "wb") as f:  # damaged: scored again, with a warning
         f.write(b"not looks")
     third = PairJudge(files, glances, cfg)

@@ -288,6 +288,7 @@ class PairJudge:
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
         self._kept: dict[str, NDArray[np.float64]] | None = None  # read on first use
         self._new = 0
+        self._used: set[str] = set()  # the kept looks this run asked for
 
     def kept_path(self) -> str | None:
         """Where the looks are kept: beside the prepared stations (None without any)."""
@@ -314,13 +315,14 @@ class PairJudge:
         return self._kept
 
     def keep(self) -> None:
-        """Write the looks for later runs (when any is new; a cache that cannot be written
-        is only a warning)."""
+        """Write the looks this run asked for, for later runs (when any is new: those of
+        placements no longer asked are dropped, so the file does not grow run after run; a
+        cache that cannot be written is only a warning)."""
         path = self.kept_path()
         if path is None or not self._new:
             return
         kept = self._kept_looks()
-        keys = sorted(kept)
+        keys = sorted(self._used & kept.keys())
         tmp = f"{path}.{os.getpid()}.tmp.npz"
         try:
             values = np.asarray([kept[k] for k in keys], dtype=np.float64).reshape(-1, 6)
@@ -368,6 +370,8 @@ class PairJudge:
         if key not in self._memo:
             stored = self._stored_key(a, b, key[2])
             kept = self._kept_looks().get(stored) if stored is not None else None
+            if stored is not None:
+                self._used.add(stored)
             look = None
             if kept is not None:
                 look = PairLook(a, b, T, (kept[0], kept[1]), (kept[2], kept[3]),

@@ -35,13 +35,20 @@ from __future__ import annotations
 import logging
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.stages.normals import grid_normals, masked_xyz
-from flexreg.survey.stations import PREPARED_SUFFIX, load_prepared
+from flexreg.survey.stations import (
+    PREPARED_SUFFIX,
+    CacheEntryError,
+    load_prepared,
+    read_entry,
+    write_entry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -484,6 +491,8 @@ def fit_pair(
 
 #: bumped when :func:`fit_pair`'s results change: fits kept by older code are measured again
 FIT_FORMAT = 1
+#: the cache entry kind of a kept fit
+FIT_KIND = "pair-fit"
 
 
 def fit_cache_path(target_cloud: str, source_cloud: str) -> str:
@@ -495,18 +504,23 @@ def fit_cache_path(target_cloud: str, source_cloud: str) -> str:
 
 
 def save_fit(path: str, start: NDArray[np.float64], fit: PairFit) -> None:
-    """Keep a pair's fit and the relative pose it started from (written whole or not at all;
-    a cache that cannot be written is only a warning: the next run measures the pair again)."""
+    """Keep a pair's fit and the relative pose it started from (a cache entry,
+    :func:`~flexreg.survey.stations.write_entry`: written whole or not at all, its digest
+    checked on reading; a cache that cannot be written is only a warning: the next run
+    measures the pair again)."""
     f = fit.figures
     figures = [np.nan if f.rms_mm is None else f.rms_mm, f.within_6mm, f.within_1cm, f.overlap,
                f.balance, f.points, f.source_points]  # fmt: skip
-    tmp = f"{path}.{os.getpid()}.tmp.npz"
+    arrays = {
+        "start": np.asarray(start, dtype=np.float64),
+        "T": np.asarray(fit.T_target_source, dtype=np.float64),
+        "information": np.asarray(fit.information, dtype=np.float64),
+        "sigma_m": np.asarray(fit.sigma_m, dtype=np.float64),
+        "figures": np.asarray(figures, dtype=np.float64),
+    }
     try:
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        np.savez(tmp, start=np.asarray(start, dtype=np.float64), T=fit.T_target_source,
-                 information=fit.information, sigma_m=np.float64(fit.sigma_m),
-                 figures=np.asarray(figures, dtype=np.float64))  # fmt: skip
-        os.replace(tmp, path)
+        write_entry(Path(path), FIT_KIND, arrays, {"format": FIT_FORMAT})
     except OSError as e:
         log.warning("%s: cannot keep the pair's fit (%s)", path, e.strerror or e)
 
@@ -517,13 +531,13 @@ def load_fit(path: str) -> tuple[NDArray[np.float64], PairFit] | None:
     if not os.path.isfile(path):
         return None
     try:
-        with np.load(path, allow_pickle=False) as z:
-            start, T, info = z["start"], z["T"], z["information"]
-            sigma, fig = float(z["sigma_m"]), z["figures"]
+        _, z = read_entry(path, FIT_KIND)
+        start, T, info = z["start"], z["T"], z["information"]
+        sigma, fig = float(z["sigma_m"]), z["figures"]
         ok = start.shape == T.shape == (4, 4) and info.shape == (6, 6) and fig.shape == (7,)
         if not ok or not (np.isfinite(start).all() and np.isfinite(T).all() and sigma > 0):
-            raise ValueError("unexpected arrays")
-    except (OSError, ValueError, KeyError) as e:
+            raise CacheEntryError("unexpected arrays")
+    except (CacheEntryError, KeyError, TypeError) as e:
         log.warning("%s: unusable kept fit (%s); measuring the pair again", path, e)
         return None
     rms = None if np.isnan(fig[0]) else float(fig[0])

@@ -70,6 +70,8 @@ JUDGE_VIEW_BYTES = 256 * 2**20
 #: bumped when a look's scores change (the dense check's tests, the glances): looks kept by
 #: older code are scored again
 LOOK_FORMAT = 1
+#: the cache entry kind of the kept looks
+LOOKS_KIND = "map-looks"
 
 
 @dataclass(eq=False)
@@ -305,12 +307,12 @@ class PairJudge:
             path = self.kept_path()
             if path is not None and os.path.isfile(path):
                 try:
-                    with np.load(path, allow_pickle=False) as z:
-                        keys, values = z["keys"], z["values"]
+                    _, z = read_entry(path, LOOKS_KIND)
+                    keys, values = z["keys"], z["values"]
                     if values.shape != (len(keys), 6) or not np.isfinite(values).all():
-                        raise ValueError("unexpected arrays")
+                        raise CacheEntryError("unexpected arrays")
                     self._kept = {str(k): v for k, v in zip(keys, values, strict=True)}
-                except (OSError, ValueError, KeyError) as e:
+                except (CacheEntryError, KeyError) as e:
                     log.warning("%s: unusable kept looks (%s); scoring them again", path, e)
         return self._kept
 
@@ -323,11 +325,10 @@ class PairJudge:
             return
         kept = self._kept_looks()
         keys = sorted(self._used & kept.keys())
-        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        values = np.asarray([kept[k] for k in keys], dtype=np.float64).reshape(-1, 6)
+        arrays = {"keys": np.asarray(keys, dtype=str), "values": values}
         try:
-            values = np.asarray([kept[k] for k in keys], dtype=np.float64).reshape(-1, 6)
-            np.savez(tmp, keys=np.asarray(keys, dtype=str), values=values)
-            os.replace(tmp, path)
+            write_entry(Path(path), LOOKS_KIND, arrays, {"format": LOOK_FORMAT})
             self._new = 0
         except OSError as e:
             log.warning("%s: cannot keep the map's looks (%s)", path, e.strerror or e)

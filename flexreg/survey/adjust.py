@@ -366,7 +366,8 @@ def _measure(
     how many were measured."""
     t0 = time.perf_counter()
     done = [0]
-    todo = [p for p in pairs if _moved(p, poses, median_range(clouds[p.source]))]
+    levers = {s: median_range(clouds[s]) for s in {p.source for p in pairs}}
+    todo = [p for p in pairs if _moved(p, poses, levers[p.source])]
 
     def report(_: int, __: Any) -> None:
         done[0] += 1

@@ -286,13 +286,6 @@ def single_link(stem: str, ref: str, links: list[Link]) -> str:
     return f"confident links that no loop checks fix it, one after the other ({what})"
 
 
-def _partner(e: Link | None, members: set[str]) -> str:
-    """The station of link ``e`` outside ``members``."""
-    if e is None:
-        return "STATION"
-    return e.source if e.target in members else e.target
-
-
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
     """Why a station is not placed, and the one thing that would place it."""
     members = set(group)
@@ -327,7 +320,9 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         + ")"
     )
     many = max((e for e in toward if e.usable), key=lambda e: len(e.alternatives), default=None)
-    n = 1 + len(many.alternatives) if many is not None else 1
+    n, alias = 1, other
+    if many is not None:  # the link that fits most poses, and its station outside the group
+        n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()
     said = next((e.undecided for e in toward if e.undecided), "")
     if said:
         return f"{what}; the rough positions cannot place it ({said}): {hand}"
@@ -339,7 +334,7 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         )
     if n > 1:
         return (
-            f"{what}; its link with {_partner(many, members)} fits {n} poses (look-alike "
+            f"{what}; its link with {alias} fits {n} poses (look-alike "
             f"rooms or bays): rough positions of both (--positions) would pick one, or {hand}"
         )
     return (

@@ -40,7 +40,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-from dataclasses import dataclass, replace
+from dataclasses import astuple, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -202,11 +202,6 @@ def _read_glance_entry(
         raise CacheEntryError(f"not a station sample ({e})") from None
 
 
-def _kernel_tolerances() -> tuple[float, ...]:
-    """The dense check's tolerances a look's scores follow (what names the kept looks)."""
-    return (float(TOLERANCE.fine_rel), float(TOLERANCE.free_k), float(TOLERANCE.free_rel))
-
-
 def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
     try:
         return _read_glance_entry(path, None)
@@ -296,7 +291,7 @@ class PairJudge:
         """Where the looks are kept: beside the prepared stations (None without any)."""
         if not self.files:
             return None
-        tol = np.asarray(_kernel_tolerances(), dtype="<f8").tobytes()
+        tol = np.asarray(astuple(TOLERANCE), dtype="<f8").tobytes()  # what scores follow
         tag = hashlib.sha256(tol).hexdigest()[:8]
         folder = os.path.dirname(next(iter(sorted(self.files.values()))))
         return os.path.join(folder, f"looks-{tag}.v{LOOK_FORMAT}.npz")

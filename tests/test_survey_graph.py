@@ -15,8 +15,11 @@ from flexreg.core.transforms import (
 from flexreg.errors import InputError
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.graph import Link, solve_graph
+from flexreg.survey.links import Alternative
 from flexreg.survey.pairs import (
     auto_pairs,
+    hypothesis_pairs,
+    later_pairs,
     place_score,
     read_pairs_csv,
     sequential_order,
@@ -470,3 +473,60 @@ def test_a_separate_group_no_loop_checks_is_not_posed():
         [*tri, *(_link(P, a, b) for a, b in (("s06", "s07"), ("s07", "s08"), ("s06", "s08")))],
     )
     assert sorted(sol.groups[1]) == ["s06", "s07", "s08"]
+
+
+def _turned(x: float, y: float, yaw: float) -> np.ndarray:
+    return make_transform(rotation_about_axis([0, 0, 1], yaw), [x, y, 0.0])
+
+
+def _hypothesis_project():
+    """Three stations placed in a row 10 m apart (a0, a1, a2) and one more (b) that a link
+    from a1 places 7 m beside a1 (right) or, as its runner-up, one 10 m bay along (beside a2)."""
+    P = {
+        "a0": _turned(0, 0, 0.3),
+        "a1": _turned(10, 0, -1.0),
+        "a2": _turned(20, 0, 2.0),
+        "b": _turned(10, 7, 0.7),
+    }
+    links = [_link(P, "a0", "a1"), _link(P, "a1", "a2"), _link(P, "a0", "a2")]
+    bay = invert(P["a1"]) @ _turned(20, 7, 0.7)
+    hop = _link(P, "a1", "b", "uncertain")
+    hop.alternatives = [Alternative(bay, "runner_up", 0.95)]
+    sol = solve_graph(sorted(P), [*links, hop], SurveyConfig())
+    return P, [*links, hop], sol
+
+
+def test_each_hypothesis_brings_the_pair_that_would_test_it():
+    P, links, sol = _hypothesis_project()
+    assert sol.group_of("b") != sol.group_of("a0")  # the uncertain link alone places nothing
+    order = {s: i for i, s in enumerate(sorted(P))}
+    tried = {frozenset((e.target, e.source)) for e in links}
+    # the answer puts b 12.2 m from a0 and from a2 (a0 first in file order); the runner-up
+    # puts it 7 m from a2: each pose's nearest untried pair, nearest first
+    got = hypothesis_pairs(sol, links, tried, 15.0, order)
+    assert got == [("a2", "b"), ("a0", "b")]
+    assert hypothesis_pairs(sol, links, tried, 10.0, order) == [("a2", "b")]
+    assert hypothesis_pairs(sol, links, tried | {frozenset(("a2", "b"))}, 15.0, order) == [
+        ("a0", "b")
+    ]
+    links[-1].verdict = None  # a failed registration's pose is no hypothesis
+    assert hypothesis_pairs(sol, links, tried, 15.0, order) == []
+
+
+def test_later_pairs_try_loops_then_hypotheses_then_place_partners():
+    P, links, sol = _hypothesis_project()
+    stems = sorted(P)
+    tried = {frozenset((e.target, e.source)) for e in links}
+    scores = {frozenset(("a0", "b")): 9, frozenset(("a1", "b")): 12}
+    got = later_pairs(
+        stems, sol, links, tried, scores, reach_m=15.0, place_candidates=3, budget=10
+    )
+    assert [(c.target, c.source, c.origin) for c in got] == [
+        ("a2", "b", "proximity"),
+        ("a0", "b", "proximity"),
+    ]
+    assert got[1].place_score == 9.0
+    short = later_pairs(
+        stems, sol, links, tried, scores, reach_m=15.0, place_candidates=3, budget=1
+    )
+    assert [c.key for c in short] == [frozenset(("a2", "b"))]

@@ -71,11 +71,14 @@ class SurveyConfig(Config):
         Cap of attempted links, times the number of stations (``auto``).
     proximity_rounds : int
         Extra rounds (``auto``): after a first graph, stations whose solved positions lie
-        within ``proximity_m`` are linked when not yet tried (closes loops), and unplaced
-        stations try their next place-recognition candidates.
+        within ``proximity_m`` are linked when not yet tried (closes loops), then the
+        pairs each pose of a link between two groups brings within ``proximity_m`` (the
+        loops that would test it), then unplaced stations' next place-recognition
+        candidates.
     proximity_m : float, metres
-        Distance between solved station positions under which a pair is tried in a proximity
-        round, and between rough positions (``--positions``) under which a pair is linked.
+        Distance between solved (or hypothesised) station positions under which a pair is
+        tried in a proximity round, and between rough positions (``--positions``) under
+        which a pair is linked.
     loop_max_deg : float, degrees
         A link that disagrees by more than this with the cycle it closes is rejected.
     loop_max_m : float, metres

@@ -15,8 +15,9 @@ station overlaps only its few neighbours. The candidates come from two cheap cue
   Each station's best ``place_candidates`` partners are tried.
 
 The total is capped at ``max_links_per_station * N``; the file-order links come first, then
-the place-recognition links by score. Later rounds (:mod:`flexreg.survey.project`) add pairs
-whose solved positions are close.
+the place-recognition links by score. Later rounds (:func:`later_pairs`) add pairs whose
+solved positions are close, then the pairs that would test each pose a link between two groups
+may have (:func:`hypothesis_pairs`), then unplaced stations' next place partners.
 
 A surveyor can add pairs (a CSV, :func:`read_pairs_csv`) and links given by hand with their
 ``T_target_source`` (:func:`hand_links`, e.g. from ``flexreg register --init`` or a point-pair
@@ -38,10 +39,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexreg.core.transforms import as_transform
+from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import InputError
 from flexreg.io.transform_io import read_pair_transform
 from flexreg.stages.alignment import consistent_subset
+from flexreg.survey.links import GraphSolution, Link
 from flexreg.survey.stations import GlobalDescriptor
 
 #: Lowe's ratio of the place-recognition matches
@@ -345,3 +347,96 @@ __all__ = [
     "sequential_pairs",
     "station_stem",
 ]
+
+
+def later_pairs(
+    stems: list[str],
+    sol: GraphSolution,
+    links: Sequence[Link],
+    tried: set[frozenset[str]],
+    scores: dict[frozenset[str], int],
+    *,
+    reach_m: float,
+    place_candidates: int,
+    budget: int,
+) -> list[Candidate]:
+    """The pairs a solution suggests, at most ``budget``: stations of one group whose solved
+    positions are within ``reach_m`` (loops), then the pairs each hypothesis of a link
+    between two groups brings within ``reach_m`` (:func:`hypothesis_pairs`: the loops that
+    would test it), then each unplaced station's next place-recognition partners."""
+    order = {s: i for i, s in enumerate(stems)}
+    near: list[tuple[float, str, str]] = []
+    for g in sol.groups:
+        for i, a in enumerate(g):
+            for b in g[i + 1 :]:
+                if frozenset((a, b)) in tried or a not in sol.poses or b not in sol.poses:
+                    continue
+                d = float(np.linalg.norm(sol.poses[a][:3, 3] - sol.poses[b][:3, 3]))
+                if d <= reach_m:
+                    near.append((d, a, b))
+    near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
+    out = [Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b)) for _, a, b in near]
+    out += [
+        Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b))
+        for a, b in hypothesis_pairs(sol, links, tried, reach_m, order)
+    ]
+    unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
+    for s in unplaced:
+        extra = [
+            (o, sc)
+            for o, sc in ranked_partners(s, stems, scores)
+            if frozenset((s, o)) not in tried and sc > 0
+        ][:place_candidates]
+        out += [Candidate(*_ordered(s, o, order), "place", float(sc)) for o, sc in extra]
+    seen: set[frozenset[str]] = set()
+    unique = []
+    for c in out:
+        if c.key not in seen:
+            seen.add(c.key)
+            unique.append(c)
+    return unique[: max(0, budget)]
+
+
+def hypothesis_pairs(
+    sol: GraphSolution,
+    links: Sequence[Link],
+    tried: set[frozenset[str]],
+    reach_m: float,
+    order: dict[str, int],
+) -> list[tuple[str, str]]:
+    """For each pose a registered link between two groups may have (its answer and its
+    alternatives), the untried pair of stations, one of each group, that pose brings nearest
+    (within ``reach_m``): the link that would close a loop through the hypothesis and so
+    confirm or refute it. Pairs by distance, nearest first; each once."""
+    group = {s: i for i, g in enumerate(sol.groups) for s in g}
+    eye = np.eye(4)
+    found: dict[frozenset[str], tuple[float, int, int, str, str]] = {}
+    for e in links:
+        if e.T_target_source is None or e.verdict is None:
+            continue
+        gt, gs = group.get(e.target), group.get(e.source)
+        if gt is None or gs is None or gt == gs:
+            continue
+        at = {a: sol.poses.get(a, eye)[:3, 3] for a in sol.groups[gt]}
+        ps = sol.poses.get(e.source, eye)
+        for T in [e.T_target_source, *(x.T_target_source for x in e.alternatives)]:
+            X = sol.poses.get(e.target, eye) @ T @ invert(ps)  # T_grouptarget_groupsource
+            best = None
+            for b in sol.groups[gs]:
+                pb = X[:3, :3] @ sol.poses.get(b, eye)[:3, 3] + X[:3, 3]
+                for a, pa in at.items():
+                    if frozenset((a, b)) in tried:
+                        continue
+                    d = float(np.linalg.norm(pa - pb))
+                    if d <= reach_m and (best is None or d < best[0]):
+                        best = (d, order[a], order[b], a, b)
+            if best is not None:
+                k = frozenset(best[3:])
+                if k not in found or best < found[k]:
+                    found[k] = best
+    return [(a, b) for *_, a, b in sorted(found.values())]
+
+
+def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
+    v = scores.get(frozenset((a, b)))
+    return None if v is None else float(v)

@@ -52,9 +52,9 @@ from flexreg.survey.pairs import (
     all_pairs,
     auto_pairs,
     hand_links,
+    later_pairs,
     merge_candidates,
     place_scores,
-    ranked_partners,
     read_pairs_csv,
     sequential_pairs,
 )
@@ -307,55 +307,6 @@ def _automatic(
         max_links=max_links,
     )
     return cands, scores
-
-
-def _more_candidates(
-    stems: list[str],
-    sol: GraphSolution,
-    tried: set[frozenset[str]],
-    scores: dict[frozenset[str], int],
-    config: SurveyConfig,
-    budget: int,
-) -> list[Candidate]:
-    """Pairs the solution suggests: close solved positions in one group (loops), then each
-    unplaced station's next place-recognition partners."""
-    order = {s: i for i, s in enumerate(stems)}
-    near: list[tuple[float, str, str]] = []
-    for g in sol.groups:
-        for i, a in enumerate(g):
-            for b in g[i + 1 :]:
-                if frozenset((a, b)) in tried or a not in sol.poses or b not in sol.poses:
-                    continue
-                d = float(np.linalg.norm(sol.poses[a][:3, 3] - sol.poses[b][:3, 3]))
-                if d <= config.proximity_m:
-                    near.append((d, a, b))
-    near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
-    out = []
-    for _, a, b in near:
-        t, src = sorted((a, b), key=order.__getitem__)
-        out.append(Candidate(t, src, "proximity", _score(scores, t, src)))
-    unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
-    for s in unplaced:
-        extra = [
-            (o, sc)
-            for o, sc in ranked_partners(s, stems, scores)
-            if frozenset((s, o)) not in tried and sc > 0
-        ][: config.place_candidates]
-        for o, sc in extra:
-            t, src = sorted((s, o), key=order.__getitem__)
-            out.append(Candidate(t, src, "place", float(sc)))
-    seen: set[frozenset[str]] = set()
-    unique = []
-    for c in out:
-        if c.key not in seen:
-            seen.add(c.key)
-            unique.append(c)
-    return unique[:budget]
-
-
-def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
-    v = scores.get(frozenset((a, b)))
-    return None if v is None else float(v)
 
 
 def _register(
@@ -658,7 +609,16 @@ def _link_rounds(
     auto = given.automatic and config.pairs == "auto"
     for _ in range(config.proximity_rounds if auto else 0):
         tried = {frozenset((e.target, e.source)) for e in found}
-        more = _more_candidates(stems, sol, tried, scores, config, max_links - len(found))
+        more = later_pairs(
+            stems,
+            sol,
+            found,
+            tried,
+            scores,
+            reach_m=config.proximity_m,
+            place_candidates=config.place_candidates,
+            budget=max_links - len(found),
+        )
         if not more:
             break
         found += _register(client, more, files, config, progress, stored)

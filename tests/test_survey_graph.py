@@ -518,9 +518,7 @@ def test_later_pairs_try_loops_then_hypotheses_then_place_partners():
     stems = sorted(P)
     tried = {frozenset((e.target, e.source)) for e in links}
     scores = {frozenset(("a0", "b")): 9, frozenset(("a1", "b")): 12}
-    got = later_pairs(
-        stems, sol, links, tried, scores, reach_m=15.0, place_candidates=3, budget=10
-    )
+    got = later_pairs(stems, sol, links, tried, scores, reach_m=15.0, place_candidates=3, budget=10)
     assert [(c.target, c.source, c.origin) for c in got] == [
         ("a2", "b", "proximity"),
         ("a0", "b", "proximity"),

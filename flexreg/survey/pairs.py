@@ -17,7 +17,7 @@ station overlaps only its few neighbours. The candidates come from two cheap cue
 The total is capped at ``max_links_per_station * N``; the file-order links come first, then
 the place-recognition links by score. Later rounds (:func:`later_pairs`) add pairs whose
 solved positions are close, then the pairs that would test each pose a link between two groups
-may have (:func:`hypothesis_pairs`), then unplaced stations' next place partners.
+may have (:func:`hypothesis_pairs`), then each unplaced station's next place partner.
 
 A surveyor can add pairs (a CSV, :func:`read_pairs_csv`) and links given by hand with their
 ``T_target_source`` (:func:`hand_links`, e.g. from ``flexreg register --init`` or a point-pair

@@ -616,7 +616,7 @@ def _link_rounds(
             tried,
             scores,
             reach_m=config.proximity_m,
-            place_candidates=config.place_candidates,
+            place_candidates=1,  # one per round: the budget left to the next round's loops
             budget=max_links - len(found),
         )
         if not more:

@@ -305,6 +305,25 @@ def test_a_pose_rough_positions_picked_confirms_a_windowed_link_around_a_loop():
     assert "s3" not in sol.groups[0]
 
 
+def test_a_loop_of_windowed_links_outranks_a_lone_confident_link_a_bay_off():
+    """s3 placed by two links confident inside rough positions' windows that agree around
+    the loop (right), and by one confident on its own but a bay (6 m) off: the placement the
+    loop confirms wins, however many lone trusted answers the other has (the held-out
+    warehouse 6007 with rough positions placed five stations a bay off the other way); the
+    bay-off link is rejected with its loop error."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    loop = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3")]
+    bay = _link(P, "s0", "s3", T=_moved(P, "s0", "s3", [6.0, 0, 0]))
+    sol = solve_graph(sorted(P), [*base, *loop, bay], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in loop)
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert bay.status == "rejected"
+    # the lone confident link alone still places it, unchecked
+    sol = solve_graph(sorted(P), [*base, bay], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0]
+
+
 def test_a_block_hanging_from_one_link_is_single_and_the_frame_is_the_largest_block():
     """Two blocks that loops of confident links hold together (a triangle s0-s2, a square
     with a diagonal s3-s6) joined by one confident link s2-s3: it closes no loop, so one

@@ -18,8 +18,10 @@ of stations, the way PCM merges the maps of several robots.
 2. **Merges** (:func:`merge_groups`). Starting from single stations, the hypotheses of the
    links between two groups form consistent sets: two are consistent when the cycle they
    close through the groups' own poses meets (PCM's test, the groups' poses in the role of
-   odometry). Sets rank by trusted answers, their firm votes, links, all votes, the
-   surveyor's word, then weight. The best set of the whole project merges its groups when a
+   odometry). Sets rank by whether a loop of confident answers confirms them (below), then
+   by trusted answers, their firm votes, links, all votes, the surveyor's word and weight:
+   a placement two registrations confirm around a loop outranks one that a lone trusted
+   answer gives. The best set of the whole project merges its groups when a
    loop of confident answers confirms it (two of them in it, trusted or confident inside
    rough positions' windows, or one and an uncertain link's pose the positions picked, or a
    firm vote of a link's answer: a twin or runner-up closing a cycle is no independent
@@ -424,6 +426,15 @@ class _Set:
         )
 
     @property
+    def standing(self) -> tuple[bool, int, int, int, int, int]:
+        """Whether a loop of confident answers confirms it, then its rank without the
+        weight: a placement two registrations confirm around a loop outranks one a lone
+        trusted answer gives, however many (a bay-off answer confident on its own against
+        two confident inside rough positions' windows that agree, on a warehouse)."""
+        r = self.rank
+        return (self.firmly_confirmed, r[0], r[1], r[2], r[3], r[4])
+
+    @property
     def misfit(self) -> float:
         """Mean cycle misfit of its voted members (0 without votes)."""
         votes = sum(h.votes for h in self.members)
@@ -483,7 +494,7 @@ def _sets(
                 if id(h.link) not in best or score < best[id(h.link)][0]:
                     best[id(h.link)] = (score, h)
         out.append(_Set(c, X, [h for _, h in best.values()]))
-    out.sort(key=lambda s: s.rank, reverse=True)
+    out.sort(key=lambda s: (s.standing, s.rank[5]), reverse=True)
     return out
 
 
@@ -587,8 +598,8 @@ def _decide(
     rival = _rival(sets, top, place, g2, tol)
     clear = (
         rival is None
-        or top.rank[:5] > rival.rank[:5]
-        or (top.rank[:5] == rival.rank[:5] and rival.rank[5] < rival_ratio * top.rank[5])
+        or top.standing > rival.standing
+        or (top.standing == rival.standing and rival.rank[5] < rival_ratio * top.rank[5])
     )
     if clear and top.firmly_confirmed:
         return _Pick(top, "loop")

@@ -411,26 +411,26 @@ def hypothesis_pairs(
     group = {s: i for i, g in enumerate(sol.groups) for s in g}
     eye = np.eye(4)
     found: dict[frozenset[str], tuple[float, int, int, str, str]] = {}
+    free: dict[tuple[int, int], NDArray[np.bool_]] = {}  # untried pairs per pair of groups
     for e in links:
         if e.T_target_source is None or e.verdict is None:
             continue
         gt, gs = group.get(e.target), group.get(e.source)
         if gt is None or gs is None or gt == gs:
             continue
-        at = {a: sol.poses.get(a, eye)[:3, 3] for a in sol.groups[gt]}
-        ps = sol.poses.get(e.source, eye)
+        A, B = sol.groups[gt], sol.groups[gs]
+        if (gt, gs) not in free:
+            free[gt, gs] = np.array([[frozenset((a, b)) not in tried for b in B] for a in A])
+        pa = np.array([sol.poses.get(a, eye)[:3, 3] for a in A])
+        pb = np.array([sol.poses.get(b, eye)[:3, 3] for b in B])
+        ps = invert(sol.poses.get(e.source, eye))
         for T in [e.T_target_source, *(x.T_target_source for x in e.alternatives)]:
-            X = sol.poses.get(e.target, eye) @ T @ invert(ps)  # T_grouptarget_groupsource
-            best = None
-            for b in sol.groups[gs]:
-                pb = X[:3, :3] @ sol.poses.get(b, eye)[:3, 3] + X[:3, 3]
-                for a, pa in at.items():
-                    if frozenset((a, b)) in tried:
-                        continue
-                    d = float(np.linalg.norm(pa - pb))
-                    if d <= reach_m and (best is None or d < best[0]):
-                        best = (d, order[a], order[b], a, b)
-            if best is not None:
+            X = sol.poses.get(e.target, eye) @ T @ ps  # T_grouptarget_groupsource
+            d = np.linalg.norm(pa[:, None, :] - (pb @ X[:3, :3].T + X[:3, 3])[None], axis=2)
+            near = np.argwhere(free[gt, gs] & (d <= reach_m))
+            hits = [(float(d[i, j]), order[A[i]], order[B[j]], A[i], B[j]) for i, j in near]
+            if hits:
+                best = min(hits)
                 k = frozenset(best[3:])
                 if k not in found or best < found[k]:
                     found[k] = best

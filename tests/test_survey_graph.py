@@ -528,3 +528,27 @@ def test_later_pairs_try_loops_then_hypotheses_then_place_partners():
         stems, sol, links, tried, scores, reach_m=15.0, place_candidates=3, budget=1
     )
     assert [c.key for c in short] == [frozenset(("a2", "b"))]
+
+
+def test_later_pairs_give_every_unplaced_station_its_next_partner_first():
+    P, links, _ = _hypothesis_project()
+    P["c"] = _turned(30, 7, 0.2)  # unplaced, no link yet
+    sol = solve_graph(sorted(P), links, SurveyConfig())
+    stems = sorted(P)
+    tried = {frozenset((e.target, e.source)) for e in links}
+    scores = {
+        frozenset(("a1", "c")): 6,
+        frozenset(("a0", "c")): 7,
+        frozenset(("a0", "b")): 9,
+        frozenset(("a2", "b")): 5,
+    }
+    kw = {"reach_m": 5.0, "place_candidates": 2}  # no pose of b's link brings a pair that near
+    got = later_pairs(stems, sol, links, tried, scores, budget=3, **kw)
+    # each unplaced station's best partner before any station's second
+    assert {(c.target, c.source) for c in got[:2]} == {("a0", "b"), ("a0", "c")}
+    assert len(got) == 3 and got[2].key in (frozenset(("a2", "b")), frozenset(("a1", "c")))
+    got = later_pairs(stems, sol, links, tried, scores, budget=10, **kw)
+    assert {c.key for c in got} == {
+        frozenset(p) for p in [("a0", "b"), ("a0", "c"), ("a2", "b"), ("a1", "c")]
+    }
+    assert all(c.origin == "place" for c in got)

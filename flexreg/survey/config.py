@@ -73,8 +73,8 @@ class SurveyConfig(Config):
         Extra rounds (``auto``): after a first graph, stations whose solved positions lie
         within ``proximity_m`` are linked when not yet tried (closes loops), then the
         pairs each pose of a link between two groups brings within ``proximity_m`` (the
-        loops that would test it), then each unplaced station's next place-recognition
-        partner (one per round).
+        loops that would test it), then unplaced stations' next place-recognition
+        candidates; each round takes at most its share of the link budget left.
     proximity_m : float, metres
         Distance between solved (or hypothesised) station positions under which a pair is
         tried in a proximity round, and between rough positions (``--positions``) under

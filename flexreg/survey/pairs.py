@@ -17,7 +17,7 @@ station overlaps only its few neighbours. The candidates come from two cheap cue
 The total is capped at ``max_links_per_station * N``; the file-order links come first, then
 the place-recognition links by score. Later rounds (:func:`later_pairs`) add pairs whose
 solved positions are close, then the pairs that would test each pose a link between two groups
-may have (:func:`hypothesis_pairs`), then each unplaced station's next place partner.
+may have (:func:`hypothesis_pairs`), then the unplaced stations' next place partners.
 
 A surveyor can add pairs (a CSV, :func:`read_pairs_csv`) and links given by hand with their
 ``T_target_source`` (:func:`hand_links`, e.g. from ``flexreg register --init`` or a point-pair
@@ -363,7 +363,9 @@ def later_pairs(
     """The pairs a solution suggests, at most ``budget``: stations of one group whose solved
     positions are within ``reach_m`` (loops), then the pairs each hypothesis of a link
     between two groups brings within ``reach_m`` (:func:`hypothesis_pairs`: the loops that
-    would test it), then each unplaced station's next place-recognition partners."""
+    would test it), then the unplaced stations' next ``place_candidates`` place-recognition
+    partners, every station's first before any station's second (a cut budget reaches every
+    station)."""
     order = {s: i for i, s in enumerate(stems)}
     near: list[tuple[float, str, str]] = []
     for g in sol.groups:
@@ -381,13 +383,20 @@ def later_pairs(
         for a, b in hypothesis_pairs(sol, links, tried, reach_m, order)
     ]
     unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
-    for s in unplaced:
-        extra = [
+    extra = [
+        [
             (o, sc)
             for o, sc in ranked_partners(s, stems, scores)
             if frozenset((s, o)) not in tried and sc > 0
         ][:place_candidates]
-        out += [Candidate(*_ordered(s, o, order), "place", float(sc)) for o, sc in extra]
+        for s in unplaced
+    ]
+    for k in range(place_candidates):  # every station's next partner, then the second...
+        out += [
+            Candidate(*_ordered(s, x[k][0], order), "place", float(x[k][1]))
+            for s, x in zip(unplaced, extra, strict=True)
+            if k < len(x)
+        ]
     seen: set[frozenset[str]] = set()
     unique = []
     for c in out:

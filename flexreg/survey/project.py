@@ -607,7 +607,8 @@ def _link_rounds(
     found = _positioned(client, found, stores, config, priors, progress, (stems, budget))
     sol = solve(found)
     auto = given.automatic and config.pairs == "auto"
-    for _ in range(config.proximity_rounds if auto else 0):
+    rounds = config.proximity_rounds if auto else 0
+    for r in range(rounds):
         tried = {frozenset((e.target, e.source)) for e in found}
         more = later_pairs(
             stems,
@@ -616,8 +617,10 @@ def _link_rounds(
             tried,
             scores,
             reach_m=config.proximity_m,
-            place_candidates=1,  # one per round: the budget left to the next round's loops
-            budget=max_links - len(found),
+            place_candidates=config.place_candidates,
+            # the budget left shared by the rounds left: a round's placements bring the
+            # next round's loops
+            budget=(max_links - len(found)) // (rounds - r),
         )
         if not more:
             break

@@ -331,24 +331,6 @@ def merge_candidates(
     return list(chosen.values())
 
 
-__all__ = [
-    "MIN_PLACE_MATCHES",
-    "Candidate",
-    "HandLink",
-    "all_pairs",
-    "auto_pairs",
-    "hand_links",
-    "merge_candidates",
-    "place_score",
-    "place_scores",
-    "ranked_partners",
-    "read_pairs_csv",
-    "sequential_order",
-    "sequential_pairs",
-    "station_stem",
-]
-
-
 def later_pairs(
     stems: list[str],
     sol: GraphSolution,
@@ -377,11 +359,8 @@ def later_pairs(
                 if d <= reach_m:
                     near.append((d, a, b))
     near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
-    out = [Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b)) for _, a, b in near]
-    out += [
-        Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b))
-        for a, b in hypothesis_pairs(sol, links, tried, reach_m, order)
-    ]
+    loops = [(a, b) for _, a, b in near] + hypothesis_pairs(sol, links, tried, reach_m, order)
+    out = [Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b)) for a, b in loops]
     unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
     extra = [
         [
@@ -421,6 +400,7 @@ def hypothesis_pairs(
     eye = np.eye(4)
     found: dict[frozenset[str], tuple[float, int, int, str, str]] = {}
     free: dict[tuple[int, int], NDArray[np.bool_]] = {}  # untried pairs per pair of groups
+    at: dict[int, NDArray[np.float64]] = {}  # station positions per group, in its frame
     for e in links:
         if e.T_target_source is None or e.verdict is None:
             continue
@@ -430,8 +410,10 @@ def hypothesis_pairs(
         A, B = sol.groups[gt], sol.groups[gs]
         if (gt, gs) not in free:
             free[gt, gs] = np.array([[frozenset((a, b)) not in tried for b in B] for a in A])
-        pa = np.array([sol.poses.get(a, eye)[:3, 3] for a in A])
-        pb = np.array([sol.poses.get(b, eye)[:3, 3] for b in B])
+        for g in (gt, gs):
+            if g not in at:
+                at[g] = np.array([sol.poses.get(x, eye)[:3, 3] for x in sol.groups[g]])
+        pa, pb = at[gt], at[gs]
         ps = invert(sol.poses.get(e.source, eye))
         for T in [e.T_target_source, *(x.T_target_source for x in e.alternatives)]:
             X = sol.poses.get(e.target, eye) @ T @ ps  # T_grouptarget_groupsource
@@ -449,3 +431,23 @@ def hypothesis_pairs(
 def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
     v = scores.get(frozenset((a, b)))
     return None if v is None else float(v)
+
+
+__all__ = [
+    "MIN_PLACE_MATCHES",
+    "Candidate",
+    "HandLink",
+    "all_pairs",
+    "auto_pairs",
+    "hand_links",
+    "hypothesis_pairs",
+    "later_pairs",
+    "merge_candidates",
+    "place_score",
+    "place_scores",
+    "ranked_partners",
+    "read_pairs_csv",
+    "sequential_order",
+    "sequential_pairs",
+    "station_stem",
+]

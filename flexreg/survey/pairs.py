@@ -400,7 +400,8 @@ def hypothesis_pairs(
     eye = np.eye(4)
     found: dict[frozenset[str], tuple[float, int, int, str, str]] = {}
     free: dict[tuple[int, int], NDArray[np.bool_]] = {}  # untried pairs per pair of groups
-    at: dict[int, NDArray[np.float64]] = {}  # station positions per group, in its frame
+    # station positions per group, in its frame
+    at = [np.array([sol.poses.get(x, eye)[:3, 3] for x in g]) for g in sol.groups]
     for e in links:
         if e.T_target_source is None or e.verdict is None:
             continue
@@ -410,9 +411,6 @@ def hypothesis_pairs(
         A, B = sol.groups[gt], sol.groups[gs]
         if (gt, gs) not in free:
             free[gt, gs] = np.array([[frozenset((a, b)) not in tried for b in B] for a in A])
-        for g in (gt, gs):
-            if g not in at:
-                at[g] = np.array([sol.poses.get(x, eye)[:3, 3] for x in sol.groups[g]])
         pa, pb = at[gt], at[gs]
         ps = invert(sol.poses.get(e.source, eye))
         for T in [e.T_target_source, *(x.T_target_source for x in e.alternatives)]:

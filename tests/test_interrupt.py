@@ -266,3 +266,66 @@ def test_survey_on_dask_workers_interrupted_is_one_line(tmp_path):
     check_one_line(rc, err, signal.SIGINT)
     left = [p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()]
     assert all(p.startswith("cache/") and ".partial" not in p for p in left), left
+
+
+class _Finaliser:
+    """A native object's finaliser that the Ctrl-C lands in: Python raises KeyboardInterrupt
+    inside ``__del__`` and only prints "Exception ignored" (the run the SIGINT test once met,
+    in llvmlite's ``ObjectRef.__del__``). ``signal.raise_signal`` runs the handler at once."""
+
+    def __del__(self) -> None:
+        signal.raise_signal(signal.SIGINT)
+
+
+@pytest.fixture()
+def cli_signals():
+    """The command line's handlers, as ``main()`` installs them; restored afterwards."""
+    from flexreg.cli import signals
+
+    old = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signals.install()
+    yield signals
+    signals.clear()
+    signal.signal(signal.SIGINT, old[0])
+    signal.signal(signal.SIGTERM, old[1])
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_swallowed_ctrl_c_still_ends_the_stage(cli_signals):
+    from flexreg.cli._common import stage
+
+    with pytest.raises(KeyboardInterrupt):
+        with stage("Working"):
+            _Finaliser()  # collected at once: its KeyboardInterrupt is printed and dropped
+            after = "reached"  # the stage's own code carried on past the signal
+    assert after == "reached"
+    assert cli_signals.signalled() == 0  # acted on once: the next command starts clean
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_swallowed_ctrl_c_writes_nothing(cli_signals, tmp_path, monkeypatch, capsys):
+    from conftest import REPO
+
+    import flexreg.io.info as info
+    from flexreg.cli import run
+
+    real = info.write_range_image
+
+    def write_then_collect(*args, **kwargs):
+        written = real(*args, **kwargs)
+        _Finaliser()
+        return written
+
+    monkeypatch.setattr(info, "write_range_image", write_then_collect)
+    out = tmp_path / "out" / "r.png"
+    src = REPO / "data" / "laserscan" / "laserscan-depth.png"
+    assert run(["project", str(src), "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert [ln for ln in err.splitlines() if ln.startswith("error:")] == [
+        "error: interrupted (Ctrl-C): nothing written, earlier results untouched"
+    ]
+    assert not out.parent.exists() or not any(out.parent.iterdir())
+    monkeypatch.undo()
+    assert run(["project", str(src), "--out", str(out)]) == 0  # the next command is unaffected
+    assert out.is_file()

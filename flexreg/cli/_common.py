@@ -61,8 +61,11 @@ def compile_notice(cache: Path) -> None:
 @contextmanager
 def stage(description: str) -> Iterator[None]:
     """Show a spinner with elapsed time while a stage runs (on stderr), then a done line; when
-    stderr is not a terminal, the done line only (never cut: it wraps softly)."""
+    stderr is not a terminal, the done line only (never cut: it wraps softly). A Ctrl-C or
+    SIGTERM whose first raise was swallowed (by a finaliser) ends the command here."""
     from rich.text import Text
+
+    from flexreg.cli.signals import raise_if_signalled
 
     t0 = time.perf_counter()
     if err_console.is_terminal:
@@ -77,6 +80,7 @@ def stage(description: str) -> Iterator[None]:
             yield
     else:
         yield
+    raise_if_signalled()
     done = Text.assemble(("✓", "green"), f" {description} ({time.perf_counter() - t0:.2f} s)")
     err_console.print(done, highlight=False, soft_wrap=True)
 

@@ -144,6 +144,7 @@ def run(argv: list[str] | None = None) -> int:
     The command runs inside :func:`flexreg.io.files.all_or_nothing`: its files are renamed into
     place together when it returns, and none is written (earlier results stay untouched) when
     it fails or is interrupted."""
+    from flexreg.cli.signals import Terminated, clear, raise_if_signalled
     from flexreg.io.files import all_or_nothing
 
     argv = hoist_root_flags(sys.argv[1:] if argv is None else [str(a) for a in argv])
@@ -152,16 +153,20 @@ def run(argv: list[str] | None = None) -> int:
             rv = app(args=argv, standalone_mode=False)
             if rv == 130:  # typer turns Ctrl-C into this status: discard the outputs
                 raise KeyboardInterrupt
+            raise_if_signalled()  # a signal whose first raise a finaliser swallowed
     except FlexregError as e:
         err_console.print(f"error: {e}", markup=False, highlight=False, soft_wrap=True)
         return 1
     except KeyboardInterrupt:
+        clear()
         _interrupted("interrupted (Ctrl-C)")
         return 130
     except _click_classes("Abort"):
+        clear()
         _interrupted("interrupted (Ctrl-C)")
         return 130
     except Terminated:
+        clear()
         _interrupted("terminated (SIGTERM)")
         return 143
     except _click_classes("ClickException") as e:
@@ -177,16 +182,6 @@ def _interrupted(what: str) -> None:
         highlight=False,
         soft_wrap=True,
     )
-
-
-class Terminated(BaseException):
-    """SIGTERM arrived: unwinds the command like Ctrl-C (a BaseException, so no ``except
-    Exception`` of the library swallows it)."""
-
-
-def _terminated(signum: int, frame: object) -> None:
-    """SIGTERM: unwind like Ctrl-C, so the command's temporary outputs are removed."""
-    raise Terminated(signum)
 
 
 #: glibc's ``M_MMAP_THRESHOLD`` (``mallopt``) and the size the command line sets it to, bytes
@@ -215,11 +210,13 @@ def _return_large_blocks() -> None:
 def main() -> None:
     """Console-script entry point. SIGTERM (a scheduler or ``kill``) ends the command like
     Ctrl-C: nothing it was writing is left behind; exit status 143 (130 for Ctrl-C), taken
-    without the interpreter's teardown once the command has unwound."""
-    import signal
+    without the interpreter's teardown once the command has unwound. Both signals are also
+    remembered (:mod:`flexreg.cli.signals`), so one whose first raise a finaliser swallowed
+    still ends the command before it writes anything."""
+    from flexreg.cli.signals import install
 
     _return_large_blocks()
-    signal.signal(signal.SIGTERM, _terminated)
+    install()
     status = run()
     if status in (130, 143):  # interrupted: its outputs are already discarded. Leave without
         sys.stdout.flush()  # the interpreter's teardown, which may meet a native thread pool

@@ -255,6 +255,9 @@ class _Bars:
         self.tasks: dict[str, Any] = {}
 
     def __call__(self, ev: ProgressEvent) -> None:
+        from flexreg.cli.signals import raise_if_signalled
+
+        raise_if_signalled()  # a Ctrl-C whose first raise a finaliser swallowed ends it here
         if ev.phase not in self.tasks or self.progress.tasks[self.tasks[ev.phase]].finished:
             self.tasks[ev.phase] = self.progress.add_task(
                 PHASES.get(ev.phase, ev.phase), total=0, counts=""

@@ -294,9 +294,10 @@ def test_an_independent_route_verifies(tmp_path) -> None:
 
 def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> None:
     """Round 2 fits again only a pair whose relative pose moved by its fit's kernel width
-    (TUKEY_C residual sigmas) or more since its fit started; one moved a fifth of it keeps
-    its fit, one turned by twice the kernel at the source's median range is fitted again,
-    and a round with nothing moved measures nothing, a pair left out included."""
+    (TUKEY_C residual sigmas) or more since its fit started (and from where it ended); one
+    moved a fifth of it keeps its fit, one turned by twice the kernel at the source's median
+    range is fitted again, and a round with nothing moved measures nothing, a pair left out
+    included."""
     from flexreg.survey import adjust as adj
     from flexreg.survey.config import SurveyConfig
 
@@ -326,6 +327,39 @@ def test_a_later_round_measures_only_the_pairs_the_solution_moved(tmp_path) -> N
     assert pairs[1].fit is not first[1]
     pairs[1].fit = None  # left out by the adjustment: measured again only once moved
     assert adj._measure(None, pairs, clouds, poses, config, None, 5) == 0
+
+
+def test_a_pair_the_solution_brought_to_its_fits_end_is_not_measured_again(tmp_path) -> None:
+    """A fit started 2 cm and 0.1° off (several kernels) ends at the pair's optimum; once the
+    solution holds the pair there (or where that fit started), ICP would end at the same
+    place: no later round measures it again; one that holds it away from both does."""
+    from flexreg.core.transforms import translation_error_m
+    from flexreg.survey import adjust as adj
+    from flexreg.survey.config import SurveyConfig
+
+    rng = np.random.default_rng(3)
+    A, B = _pose(10, 2, (3.0, 2.5, 1.5)), _pose(-25, 2, (7.0, 5.5, 1.6))
+    clouds = {
+        "a": _box_cloud(tmp_path / "a.npz", A, rng),
+        "b": _box_cloud(tmp_path / "b.npz", B, rng),
+    }
+    off = B @ _pose(0.1, 2, (0.015, -0.01, 0.005))
+    poses = {"a": A, "b": off}
+    pairs = [adj.Pair("a", "b", "link")]
+    config = SurveyConfig()
+    assert adj._measure(None, pairs, clouds, poses, config, None, 1) == 1
+    f = pairs[0].fit
+    assert f is not None and 0.015 > 2 * pairs[0].kernel_m  # started several kernels off
+    truth = np.linalg.inv(A) @ B
+    assert translation_error_m(f.T_target_source, truth) < 0.2 * pairs[0].kernel_m
+    poses["b"] = A @ f.T_target_source  # the adjustment agrees with the pair's fit
+    assert adj._measure(None, pairs, clouds, poses, config, None, 2) == 0
+    assert pairs[0].fit is f
+    poses["b"] = off  # back where the fit started: it would repeat that fit
+    assert adj._measure(None, pairs, clouds, poses, config, None, 3) == 0
+    poses["b"] = B @ _pose(-0.1, 2, (-0.015, 0.01, -0.005))  # away from both: measured again
+    assert adj._measure(None, pairs, clouds, poses, config, None, 4) == 1
+    assert pairs[0].fit is not f
 
 
 def test_a_later_run_recalls_the_kept_fits_and_measures_only_what_it_moved(tmp_path) -> None:

@@ -12,13 +12,14 @@ per pair with its information as a Gaussian model under a Huber kernel, the refe
 fixed) is optimised by Levenberg-Marquardt; a pair that still disagrees with the optimised
 poses by more than ``tolerance_mm`` is left out (worst first: the kernel bounds its pull, but
 it still pulls) and the graph optimised again; the pairs are measured again from the new poses
-(those the solution moved since their last fit by their fit's own kernel width or more,
+(those whose solved relative pose lies their fit's own kernel width or more,
 :data:`~flexreg.survey.c2c.TUKEY_C` residual sigmas, a turn counted at the source's median
-range), until no pair needs measuring again or ``refine_iterations`` rounds are done. ICP
-started well inside its kernel ends at the same optimum, so measuring such a pair again
-only repeats the measurement (on our 36-station warehouse the rounds after the first, each
-measuring every pair again, moved no station by more than 0.21 mm, against a 10 mm
-tolerance and 1-sigma accuracies of 0.5-1.4 mm). This is the usual two-step form of a multi-view
+range, both from where their last fit started and from where it ended), until no pair needs
+measuring again or ``refine_iterations`` rounds are done. ICP started inside its kernel of
+either ends where that fit ended, so measuring such a pair again only repeats the
+measurement (on our 36-station warehouse the rounds after the first, each measuring every
+pair again, moved no station by more than 0.21 mm, against a 10 mm tolerance and 1-sigma
+accuracies of 0.5-1.4 mm). This is the usual two-step form of a multi-view
 cloud-to-cloud adjustment (Open3D's multiway and the surveying tools' "cloud-to-cloud bundle"
 alike): the pose graph is the least-squares adjustment of every pair's point-to-plane fit,
 linearised at the pair's own optimum.
@@ -98,7 +99,8 @@ class Pair:
         No loop closes through it: its residual is zero by construction (``unchecked``).
     start : (4, 4) float64 or None
         The relative pose ``fit`` was started from: a later round measures the pair again
-        only when the solution has moved it by ``kernel_m`` or more (:func:`_moved`).
+        only when the solution holds it ``kernel_m`` or more both from there and from where
+        that fit ended (from ``start`` alone when it was left out; :func:`_moved`).
     kernel_m : float or None
         The kernel width of its last fit (:data:`~flexreg.survey.c2c.TUKEY_C` residual
         sigmas; that of a voxel-wide sigma when it could not be fitted), metres, kept when
@@ -430,15 +432,18 @@ def _recall(pairs: list[Pair], clouds: dict[str, str], config: SurveyConfig) -> 
 
 
 def _moved(p: Pair, poses: dict[str, Matrix], lever_m: float) -> bool:
-    """The pair was never measured, or the solution has moved its relative pose from where
-    its last fit started by that fit's kernel width or more (:attr:`Pair.kernel_m`; a turn at
-    ``lever_m``, the source's median range). ICP started well inside the kernel ends at the
-    same optimum: its first stages bring it there to a hundredth of their kernel wherever it
-    starts, and the last runs to convergence. A pair left out stays out until then."""
+    """The pair was never measured, or the solution holds its relative pose ``kernel_m`` or
+    more (:attr:`Pair.kernel_m`; a turn at ``lever_m``, the source's median range) both from
+    where its last fit started and from where it ended. ICP started inside its kernel of
+    where an earlier fit started, or of an optimum it reached, ends where that fit ended (its
+    first stages bring it there to a hundredth of their kernel, the last runs to
+    convergence), so measuring such a pair again would only repeat the measurement. A pair
+    left out stays out until the solution moves it by that much from its start."""
     if p.start is None or p.kernel_m is None:
         return True
     T = invert(poses[p.target]) @ poses[p.source]
-    return _shift_m(T, p.start, lever_m) >= p.kernel_m
+    ends = [p.start] if p.fit is None else [p.start, p.fit.T_target_source]
+    return all(_shift_m(T, end, lever_m) >= p.kernel_m for end in ends)
 
 
 def _shift_m(A: Matrix, B: Matrix, lever_m: float) -> float:

@@ -68,8 +68,11 @@ WITHIN_M = (0.006, 0.010)
 ICP_ITERATIONS = 30
 #: a capture stage of :func:`fit_pair` (its wide kernels) stops once a step moves the points
 #: by less than this share of its kernel: its pose is only a start for the narrower stage
-#: after it, whose reach is several times that; the last stage runs to 1 um / 1e-7 rad
+#: after it, whose reach is several times that
 CAPTURE_STOP = 0.01
+#: the last stage of :func:`fit_pair` stops once a step moves the points by less than this
+#: share of the residuals' robust sigma (a turn at the source's median range)
+FINAL_STOP = 0.001
 #: MAD to sigma for Gaussian residuals
 MAD_SIGMA = 1.4826
 
@@ -439,6 +442,22 @@ def _icp(
     return T
 
 
+def _within(
+    tree: Any, src: NDArray[np.float64], T: NDArray[np.float64], max_m: float
+) -> NDArray[np.intp]:
+    """Indices of the source points with a target point within ``max_m`` at ``T``."""
+    d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], k=1, distance_upper_bound=max_m)
+    return np.flatnonzero(np.isfinite(d))
+
+
+def _shift(A: NDArray[np.float64], B: NDArray[np.float64], reach_m: float) -> float:
+    """How far a source point within ``reach_m`` of its origin moves between two poses at
+    most: the translation plus the turn times the reach (metres)."""
+    E = np.linalg.inv(A) @ B
+    turn = float(np.arccos(np.clip((np.trace(E[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+    return float(np.linalg.norm(E[:3, 3])) + turn * reach_m
+
+
 def fit_pair(
     target_cloud: str, source_cloud: str, T_init: NDArray[np.float64], voxel_m: float
 ) -> PairFit:
@@ -450,8 +469,10 @@ def fit_pair(
     the residuals' own robust sigma (kernel :data:`TUKEY_C` sigma), so the final weights come
     from the scans' noise, not from a set distance. The first two only bring the pose within
     reach of the next and stop once a step moves the points by less than
-    :data:`CAPTURE_STOP` of their kernel (a turn at the source's median range); the last runs
-    to 1 um / 1e-7 rad.
+    :data:`CAPTURE_STOP` of their kernel (a turn at the source's median range); the last stops
+    once a step moves them by less than :data:`FINAL_STOP` of the residuals' sigma (10 um at
+    4-10 mm), on the source points with a target point within twice its reach (unless it
+    moved a point by as much: then on all).
 
     Raises
     ------
@@ -473,7 +494,16 @@ def fit_pair(
     _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree, src_n)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma
-    T = _icp(tgt, tgt_n, tree, src, src_n, T, 3 * k, k)
+    step_m = FINAL_STOP * sigma
+    stop = (step_m / max(lever_m, 1.0), step_m)
+    # the last stage moves a point by far less than its reach (3 k): the source points with
+    # no target point within twice that reach cannot find one, and are left out of its
+    # steps unless a point did move by as much (then it runs again with every point)
+    near = _within(tree, src, T, 6 * k)
+    start = T
+    T = _icp(tgt, tgt_n, tree, src[near], src_n[near], T, 3 * k, k, stop)
+    if _shift(T, start, float(np.sqrt(np.max(np.einsum("ij,ij->i", src, src))))) >= 3 * k:
+        T = _icp(tgt, tgt_n, tree, src, src_n, T, 3 * k, k, stop)
     i, j, r = _correspond(tgt, tgt_n, src, T, 3 * k, tree, src_n)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma
@@ -490,7 +520,7 @@ def fit_pair(
 
 
 #: bumped when :func:`fit_pair`'s results change: fits kept by older code are measured again
-FIT_FORMAT = 1
+FIT_FORMAT = 2
 #: the cache entry kind of a kept fit
 FIT_KIND = "pair-fit"
 

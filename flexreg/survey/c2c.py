@@ -470,8 +470,8 @@ def fit_pair(
     from the scans' noise, not from a set distance. The first two only bring the pose within
     reach of the next and stop once a step moves the points by less than
     :data:`CAPTURE_STOP` of their kernel (a turn at the source's median range); the last stops
-    once a step moves them by less than :data:`FINAL_STOP` of the residuals' sigma (10 um at
-    4-10 mm), on the source points with a target point within twice its reach (unless it
+    once a step moves them by less than :data:`FINAL_STOP` of the residuals' sigma (4 um at
+    4 mm), on the source points with a target point within twice its reach (unless it
     moved a point by as much: then on all).
 
     Raises

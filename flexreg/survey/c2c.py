@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from flexreg.core.transforms import rotation_error_deg, translation_error_m
 from flexreg.stages.normals import grid_normals, masked_xyz
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
@@ -442,20 +443,10 @@ def _icp(
     return T
 
 
-def _within(
-    tree: Any, src: NDArray[np.float64], T: NDArray[np.float64], max_m: float
-) -> NDArray[np.intp]:
-    """Indices of the source points with a target point within ``max_m`` at ``T``."""
-    d, _ = tree.query(src @ T[:3, :3].T + T[:3, 3], k=1, distance_upper_bound=max_m)
-    return np.flatnonzero(np.isfinite(d))
-
-
 def _shift(A: NDArray[np.float64], B: NDArray[np.float64], reach_m: float) -> float:
     """How far a source point within ``reach_m`` of its origin moves between two poses at
     most: the translation plus the turn times the reach (metres)."""
-    E = np.linalg.inv(A) @ B
-    turn = float(np.arccos(np.clip((np.trace(E[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
-    return float(np.linalg.norm(E[:3, 3])) + turn * reach_m
+    return translation_error_m(A, B) + np.radians(rotation_error_deg(A, B)) * reach_m
 
 
 def fit_pair(
@@ -499,7 +490,7 @@ def fit_pair(
     # the last stage moves a point by far less than its reach (3 k): the source points with
     # no target point within twice that reach cannot find one, and are left out of its
     # steps unless a point did move by as much (then it runs again with every point)
-    near = _within(tree, src, T, 6 * k)
+    near, _, _ = _correspond(tgt, tgt_n, src, T, 6 * k, tree)
     start = T
     T = _icp(tgt, tgt_n, tree, src[near], src_n[near], T, 3 * k, k, stop)
     if _shift(T, start, float(np.sqrt(np.max(np.einsum("ij,ij->i", src, src))))) >= 3 * k:

@@ -31,7 +31,6 @@ import cProfile
 import io
 import json
 import os
-import pickle
 import pstats
 import statistics
 import sys
@@ -50,25 +49,28 @@ import numpy as np  # noqa: E402
 
 from flexreg.bench.harness import machine_info, results_folder, write_json  # noqa: E402
 from flexreg.registration.pipeline import Registration  # noqa: E402
+from flexreg.survey.config import SurveyConfig  # noqa: E402
+from flexreg.survey.stations import PREPARED_SUFFIX, load_prepared, read_entry  # noqa: E402
 
 RESULTS = REPO / "benchmarks" / "results"
 STAGES = ("plan views", "matching", "estimation", "settling", "refinement", "verdict", "overlap")
 
 
 def cached_links(run: Path) -> tuple[dict[str, str], dict[tuple[str, str], Any]]:
-    """Station name -> its prepared cache file, and (target, source) -> the cached link."""
+    """Station name -> its prepared cache file, and (target, source) -> the cached link's
+    fields (the data-only entries ``<target key>__<source key>[.seed-...].vN.link.npz``)."""
     cache = run / "cache"
     files: dict[str, str] = {}
     links: dict[tuple[str, str], Any] = {}
-    for p in sorted((cache / "links").glob("*.link.pkl")):
-        if ".stored." in p.name:
+    for p in sorted((cache / "links").glob("*.link.npz")):
+        if ".seed-" in p.name:  # seeded by stored poses, a hand link or rough positions
             continue
-        with p.open("rb") as f:
-            link = pickle.load(f)
-        t, s = p.name.removesuffix(".link.pkl").split("__")
-        files[link.target] = str(cache / f"{t}.prepared.pkl")
-        files[link.source] = str(cache / f"{s}.prepared.pkl")
-        links[(link.target, link.source)] = link
+        meta, _ = read_entry(p, "link")
+        link = meta["link"]
+        t, s = p.name.split(".v", 1)[0].split("__")
+        files[link["target"]] = str(cache / f"{t}{PREPARED_SUFFIX}")
+        files[link["source"]] = str(cache / f"{s}{PREPARED_SUFFIX}")
+        links[(link["target"], link["source"])] = link
     return files, links
 
 
@@ -93,16 +95,14 @@ def chosen(run: Path, args: argparse.Namespace) -> list[tuple[str, str]]:
     return [(lk["target"], lk["source"]) for lk in slow + typical]
 
 
-def register_link(files: dict[str, str], target: str, source: str) -> dict[str, Any]:
-    """One link registered again from the cache (loading not timed)."""
-    with open(files[target], "rb") as f:
-        pt = pickle.load(f)
-    with open(files[source], "rb") as f:
-        ps = pickle.load(f)
+def register_link(files: dict[str, str], target: str, source: str, config: Any) -> dict[str, Any]:
+    """One link registered again from the cache with the run's registration ``config``
+    (loading not timed)."""
+    pt, ps = load_prepared(files[target]), load_prepared(files[source])
     rec: dict[str, Any] = {"target": target, "source": source}
     t0, c0 = time.perf_counter(), time.process_time()
     try:
-        r = Registration(pt.config).align(pt, ps)
+        r = Registration(config).align(pt, ps)
     except Exception as e:  # a failed link is an answer too (the survey records it)
         rec["failed"] = f"{type(e).__name__}: {e}"
         r = None
@@ -193,6 +193,8 @@ def main() -> None:
     ap.add_argument("--results", type=Path, default=RESULTS)
     args = ap.parse_args()
     files, _ = cached_links(args.run)
+    poses = json.loads((args.run / "poses.json").read_text())
+    config = SurveyConfig.model_validate(poses.get("config") or {}).registration
     todo = chosen(args.run, args)
     folder = results_folder(args.results, "links")
     prof = cProfile.Profile(time.process_time) if args.profile else None
@@ -200,7 +202,7 @@ def main() -> None:
     for target, source in todo:
         if prof is not None:
             prof.enable()
-        rec = register_link(files, target, source)
+        rec = register_link(files, target, source, config)
         if prof is not None:
             prof.disable()
         out.append(rec)

@@ -141,6 +141,16 @@ CONTESTED = (
 def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
     """Why a link between two groups placed nothing, in words."""
     n = 1 + len(e.alternatives)
+    if e.vouched == "positions" or (e.windowed and e.verdict == "confident"):
+        how = (
+            f"the rough positions pick one of the {n} poses it fits"
+            if e.vouched == "positions" and n > 1
+            else "confident inside the rough positions' window"
+        )
+        return (
+            f"{how}, and no loop confirms it (positions tell a bay or a room apart, not the "
+            "centimetres: a pose found within them may be slid)"
+        )
     if n > 1 and not e.trusted:
         return (
             f"fits {n} poses (look-alike rooms or bays), and no loop or rough position tells "
@@ -323,6 +333,11 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     n, alias = 1, other
     if many is not None:  # the link that fits most poses, and its station outside the group
         n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()
+    if any(e.vouched == "positions" for e in toward or mine):  # they decided; none confirms
+        return (
+            f"{what}; the rough positions pick its links' poses, and no second registration "
+            f"confirms one: {hand}, or a scan between it and {other}"
+        )
     said = next((e.undecided for e in toward if e.undecided), "")
     if said:
         return f"{what}; the rough positions cannot place it ({said}): {hand}"

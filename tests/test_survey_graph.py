@@ -344,6 +344,27 @@ def test_a_station_whose_pose_only_the_rough_positions_picked_says_so():
     _assert_plain(lone.why)
 
 
+def test_a_link_that_fits_none_of_its_poses_does_not_say_it_fits_several():
+    """s3 hangs on s2 by one uncertain link with two poses, uncertain for its overlap as
+    well: it does not "fit 2 poses (look-alike rooms or bays)" (which a loop or positions would
+    pick from); its reasons are what stands in the way, and the station is not told that
+    rough positions would pick one of them."""
+    P = {f"s{i}": make_transform(rotation_about_axis([0, 0, 1], 0.3 * i), [5.0 * i, 0, 0])
+         for i in range(4)}  # fmt: skip
+    links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    lone = _link(P, "s2", "s3", "uncertain", overlap=0.08)
+    lone.reasons = [{"code": "low_overlap", "message": "only 8% ..."},
+                    {"code": "ambiguous", "message": "two poses ..."}]  # fmt: skip
+    lone.alternatives = [Alternative(_bay(P, "s2", "s3", [6.0, 0, 0]), "runner_up", 0.9)]
+    sol = solve_graph(sorted(P), [*links, lone], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    assert lone.why == "uncertain (see the link's reasons), and no loop confirms it"
+    assert "would pick one" not in sol.reasons["s3"], sol.reasons["s3"]
+    lone.reasons = lone.reasons[1:]  # ambiguous only: it fits both, and a loop or positions pick
+    solve_graph(sorted(P), [*links, lone], SurveyConfig(), reference="s0")
+    assert lone.why.startswith("fits 2 poses (look-alike rooms or bays)")
+
+
 def _wrong_in_a_loop():
     P = _grid(3, seed=1)
     wrong = make_transform(rotation_about_axis([0, 0, 1], np.radians(2)), [0.5, 0.2, 0])

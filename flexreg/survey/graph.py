@@ -151,7 +151,7 @@ def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
             f"{how}, and no loop confirms it (positions tell a bay or a room apart, not the "
             "centimetres: a pose found within them may be slid)"
         )
-    if n > 1 and not e.trusted:
+    if n > 1 and not e.trusted and e.fits:
         return (
             f"fits {n} poses (look-alike rooms or bays), and no loop or rough position tells "
             "which is right"
@@ -329,7 +329,9 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         + "; ".join(sorted({e.why or e.status for e in mine if e.status != "accepted"}))
         + ")"
     )
-    many = max((e for e in toward if e.usable), key=lambda e: len(e.alternatives), default=None)
+    many = max(
+        (e for e in toward if e.usable and e.fits), key=lambda e: len(e.alternatives), default=None
+    )
     n, alias = 1, other
     if many is not None:  # the link that fits most poses, and its station outside the group
         n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()

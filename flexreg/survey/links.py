@@ -249,6 +249,14 @@ class Link:
         return (self.verdict == "confident" and not self.windowed) or self.vouched == "hand"
 
     @property
+    def fits(self) -> bool:
+        """Whether its poses fit its scans: confident, or uncertain only because several
+        clearly different poses fit (``ambiguous``): what a loop or rough positions choose
+        between. A link also uncertain for its overlap, open space or a weak axis fits none
+        of them well."""
+        return all(r.get("code") == "ambiguous" for r in self.reasons)
+
+    @property
     def usable(self) -> bool:
         return self.T_target_source is not None and self.status != "failed"
 

@@ -211,7 +211,7 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
             continue
         if e.target not in positions or e.source not in positions:
             continue
-        if not _fitting(e):  # its answer does not fit (free space, overlap, a weak axis)
+        if not e.fits:  # its answer does not fit (free space, overlap, a weak axis)
             e.undecided = "no pose of the link fits the scans, seeded by them or not"
             continue
         i, why = choose(e.poses, positions[e.target], positions[e.source])
@@ -249,12 +249,6 @@ def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link
             continue
         out.append(e)
     return out
-
-
-def _fitting(e: Link) -> bool:
-    """Whether the link's poses fit its scans: confident, or uncertain only because several
-    poses fit (ambiguous): what positions may choose between."""
-    return all(r.get("code") == "ambiguous" for r in e.reasons)
 
 
 def site_from_positions(

@@ -183,8 +183,13 @@ def test_survey_interrupted_resumes_from_its_cache(tmp_path):
     assert all(p.startswith("cache/") for p in left), left  # no result file, only the cache
     assert not [p for p in left if ".partial" in p], left  # no half-written cache entry
 
+    # the re-run links one pair only: the stations' cache keys do not depend on the pairs,
+    # and every station is prepared (or read from the cache) whatever they are
+    one = tmp_path / "one-pair.csv"
+    one.write_text("target,source\nst0,st1\n")
+    again_argv = [*argv[:-2], "--pairs", str(one)]
     done = subprocess.run(
-        [*CLI, *argv], cwd=tmp_path, capture_output=True, text=True, timeout=900,
+        [*CLI, *again_argv], cwd=tmp_path, capture_output=True, text=True, timeout=900,
         env={**os.environ, "COLUMNS": "200", "NO_COLOR": "1"},
     )  # fmt: skip
     assert done.returncode in (0, 3), done.stderr[-3000:]

@@ -138,14 +138,24 @@ CONTESTED = (
 )
 
 
+def _by_positions(e: Link) -> bool:
+    """Whether what the link offers rests on the rough positions: not trusted, and the pose
+    they picked, or confident only inside their window (such a link needs a loop:
+    :mod:`flexreg.survey.consensus`)."""
+    windowed = e.windowed and e.verdict == "confident"
+    return not e.trusted and (e.vouched == "positions" or windowed)
+
+
 def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
     """Why a link between two groups placed nothing, in words."""
     n = 1 + len(e.alternatives)
-    if e.vouched == "positions" or (e.windowed and e.verdict == "confident"):
+    if _by_positions(e):
         how = (
-            f"the rough positions pick one of the {n} poses it fits"
-            if e.vouched == "positions" and n > 1
-            else "confident inside the rough positions' window"
+            "confident inside the rough positions' window"
+            if e.verdict == "confident"
+            else f"the rough positions pick one of the {n} poses it fits"
+            if n > 1
+            else "the rough positions vouch for its pose"
         )
         return (
             f"{how}, and no loop confirms it (positions tell a bay or a room apart, not the "
@@ -335,7 +345,7 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     n, alias = 1, other
     if many is not None:  # the link that fits most poses, and its station outside the group
         n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()
-    if any(e.vouched == "positions" for e in toward or mine):  # they decided; none confirms
+    if any(_by_positions(e) for e in toward or mine):  # they decided; nothing confirms
         return (
             f"{what}; the rough positions pick its links' poses, and no second registration "
             f"confirms one: {hand}, or a scan between it and {other}"

@@ -3,11 +3,14 @@ in a fresh forked child, as ``flexreg`` would run it from a shell.
 
 Every case starting a new interpreter paid about half a second of CPU for importing the
 command line (typer, rich, pydantic, numpy) before doing anything; over 250 cases on 2 cores
-that was most of the corpus's time. The child of a fork starts with those modules loaded and
-nothing else done: it becomes a session leader, moves to the case folder, takes the case's
-environment and (for ``memory_limit`` cases) the address-space limit, points stdout and stderr
-at the given files, and runs ``flexreg.cli.main`` with the case's arguments. An exception that
-escapes is printed as Python prints it (a traceback, which the corpus counts) and exits 1.
+that was most of the corpus's time, and the modules ``register`` and ``survey`` import when
+they start working (the pipeline, the survey, the readers) about a second more of each such
+case: the server imports both once (``PRELOAD``). The child of a fork starts with those
+modules loaded and nothing else done: it becomes a session leader, moves to the case folder,
+takes the case's environment and (for ``memory_limit`` cases) the address-space limit, points
+stdout and stderr at the given files, and runs ``flexreg.cli.main`` with the case's arguments.
+An exception that escapes is printed as Python prints it (a traceback, which the corpus
+counts) and exits 1.
 
 Protocol, one JSON object per line: request ``{"argv", "cwd", "env", "stdout", "stderr",
 "memory_limit", "timeout_s"}`` on stdin; reply ``{"rc", "seconds", "peak_rss_mb"}`` on stdout
@@ -22,6 +25,15 @@ import resource
 import signal
 import sys
 import time
+
+PRELOAD = (
+    "flexreg.io",
+    "flexreg.io.info",
+    "flexreg.registration.pipeline",
+    "flexreg.stages.projection",
+    "flexreg.survey.project",
+    "flexreg.survey.outputs",
+)
 
 
 def _child(req: dict) -> None:  # never returns
@@ -88,7 +100,14 @@ def _run(req: dict) -> dict:
 
 
 def serve() -> None:
+    import importlib
+
     import flexreg.cli  # noqa: F401  (loaded once, inherited by every case)
+
+    # the modules the commands import when they start working: about a second of every
+    # register or survey case otherwise; a shell's run loads the same ones, only later
+    for name in PRELOAD:
+        importlib.import_module(name)
 
     for line in sys.stdin:
         if line.strip():

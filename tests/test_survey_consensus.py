@@ -282,8 +282,9 @@ def test_a_pose_rough_positions_picked_confirms_a_windowed_link_around_a_loop():
     agree around the loop s3 is placed (each pose registered on its own scans, the bay
     picked by the positions); the uncertain link alone places nothing, nor does one whose
     pose, undecided, is only its answer; a picked pose a bay off the windowed one places
-    nothing either, nor do two picked poses that agree with no confident registration
-    among them (positions pick a bay, not centimetres)."""
+    nothing either. Two picked poses with no confident registration among them place it
+    when they agree around the loop (two registrations, the bay picked by the positions)
+    and not when one is slid 14 cm (positions pick a bay, not centimetres)."""
     P = _poses(4)
     base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
     two = [_windowed(P, "s2", "s3"), _picked(P, "s1", "s3")]
@@ -302,7 +303,30 @@ def test_a_pose_rough_positions_picked_confirms_a_windowed_link_around_a_loop():
     assert "s3" not in sol.groups[0]
     both = [_picked(P, "s2", "s3"), _picked(P, "s1", "s3")]  # no registration confident
     sol = solve_graph(sorted(P), [*base, *both], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in both)
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    slid = [_picked(P, "s2", "s3"), _picked(P, "s1", "s3")]
+    slid[1].T_target_source = _moved(P, "s1", "s3", [0.14, 0, 0])
+    sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]
+
+
+def test_two_picked_poses_slid_alike_do_not_outrank_a_confident_link():
+    """s3 seen by a link confident on its own (right) and by two doorway links whose poses
+    the positions picked, both slid 12 cm alike (a wall's thickness: they agree with each
+    other around the loop, not with the confident link): s3 is placed where the confident
+    registration puts it, and the slid links are rejected with their loop error."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    slid_s3 = make_transform(np.eye(3), [0.12, 0.0, 0.0]) @ P["s3"]
+    doors = [_picked(P, a, "s3") for a in ("s0", "s1")]
+    for e in doors:
+        e.T_target_source = invert(P[e.target]) @ slid_s3
+    right = _link(P, "s2", "s3")
+    sol = solve_graph(sorted(P), [*base, right, *doors], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and right.status == "accepted"
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert all(e.status == "rejected" and e.loop_error_m > 0.1 for e in doors)
 
 
 def test_a_loop_of_windowed_links_outranks_a_lone_confident_link_a_bay_off():

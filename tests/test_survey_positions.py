@@ -100,6 +100,31 @@ def test_apply_positions_swaps_in_the_alternative_and_vouches():
     assert bad.status == "rejected" and "positions refuse" in bad.why
 
 
+def test_positions_pick_a_doorway_link_but_not_one_its_scans_contradict():
+    """A link uncertain because its scans share a doorway's worth (``low_overlap``) fits what
+    both see: the positions pick its pose. One whose answer puts points in open space or
+    leaves an axis free fits nothing: they leave it, and say why."""
+
+    def uncertain(*codes):
+        e = Link("s0", "s1", T_target_source=_pose(6.0, 0.0), verdict="uncertain")
+        e.reasons = [{"code": c, "message": c} for c in codes]
+        return e
+
+    pos = {
+        "s0": Position(np.zeros(3), False, 0.0, 1.0),
+        "s1": Position(np.array([6.4, 0.2, 0.0]), False, 0.05, 1.0),
+    }
+    doorway = uncertain("low_overlap")
+    both = uncertain("low_overlap", "ambiguous")
+    both.alternatives = [Alternative(_pose(6.0, 0.0) @ _pose(5.9, 0.0), "twin", 0.9)]
+    opened, free = uncertain("low_overlap", "free_space"), uncertain("weak_axis")
+    assert apply_positions([doorway, both, opened, free], pos) == 2
+    assert doorway.vouched == both.vouched == "positions" and not doorway.trusted
+    assert np.allclose(both.T_target_source, _pose(6.0, 0.0))
+    for e in (opened, free):
+        assert not e.vouched and "no pose of the link fits the scans" in e.undecided
+
+
 def test_the_site_frame_of_the_positions():
     """Registered poses in the reference's frame, rough positions in a site frame turned by
     30 degrees and shifted: the fit recovers the turn and the shift."""

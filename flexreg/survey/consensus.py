@@ -22,17 +22,18 @@ of stations, the way PCM merges the maps of several robots.
    by trusted answers, their firm votes, links, all votes, the surveyor's word and weight:
    a placement two registrations confirm around a loop outranks one that a lone trusted
    answer gives. The best set of the whole project merges its groups when a
-   loop of confident answers confirms it (two of them in it, trusted or confident inside
-   rough positions' windows, or one and an uncertain link's pose the positions picked, or a
-   firm vote of a link's answer: a twin or runner-up closing a cycle is no independent
-   route) and no distinct placement of the same groups is as well supported; then
-   everything is looked at again.
-   Uncertain links never confirm each other: in look-alike rooms and bays several are wrong
-   the same way. Nor do they settle a dispute between trusted answers: one that a cycle of
-   trusted answers contradicts and none confirms is *disputed* (one link of that cycle is
-   wrong, and nothing says it is not this one), and a cycle through it is no firm vote;
-   where two distinct placements of the same groups each hold a trusted answer and the best
-   is contradicted, only the map decides. (A room that looks the same turned half round
+   loop of confident answers confirms it (two of them in it, each trusted, confident inside
+   rough positions' windows, or an uncertain link's pose the positions picked, or a firm
+   vote of a link's answer: a twin or runner-up closing a cycle is no independent route)
+   and no distinct placement of the same groups is as well supported; then everything is
+   looked at again.
+   Uncertain links never confirm each other unless rough positions picked their poses: in
+   look-alike rooms and bays several are wrong the same way, and only the positions say
+   which bay or room each means. Nor do they settle a dispute between trusted answers: one
+   that a cycle of trusted answers contradicts and none confirms is *disputed* (one link of
+   that cycle is wrong, and nothing says it is not this one), and a cycle through it is no
+   firm vote; where two distinct placements of the same groups each hold a trusted answer
+   and the best is contradicted, only the map decides. (A room that looks the same turned half round
    aliases every link of its station alike: a confident answer and the uncertain links of
    that station then agree on the turn.) Where distinct placements compete, the map's
    free-space check may pick the one under which the groups' nearest stations see each
@@ -426,13 +427,22 @@ class _Set:
         )
 
     @property
-    def standing(self) -> tuple[bool, int, int, int, int, int]:
-        """Whether a loop of confident answers confirms it, then its rank without the
-        weight: a placement two registrations confirm around a loop outranks one a lone
-        trusted answer gives, however many (a bay-off answer confident on its own against
-        two confident inside rough positions' windows that agree, on a warehouse)."""
+    def standing(self) -> tuple[bool, int, bool, int, int, int, int]:
+        """Whether a loop with a confident registration confirms it, its trusted answers,
+        whether a loop confirms it at all, then the rest of its rank without the weight: a
+        placement two registrations confirm around a loop outranks one a lone trusted
+        answer gives, however many (a bay-off answer confident on its own against two
+        confident inside rough positions' windows that agree, on a warehouse); one that
+        only poses the positions picked confirm does not outrank a confident answer (two
+        doorway links slid alike by a wall's thickness agree with each other, not with
+        the confident link of the right placement)."""
         r = self.rank
-        return (self.firmly_confirmed, r[0], r[1], r[2], r[3], r[4])
+        confirmed = self.firmly_confirmed
+        by_registration = confirmed and (
+            any(h.confident for h in self.members)
+            or any(h.firm_votes for h in self.members if h.alternative is None)
+        )
+        return (by_registration, r[0], confirmed, r[1], r[2], r[3], r[4])
 
     @property
     def misfit(self) -> float:
@@ -448,18 +458,18 @@ class _Set:
         or a cycle of trusted answers closes through one of its links' answers. An
         alternative closing such a cycle is no independent route: an uncertain link's twins
         offer its pose one bay along each way, so in a hall of identical bays one of them
-        agrees with any trusted answer a whole number of bays off. With one confident answer,
-        the pose rough positions picked of an uncertain link counts as the second: the
-        positions decided which bay that link means (none other of its fitting poses lay
-        within their window) and the loop, with a registration confident on its own, holds
-        it to the centimetre. Two picked poses alone do not: positions pick a bay, not
-        centimetres, and two uncertain links may be slid alike."""
+        agrees with any trusted answer a whole number of bays off. A pose rough positions
+        picked of an uncertain link counts as one too: the positions decided which bay or
+        room that link means (none other of its poses lay within their window), and the
+        loop holds it to the centimetre, with a confident registration or with a second
+        picked pose of another pair of scans (two doorway links of a room, each uncertain
+        for the little the scans share, that agree to the loop tolerance: a slide of either
+        opens the loop). One picked pose alone does not: positions pick a bay, not
+        centimetres."""
         confident = sum(h.confident for h in self.members)
         sited = sum(h.sited and not h.confident for h in self.members)
-        return (
-            confident >= 2
-            or (confident == 1 and sited >= 1)
-            or any(h.firm_votes for h in self.members if h.alternative is None)
+        return confident + sited >= 2 or any(
+            h.firm_votes for h in self.members if h.alternative is None
         )
 
 

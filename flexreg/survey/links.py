@@ -257,6 +257,15 @@ class Link:
         return all(r.get("code") == "ambiguous" for r in self.reasons)
 
     @property
+    def fits_where_seen(self) -> bool:
+        """Whether its poses fit what both scans see: it :attr:`fits`, or it is uncertain
+        also (or only) because the scans share little (``low_overlap``: a doorway's worth),
+        not because its answer contradicts them (open space, a weak axis, a high residual).
+        Rough positions may pick the pose of such a link
+        (:func:`flexreg.survey.positions.apply_positions`)."""
+        return all(r.get("code") in ("ambiguous", "low_overlap") for r in self.reasons)
+
+    @property
     def usable(self) -> bool:
         return self.T_target_source is not None and self.status != "failed"
 

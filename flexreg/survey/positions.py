@@ -198,8 +198,10 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
 
 def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int:
     """Let rough positions decide each link between two stations that have one (in place),
-    among the poses the registration found fitting (a confident answer, or an answer only
-    ambiguous, with its alternatives; a link uncertain for another reason has none): the one
+    among the poses the registration found fitting what both scans see (a confident answer,
+    or an answer uncertain only because it is ambiguous or the scans share little, with its
+    alternatives, :attr:`~flexreg.survey.links.Link.fits_where_seen`; a link whose answer
+    contradicts its scans, in open space or along a weak axis, has none): the one
     pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
     Alternative`) they pick (:func:`choose`) becomes its transform and the link is vouched
     for (``vouched="positions"``, the answer kept as an alternative when replaced); a link
@@ -211,7 +213,7 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
             continue
         if e.target not in positions or e.source not in positions:
             continue
-        if not e.fits:  # its answer does not fit (free space, overlap, a weak axis)
+        if not e.fits_where_seen:  # its answer contradicts its scans (open space, an axis)
             e.undecided = "no pose of the link fits the scans, seeded by them or not"
             continue
         i, why = choose(e.poses, positions[e.target], positions[e.source])

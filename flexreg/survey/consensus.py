@@ -33,9 +33,9 @@ of stations, the way PCM merges the maps of several robots.
    that a cycle of trusted answers contradicts and none confirms is *disputed* (one link of
    that cycle is wrong, and nothing says it is not this one), and a cycle through it is no
    firm vote; where two distinct placements of the same groups each hold a trusted answer
-   and the best is contradicted, only the map decides. (A room that looks the same turned half round
-   aliases every link of its station alike: a confident answer and the uncertain links of
-   that station then agree on the turn.) Where distinct placements compete, the map's
+   and the best is contradicted, only the map decides. (A room that looks the same turned
+   half round aliases every link of its station alike: a confident answer and the uncertain
+   links of that station then agree on the turn.) Where distinct placements compete, the map's
    free-space check may pick the one under which the groups' nearest stations see each
    other without contradiction, every other contradicting decisively more. Once no such
    merge is left, a lone trusted answer (or the surveyor's word) places its stations
@@ -437,12 +437,8 @@ class _Set:
         doorway links slid alike by a wall's thickness agree with each other, not with
         the confident link of the right placement)."""
         r = self.rank
-        confirmed = self.firmly_confirmed
-        by_registration = confirmed and (
-            any(h.confident for h in self.members)
-            or any(h.firm_votes for h in self.members if h.alternative is None)
-        )
-        return (by_registration, r[0], confirmed, r[1], r[2], r[3], r[4])
+        how = self.confirmed_by
+        return (how == "registration", r[0], bool(how), r[1], r[2], r[3], r[4])
 
     @property
     def misfit(self) -> float:
@@ -466,11 +462,21 @@ class _Set:
         for the little the scans share, that agree to the loop tolerance: a slide of either
         opens the loop). One picked pose alone does not: positions pick a bay, not
         centimetres."""
+        return bool(self.confirmed_by)
+
+    @property
+    def confirmed_by(self) -> str:
+        """What confirms it around a loop (:attr:`firmly_confirmed`): ``"registration"``
+        when a confident answer is among the two, or a cycle of trusted answers closes
+        through one of its answers; ``"positions"`` when only poses the positions picked
+        do; empty when nothing does."""
         confident = sum(h.confident for h in self.members)
         sited = sum(h.sited and not h.confident for h in self.members)
-        return confident + sited >= 2 or any(
-            h.firm_votes for h in self.members if h.alternative is None
-        )
+        if any(h.firm_votes for h in self.members if h.alternative is None) or (
+            confident and confident + sited >= 2
+        ):
+            return "registration"
+        return "positions" if sited >= 2 else ""
 
 
 def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:

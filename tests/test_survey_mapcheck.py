@@ -1,4 +1,5 @@
-"""The map check: placed stations that contradict each other cut the most doubtful link."""
+"""The map check: placed stations that contradict each other cut the links between them that no
+loop confirms (else the most doubtful one)."""
 
 from __future__ import annotations
 
@@ -62,6 +63,33 @@ def test_a_veto_cuts_the_most_doubtful_links_until_the_station_is_unplaced():
     assert [(e.target, e.source) for e in cut] == [("s3", "s4"), ("s2", "s4")]
     assert all("s4 in s1's free space" in e.why for e in cut)
     for e in links[:5]:  # the correct links all stay
+        assert e.status == "accepted"
+
+
+def test_a_veto_cuts_the_links_no_loop_confirms_however_doubtful_the_confirmed_ones():
+    """A hall that repeats bay by bay: the right links among s0, s1, s2 close a loop but
+    show more free-space conflict (racks seen through racks) than the two wrong links that
+    hang s3 and s4 from s2 a bay off. The map refutes s0 against s4: the cut falls on the
+    links no loop confirms, not on the loop's most doubtful link."""
+    P = _poses()
+    bay = make_transform(np.eye(3), [0.0, 6.0, 0.0])  # one bay across
+    W3, W4 = bay @ P["s3"], bay @ P["s4"]
+    links = [
+        _link(P, "s0", "s1", doubt=0.40),
+        _link(P, "s1", "s2", doubt=0.42),
+        _link(P, "s0", "s2", doubt=0.44),
+        _link(P, "s2", "s3", doubt=0.12, T=invert(P["s2"]) @ W3),  # wrong, a bridge
+        _link(P, "s3", "s4", doubt=0.20, T=invert(W3) @ W4),  # right relative to s3
+    ]
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
+    assert len(sol.groups[0]) == 5  # nothing yet says s3 and s4 are a bay off
+    veto = Veto("s0", "s4", invert(sol.poses["s0"]) @ sol.poses["s4"], "s4 in s0's free space")
+    sol = solve_graph(list(P), links, SurveyConfig(), reference="s0", vetoes=[veto])
+    assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
+    cut = [e for e in links if "cut by the map check" in (e.why or "")]
+    assert [(e.target, e.source) for e in cut] == [("s2", "s3"), ("s3", "s4")]
+    assert all("no loop confirms this one (2 of the 3 link(s)" in e.why for e in cut)
+    for e in links[:3]:  # the loop stays, whatever its free-space conflict ratios
         assert e.status == "accepted"
 
 

@@ -467,9 +467,16 @@ def _veto_cuts(
     sol: GraphSolution, links: list[Link], vetoes: Sequence[Veto], config: SurveyConfig
 ) -> list[tuple[Link, str]]:
     """The links to cut for the first veto the solution still violates: both stations in one
-    group at (about) the refuted relative pose. The most doubtful accepted link of a path
-    between them is cut, with every link of the path whose doubt is within
-    ``MAP_DOUBT_MARGIN`` of it; [] when no veto is violated."""
+    group at (about) the refuted relative pose; [] when no veto is violated.
+
+    One link of a path between them is wrong. A confident link that closes a loop of
+    confident links has a second route that agrees with it; one that does not (a bridge, or
+    an uncertain link) has nothing but its own registration, and in a hall that repeats bay
+    by bay a wrong answer explains the scans as well as a right one (its free-space conflict
+    ratio is no guide there). So every link of the path that no loop confirms is cut: the
+    map says one of them is wrong and nothing says which. Only when a loop confirms every
+    link of the path is the most doubtful one cut, with every link whose doubt is within
+    ``MAP_DOUBT_MARGIN`` of it."""
     for v in vetoes:
         if v.a not in sol.poses or v.b not in sol.poses:
             continue
@@ -481,18 +488,30 @@ def _veto_cuts(
         path = _accepted_path(links, v.a, v.b)
         if not path:
             continue
+        said = (
+            f"cut by the map check: {v.a} and {v.b} contradict each other where the links "
+            f"place them ({v.why}); "
+        )
+        edges, alone = _firm_edges(links)
+        held = {frozenset(x) for i, x in enumerate(edges) if i not in alone}
+        unconfirmed = [e for e in path if frozenset((e.target, e.source)) not in held]
+        if unconfirmed:
+            n = len(unconfirmed)
+            return [
+                (e, said + f"no loop confirms this one ({n} of the {len(path)} link(s) between "
+                 "them; one of those is wrong, and nothing tells which)")
+                for e in unconfirmed
+            ]  # fmt: skip
         doubt = [max(float(e.doubt or 0.0), 1e-6) for e in path]
         top = max(doubt)
-        cut = [e for e, d in zip(path, doubt, strict=True) if d * MAP_DOUBT_MARGIN >= top]
         return [
             (
                 e,
-                f"cut by the map check: {v.a} and {v.b} contradict each other where the "
-                f"links place them ({v.why}); of the {len(path)} link(s) between them this one "
+                said + f"loops confirm each of the {len(path)} link(s) between them; this one "
                 f"is the least trustworthy (free-space conflict ratio {d:.2f})",
             )
             for e, d in zip(path, doubt, strict=True)
-            if e in cut
+            if d * MAP_DOUBT_MARGIN >= top
         ]
     return []
 

@@ -84,6 +84,32 @@ def test_the_local_cluster_serves_no_dashboard_unless_asked_and_then_on_loopback
         assert _web(client) == ({"127.0.0.1"}, 200)
 
 
+def test_an_exception_in_the_clients_event_loop_prints_no_traceback(caplog):
+    """Ctrl-C while the client waits can make Dask's own cancel callback fail (its future not
+    yet created); the client's event loop logs that through tornado with a traceback, which
+    reached the console between the progress bar and the one-line error. Nothing the event
+    loop logs below critical is shown while the cluster runs; the logger is as it was after."""
+    import logging
+    import threading
+
+    import distributed  # noqa: F401  (its logging set-up first: the level it leaves is kept)
+
+    ran = threading.Event()
+
+    def fails() -> None:
+        ran.set()
+        raise NameError("a callback of the client's event loop")
+
+    before = logging.getLogger("tornado.application").level
+    caplog.set_level(logging.DEBUG)
+    with dask_client(2, None) as client:
+        client.loop.add_callback(fails)
+        assert ran.wait(10)
+        client.scheduler_info()  # one more round trip: the loop has logged what it would
+    assert not [r for r in caplog.records if r.name.startswith("tornado")]
+    assert logging.getLogger("tornado.application").level == before
+
+
 def _worker_environ():
     import os
 

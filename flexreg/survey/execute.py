@@ -245,33 +245,44 @@ def dask_client(
     quiet = logging.getLogger("distributed")
     level = quiet.level
     quiet.setLevel(logging.ERROR)  # the nannies' shutdown chatter is not the user's business
-    # the worker processes inherit SIGINT ignored: Ctrl-C (sent to the whole process group)
-    # stops this process, which closes the cluster, instead of printing each worker's traceback
-    main = threading.current_thread() is threading.main_thread()
-    handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    # the client's event loop reports an exception in one of its callbacks through tornado's
+    # logger, with a traceback: Ctrl-C while the client waits can make Dask's own cancel
+    # callback fail (a future not yet created when the interrupt arrives); the survey's
+    # tasks report their failures through their futures, not there
+    loop_log = logging.getLogger("tornado.application")
+    loop_level = loop_log.level
+    loop_log.setLevel(logging.CRITICAL)
     try:
-        with dask.config.set(_WORKER_ENVIRON):
-            cluster = LocalCluster(
-                n_workers=n,
-                host="127.0.0.1",  # the scheduler, its web server and the workers: loopback only
-                threads_per_worker=1,
-                processes=True,
-                # an unauthenticated web page: off unless asked for, and then on loopback
-                # unless a host is named
-                dashboard_address=dashboard,
-                # the workers' own logs: a heartbeat that loses the scheduler while the cluster
-                # closes (Ctrl-C) is logged as an error with a traceback; task failures reach the
-                # survey through their futures, so only critical worker logs are shown
-                silence_logs=logging.CRITICAL,
-            )
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, handler)
-    try:
+        # the worker processes inherit SIGINT ignored: Ctrl-C (sent to the whole process
+        # group) stops this process, which closes the cluster, instead of printing each
+        # worker's traceback
+        main = threading.current_thread() is threading.main_thread()
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+        try:
+            with dask.config.set(_WORKER_ENVIRON):
+                cluster = LocalCluster(
+                    n_workers=n,
+                    # the scheduler, its web server and the workers: loopback only
+                    host="127.0.0.1",
+                    threads_per_worker=1,
+                    processes=True,
+                    # an unauthenticated web page: off unless asked for, and then on loopback
+                    # unless a host is named
+                    dashboard_address=dashboard,
+                    # the workers' own logs: a heartbeat that loses the scheduler while the
+                    # cluster closes (Ctrl-C) is logged as an error with a traceback; task
+                    # failures reach the survey through their futures, so only critical
+                    # worker logs are shown
+                    silence_logs=logging.CRITICAL,
+                )
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, handler)
         with cluster, Client(cluster) as client:
             yield client
-    finally:
+    finally:  # also when the cluster does not start
         quiet.setLevel(level)
+        loop_log.setLevel(loop_level)
 
 
 class OutcomeCounter:

@@ -22,8 +22,9 @@ STORED_MAX_DEG, STORED_MAX_M = 1.0, 0.10
 #: Open3D's line-process weight under which the pose-graph optimisation prunes an edge
 #: (its own default).
 PRUNE_THRESHOLD = 0.25
-#: A map conflict cuts the most doubtful link of a path between its stations and every link
-#: of the path whose doubt (free-space conflict ratio) is within this factor of it.
+#: A map conflict on a path whose links loops all confirm cuts the most doubtful one and every
+#: link of the path whose doubt (free-space conflict ratio) is within this factor of it (else
+#: it cuts the links no loop confirms).
 MAP_DOUBT_MARGIN = 1.5
 #: Two placed stations closer than this (metres) are one viewpoint: they must explain
 #: :data:`COINCIDENT_EXPLAINED` of each other (a repeated set-up does; two stations folded
@@ -124,7 +125,7 @@ class SurveyConfig(Config):
         only beyond three sigma (and 30 degrees about the vertical).
     map_check : bool
         After the graph, score every pair of placed stations of a group (linked or not) on the
-        dense check and cut the most doubtful link between two that contradict each other
+        dense check and cut the links no loop confirms between two that contradict each other
         (:mod:`flexreg.survey.mapcheck`).
     map_radius_m : float, metres
         Pairs of placed stations farther apart than this are not checked.

@@ -20,8 +20,9 @@ information matrix. A wrong link must not place a station:
    and everything is solved again without it, until every link fits.
 5. **Vetoes** from the map check (:mod:`flexreg.survey.mapcheck`): two placed stations
    whose scans contradict each other at their solved relative pose (linked or not) mean a
-   wrong link between them; the most doubtful one on a path between them (the highest
-   free-space conflict ratio of its own check) is cut and everything solved again.
+   wrong link between them; the links of a path between them that no loop confirms are cut
+   (when loops confirm them all, the most doubtful one: the highest free-space conflict ratio
+   of its own check) and everything solved again.
 """
 
 from __future__ import annotations
@@ -420,8 +421,8 @@ def solve_graph(
         the largest group).
     vetoes : sequence of Veto
         Pairs of stations the map check found contradicting each other: while a solution
-        keeps one in its refuted configuration, the most doubtful link between them is cut
-        (step 5) and the graph solved again.
+        keeps one in its refuted configuration, the links between them no loop confirms are
+        cut (step 5) and the graph solved again.
     judge : callable, optional
         ``judge(a, b, T_a_b)``: how much stations ``a`` and ``b`` contradict each other at
         that relative pose (:data:`~flexreg.survey.links.Judge`); it decides between

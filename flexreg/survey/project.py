@@ -109,8 +109,8 @@ class SurveyResult:
     map_looks : list of PairLook
         The last map check: every pair of placed stations scored at its solved pose.
     vetoes : list of Veto
-        Every conflict the map checks found (each cut the most doubtful link between its
-        two stations).
+        Every conflict the map checks found (each cut the links between its two stations
+        that no loop confirms, or the most doubtful one).
     adjustment : Adjustment or None
         The final joint alignment (None when off or nothing placed): accuracies, statuses.
     frame : {"reference", "stored"}

@@ -584,8 +584,8 @@ keeps its own frame and is not placed.</dd>
 <dt>map check</dt><dd>Every pair of placed stations of a group, linked or not, scored at
 its solved relative pose: when more of one station's points lie in the other's free space (in
 front of what that scanner measured) than on its surfaces, one of them is placed wrongly (a wrong
-link through repeating structure); the most doubtful link between them is cut and the graph
-solved again.</dd>
+link through repeating structure); the links between them that no loop confirms are cut (the
+most doubtful one when loops confirm them all) and the graph solved again.</dd>
 <dt>verdict</dt><dd>The pairwise registration's own judgement: confident, or uncertain with
 reasons (low overlap, weak axis, ambiguous pose, few or clustered inliers, free-space conflict,
 high residual).</dd>

@@ -252,6 +252,13 @@ def _firm_edges(
     return edges, bridges(edges)
 
 
+def _looped(firm: tuple[list[tuple[str, str]], set[int]]) -> list[tuple[str, str]]:
+    """The confident accepted links that close a loop of them (``firm``:
+    :func:`_firm_edges`): each has a second route of confident links that agrees with it."""
+    edges, alone = firm
+    return [x for i, x in enumerate(edges) if i not in alone]
+
+
 def _confidence(
     group: list[str], ref: str, firm: tuple[list[tuple[str, str]], set[int]]
 ) -> dict[str, str]:
@@ -263,9 +270,8 @@ def _confidence(
     uncertain links that agree with it may be wrong the same way (a view that repeats bay by
     bay aliases every link alike); else ``uncertain``. ``firm``: :func:`_firm_edges` of the
     group."""
-    edges, alone = firm
-    joined = reached(ref, edges)
-    held = reached(ref, [x for i, x in enumerate(edges) if i not in alone])
+    joined = reached(ref, firm[0])
+    held = reached(ref, _looped(firm))
     return {
         s: "uncertain" if s not in joined else "confident" if s in held else "single" for s in group
     }
@@ -276,8 +282,7 @@ def _firm_reference(group: list[str], firm: tuple[list[tuple[str, str]], set[int
     closing loops hold together (:func:`_confidence`; ``firm``: :func:`_firm_edges` of the
     group): the frame every confirmed pose is given in, so that a block hanging from one link
     is the one reported as such."""
-    edges, alone = firm
-    kept = [x for i, x in enumerate(edges) if i not in alone]
+    kept = _looped(firm)
     best: tuple[int, str] | None = None
     done: set[str] = set()
     for s in group:  # in name order: the first of each block
@@ -493,8 +498,7 @@ def _veto_cuts(
             f"cut by the map check: {v.a} and {v.b} contradict each other where the links "
             f"place them ({v.why}); "
         )
-        edges, alone = _firm_edges(links)
-        held = {frozenset(x) for i, x in enumerate(edges) if i not in alone}
+        held = {frozenset(x) for x in _looped(_firm_edges(links))}
         unconfirmed = [e for e in path if frozenset((e.target, e.source)) not in held]
         if unconfirmed:
             n = len(unconfirmed)

@@ -469,6 +469,24 @@ def _accepted_path(links: list[Link], a: str, b: str) -> list[Link]:
     return [e for _, e in steps] if steps else []
 
 
+def _nearest_held(unconfirmed: list[Link], path: list[Link], v: Veto) -> list[Link]:
+    """The links of ``unconfirmed`` between the end of ``v`` that it does not hold right and
+    the nearest station of :attr:`Veto.held` on ``path`` (from ``v.b`` to ``v.a``): where the
+    map check saw every station up to it placed right, the wrong link lies beyond. All of
+    ``unconfirmed`` when the veto holds no station, or both ends."""
+    if not v.held or (v.a in v.held) == (v.b in v.held):
+        return unconfirmed
+    x, steps = (v.b, path) if v.a in v.held else (v.a, path[::-1])
+    segment = []
+    for e in steps:
+        segment.append(e)
+        x = e.source if e.target == x else e.target
+        if x in v.held:
+            break
+    near = [e for e in unconfirmed if any(e is f for f in segment)]
+    return near or unconfirmed
+
+
 def _veto_cuts(
     sol: GraphSolution, links: list[Link], vetoes: Sequence[Veto], config: SurveyConfig
 ) -> list[tuple[Link, str]]:
@@ -499,7 +517,9 @@ def _veto_cuts(
             f"place them ({v.why}); "
         )
         held = {frozenset(x) for x in _looped(_firm_edges(links))}
-        unconfirmed = [e for e in path if frozenset((e.target, e.source)) not in held]
+        unconfirmed = _nearest_held(
+            [e for e in path if frozenset((e.target, e.source)) not in held], path, v
+        )
         if unconfirmed:
             n = len(unconfirmed)
             return [

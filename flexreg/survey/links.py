@@ -324,12 +324,17 @@ class Veto:
         The refuted relative pose (maps ``b``'s points into ``a``'s frame).
     why : str
         What contradicts what, in words.
+    held : frozenset of str
+        Stations the map check holds placed right (confirmed by loops, or seen clean against
+        such stations at full resolution): the wrong link lies between the other end and the
+        nearest of them on a path between the two (empty: anywhere on the path).
     """
 
     a: str
     b: str
     T_a_b: Matrix
     why: str
+    held: frozenset[str] = frozenset()
 
 
 @dataclass(eq=False)

@@ -50,8 +50,10 @@ from numpy.typing import NDArray
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.registration.check import TOLERANCE, Check, check_masks
+from flexreg.registration.fullres import full_pair_of, pose_masks
 from flexreg.stages.correspondences import derive_threshold
 from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
+from flexreg.survey.links import Veto
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
     CacheEntryError,
@@ -244,6 +246,102 @@ def look_from(
     for stem, g, T in others:
         sample, thr_b = _read_glance(g)
         out.append((stem, *_shares(v, thr_a, sample, thr_b, T)))
+    return out
+
+
+def open_space_at_full(
+    files: tuple[str, str], glances: tuple[str, str], T_a_b: Matrix
+) -> tuple[float, float, int]:
+    """Two stations at one relative pose, every valid pixel of both (runs on a worker): the
+    registration's full-resolution test (:func:`~flexreg.registration.fullres.pose_masks`,
+    each point against the other's nearest range in a 5 x 5 square, with its own range
+    step), where a right pose puts almost nothing in open space.
+
+    Parameters
+    ----------
+    files, glances : (str, str)
+        Both stations' prepared files and glances (:func:`write_glance`: the inlier
+        thresholds), ``a`` first.
+    T_a_b : (4, 4) float64
+        Maps ``b``'s points into ``a``'s frame.
+
+    Returns
+    -------
+    (open share, explained share, points)
+        The share of both stations' points in the other's open space, the share the other
+        explains, and how many points were tested (both directions).
+    """
+    views = [load_prepared(f).view for f in files]
+    thr = max(_read_glance(g)[1] for g in glances)
+    (ex_b, op_b), (ex_a, op_a) = pose_masks(
+        full_pair_of(views)(), np.asarray(T_a_b, dtype=np.float64), thr
+    )
+    n = len(op_b) + len(op_a)
+    if n == 0:
+        return 0.0, 0.0, 0
+    return (
+        float(op_b.sum() + op_a.sum()) / n,
+        float(ex_b.sum() + ex_a.sum()) / n,
+        n,
+    )
+
+
+def unconfirmed_pairs(
+    pairs: list[tuple[str, str]],
+    confidence: dict[str, str],
+    poses: dict[str, Matrix],
+    glances: dict[str, str],
+) -> list[tuple[str, str, Matrix]]:
+    """The pairs of ``pairs`` that join a placement no loop confirms to a station loops
+    confirm, with their relative poses ``T_a_b``: what :func:`open_space_at_full` tests.
+
+    A station that confident links place through one that closes no loop (confidence
+    ``single``: :attr:`~flexreg.survey.graph.GraphSolution.confidence`) rests on that one
+    registration, and in a hall that repeats bay by bay a wrong answer explains its two scans
+    as well as the right one; the sample's map check cannot tell either (stray returns at
+    depth edges fill a few percent of each sample at every pose). The stations that loops
+    confirm around the placement can, at full resolution: there a right pose puts almost
+    none of either station's points where the other saw open space, and one a few bays off
+    puts the hall's unique objects there (:func:`refuted_at_full`)."""
+    out = []
+    for a, b in pairs:
+        if {confidence.get(a), confidence.get(b)} == {"single", "confident"}:
+            if a in glances and b in glances:
+                out.append((a, b, invert(poses[a]) @ poses[b]))
+    return out
+
+
+def refuted_at_full(
+    todo: list[tuple[str, str, Matrix]],
+    tested: list[tuple[float, float, int]],
+    confidence: dict[str, str],
+    limit: float,
+    min_seen: float,
+) -> list[Veto]:
+    """Vetoes of the pairs of :func:`unconfirmed_pairs` whose full-resolution test
+    (:func:`open_space_at_full`, in ``tested``) puts ``limit`` or more of both stations' points
+    in the other's open space: the registration's ``judge.settle_open_share``, the share from
+    which it sweeps a pose in a repeating plan along the repeat.
+
+    Each veto holds right (:attr:`~flexreg.survey.links.Veto.held`) the stations loops
+    confirm and the unconfirmed ones that passed: no pair refuted, and in one at least
+    ``min_seen`` of the points explained (``map_min_conflict``: the two see each other). A
+    chain of lone links is then cut beyond the last station it placed right, not along its
+    whole length."""
+    lone_of = [a if confidence.get(a) == "single" else b for a, b, _ in todo]
+    refuted = {s for s, (share, _, _) in zip(lone_of, tested, strict=True) if share >= limit}
+    seen = {s for s, (_, x, _) in zip(lone_of, tested, strict=True) if x >= min_seen}
+    held = frozenset(s for s, c in confidence.items() if c == "confident") | (seen - refuted)
+    out = []
+    for (a, b, T), lone, (share, _, _) in zip(todo, lone_of, tested, strict=True):
+        if share >= limit:
+            firm = b if lone == a else a
+            why = (
+                f"at full resolution {100 * share:.2f}% of both stations' points lie where the "
+                f"other saw open space: {lone}, which no loop confirms, against {firm}, which "
+                f"loops confirm (refuted from {100 * limit:.2f}%)"
+            )
+            out.append(Veto(a, b, T, why, held))
     return out
 
 
@@ -475,7 +573,10 @@ __all__ = [
     "assemble",
     "glance_path",
     "look_from",
+    "open_space_at_full",
     "pairs_to_check",
     "plan_looks",
+    "refuted_at_full",
+    "unconfirmed_pairs",
     "write_glance",
 ]

@@ -42,8 +42,11 @@ from flexreg.survey.mapcheck import (
     PairLook,
     assemble,
     look_from,
+    open_space_at_full,
     pairs_to_check,
     plan_looks,
+    refuted_at_full,
+    unconfirmed_pairs,
     write_glance,
 )
 from flexreg.survey.pairs import (
@@ -708,6 +711,7 @@ def _map_check(
     last round's pair scores (``vetoes`` grows in place)."""
     files, glances = stored
     looks: list[PairLook] = []
+    tested: dict[tuple[str, str, bytes], tuple[float, float, int]] = {}
     rounds = config.map_rounds + 1
     for i in range(rounds):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
@@ -722,13 +726,43 @@ def _map_check(
         seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
         looks = assemble(pairs, sol.poses, seen)
         bad = [p for p in looks if p.conflicts(config)]
-        if not bad or i >= config.map_rounds:
-            break
         bad.sort(key=lambda p: -max(p.conflicting))
-        vetoes.extend(Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad)
-        log.info("map check: %d pair(s) of placed stations contradict each other", len(bad))
+        found = [Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad]
+        found += _unconfirmed_refuted(client, pairs, sol, stored, config, tested, progress)
+        if not found or i >= config.map_rounds:
+            break
+        vetoes.extend(found)
+        log.info("map check: %d pair(s) of placed stations contradict each other", len(found))
         sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
     return sol, looks
+
+
+def _unconfirmed_refuted(
+    client: Any,
+    pairs: list[tuple[str, str]],
+    sol: GraphSolution,
+    stored: tuple[dict[str, str], dict[str, str]],
+    config: SurveyConfig,
+    tested: dict[tuple[str, str, bytes], tuple[float, float, int]],
+    progress: Progress,
+) -> list[Veto]:
+    """Placements no loop confirms against the stations loops confirm, at full resolution
+    (:func:`~flexreg.survey.mapcheck.unconfirmed_pairs`): the vetoes of the pairs refuted.
+    ``tested`` remembers each pair and pose across the map check's rounds."""
+    files, glances = stored
+    todo = unconfirmed_pairs(pairs, sol.confidence, sol.poses, glances)
+    keys = [(a, b, np.round(T[:3, :].ravel() * 1e4).tobytes()) for a, b, T in todo]
+    new = [(t, k) for t, k in zip(todo, keys, strict=True) if k not in tested]
+    results = run_tasks(
+        client,
+        open_space_at_full,
+        [((files[a], files[b]), (glances[a], glances[b]), T) for (a, b, T), _ in new],
+        on_result=OutcomeCounter("map check", len(new), progress),
+    )
+    tested.update((k, r) for (_, k), r in zip(new, results, strict=True))
+    limit = config.registration.judge.settle_open_share
+    tests = [tested[k] for k in keys]
+    return refuted_at_full(todo, tests, sol.confidence, limit, config.map_min_conflict)
 
 
 def _glances(

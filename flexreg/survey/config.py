@@ -125,13 +125,17 @@ class SurveyConfig(Config):
         only beyond three sigma (and 30 degrees about the vertical).
     map_check : bool
         After the graph, score every pair of placed stations of a group (linked or not) on the
-        dense check and cut the links no loop confirms between two that contradict each other
-        (:mod:`flexreg.survey.mapcheck`).
+        dense check and cut the links no loop confirms between two that contradict each other;
+        test a station that a link closing no loop places against the stations loops confirm
+        at full resolution, refuted from ``registration.judge.settle_open_share`` of their
+        points in each other's open space (:mod:`flexreg.survey.mapcheck`).
     map_radius_m : float, metres
         Pairs of placed stations farther apart than this are not checked.
     map_min_conflict : float
         A pair conflicts when, in either direction, at least this share of one station's
-        sample lies in the other's free space (and ``map_conflict_ratio`` holds).
+        sample lies in the other's free space (and ``map_conflict_ratio`` holds); and two
+        stations see each other from this share explained (a lone station that passed the
+        full-resolution test is then held placed right).
     map_conflict_ratio : float
         A pair conflicts only when that share in free space is at least this many times the
         share the other explains (with ``map_min_conflict``).

@@ -29,10 +29,17 @@ conflict when either explains less than 80 % of the other
 of different aisles of a repeating hall folded onto one spot agree on the racks but not on
 the far walls, and do not.
 
+A station placed only through a link that closes no loop is also tested against each station
+loops confirm at full resolution (:func:`unconfirmed_pairs`, :func:`open_space_at_full`,
+:func:`refuted_at_full`): every valid pixel of both scans, the registration's own open-space
+test, where a right pose puts almost nothing and a look-alike bay the hall's unique objects.
+
 A conflict is handed to the graph as a *veto* (:func:`flexreg.survey.graph.solve_graph`):
-while the solution keeps the two stations in the vetoed configuration, the most doubtful
-accepted link between them is cut (doubt = the link's own free-space conflict ratio), and the
-graph solved again; the map is checked again until no pair conflicts.
+while the solution keeps the two stations in the vetoed configuration, the accepted links of
+a path between them that no loop confirms are cut (the most doubtful one, by the link's own
+free-space conflict ratio, when loops confirm them all; for a full-resolution veto, only those
+beyond the last station the map holds right), and the graph solved again; the map is checked
+again until no pair conflicts.
 """
 
 from __future__ import annotations

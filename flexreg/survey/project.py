@@ -760,6 +760,9 @@ def _unconfirmed_refuted(
         on_result=OutcomeCounter("map check", len(new), progress),
     )
     tested.update((k, r) for (_, k), r in zip(new, results, strict=True))
+    for (a, b, T), r in zip((t for t, _ in new), results, strict=True):
+        at = np.round(T[:3], 4).ravel().tolist()
+        log.debug("map check at full resolution %s - %s: %.4f open, %.4f seen %s", a, b, *r[:2], at)
     limit = config.registration.judge.settle_open_share
     tests = [tested[k] for k in keys]
     return refuted_at_full(todo, tests, sol.confidence, limit, config.map_min_conflict)

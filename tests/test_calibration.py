@@ -702,3 +702,19 @@ def test_verdict_thresholds_are_validated():
     pairs, _ = _hand_made("spread")
     strict = CalibrationConfig(verdict_min_inliers=40)
     assert solve_pnp(pairs, _intr(), config=strict).verdict.status == "uncertain"
+
+
+def test_a_kitti_calibration_with_a_number_that_is_not_finite_names_its_line(tmp_path):
+    """Refused when read, before any product of the matrices (which would turn the infinity
+    into NaN with a warning and fail later, less clearly)."""
+    p = tmp_path / "calib.txt"
+    p.write_text(
+        "P2: 700 0 600 45 0 700 170 0 0 0 1 0\n"
+        "R0_rect: 1 0 0 0 1 0 0 0 1\n"
+        "Tr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 inf 0\n"
+    )
+    with pytest.raises(InputError, match="line 3: Tr_velo_to_cam holds a number that is not "):
+        read_kitti_calib(p)
+    p.write_text(p.read_text().replace("inf", "0"))
+    _, T = read_kitti_calib(p)
+    assert np.isfinite(T).all()

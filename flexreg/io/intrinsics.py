@@ -460,6 +460,8 @@ def _kitti_fields(p: Path) -> dict[str, NDArray[np.float64]]:
             fields[key.strip()] = np.array([float(x) for x in rest.split()], dtype=np.float64)
         except ValueError:
             raise InputError(p, f"line {lineno}: {key.strip()} must hold only numbers") from None
+        if not np.isfinite(fields[key.strip()]).all():
+            raise InputError(p, f"line {lineno}: {key.strip()} holds a number that is not finite")
     return fields
 
 

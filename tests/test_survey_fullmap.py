@@ -9,7 +9,7 @@ from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.registration.config import JudgeConfig
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.graph import Link, Veto, solve_graph
-from flexreg.survey.mapcheck import refuted_at_full, unconfirmed_pairs
+from flexreg.survey.mapcheck import PairJudge, refuted_at_full, unconfirmed_pairs
 
 INFO = np.diag([2e5, 2e5, 2e5, 1e4, 1e4, 1e4])
 
@@ -143,3 +143,15 @@ def test_a_right_pose_puts_almost_nothing_in_open_space_at_full_resolution(tmp_p
     # the other order: the same points, the same shares
     back = open_space_at_full((files[1], files[0]), (glances[1], glances[0]), invert(T))
     assert back[2] == n and abs(back[0] - share) <= 2 / n
+    # kept with the map's looks: a later run recalls the test instead of making it again
+    names = list(W)
+    by_name = (dict(zip(names, files, strict=True)), dict(zip(names, glances, strict=True)))
+    judge = PairJudge(*by_name, SurveyConfig())
+    assert judge.recall_full(*names, T) is None
+    judge.remember_full(*names, T, (share, explained, n))
+    assert judge.recall_full(*names, T) == (share, explained, n)
+    judge.keep()
+    later = PairJudge(*by_name, SurveyConfig())
+    assert later.recall_full(*names, T) == (share, explained, n)
+    assert later.recall_full(*names, moved) is None
+    assert later.look(*names, T) is not None and later._views != {}  # a look is no test

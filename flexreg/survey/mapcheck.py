@@ -320,7 +320,7 @@ def unconfirmed_pairs(
 
 def refuted_at_full(
     todo: list[tuple[str, str, Matrix]],
-    tested: list[tuple[float, float, int]],
+    tested: list[tuple[float, float, int] | None],
     confidence: dict[str, str],
     limit: float,
     min_seen: float,
@@ -336,11 +336,12 @@ def refuted_at_full(
     chain of lone links is then cut beyond the last station it placed right, not along its
     whole length."""
     lone_of = [a if confidence.get(a) == "single" else b for a, b, _ in todo]
-    refuted = {s for s, (share, _, _) in zip(lone_of, tested, strict=True) if share >= limit}
-    seen = {s for s, (_, x, _) in zip(lone_of, tested, strict=True) if x >= min_seen}
+    shares = [(0.0, 0.0) if t is None else t[:2] for t in tested]  # None: not tested
+    refuted = {s for s, (share, _) in zip(lone_of, shares, strict=True) if share >= limit}
+    seen = {s for s, (_, x) in zip(lone_of, shares, strict=True) if x >= min_seen}
     held = frozenset(s for s, c in confidence.items() if c == "confident") | (seen - refuted)
     out = []
-    for (a, b, T), lone, (share, _, _) in zip(todo, lone_of, tested, strict=True):
+    for (a, b, T), lone, (share, _) in zip(todo, lone_of, shares, strict=True):
         if share >= limit:
             firm = b if lone == a else a
             why = (
@@ -388,6 +389,7 @@ class PairJudge:
         self.keep_bytes = keep_bytes
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
+        self._full: dict[tuple[str, str, bytes], tuple[float, float, int]] = {}
         self._kept: dict[str, NDArray[np.float64]] | None = None  # read on first use
         self._new = 0
         self._used: set[str] = set()  # the kept looks this run asked for
@@ -488,6 +490,36 @@ class PairJudge:
                     self._new += 1
             self._memo[key] = look
         return self._memo[key]
+
+    def recall_full(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, int] | None:
+        """The full-resolution test of the pair at ``T_a_b`` (:func:`open_space_at_full`),
+        when this run or an earlier one (the kept looks) made it; else None."""
+        key, stored = self._full_key(a, b, T_a_b)
+        if key not in self._full:
+            kept = self._kept_looks().get(stored) if stored is not None else None
+            if kept is None:
+                return None
+            self._full[key] = (float(kept[0]), float(kept[1]), int(kept[2]))
+        if stored is not None:
+            self._used.add(stored)
+        return self._full[key]
+
+    def remember_full(
+        self, a: str, b: str, T_a_b: Matrix, tested: tuple[float, float, int]
+    ) -> None:
+        """Keep a full-resolution test for this run and (:meth:`keep`) later ones."""
+        key, stored = self._full_key(a, b, T_a_b)
+        self._full[key] = tested
+        if stored is not None:
+            self._used.add(stored)
+            self._kept_looks()[stored] = np.asarray([*tested, 0, 0, 0], dtype=np.float64)
+            self._new += 1
+
+    def _full_key(self, a: str, b: str, T_a_b: Matrix) -> tuple[Any, str | None]:
+        T = np.asarray(T_a_b, dtype=np.float64)
+        pose = np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes()
+        stored = self._stored_key(a, b, pose)
+        return (a, b, pose), None if stored is None else "full|" + stored
 
     def _stored_key(self, a: str, b: str, pose: bytes) -> str | None:
         """A look's name among the kept ones: both stations' cache keys and the pose."""

@@ -711,7 +711,6 @@ def _map_check(
     last round's pair scores (``vetoes`` grows in place)."""
     files, glances = stored
     looks: list[PairLook] = []
-    tested: dict[tuple[str, str, bytes], tuple[float, float, int]] = {}
     rounds = config.map_rounds + 1
     for i in range(rounds):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
@@ -728,7 +727,7 @@ def _map_check(
         bad = [p for p in looks if p.conflicts(config)]
         bad.sort(key=lambda p: -max(p.conflicting))
         found = [Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad]
-        found += _unconfirmed_refuted(client, pairs, sol, stored, config, tested, progress)
+        found += _unconfirmed_refuted(client, pairs, sol, stored, config, judge, progress)
         if not found or i >= config.map_rounds:
             break
         vetoes.extend(found)
@@ -743,28 +742,28 @@ def _unconfirmed_refuted(
     sol: GraphSolution,
     stored: tuple[dict[str, str], dict[str, str]],
     config: SurveyConfig,
-    tested: dict[tuple[str, str, bytes], tuple[float, float, int]],
+    judge: PairJudge | None,
     progress: Progress,
 ) -> list[Veto]:
     """Placements no loop confirms against the stations loops confirm, at full resolution
     (:func:`~flexreg.survey.mapcheck.unconfirmed_pairs`): the vetoes of the pairs refuted.
-    ``tested`` remembers each pair and pose across the map check's rounds."""
+    ``judge`` remembers each pair and pose's test across the rounds and for later runs."""
     files, glances = stored
+    judge = judge if judge is not None else PairJudge(files, glances, config)
     todo = unconfirmed_pairs(pairs, sol.confidence, sol.poses, glances)
-    keys = [(a, b, np.round(T[:3, :].ravel() * 1e4).tobytes()) for a, b, T in todo]
-    new = [(t, k) for t, k in zip(todo, keys, strict=True) if k not in tested]
+    new = [t for t in todo if judge.recall_full(*t) is None]
     results = run_tasks(
         client,
         open_space_at_full,
-        [((files[a], files[b]), (glances[a], glances[b]), T) for (a, b, T), _ in new],
+        [((files[a], files[b]), (glances[a], glances[b]), T) for a, b, T in new],
         on_result=OutcomeCounter("map check", len(new), progress),
     )
-    tested.update((k, r) for (_, k), r in zip(new, results, strict=True))
-    for (a, b, T), r in zip((t for t, _ in new), results, strict=True):
+    for (a, b, T), r in zip(new, results, strict=True):
+        judge.remember_full(a, b, T, r)
         at = np.round(T[:3], 4).ravel().tolist()
         log.debug("map check at full resolution %s - %s: %.4f open, %.4f seen %s", a, b, *r[:2], at)
+    tests = [judge.recall_full(*t) for t in todo]
     limit = config.registration.judge.settle_open_share
-    tests = [tested[k] for k in keys]
     return refuted_at_full(todo, tests, sol.confidence, limit, config.map_min_conflict)
 
 

@@ -365,7 +365,8 @@ class PairJudge:
     remembered per pair and pose (to 1 mm / 1e-4 of the rotation), and kept for later runs
     by :meth:`keep` in the cache (:meth:`kept_path`: named by the dense check's tolerances and
     :data:`LOOK_FORMAT`, each look by both stations' cache keys and the pose), so a re-run
-    scores only the placements it has not seen.
+    scores only the placements it has not seen; the full-resolution tests of lone placements
+    (:meth:`recall_full`, :meth:`remember_full`) are kept beside them.
 
     Parameters
     ----------

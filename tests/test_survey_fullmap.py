@@ -87,6 +87,7 @@ def test_a_refuted_lone_station_is_cut_beyond_the_last_station_the_map_holds():
     assert sorted(sol.groups[0]) == ["s0", "s1", "s2", "s3"]
     cut = [e for e in links if "cut by the map check" in (e.why or "")]
     assert [(e.target, e.source) for e in cut] == [("s3", "s4")]
+    assert "(1 of the 3 link(s) between them; the map saw the stations on the other " in cut[0].why
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
     # the veto's ends in the other order cut the same link
     P, links = _hall()
@@ -102,6 +103,7 @@ def test_a_refuted_lone_station_is_cut_beyond_the_last_station_the_map_holds():
     assert sorted(sol.groups[0]) == ["s0", "s1", "s2"]
     assert [(e.target, e.source) for e in links if e.status != "accepted"] == [
         ("s2", "s3"), ("s3", "s4")]  # fmt: skip
+    assert all("one of those is wrong, and nothing tells which" in e.why for e in links[3:])
 
 
 def test_a_right_pose_puts_almost_nothing_in_open_space_at_full_resolution(tmp_path):

@@ -517,14 +517,18 @@ def _veto_cuts(
             f"place them ({v.why}); "
         )
         held = {frozenset(x) for x in _looped(_firm_edges(links))}
-        unconfirmed = _nearest_held(
-            [e for e in path if frozenset((e.target, e.source)) not in held], path, v
-        )
+        loose = [e for e in path if frozenset((e.target, e.source)) not in held]
+        unconfirmed = _nearest_held(loose, path, v)
         if unconfirmed:
             n = len(unconfirmed)
+            which = (
+                "one of those is wrong, and nothing tells which"
+                if n == len(loose)
+                else "the map saw the stations on the other side of it placed right"
+            )
             return [
                 (e, said + f"no loop confirms this one ({n} of the {len(path)} link(s) between "
-                 "them; one of those is wrong, and nothing tells which)")
+                 f"them; {which})")
                 for e in unconfirmed
             ]  # fmt: skip
         doubt = [max(float(e.doubt or 0.0), 1e-6) for e in path]

@@ -9,7 +9,7 @@ from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.registration.config import JudgeConfig
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.graph import Link, Veto, solve_graph
-from flexreg.survey.mapcheck import PairJudge, refuted_at_full, unconfirmed_pairs
+from flexreg.survey.mapcheck import PairJudge, PairLook, refuted_at_full, unconfirmed_pairs
 
 INFO = np.diag([2e5, 2e5, 2e5, 1e4, 1e4, 1e4])
 
@@ -42,15 +42,25 @@ def _hall():
     return P, links
 
 
-def test_lone_placements_are_paired_with_the_confirmed_stations_only():
+def test_lone_placements_are_paired_with_the_confirmed_stations_they_see():
     P, links = _hall()
     sol = solve_graph(list(P), links, SurveyConfig(), reference="s0")
     assert sol.confidence == {
         "s0": "confident", "s1": "confident", "s2": "confident",
         "s3": "single", "s4": "single"}  # fmt: skip
-    pairs = [("s0", "s3"), ("s3", "s4"), ("s1", "s2"), ("s2", "s4"), ("s1", "s4")]
-    glances = {s: f"{s}.glance.npz" for s in P if s != "s1"}  # s1 has no glance
-    todo = unconfirmed_pairs(pairs, sol.confidence, sol.poses, glances)
+
+    def look(a, b, explained, conflicting):
+        T = invert(sol.poses[a]) @ sol.poses[b]
+        return PairLook(a, b, T, explained, conflicting, (1000, 1000))
+
+    looks = [
+        look("s0", "s3", (0.20, 0.10), (0.0, 0.0)),  # tested
+        look("s3", "s4", (0.30, 0.30), (0.0, 0.0)),  # two lone stations: not
+        look("s1", "s2", (0.50, 0.50), (0.0, 0.0)),  # two confirmed ones: not
+        look("s2", "s4", (0.01, 0.0), (0.025, 0.0)),  # 3.5 % of s4's sample seen: tested
+        look("s1", "s4", (0.01, 0.01), (0.01, 0.01)),  # they hardly see each other: not
+    ]
+    todo = unconfirmed_pairs(looks, sol.confidence, SurveyConfig().map_min_conflict)
     assert [(a, b) for a, b, _ in todo] == [("s0", "s3"), ("s2", "s4")]
     np.testing.assert_allclose(todo[1][2], invert(sol.poses["s2"]) @ sol.poses["s4"])
 

@@ -294,13 +294,13 @@ def open_space_at_full(
 
 
 def unconfirmed_pairs(
-    pairs: list[tuple[str, str]],
-    confidence: dict[str, str],
-    poses: dict[str, Matrix],
-    glances: dict[str, str],
+    looks: list[PairLook], confidence: dict[str, str], min_seen: float
 ) -> list[tuple[str, str, Matrix]]:
-    """The pairs of ``pairs`` that join a placement no loop confirms to a station loops
-    confirm, with their relative poses ``T_a_b``: what :func:`open_space_at_full` tests.
+    """The pairs of ``looks`` (the sample's scores of this round) that join a placement no
+    loop confirms to a station loops confirm and see each other (in either direction at least
+    ``min_seen`` of a sample on the other's surfaces or in its free space, as
+    :meth:`PairJudge.contradiction` asks), with their relative poses ``T_a_b``: what
+    :func:`open_space_at_full` tests.
 
     A station that confident links place through one that closes no loop (confidence
     ``single``: :attr:`~flexreg.survey.graph.GraphSolution.confidence`) rests on that one
@@ -309,12 +309,15 @@ def unconfirmed_pairs(
     depth edges fill a few percent of each sample at every pose). The stations that loops
     confirm around the placement can, at full resolution: there a right pose puts almost
     none of either station's points where the other saw open space, and one a few bays off
-    puts the hall's unique objects there (:func:`refuted_at_full`)."""
+    puts the hall's unique objects there (:func:`refuted_at_full`). Pairs that do not see
+    each other are left out: they would say little, and a project of many stations holds
+    many of them."""
     out = []
-    for a, b in pairs:
-        if {confidence.get(a), confidence.get(b)} == {"single", "confident"}:
-            if a in glances and b in glances:
-                out.append((a, b, invert(poses[a]) @ poses[b]))
+    for p in looks:
+        if {confidence.get(p.a), confidence.get(p.b)} != {"single", "confident"}:
+            continue
+        if max(x + c for x, c in zip(p.explained, p.conflicting, strict=True)) >= min_seen:
+            out.append((p.a, p.b, np.asarray(p.T_a_b, dtype=np.float64)))
     return out
 
 

@@ -727,7 +727,7 @@ def _map_check(
         bad = [p for p in looks if p.conflicts(config)]
         bad.sort(key=lambda p: -max(p.conflicting))
         found = [Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad]
-        found += _unconfirmed_refuted(client, pairs, sol, stored, config, judge, progress)
+        found += _unconfirmed_refuted(client, looks, sol, stored, config, judge, progress)
         if not found or i >= config.map_rounds:
             break
         vetoes.extend(found)
@@ -738,7 +738,7 @@ def _map_check(
 
 def _unconfirmed_refuted(
     client: Any,
-    pairs: list[tuple[str, str]],
+    looks: list[PairLook],
     sol: GraphSolution,
     stored: tuple[dict[str, str], dict[str, str]],
     config: SurveyConfig,
@@ -750,7 +750,7 @@ def _unconfirmed_refuted(
     ``judge`` remembers each pair and pose's test across the rounds and for later runs."""
     files, glances = stored
     judge = judge if judge is not None else PairJudge(files, glances, config)
-    todo = unconfirmed_pairs(pairs, sol.confidence, sol.poses, glances)
+    todo = unconfirmed_pairs(looks, sol.confidence, config.map_min_conflict)
     new = [t for t in todo if judge.recall_full(*t) is None]
     results = run_tasks(
         client,

@@ -41,7 +41,9 @@ A station is
   its median range, under the tolerance) and confirmed by an independent route: it stays
   joined to the reference when any one pair is taken out (2-edge-connected) through pairs
   whose residuals are within tolerance;
-* ``placed``: within tolerance, but one pair alone places it;
+* ``placed``: no independent route confirms it (one pair alone places it); tested before
+  the tolerance, since its 95 % error does not bound a slid or look-alike pose (the reason
+  says when that error is over the tolerance too);
 * ``outside_tolerance``: placed, but its 95 % error radius exceeds the tolerance, or no
   pair holds it (every pair at it left out);
 * ``unplaced``.

@@ -119,6 +119,13 @@ class PairLook:
         each other (a repeated set-up does); less means one is in the wrong place."""
         return self.distance_m < COINCIDENT_M and min(self.explained) < (COINCIDENT_EXPLAINED)
 
+    @property
+    def seen(self) -> tuple[float, float]:
+        """Share of each sample on the other's surfaces or in its free space (where the other
+        scanner measured anything): how much each direction sees of the other."""
+        x, c = self.explained, self.conflicting
+        return (x[0] + c[0], x[1] + c[1])
+
     def conflicts(self, config: SurveyConfig) -> bool:
         """Whether either direction contradicts more than it explains, or the two are
         placed at one spot without seeing the same scene (see the module)."""
@@ -316,7 +323,7 @@ def unconfirmed_pairs(
     for p in looks:
         if {confidence.get(p.a), confidence.get(p.b)} != {"single", "confident"}:
             continue
-        if max(x + c for x, c in zip(p.explained, p.conflicting, strict=True)) >= min_seen:
+        if max(p.seen) >= min_seen:
             out.append((p.a, p.b, np.asarray(p.T_a_b, dtype=np.float64)))
     return out
 
@@ -354,6 +361,11 @@ def refuted_at_full(
             )
             out.append(Veto(a, b, T, why, held))
     return out
+
+
+def _pose_key(T: Matrix) -> bytes:
+    """A relative pose to 1e-4 of the rotation and 1 mm: what the judge remembers it by."""
+    return np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes()
 
 
 class PairJudge:
@@ -473,7 +485,7 @@ class PairJudge:
     def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
         """Both directions of the pair at ``T_a_b``; None when a station has no view."""
         T = np.asarray(T_a_b, dtype=np.float64)
-        key = (a, b, np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes())
+        key = (a, b, _pose_key(T))
         if key not in self._memo:
             stored = self._stored_key(a, b, key[2])
             kept = self._kept_looks().get(stored) if stored is not None else None
@@ -520,8 +532,7 @@ class PairJudge:
             self._new += 1
 
     def _full_key(self, a: str, b: str, T_a_b: Matrix) -> tuple[Any, str | None]:
-        T = np.asarray(T_a_b, dtype=np.float64)
-        pose = np.round(np.r_[T[:3, :3].ravel() * 1e4, T[:3, 3] * 1e3]).tobytes()
+        pose = _pose_key(np.asarray(T_a_b, dtype=np.float64))
         stored = self._stored_key(a, b, pose)
         return (a, b, pose), None if stored is None else "full|" + stored
 
@@ -543,7 +554,7 @@ class PairJudge:
     def contradiction(self, look: PairLook) -> tuple[float, float, float] | None:
         """``(contradiction, conflict, explained)`` of a pair's scores (see
         :meth:`__call__`)."""
-        seen = [x + c for x, c in zip(look.explained, look.conflicting, strict=True)]
+        seen = look.seen
         if max(seen) < self.config.map_min_conflict:
             return None
         r = max(

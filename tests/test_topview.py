@@ -16,6 +16,7 @@ from flexreg.core.range_image import from_depth
 from flexreg.core.scan import Scan
 from flexreg.core.transforms import rotation_about_axis
 from flexreg.errors import DegenerateGeometryError
+from flexreg.stages import plan_correlation as plancorr
 from flexreg.stages import priors as topview
 from flexreg.stages.priors import Levelling, PlanMatch, TopView, match_top_views
 from flexreg.stages.projection import fill_holes, project, range_image
@@ -272,13 +273,70 @@ def test_rotated_rasters_hand_made():
     xy = np.array([[0.5, 0.0], [0.0, 1.0]])
     vals = np.array([1.0, 2.0])
     yaws = np.array([math.pi / 2, 0.0])
-    r = topview._rotated_rasters(xy, vals, yaws, 0.0, 0.0, 0.5, 3, 8, -1)
+    r = plancorr.rotated_rasters(xy, vals, yaws, 0.0, 0.0, 0.5, 3, 8, -1)
     assert r.shape == (2, 8, 8) and r.dtype == np.float32
     assert r[0, 4, 3] == 1.0 and r[0, 3, 1] == 2.0 and r[0].sum() == 3.0
     assert r[1, 3, 4] == 1.0 and r[1, 5, 3] == 2.0  # yaw 0: cells (1, 0) and (0, 2)
     # shifted by (-0.5, 0): (-0.5, 0.5) -> cell (-1, 1) kept; (-1.5, 0) -> cell (-3, 0) beyond
-    shifted = topview._rotated_rasters(xy, vals, yaws[:1], -0.5, 0.0, 0.5, 3, 8, 1)
+    shifted = plancorr.rotated_rasters(xy, vals, yaws[:1], -0.5, 0.0, 0.5, 3, 8, 1)
     assert shifted[0, 4, 2] == 1.0 and shifted[0].sum() == 1.0
+
+
+def test_window_scores_hand_made():
+    # one source cell of value 2 at (1, 0) (0.5 m cells), yaw 0, no shift; the target raster
+    # holds 3 at its cell (0, 0) and 5 at (1, 1) (stored at [iy + 2, ix + 2]); offset d puts
+    # the source cell on target cell (1, 0) - d: d = (1, 0) meets (0, 0), d = (0, -1) meets (1, 1)
+    T = np.zeros((5, 5), np.float32)
+    T[2, 2], T[3, 3] = 3.0, 5.0
+    xy, vals = np.array([[0.5, 0.0]]), np.array([2.0])
+    out = plancorr.window_scores(xy, vals, np.zeros(1), 0.0, 0.0, 0.5, T, 2, 1, 1)
+    want = np.zeros((3, 3))
+    want[1, 2] = 6.0  # [iy, ix] = [dy + 1, dx + 1]
+    want[0, 1] = 10.0
+    np.testing.assert_array_equal(out[0], want)
+
+
+@pytest.mark.parametrize("shift_m", [0.4, 1.5])
+def test_offsets_summed_in_a_window_equal_the_fft_products(room_views, shift_m):
+    """The refinement's few offsets summed cell by cell give the FFT correlation's values
+    (which the whole-plan products give in single precision)."""
+    _, tv, tvf, _ = room_views[0]
+    _, sv, svf, _ = room_views[1]
+    for t, s in ((tv, sv), (tvf, svf)):
+        off = plancorr.Offsets.of(t.cells, t.values, t.cell_m, shift_m)
+        yaws = np.radians([-1.0, 0.0, 2.5, 91.0])
+        t0 = np.array([0.3, -0.2])
+        direct = plancorr.window_scores(
+            s.xy, s.values, yaws, 0.3, -0.2, off.cell_m, off.T, off.rt + off.w, off.w, off.rt
+        )
+        near = np.arange(-off.w, off.w + 1) % off.n
+        rasters = plancorr.rotated_rasters(
+            s.xy, s.values, yaws, 0.3, -0.2, off.cell_m, off.rt + off.w, off.n, off.rt
+        )
+        fft = np.stack(
+            [c[np.ix_(near, near)] for c in plancorr.correlation(rasters, off.FT, (off.n,) * 2)]
+        )
+        scale = float(np.abs(fft).max())
+        assert scale > 0
+        np.testing.assert_allclose(direct, fft, atol=1e-4 * scale)
+        np.testing.assert_allclose(off.near(s.xy, s.values, t0, yaws), direct, atol=1e-4 * scale)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_top_local_maxima_equal_the_maximum_filter(seed):
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    corr = rng.normal(size=(40, 48))
+    corr = ndimage.gaussian_filter(corr, 1.5, mode="wrap")  # smooth peaks, as correlations
+    if seed % 2:
+        corr = np.round(corr, 1)  # ties
+    sep, k = 9, 3 + seed
+    top = (corr == ndimage.maximum_filter(corr, size=sep, mode="wrap")) & (corr > 0)
+    flat = np.flatnonzero(top)
+    want = flat[np.argsort(-corr.ravel()[flat], kind="stable")][:k]
+    np.testing.assert_array_equal(plancorr.top_local_maxima(corr, sep, k), want)
+    assert len(plancorr.top_local_maxima(-np.abs(corr), sep, k)) == 0  # nothing positive
 
 
 def test_estimate_up_synthetic_stations(room_pair, room_views):

@@ -38,6 +38,13 @@ from flexreg.core.transforms import invert, rotation_about_axis
 from flexreg.errors import DegenerateGeometryError
 from flexreg.stages.levelling import MAX_TILT_RAD, Levelling, estimate_up
 from flexreg.stages.normals import surface_normals
+from flexreg.stages.plan_correlation import (
+    Offsets,
+    correlation,
+    raster,
+    rotated_rasters,
+    top_local_maxima,
+)
 
 log = logging.getLogger(__name__)
 
@@ -219,46 +226,6 @@ class PlanMatch:
     score: float
 
 
-def _raster(
-    cells: NDArray[np.int64], vals: NDArray[np.float64], shape: tuple[int, int], off: int
-) -> NDArray[np.float64]:
-    lin = (cells[:, 1] + off) * shape[1] + (cells[:, 0] + off)
-    img = np.bincount(lin, weights=vals, minlength=shape[0] * shape[1])
-    return np.asarray(img, dtype=np.float64).reshape(shape)
-
-
-@numba.njit(cache=True, nogil=True)
-def _rotated_rasters(xy, values, yaws, tx, ty, cell, off, size, bound):  # pragma: no cover
-    """(len(yaws), size, size) float32 rasters of the plan cells ``xy`` rotated by each yaw
-    about the scanner and shifted by ``(tx, ty)``, then rounded to cells of ``cell`` metres
-    (cell ``(ix, iy)`` at ``[iy + off, ix + off]``, as :func:`_raster`); cells beyond ``bound``
-    in x or y are left out when ``bound >= 0``."""
-    out = np.empty((yaws.shape[0], size, size), dtype=np.float32)
-    acc = np.empty((size, size))
-    for k in range(yaws.shape[0]):
-        acc[:] = 0.0
-        cy = math.cos(yaws[k])
-        sy = math.sin(yaws[k])
-        for i in range(xy.shape[0]):
-            x = xy[i, 0] * cy - xy[i, 1] * sy + tx
-            y = xy[i, 0] * sy + xy[i, 1] * cy + ty
-            ix = np.int64(math.floor(x / cell + 0.5))
-            iy = np.int64(math.floor(y / cell + 0.5))
-            if bound >= 0 and (abs(ix) > bound or abs(iy) > bound):
-                continue
-            acc[iy + off, ix + off] += values[i]
-        for r in range(size):
-            for c in range(size):
-                out[k, r, c] = acc[r, c]
-    return out
-
-
-def _correlation(S: NDArray[Any], FT: Any, shape: tuple[int, int]) -> NDArray[Any]:
-    """``corr[d] = sum_x T[x] S[x + d]`` (circular) of each raster in ``S`` (..., H, W), given
-    ``FT = conj(rfft2(T))``: source raster position ``x + d`` lies on target position ``x``."""
-    return np.asarray(fft.irfft2(fft.rfft2(S, axes=(-2, -1)) * FT, s=shape, axes=(-2, -1)))
-
-
 def _yaw_peaks(
     target: TopView, source: TopView, yaws: NDArray[Any], cell_m: float, peaks: int = 1
 ) -> list[list[tuple[float, float, float]]]:
@@ -273,12 +240,12 @@ def _yaw_peaks(
     rs = math.ceil(float(np.hypot(source.xy[:, 0], source.xy[:, 1]).max()) / c) + 2
     size = fft.next_fast_len(2 * (rt + rs) + 1, real=True)
     shape = (size, size)
-    T = _raster(tcells, target.values, shape, rt).astype(np.float32)
+    T = raster(tcells, target.values, shape, rt).astype(np.float32)
     FT = np.conj(fft.rfft2(T))
     out: list[list[tuple[float, float, float]]] = []
     batch = 8  # yaws per FFT call (single precision: a plan is a coarse picture)
     for b0 in range(0, len(yaws), batch):
-        S = _rotated_rasters(
+        S = rotated_rasters(
             source.xy,
             source.values,
             np.ascontiguousarray(yaws[b0 : b0 + batch], dtype=np.float64),
@@ -289,14 +256,12 @@ def _yaw_peaks(
             size,
             -1,
         )
-        for corr in _correlation(S, FT, shape):
+        for corr in correlation(S, FT, shape):
             if peaks == 1:
                 tops = [divmod(int(np.argmax(corr)), size)]
             else:
                 sep = 2 * math.ceil(PEAK_SEPARATION_M / c) + 1
-                top = (corr == ndimage.maximum_filter(corr, size=sep, mode="wrap")) & (corr > 0)
-                flat = np.flatnonzero(top)
-                flat = flat[np.argsort(-corr.ravel()[flat], kind="stable")][:peaks]
+                flat = top_local_maxima(corr, sep, peaks)
                 tops = [divmod(int(f), size) for f in flat] or [divmod(int(np.argmax(corr)), size)]
             row = []
             for iy, ix in tops:
@@ -402,54 +367,6 @@ def refine_plan_match(
     )[0]
 
 
-@dataclass(frozen=True, eq=False)
-class _Offsets:
-    """The target's plan, blurred and transformed once, for correlations with the source's
-    plan turned by several yaws and shifted to a seed offset: the scores of every offset
-    within ``w`` cells of the seed (:meth:`near`)."""
-
-    cell_m: float
-    rt: int
-    w: int
-    n: int
-    FT: Any
-
-    @classmethod
-    def of(cls, target: TopView, shift_m: float) -> _Offsets:
-        c = target.cell_m
-        rt = int(np.abs(target.cells).max()) + 1
-        w = math.ceil(shift_m / c) + 1
-        n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
-        T = ndimage.gaussian_filter(_raster(target.cells, target.values, (n, n), rt + w), 1.0)
-        return cls(c, rt, w, n, np.conj(fft.rfft2(T.astype(np.float32))))
-
-    def near(
-        self, source: TopView, t0: NDArray[np.float64], yaws: NDArray[np.float64]
-    ) -> NDArray[Any]:
-        """``(len(yaws), 2w + 1, 2w + 1)`` correlations of the source turned by each yaw and
-        shifted by ``t0``, at offsets ``d`` in ``[-w, w]^2`` cells (``[iy, ix]`` is
-        ``d = (ix - w, iy - w)``: the source at ``x + d`` lies on the target at ``x``); eight
-        yaws per batched FFT product."""
-        near = np.arange(-self.w, self.w + 1) % self.n
-        out = []
-        for b0 in range(0, len(yaws), 8):
-            rasters = _rotated_rasters(
-                source.xy,
-                source.values,
-                np.ascontiguousarray(yaws[b0 : b0 + 8], dtype=np.float64),
-                float(t0[0]),
-                float(t0[1]),
-                float(self.cell_m),
-                self.rt + self.w,
-                self.n,
-                self.rt,
-            )
-            out += [
-                corr[np.ix_(near, near)] for corr in _correlation(rasters, self.FT, (self.n,) * 2)
-            ]
-        return np.stack(out)
-
-
 def refine_plan_matches(
     target: TopView,
     source: TopView,
@@ -464,14 +381,14 @@ def refine_plan_matches(
     c = target.cell_m
     if source.cell_m != c:
         raise ValueError("plans must share their cell size")
-    offsets = _Offsets.of(target, shift_m)
+    offsets = Offsets.of(target.cells, target.values, target.cell_m, shift_m)
     w = offsets.w
     out = []
     for match in matches:
         t0 = np.asarray(match.t_xy)
         yaws = match.yaw_rad + np.arange(-yaw_range_rad, yaw_range_rad + 1e-12, yaw_step_rad)
         best = []
-        for yaw, win in zip(yaws, offsets.near(source, t0, yaws), strict=True):
+        for yaw, win in zip(yaws, offsets.near(source.xy, source.values, t0, yaws), strict=True):
             iy, ix = divmod(int(np.argmax(win)), 2 * w + 1)
             b = float(win[iy, ix])
             fy = _parabola(win[iy - 1, ix], b, win[iy + 1, ix]) if 0 < iy < 2 * w else 0.0
@@ -643,11 +560,11 @@ def _window_peaks(
     ``turn_rad`` of ``seed``'s (1 degree steps) and offset within ``shift_m`` of its: local
     maxima of the correlation over (yaw, offset), at least 1 m or 3 degrees apart."""
     c = target.cell_m
-    offsets = _Offsets.of(target, shift_m)
+    offsets = Offsets.of(target.cells, target.values, target.cell_m, shift_m)
     w = offsets.w
     yaws = seed.yaw_rad + np.arange(-turn_rad, turn_rad + 1e-12, math.radians(1.0))
     t0 = np.asarray(seed.t_xy)
-    vol = offsets.near(source, t0, yaws).astype(np.float64)
+    vol = offsets.near(source.xy, source.values, t0, yaws).astype(np.float64)
     d = np.arange(-w, w + 1) * c
     inside = np.hypot(d[None, :], d[:, None]) <= shift_m
     vol[:, ~inside] = -np.inf

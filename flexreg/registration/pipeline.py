@@ -85,11 +85,12 @@ def _plan_priors(
     source: PlanView | str | None,
     config: RegistrationConfig,
     window: Window | None = None,
+    symmetries: tuple[Sequence[NDArray[np.float64]] | None, ...] = (None, None),
 ) -> PlanPriors:
     """The plan overlays of two plan views (raises the reason a scan has none), the best ones
     inside a rough prior's ``window`` first (:func:`~flexreg.stages.priors.
     windowed_plan_overlays`), and the symmetries of each (when
-    ``config.judge.runs("aliases")``)."""
+    ``config.judge.runs("aliases")``; those given, of prepared scans, as they are)."""
     for p in (target, source):
         if not isinstance(p, PlanView):
             raise DegenerateGeometryError(str(p))
@@ -110,7 +111,11 @@ def _plan_priors(
     up = np.asarray(target.levelling.up, dtype=np.float64)  # type: ignore[union-attr]
     if not config.judge.runs("aliases"):
         return overlays, Aliases(up=up)
-    return overlays, Aliases(self_symmetries(target), self_symmetries(source), up)
+    st, ss = (
+        list(given) if given is not None else self_symmetries(plan)
+        for given, plan in zip(symmetries, (target, source), strict=True)
+    )
+    return overlays, Aliases(st, ss, up)
 
 
 def _pair_plan_priors(
@@ -600,7 +605,11 @@ class Registration:
             (view,) = view_job.result()
         if not keep_scan:
             view.refine_sample = refine_sample
-        return PreparedScan(scan, images[0], kp, plan, view, config, run.timings)
+        symmetries = None
+        if isinstance(plan, PlanView) and config.judge.runs("aliases"):
+            with timed_stage(run.timings, "plan views"):
+                symmetries = self_symmetries(plan)
+        return PreparedScan(scan, images[0], kp, plan, view, config, run.timings, symmetries)
 
     def align(
         self,
@@ -626,7 +635,13 @@ class Registration:
             plan_job = (
                 pool.submit(
                     run.background(
-                        "plan views", _plan_priors, target.plan, source.plan, config, win
+                        "plan views",
+                        _plan_priors,
+                        target.plan,
+                        source.plan,
+                        config,
+                        win,
+                        (target.symmetries, source.symmetries),
                     )
                 )
                 if _plan_wanted(config, images) and not config.icp_only

@@ -120,6 +120,11 @@ class PreparedScan:
         The configuration it was prepared with (:meth:`Registration.align` needs the same).
     timings_s : dict
         Seconds per stage.
+    symmetries : list of (4, 4) float64, or None
+        The poses that overlay the plan view onto itself
+        (:func:`~flexreg.registration.candidates.self_symmetries`), when the judge looks for
+        aliases and the scan has a plan view: one scan's, found once with it rather than in
+        each of its links (about a second at 1024 x 512).
     """
 
     scan: Scan | RangeImage
@@ -129,6 +134,7 @@ class PreparedScan:
     view: ScanView
     config: RegistrationConfig
     timings_s: dict[str, float] = field(default_factory=dict)
+    symmetries: list[NDArray[np.float64]] | None = None
 
 
 @contextmanager

@@ -210,9 +210,11 @@ def _facing(
     """The source's points whose normal, turned by ``R`` into the target frame, lies within
     60 degrees of ``direction`` either way: the only surfaces a slide along it moves across
     themselves (a tunnel's niche and its cabinets, a forklift's front and back)."""
-    n = pair.source.normals @ R.T
+    # the direction turned into the source frame, against the normals in float64 (a float32
+    # array times a float64 matrix takes numpy's slow mixed-type loop: 60 ms for 360 000)
+    v = np.asarray(R, dtype=np.float64).T @ np.asarray(direction, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        return np.asarray(np.abs(n @ direction) >= 0.5)
+        return np.asarray(np.abs(pair.source.normals.astype(np.float64) @ v) >= 0.5)
 
 
 @dataclass(eq=False)
@@ -372,9 +374,7 @@ def place_along(
     (4, 4) float64
     """
     s = pair.source
-    n = s.normals @ T[:3, :3].T
-    with np.errstate(invalid="ignore"):
-        facing = np.abs(n @ direction) >= 0.5
+    facing = _facing(pair, T[:3, :3], direction)
     pts, slack = s.points[facing], s.point_slack[facing]
     if len(pts) == 0:
         return T

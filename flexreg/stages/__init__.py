@@ -16,7 +16,9 @@ matching       matching.match                      Features x 2        (Q, 2) in
 threshold      correspondences.derive_threshold    images, keypoints   metres
 RANSAC prior   alignment.ransac_rigid              (Q, 3) x 2          RansacResult
 plan prior     priors.upright_priors               RangeImage x 2      list of (4, 4)
-               (plan_view, plan_overlays)
+               (plan_view, plan_overlays;
+               plan_correlation: the overlays'
+               FFT and windowed correlations)
 guided fit     alignment.guided_fit                prior, Features     GuidedFit
 verification   verification.overlap_score          RangeImage x 2, T   consistent, conflict
                (classify_points, range_slack)

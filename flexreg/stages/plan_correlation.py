@@ -30,6 +30,15 @@ def raster(
     return np.asarray(img, dtype=np.float64).reshape(shape)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _turned_cell(x0, y0, cy, sy, tx, ty, cell):  # pragma: no cover - compiled
+    """The cell ``(ix, iy)`` of ``cell`` metres of the point ``(x0, y0)`` turned by the yaw
+    of cosine ``cy`` and sine ``sy`` about the scanner and shifted by ``(tx, ty)``."""
+    x = x0 * cy - y0 * sy + tx
+    y = x0 * sy + y0 * cy + ty
+    return np.int64(math.floor(x / cell + 0.5)), np.int64(math.floor(y / cell + 0.5))
+
+
 @numba.njit(cache=True, nogil=True)
 def rotated_rasters(xy, values, yaws, tx, ty, cell, off, size, bound):  # pragma: no cover
     """(len(yaws), size, size) float32 rasters of the plan cells ``xy`` rotated by each yaw
@@ -43,10 +52,7 @@ def rotated_rasters(xy, values, yaws, tx, ty, cell, off, size, bound):  # pragma
         cy = math.cos(yaws[k])
         sy = math.sin(yaws[k])
         for i in range(xy.shape[0]):
-            x = xy[i, 0] * cy - xy[i, 1] * sy + tx
-            y = xy[i, 0] * sy + xy[i, 1] * cy + ty
-            ix = np.int64(math.floor(x / cell + 0.5))
-            iy = np.int64(math.floor(y / cell + 0.5))
+            ix, iy = _turned_cell(xy[i, 0], xy[i, 1], cy, sy, tx, ty, cell)
             if bound >= 0 and (abs(ix) > bound or abs(iy) > bound):
                 continue
             acc[iy + off, ix + off] += values[i]
@@ -109,10 +115,7 @@ def window_scores(xy, values, yaws, tx, ty, cell, T, off, w, bound):  # pragma: 
         cy = math.cos(yaws[k])
         sy = math.sin(yaws[k])
         for i in range(xy.shape[0]):
-            x = xy[i, 0] * cy - xy[i, 1] * sy + tx
-            y = xy[i, 0] * sy + xy[i, 1] * cy + ty
-            ix = np.int64(math.floor(x / cell + 0.5))
-            iy = np.int64(math.floor(y / cell + 0.5))
+            ix, iy = _turned_cell(xy[i, 0], xy[i, 1], cy, sy, tx, ty, cell)
             if abs(ix) > bound or abs(iy) > bound:
                 continue
             v = values[i]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numba
@@ -137,7 +138,12 @@ class Offsets:
     w: int
     n: int
     T: NDArray[np.float32]
-    FT: Any
+
+    @cached_property
+    def FT(self) -> Any:
+        """``conj(rfft2(T))``: made when an FFT product is first asked for (the windows
+        summed cell by cell do not need it)."""
+        return np.conj(fft.rfft2(self.T))
 
     @classmethod
     def of(
@@ -150,8 +156,7 @@ class Offsets:
         w = math.ceil(shift_m / c) + 1
         n = fft.next_fast_len(2 * (rt + w) + 1, real=True)
         T = ndimage.gaussian_filter(raster(cells, values, (n, n), rt + w), 1.0)
-        T = T.astype(np.float32)
-        return cls(c, rt, w, n, T, np.conj(fft.rfft2(T)))
+        return cls(c, rt, w, n, T.astype(np.float32))
 
     def near(
         self,

@@ -330,7 +330,7 @@ def unconfirmed_pairs(
 
 def refuted_at_full(
     todo: list[tuple[str, str, Matrix]],
-    tested: list[tuple[float, float, int] | None],
+    tested: list[tuple[float, float, int]],
     confidence: dict[str, str],
     limit: float,
     min_seen: float,
@@ -346,12 +346,11 @@ def refuted_at_full(
     chain of lone links is then cut beyond the last station it placed right, not along its
     whole length."""
     lone_of = [a if confidence.get(a) == "single" else b for a, b, _ in todo]
-    shares = [(0.0, 0.0) if t is None else t[:2] for t in tested]  # None: not tested
-    refuted = {s for s, (share, _) in zip(lone_of, shares, strict=True) if share >= limit}
-    seen = {s for s, (_, x) in zip(lone_of, shares, strict=True) if x >= min_seen}
+    refuted = {s for s, (share, _, _) in zip(lone_of, tested, strict=True) if share >= limit}
+    seen = {s for s, (_, x, _) in zip(lone_of, tested, strict=True) if x >= min_seen}
     held = frozenset(s for s, c in confidence.items() if c == "confident") | (seen - refuted)
     out = []
-    for (a, b, T), lone, (share, _) in zip(todo, lone_of, shares, strict=True):
+    for (a, b, T), lone, (share, _, _) in zip(todo, lone_of, tested, strict=True):
         if share >= limit:
             firm = b if lone == a else a
             why = (

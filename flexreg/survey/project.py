@@ -749,7 +749,7 @@ def _unconfirmed_refuted(
     (:func:`~flexreg.survey.mapcheck.unconfirmed_pairs`): the vetoes of the pairs refuted.
     ``judge`` remembers each pair and pose's test across the rounds and for later runs."""
     files, glances = stored
-    judge = judge if judge is not None else PairJudge(files, glances, config)
+    assert judge is not None  # made with the glances whenever the map check runs
     todo = unconfirmed_pairs(looks, sol.confidence, config.map_min_conflict)
     new = [t for t in todo if judge.recall_full(*t) is None]
     results = run_tasks(
@@ -762,7 +762,7 @@ def _unconfirmed_refuted(
         judge.remember_full(a, b, T, r)
         at = np.round(T[:3], 4).ravel().tolist()
         log.debug("map check at full resolution %s - %s: %.4f open, %.4f seen %s", a, b, *r[:2], at)
-    tests = [judge.recall_full(*t) for t in todo]
+    tests = [r for r in (judge.recall_full(*t) for t in todo) if r is not None]  # all made now
     limit = config.registration.judge.settle_open_share
     return refuted_at_full(todo, tests, sol.confidence, limit, config.map_min_conflict)
 

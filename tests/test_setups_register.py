@@ -93,7 +93,7 @@ def test_stored_pose_as_init_with_icp_only_on_a_two_cloud_ptx(files):
     rc, _, err = run_cli(argv)
     assert rc == 0, err
     doc = json.loads(out.read_text())
-    assert doc["prior"].startswith("init") and doc["config"]["icp_only"] is True
+    assert doc["prior"].startswith("init") and doc["config"]["method"] == "init"
     assert doc["init"]["from"] == "stored"
     init = np.asarray(doc["init"]["T_target_source"])
     assert rotation_error_deg(init, T_TRUE) > 1.0  # the rough stored pose ...

@@ -30,7 +30,7 @@ from flexreg.cli.options import (
     check_outputs,
     with_default,
 )
-from flexreg.errors import InputError
+from flexreg.errors import ConfigError, InputError
 from flexreg.registration.config import RegistrationConfig
 
 if TYPE_CHECKING:
@@ -46,6 +46,7 @@ TARGET_RGB = (230, 159, 0)
 SOURCE_RGB = (0, 114, 178)
 #: options that set a field of RegistrationConfig (option -> field)
 OPTIONS = {
+    "--method": "method",
     "--image": "image",
     "--n": "n",
     "--features": "features",
@@ -55,7 +56,6 @@ OPTIONS = {
     "--threshold": "threshold_m",
     "--seed": "seed",
     "--upright": "prior.upright",
-    "--icp-only": "icp_only",
 }
 _C = RegistrationConfig
 
@@ -236,6 +236,21 @@ _SeedOption = Annotated[
         "--seed", help=with_default(_C, "seed", "Random seed; the same seed gives the same T.")
     ),
 ]
+_MethodOption = Annotated[
+    str | None,
+    typer.Option(
+        "--method",
+        metavar="auto|flexion|geometric|init",
+        help=with_default(
+            _C,
+            "method",
+            "Where the hypotheses come from: flexion (feature images), geometric (FPFH "
+            "descriptors of the clouds), auto (feature images for two stations on which "
+            "they find a prior, both otherwise) or init (--init alone, as --icp-only); the "
+            "same verdict judges them all.",
+        ),
+    ),
+]
 _UprightOption = Annotated[
     str | None,
     typer.Option(
@@ -270,7 +285,7 @@ _IcpOnlyOption = Annotated[
     bool | None,
     typer.Option(
         "--icp-only/--search",
-        help=with_default(_C, "icp_only", "Refine from --init only, without global search."),
+        help="Refine from --init only, without global search (--method init). [default: no]",
     ),
 ]
 
@@ -293,6 +308,13 @@ _SourceOriginOption = Annotated[
 ]
 
 
+def _method(method: str | None, icp_only: bool | None) -> str | None:
+    """The ``method`` field of ``--method`` and ``--icp-only`` (an alias of ``--method init``)."""
+    if icp_only and method not in (None, "init"):
+        raise ConfigError(f"--icp-only and --method {method} contradict each other: give one")
+    return "init" if icp_only else method
+
+
 @app.command("register")
 def register_command(
     target: _TargetArgument,
@@ -300,6 +322,7 @@ def register_command(
     out: _OutOption,
     txt: _TxtOption = None,
     txt_frame: _TxtFrameOption = None,
+    method: _MethodOption = None,
     image: _ImageOption = None,
     n: _NOption = None,
     features: _FeaturesOption = None,
@@ -319,7 +342,7 @@ def register_command(
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
-    """Register SOURCE onto TARGET through feature images; write T_target_source.
+    """Register SOURCE onto TARGET (feature images, FPFH or both); write T_target_source.
 
     \b
     Exit status:
@@ -337,6 +360,7 @@ def register_command(
         config_file,
         sets,
         OPTIONS,
+        method=_method(method, icp_only),
         image=image,
         n=n,
         features=features,
@@ -345,18 +369,12 @@ def register_command(
         voxel_m=voxel,
         threshold_m=threshold,
         seed=seed,
-        icp_only=icp_only,
         **nested,
     )
     frame = _check_options(config, init, txt, txt_frame)
-    outputs = [
-        ("--out", out, ".json"),
-        ("--txt", txt, None),
-        ("--matches", matches, ".png"),
-        ("--merged", merged, ".ply"),
-    ]
+    files = [("--out", out, ".json"), ("--txt", txt, None), ("--matches", matches, ".png")]
     check_outputs(
-        outputs,
+        [*files, ("--merged", merged, ".ply")],
         inputs=(scan_file(target), scan_file(source)),
         extra_inputs=[
             ("--truth", truth),

@@ -244,7 +244,7 @@ def _configs(
 
 
 #: keys of the registration's flat layout before its tables, still read for one release
-OLD_KEYS = frozenset([*RENAMED, *AS_CHECKS, *RETIRED])
+OLD_KEYS = frozenset([*RENAMED, *AS_CHECKS, *RETIRED, "icp_only"])  # icp_only: method "init"
 
 
 class _Bars:

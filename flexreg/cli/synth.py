@@ -54,6 +54,11 @@ OPTIONS: dict[str, str | tuple[str, ...]] = {
     "--embed-poses": "embed_poses",
     "--groups": "groups",
     "--rig": "rig",
+    "--views": "views",
+    "--view-step-deg": "view_step_rad",
+    "--floor": "floor",
+    "--lidar-kind": "lidar_kind",
+    "--fragments": "fragments",
 }
 _C = SynthConfig
 
@@ -75,6 +80,8 @@ def _option_values(
     max_tilt_deg: float | None,
     size_m: str | None,
     mesh_up: str | None,
+    view_step_deg: str | None = None,
+    lidar_kind: str | None = None,
 ) -> dict[str, Any]:
     """The options given in other units or spellings than their fields, as field values."""
     width, height = _resolution(resolution)
@@ -83,7 +90,15 @@ def _option_values(
     distance = None
     if distance_m is not None:
         distance = _parse_pair(distance_m, ",", "MIN,MAX metres such as 2,10", "--distance-m")
+    step = None
+    if view_step_deg is not None:
+        lo, hi = _parse_pair(
+            view_step_deg, ",", "MIN,MAX degrees such as 30,120", "--view-step-deg"
+        )
+        step = (math.radians(lo), math.radians(hi))
     return {
+        "view_step_rad": step,
+        "lidar_kind": None if lidar_kind is None else lidar_kind.lower(),
         "width": width,
         "height": height,
         "noise_m": None if noise_mm is None else noise_mm / 1000.0,
@@ -107,12 +122,18 @@ _SceneOption = Annotated[
             "or their variants with one asymmetric cue (symmetric-room-cue, tunnel-cue, "
             "bays-cue); a multi-station project sized by --stations: building (rooms, "
             "corridors, doorways), warehouse (identical rack bays), street (with a side "
-            "street); or a mesh file to scan. [default: room]"
+            "street); object (a procedural object of about 0.3 m for --views); or a mesh file "
+            "to scan (with --views: an object scanned all round). [default: room]"
         ),
     ),
 ]
 _StationsOption = Annotated[
-    int | None, typer.Option("--stations", help="Number of TLS stations. [default: 2]")
+    int | None,
+    typer.Option(
+        "--stations",
+        help="Number of TLS stations; 0: none (only with --rgbd-frames, --lidar-frames or "
+        "--fragments). [default: 2; with --views none]",
+    ),
 ]
 _ResolutionOption = Annotated[
     str | None,
@@ -122,7 +143,11 @@ _ResolutionOption = Annotated[
 ]
 _NoiseMmOption = Annotated[
     float | None,
-    typer.Option("--noise-mm", help="Range noise sigma (constant part), mm. [default: 3]"),
+    typer.Option(
+        "--noise-mm",
+        help="Range noise sigma (constant part) of the stations, mm; with --views the depth "
+        "noise sigma of the views. [default: 3; with --views 0.1]",
+    ),
 ]
 _SeedOption = Annotated[
     int | None,
@@ -147,7 +172,60 @@ _LidarFramesOption = Annotated[
     int | None,
     typer.Option(
         "--lidar-frames",
-        help=with_default(_C, "lidar_frames", "Sweeps of a spinning lidar (64 x 1024)."),
+        help=with_default(
+            _C, "lidar_frames", "Lidar frames along a path (the sensor: --lidar-kind)."
+        ),
+    ),
+]
+_LidarKindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--lidar-kind",
+        help=with_default(
+            _C,
+            "lidar_kind",
+            "Sensor of --lidar-frames: spinning (64 x 1024 sweeps in the --format of the "
+            "stations) or rosette (a Livox-style narrow-field lidar, 70.4 x 77.2 deg, 24000 "
+            "points per 0.1 s frame, as PCD; --set rosette.KEY=VALUE changes it).",
+        ),
+    ),
+]
+_ViewsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--views",
+        help="Object views instead of stations: pinhole depth scans (640 x 480, depth PNG + "
+        "camera sidecar) on a ring around the object of --scene object or a mesh file, each "
+        "looking at its centre. [default: 0; --scene object: 6]",
+    ),
+]
+_ViewStepDegOption = Annotated[
+    str | None,
+    typer.Option(
+        "--view-step-deg",
+        help="MIN,MAX azimuth between neighbouring object views, degrees (each drawn from "
+        "it). [default: 30,120]",
+    ),
+]
+_FloorOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--floor/--no-floor",
+        help="Object views: a floor under the object (by default it floats in the air). "
+        "[default: no-floor]",
+    ),
+]
+_FragmentsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--fragments",
+        help=with_default(
+            _C,
+            "fragments",
+            "3DMatch-style fragments: depth frames of a hand-held camera fused into PLY "
+            "clouds (1 cm voxels), consecutive ones overlapping 30-70 %; --set "
+            "fragment.frames=N, fragment.voxel_m, fragment.overlap change them.",
+        ),
     ),
 ]
 _MinOverlapOption = Annotated[
@@ -249,6 +327,11 @@ def synth(
     embed_poses: _EmbedPosesOption = None,
     groups: _GroupsOption = None,
     rig: _RigOption = None,
+    views: _ViewsOption = None,
+    view_step_deg: _ViewStepDegOption = None,
+    floor: _FloorOption = None,
+    lidar_kind: _LidarKindOption = None,
+    fragments: _FragmentsOption = None,
     config_file: ConfigFileOption = None,
     sets: SetOption = None,
 ) -> None:
@@ -260,11 +343,27 @@ def synth(
     street) also get each station's group and the overlap of every pair in gt.json. With
     --rig, a camera on the first station: camera.png, camera.json, init.json and the true
     T_camera_lidar in gt.json.
+
+    Data that are not TLS stations, each with its poses and neighbouring pairs in gt.json:
+    --views N (--scene object or a mesh file) writes object views instead of stations,
+    views/view_NN.png with its camera sidecar; --lidar-frames N --lidar-kind rosette writes
+    Livox-style frames, lidar/lidar_NNNNN.pcd; --fragments N writes 3DMatch-style fused
+    fragments, fragments/fragment_NNN.ply (--stations 0: no stations beside them).
     """
     from flexreg.synth.dataset import synthesize
 
     check_out_folder("--out", out)
-    converted = _option_values(resolution, noise_mm, fmt, distance_m, max_tilt_deg, size_m, mesh_up)
+    converted = _option_values(
+        resolution,
+        noise_mm,
+        fmt,
+        distance_m,
+        max_tilt_deg,
+        size_m,
+        mesh_up,
+        view_step_deg,
+        lidar_kind,
+    )
     cfg = build_config(
         SynthConfig,
         config_file,
@@ -281,6 +380,9 @@ def synth(
         embed_poses=embed_poses,
         groups=groups,
         rig=rig,
+        views=views,
+        floor=floor,
+        fragments=fragments,
         **converted,
     )
     t0 = time.perf_counter()
@@ -304,41 +406,45 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
     x0, y0, x1, y1 = sc.region
     n_obj = sum(sc.objects.values())
     seed = "" if sc.seed is None else f" (seed {sc.seed})"
-    console.print(
-        f"scene {sc.kind}{seed}: {sc.n_triangles} triangles, {n_obj} objects, "
-        f"stations within {x1 - x0:.1f} x {y1 - y0:.1f} m"
-    )
-    t = Table(title="stations", title_justify="left")
-    for c in ("name", "x m", "y m", "z m", "yaw deg", "tilt deg", "points", "sim s"):
-        t.add_column(c, justify="left" if c == "name" else "right")
-    for s in res.stations:
-        T = s.T_world_scanner
-        yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
-        tilt = math.degrees(math.acos(float(np.clip(T[2, 2], -1.0, 1.0))))
-        t.add_row(
-            s.name,
-            f"{T[0, 3]:.2f}",
-            f"{T[1, 3]:.2f}",
-            f"{T[2, 3]:.2f}",
-            f"{yaw:.1f}",
-            f"{tilt:.2f}",
-            f"{s.n_points}",
-            f"{s.seconds:.2f}",
-        )
-    console.print(t)
+    where = f", stations within {x1 - x0:.1f} x {y1 - y0:.1f} m" if res.stations else ""
+    console.print(f"scene {sc.kind}{seed}: {sc.n_triangles} triangles, {n_obj} objects{where}")
+    if res.stations:
+        t = Table(title="stations", title_justify="left")
+        for c in ("name", "x m", "y m", "z m", "yaw deg", "tilt deg", "points", "sim s"):
+            t.add_column(c, justify="left" if c == "name" else "right")
+        for s in res.stations:
+            T = s.T_world_scanner
+            yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+            tilt = math.degrees(math.acos(float(np.clip(T[2, 2], -1.0, 1.0))))
+            t.add_row(
+                s.name,
+                f"{T[0, 3]:.2f}",
+                f"{T[1, 3]:.2f}",
+                f"{T[2, 3]:.2f}",
+                f"{yaw:.1f}",
+                f"{tilt:.2f}",
+                f"{s.n_points}",
+                f"{s.seconds:.2f}",
+            )
+        console.print(t)
+    _print_extras(res)
+    kinds = any(pr.kind is not None for pr in res.pairs)
     if res.pairs:
         p = Table(
             title="pairs",
             title_justify="left",
-            caption="overlap: smaller share of one station's returns the other also sees",
+            caption="overlap: the smaller of the two shares (defined in gt.json)"
+            if kinds
+            else "overlap: smaller share of one station's returns the other also sees",
             caption_justify="left",
         )
-        for c in ("target", "source", "distance m", "overlap"):
-            p.add_column(c, justify="left" if c in ("target", "source") else "right")
+        for c in ("target", "source", *(("kind",) if kinds else ()), "distance m", "overlap"):
+            p.add_column(c, justify="left" if c in ("target", "source", "kind") else "right")
         for pr in res.pairs:
-            p.add_row(pr.target, pr.source, f"{pr.distance_m:.2f}", f"{pr.overlap:.2f}")
+            kind = ((pr.kind or "station"),) if kinds else ()
+            p.add_row(pr.target, pr.source, *kind, f"{pr.distance_m:.2f}", f"{pr.overlap:.2f}")
         console.print(p)
-    elif len(res.stations) > 1:
+    if len(res.stations) > 1 and not any(pr.kind is None for pr in res.pairs):
         err_console.print("no station pair within the distance range and overlap")
     if res.project:
         proj = res.project
@@ -351,6 +457,38 @@ def _print_summary(res: SynthResult, seconds: float) -> None:
     if res.rig is not None:
         _print_rig(res)
     console.print(f"wrote {len(res.files)} files to {res.out_dir} in {seconds:.1f} s")
+
+
+def _print_extras(res: SynthResult) -> None:
+    """One line for each of the object views, the lidar frames and the fragments."""
+    ex = res.extras
+    if "views" in ex:
+        v = ex["views"]
+        lo, hi = v["step_range_deg"]
+        console.print(
+            f"views: {len(v['views'])} depth views {v['distance_m']:.3f} m from the object's "
+            f"centre (bounding radius {v['object']['radius_m']:.3f} m), {lo:g}-{hi:g} deg "
+            f"apart; depth PNGs at {1e6 * v['depth_scale_m_per_unit']:.0f} µm per unit in "
+            f"{v['folder']}/",
+            markup=False,
+        )
+    if "lidar" in ex and ex["lidar"].get("kind") == "rosette":
+        sensor, frames = ex["lidar"]["sensor"], ex["lidar"]["frames"]
+        fx, fy = sensor["fov_deg"]
+        console.print(
+            f"lidar: {len(frames)} rosette frames of {sensor['points']} shots "
+            f"({fx:g} x {fy:g} deg, {sensor['rate_hz']:g} Hz) as PCD in lidar/",
+            markup=False,
+        )
+    if "fragments" in ex:
+        f = ex["fragments"]
+        lo, hi = f["overlap_range"]
+        console.print(
+            f"fragments: {len(f['fragments'])} fragments of {f['frames_per_fragment']} depth "
+            f"frames, {100 * f['voxel_m']:g} cm voxels, consecutive ones overlapping "
+            f"{lo:g}-{hi:g}, as PLY in {f['folder']}/",
+            markup=False,
+        )
 
 
 def _print_rig(res: SynthResult) -> None:

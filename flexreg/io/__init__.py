@@ -9,7 +9,8 @@ suffix         reader
 ``.ptx``       Leica PTX, every cloud, native grid, pose (``flexreg.io.ptx``)
 ``.e57``       ASTM E57 via pye57, every scan, row/column grid, pose (``flexreg.io.e57``)
 ``.ply``       PLY via open3d (``flexreg.io.pointcloud``)
-``.pcd``       PCD via open3d; an organised PCD keeps its width x height grid
+``.pcd``       PCD via open3d; an organised PCD keeps its width x height grid (written:
+               unorganised binary, the pose as ``VIEWPOINT``; ``pointcloud.write_pcd``)
 ``.las/.laz``  LAS/LAZ via laspy (``flexreg.io.las``)
 ``.bin``       KITTI Velodyne float32 ``x y z reflectance`` (``flexreg.io.kitti``)
 ``.3d``        3DTK scan (cm, left-handed) with its ``.pose`` (``flexreg.io.threedtk``)

@@ -15,7 +15,7 @@ from flexreg.core.camera import Camera, DepthKind, PinholeCamera, SphericalCamer
 from flexreg.core.range_image import from_depth, to_scan
 from flexreg.core.scan import GRID_CELL_BYTES, Scan
 from flexreg.errors import InputError
-from flexreg.io.files import protect
+from flexreg.io.files import atomic_write, protect, write_png
 
 TUM_DEPTH_SCALE = 1.0 / 5000.0  # metres per unit of TUM RGB-D depth PNGs
 MM_DEPTH_SCALE = 1.0e-3
@@ -205,6 +205,64 @@ def read(
         raise InputError(path, f"depth kind must be 'z' or 'range', got {depth_kind!r}")
     img = from_depth(d, camera, depth_kind=depth_kind)
     return [to_scan(img, path=path, name=path.stem)]
+
+
+def write_depth_png(
+    path: str | PathLike[str],
+    depth_m: NDArray[np.floating],
+    camera: PinholeCamera,
+    *,
+    depth_scale: float,
+) -> list[Path]:
+    """Write a pinhole depth image as a 16-bit PNG with its camera sidecar, so that
+    :func:`read` (``read_scan``, ``flexreg register``) reads it back as a gridded scan.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.png``; ``<stem>.camera.json`` (camera, ``depth_scale``, ``depth_kind = "z"``)
+        goes beside it.
+    depth_m : (H, W) float, metres
+        Orthographic depth ``z`` (paper eq. 2); NaN, 0 or negative: no reading (stored 0).
+    camera : PinholeCamera
+        Its size must be the image's.
+    depth_scale : float
+        Metres per stored unit (1e-5: 10 µm steps up to 0.65 m; TUM 2e-4; Kinect 1e-3).
+
+    Returns
+    -------
+    list of Path
+        The PNG and the sidecar.
+
+    Raises
+    ------
+    InputError
+        A size that does not match the camera, a bad scale, or a depth beyond 65535 units.
+    """
+    p = Path(path)
+    d = np.asarray(depth_m, dtype=np.float64)
+    if d.shape != camera.shape:
+        raise InputError(
+            p,
+            f"depth is {d.shape[1]}x{d.shape[0]} but the camera is {camera.width}x{camera.height}",
+        )
+    if not (np.isfinite(depth_scale) and depth_scale > 0):
+        raise InputError(p, f"depth scale must be a positive number of metres, got {depth_scale}")
+    valid = np.isfinite(d) & (d > 0)
+    units = np.zeros(d.shape, dtype=np.uint16)
+    if valid.any():
+        top = float(d[valid].max())
+        if top / depth_scale > 65535:
+            raise InputError(
+                p, f"depth {top:.4g} m does not fit 16 bits at {depth_scale:g} m per unit"
+            )
+        units[valid] = np.clip(np.rint(d[valid] / depth_scale), 1, 65535).astype(np.uint16)
+    write_png(p, units)
+    side = sidecar_path(p)
+    doc = {"camera": camera.to_dict(), "depth_scale": float(depth_scale), "depth_kind": "z"}
+    text = json.dumps(doc, indent=2) + "\n"
+    atomic_write(side, lambda tmp: tmp.write_text(text))
+    return [p, side]
 
 
 def camera_for_image(

@@ -20,11 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from flexreg.core.budget import check_memory
-from flexreg.core.scan import POINT_BYTES, Scan
-from flexreg.core.transforms import quat_to_matrix
+from flexreg.core.scan import FLOAT32_MAX_M, POINT_BYTES, Scan
+from flexreg.core.transforms import matrix_to_quat, quat_to_matrix
 from flexreg.errors import InputError
 
-__all__ = ["is_mesh", "read", "write"]
+__all__ = ["is_mesh", "read", "write", "write_pcd"]
 
 _INTENSITY_NAMES = ("intensity", "intensities", "scalar_intensity", "reflectance", "remission")
 _PLY_TYPE_SIZE = {
@@ -511,12 +511,13 @@ def _colors(attrs: dict[str, NDArray[Any]]) -> NDArray[np.uint8] | None:
 
 # --------------------------------------------------------------------------------- writing
 def write(path: Path, scans: list[Scan], *, ascii: bool = False, world: bool = False) -> None:
-    """Write one scan as PLY: ``double x y z``, ``uchar red green blue``, ``float intensity``.
+    """Write one scan as PLY (``double x y z``, ``uchar red green blue``, ``float intensity``)
+    or, by the suffix ``.pcd``, as PCD (:func:`write_pcd`).
 
     Parameters
     ----------
     path : Path
-        Destination ``.ply``.
+        Destination ``.ply`` (or ``.pcd``).
     scans : list of Scan
         Exactly one scan (PLY holds one cloud; use E57 or PTX for several).
     ascii : bool
@@ -533,6 +534,9 @@ def write(path: Path, scans: list[Scan], *, ascii: bool = False, world: bool = F
     """
     import open3d as o3d
 
+    if Path(path).suffix.lower() == ".pcd":
+        write_pcd(path, scans, ascii=ascii, world=world)
+        return
     if len(scans) != 1:
         raise InputError(path, f"a PLY file holds one scan, got {len(scans)} (write E57 or PTX)")
     scan = scans[0]
@@ -552,3 +556,63 @@ def write(path: Path, scans: list[Scan], *, ascii: bool = False, world: bool = F
         ok = o3d.t.io.write_point_cloud(path, pc, write_ascii=bool(ascii))
     if not ok:
         raise InputError(path, "open3d could not write the PLY file")
+
+
+def write_pcd(path: Path, scans: list[Scan], *, ascii: bool = False, world: bool = False) -> None:
+    """Write one scan as an unorganised PCD (v0.7): ``x y z`` and ``intensity`` when the scan
+    has intensities, its pose as ``VIEWPOINT tx ty tz qw qx qy qz``.
+
+    Coordinates are ``float`` (4 bytes) when they all lie within
+    :data:`~flexreg.core.scan.FLOAT32_MAX_M` of the origin (0.5 mm or better), else
+    ``double``; colours and the grid are not kept. Identical scans give identical bytes.
+
+    Parameters
+    ----------
+    path : Path
+        Destination ``.pcd``.
+    scans : list of Scan
+        Exactly one scan.
+    ascii : bool
+        ``DATA ascii`` (17 significant digits) instead of ``DATA binary`` (little-endian).
+    world : bool
+        Write ``points_world()`` with an identity ``VIEWPOINT`` instead of the scanner-frame
+        points with the scan's pose (what the reader turns back into ``T_world_scanner``).
+
+    Raises
+    ------
+    InputError
+        Not exactly one scan, or an empty scan.
+    """
+    if len(scans) != 1:
+        raise InputError(path, f"a PCD file holds one scan, got {len(scans)} (write E57 or PTX)")
+    scan = scans[0]
+    if len(scan) == 0:
+        raise InputError(path, "scan has no points to write")
+    pts = np.asarray(scan.points_world() if world else scan.points, dtype=np.float64)
+    T = np.eye(4) if world else np.asarray(scan.T_world_scanner, dtype=np.float64)
+    q = matrix_to_quat(T[:3, :3], order="wxyz")
+    wide = float(np.abs(pts).max()) > FLOAT32_MAX_M
+    xyz_type, size = ("<f8", 8) if wide else ("<f4", 4)
+    fields = [("x", xyz_type), ("y", xyz_type), ("z", xyz_type)]
+    if scan.intensity is not None:
+        fields.append(("intensity", "<f4"))
+    rows = np.empty(len(pts), dtype=np.dtype(fields))
+    rows["x"], rows["y"], rows["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    if scan.intensity is not None:
+        rows["intensity"] = np.asarray(scan.intensity, dtype=np.float32)
+    names = [f[0] for f in fields]
+    sizes = [str(size)] * 3 + (["4"] if scan.intensity is not None else [])
+    viewpoint = " ".join(repr(float(v)) for v in (*T[:3, 3], *q))
+    header = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+        f"FIELDS {' '.join(names)}\nSIZE {' '.join(sizes)}\nTYPE {' '.join('F' for _ in names)}\n"
+        f"COUNT {' '.join('1' for _ in names)}\nWIDTH {len(pts)}\nHEIGHT 1\n"
+        f"VIEWPOINT {viewpoint}\nPOINTS {len(pts)}\nDATA {'ascii' if ascii else 'binary'}\n"
+    )
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        if ascii:
+            for r in rows.tolist():
+                f.write((" ".join(f"{float(v):.17g}" for v in r) + "\n").encode("ascii"))
+        else:
+            f.write(rows.tobytes())

@@ -34,6 +34,7 @@ __all__ = [
 
 _WRITERS = {
     ".ply": "pointcloud",
+    ".pcd": "pointcloud",
     ".npz": "npz",
     ".ptx": "ptx",
     ".e57": "e57",
@@ -191,8 +192,8 @@ def read_working_scan(
 
 
 def write_scan(path: str | PathLike[str], scan: Scan | list[Scan], **options: Any) -> Path:
-    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.npz``, ``.ptx``,
-    ``.e57``, ``.las``, ``.laz``.
+    """Write a scan (or several, for PTX and E57) by suffix: ``.ply``, ``.pcd``, ``.npz``,
+    ``.ptx``, ``.e57``, ``.las``, ``.laz``.
 
     The file is written to a temporary name first and renamed at the end, so a failure never
     leaves a partial file behind.

@@ -54,8 +54,9 @@ Candidate = tuple[str, NDArray[np.float64]]
 #: keypoint inliers): plan-view overlays, a given initial transform and the aliases of the
 #: best prior (:func:`alias_candidates`), and the poses slid along a weak axis or a repeat
 #: (:mod:`flexreg.registration.settle`) or slid along the walls from an answer refuted in
-#: open space (:func:`flexreg.registration.twins.slide_refuted`)
-DENSE_PRIORS = ("plan", "window-plan", "init", "alias", "sweep", "slide")
+#: open space (:func:`flexreg.registration.twins.slide_refuted`), and the geometric route's
+#: FPFH hypotheses (:mod:`flexreg.registration.geometric`)
+DENSE_PRIORS = ("plan", "window-plan", "init", "alias", "sweep", "slide", "geometric")
 
 #: the prior polished from afar (:func:`polisher`, ``wide``): a plan overlay inside a rough
 #: prior's window, which a look-alike elsewhere did not outscore

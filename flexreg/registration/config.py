@@ -25,6 +25,9 @@ STRETCHES: tuple[str, ...] = ("clahe", "percentile")
 MEDIANS: tuple[int, ...] = (0, 3, 5)
 UPRIGHT: tuple[str, ...] = ("auto", "on", "off")
 
+#: where :func:`~flexreg.registration.register` takes its hypotheses from
+REGISTRATION_METHODS: tuple[str, ...] = ("auto", "flexion", "geometric", "init")
+
 log = logging.getLogger(__name__)
 
 # Bounds of the knobs that set sizes, steps, cells and counts: each keeps a run's time and
@@ -268,6 +271,16 @@ class RegistrationConfig(Config):
 
     Attributes
     ----------
+    method : {"auto", "flexion", "geometric", "init"}
+        Where the hypotheses come from: ``"flexion"`` the feature images (and the plan
+        views of levelled scanners); ``"geometric"`` FPFH descriptors of the clouds, made
+        consistent and solved by RANSAC (:mod:`flexreg.stages.geometric`); ``"auto"`` the
+        feature images alone for two panoramic stations on which they find a prior, both
+        otherwise (an object scanned from outside, a narrow-field lidar frame, a fragment,
+        or a station the feature images find nothing on), the answer of the feature images
+        alone when it is confident; ``"init"`` the given initial transform only
+        (``register(..., init=T)``, refined by ICP: no search; the ``icp_only`` switch of
+        earlier releases). Every hypothesis is judged by the same dense check and verdict.
     image : str
         Feature image kind, one of :data:`flexreg.stages.feature_images.KINDS` or
         ``"intensity"``.
@@ -323,9 +336,6 @@ class RegistrationConfig(Config):
     fill_holes : bool
         Fill isolated no-return pixels before the conversion
         (:func:`flexreg.stages.projection.fill_holes`).
-    icp_only : bool
-        Refine the given initial transform (``register(..., init=T)``) only: no descriptor
-        or plan-view search. Requires ``init``.
     min_overlap : float
         Smallest share of the source's points the result must explain, in [0, 1]; less raises
         :class:`RegistrationError` (no overlap). See :func:`overlap_score`.
@@ -339,6 +349,7 @@ class RegistrationConfig(Config):
         Which checks run and the verdict's thresholds.
     """
 
+    method: Annotated[str, one_of(REGISTRATION_METHODS, "method")] = "auto"
     image: Annotated[str, one_of(IMAGES, "feature image")] = "flexion"
     n: OddSize = 5
     median: Annotated[int, one_of(MEDIANS)] = 3
@@ -360,7 +371,6 @@ class RegistrationConfig(Config):
     voxel_m: VoxelM | None = None
     seed: Seed = 0
     fill_holes: bool = True
-    icp_only: bool = False
     min_overlap: float = Field(0.1, ge=0, le=1)
     max_image_pixels: int = Field(2_500_000, ge=MIN_IMAGE_PIXELS, le=MAX_IMAGE_PIXELS)
     prior: PriorConfig = PriorConfig()
@@ -370,6 +380,11 @@ class RegistrationConfig(Config):
     @classmethod
     def _flat_keys(cls, data: Any) -> Any:
         return nest_flat_keys(data) if isinstance(data, dict) else data
+
+    @property
+    def icp_only(self) -> bool:
+        """Whether the given initial transform is the only hypothesis (``method="init"``)."""
+        return self.method == "init"
 
 
 #: Flat keys of the layout before the ``prior`` and ``judge`` tables -> where they are now.
@@ -427,9 +442,17 @@ def nest_flat_keys(data: dict[str, Any]) -> dict[str, Any]:
 
     >>> nest_flat_keys({"n": 7, "verdict_min_overlap": 0.3})
     {'n': 7, 'judge': {'min_overlap': 0.3}}
+    >>> nest_flat_keys({"icp_only": True})
+    {'method': 'init'}
     >>> nest_flat_keys({"verdict_twins": False})["judge"]["checks"]
     ('polish', 'aliases', 'settle', 'full', 'guard')
     """
+    if "icp_only" in data:  # a switch of earlier releases: the method "init" now
+        value = data["icp_only"]
+        data = {k: v for k, v in data.items() if k != "icp_only"}
+        if value if isinstance(value, bool) else str(value).lower() in ("true", "1", "yes"):
+            data["method"] = "init"
+        log.warning('setting icp_only is deprecated: it is method = "init" now')
     old = [k for k in data if k in RENAMED or k in AS_CHECKS or k in RETIRED]
     if not old:
         return data

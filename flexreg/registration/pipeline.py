@@ -52,6 +52,7 @@ from flexreg.registration.check import Check, TwoWay
 from flexreg.registration.conclude import Judging, conclude, slid_answer
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
+from flexreg.registration.geometric import geometric_priors, route
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
@@ -136,6 +137,7 @@ class _Matched:
     pairs: NDArray[np.int64]
     priors: list[Candidate]
     notes: list[str]
+    few: bool = False  # too few keypoints: matching did not run
 
 
 def _descriptor_prior(
@@ -174,10 +176,13 @@ def _match(
     nt, ns = len(kt.features), len(ks.features)
     log.info("%d/%d keypoints, %d/%d lifted", nt, ns, n_lt, n_ls)
     if n_lt < 3 or n_ls < 3:
-        raise RegistrationError(
-            f"too few keypoints on valid surface: {n_lt} target / {n_ls} source "
+        why = f"too few keypoints on valid surface: {n_lt} target / {n_ls} source " + (
             f"(of {nt} / {ns} detected)"
         )
+        if config.method == "flexion":
+            raise RegistrationError(why)
+        thr = _pixel_threshold(images, config)
+        return _Matched(thr, np.zeros((0, 2), np.int64), [], [why], few=True)
     thr = (
         float(config.threshold_m)
         if config.threshold_m is not None
@@ -200,6 +205,19 @@ def _match(
         else:
             notes.append(f"global matching: {len(pairs)} matches")
     return _Matched(thr, pairs, priors, notes)
+
+
+def _pixel_threshold(images: list[RangeImage], config: RegistrationConfig) -> float:
+    """The inlier distance without keypoints: ``config.threshold_m``, or ``threshold_px``
+    times the median footprint of an even sample of both images' valid pixels."""
+    if config.threshold_m is not None:
+        return float(config.threshold_m)
+    xy = []
+    for img in images:
+        rows, cols = np.nonzero(img.valid)
+        k = max(1, len(rows) // 2000)
+        xy.append(np.stack([cols[::k], rows[::k]], axis=1).astype(np.float64))
+    return derive_threshold(images[0], images[1], xy[0], xy[1], threshold_px=config.threshold_px)
 
 
 def _plan_candidates(
@@ -301,6 +319,46 @@ def _finish(
         verdict=done.verdict,
         overlap=overlap,
     )
+
+
+def _answer(
+    scans: list[Scan | RangeImage],
+    images: list[RangeImage],
+    kps: list[Keypoints3D],
+    views: list[ScanView],
+    m: _Matched,
+    plans: list[Candidate],
+    config: RegistrationConfig,
+    run: Run,
+    init: NDArray[np.float64] | None,
+    aliases: Aliases | None,
+    window: Window | None,
+) -> RegistrationResult:
+    """The answer of the routes ``config.method`` takes (:func:`route`): the feature images'
+    hypotheses alone, the geometric ones alone, or both judged together by one
+    :func:`_finish` (after the feature images' alone when that may already be confident)."""
+    way = route(config.method, images, bool(m.priors) or (bool(plans) and not m.few))
+    if way == "flexion":
+        return _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
+    first: RegistrationResult | None = None
+    if way == "flexion-first":
+        try:
+            first = _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
+        except RegistrationError as e:
+            log.info("the feature images alone: %s", e)
+        else:
+            if first.verdict is not None and first.verdict.confident:
+                return first
+            log.info("the feature images' answer is not confident: geometric hypotheses too")
+    with run.stage("geometric"):
+        geo = geometric_priors(images, config, m.notes)
+    if not geo and first is not None:
+        return first
+    if way == "geometric":
+        m, plans = _Matched(m.thr, m.pairs, geo, m.notes), []
+    else:
+        m = _Matched(m.thr, m.pairs, m.priors + geo, m.notes)
+    return _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
 
 
 # ------------------------------------------------------------------------------ entry points
@@ -422,7 +480,7 @@ def _check_init(
             )
     if init is None:
         if config.icp_only:
-            raise ConfigError("icp_only needs an initial T_target_source (init)")
+            raise ConfigError('method "init" (icp_only) needs an initial T_target_source (init)')
         return None, None
     T = as_transform(init, name="init")
     return T, None if window is None else Window(T, *window)
@@ -531,7 +589,7 @@ def register(
         plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
         views = view_job.result()
-    return _finish(scans, kps, views, matched, plans, config, run, init, aliases, win)
+    return _answer(scans, images, kps, views, matched, plans, config, run, init, aliases, win)
 
 
 class Registration:
@@ -650,7 +708,7 @@ class Registration:
             matched = _match(images, kps, config, run)
             plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         scans, views = [target.scan, source.scan], [target.view, source.view]
-        return _finish(scans, kps, views, matched, plans, config, run, init, aliases, win)
+        return _answer(scans, images, kps, views, matched, plans, config, run, init, aliases, win)
 
 
 __all__ = [

@@ -1,6 +1,7 @@
 """Every knob of the synthetic data: the data set (:class:`SynthConfig`), the laser scanner and
-spinning lidar (:class:`TLSConfig`) and the RGB-D camera (:class:`RGBDConfig`), validated in
-one place (each rule once, on its field)."""
+spinning lidar (:class:`TLSConfig`), the RGB-D camera (:class:`RGBDConfig`), the rosette lidar
+(:class:`RosetteConfig`) and the fused fragments (:class:`FragmentConfig`), validated in one
+place (each rule once, on its field)."""
 
 from __future__ import annotations
 
@@ -14,10 +15,22 @@ from pydantic import Field, ValidationInfo, field_validator, model_validator
 from flexreg.config import Config, Positive, Seed, one_of
 from flexreg.core.budget import ENV_VAR, format_bytes, memory_budget
 from flexreg.core.camera import PinholeCamera, SphericalCamera
+from flexreg.errors import ConfigError
 from flexreg.io.depth import TUM_DEPTH_SCALE
-from flexreg.synth.scenes import PROJECT_SCENE_KINDS, SCENE_KINDS
+from flexreg.synth.scenes import OBJECT_SCENE_KINDS, PROJECT_SCENE_KINDS, SCENE_KINDS
 
-__all__ = ["FORMATS", "PROJECT_MIN_OVERLAP", "RGBDConfig", "SynthConfig", "TLSConfig"]
+__all__ = [
+    "DEFAULT_OBJECT_VIEWS",
+    "FORMATS",
+    "LIDAR_KINDS",
+    "OBJECT_NOISE_M",
+    "PROJECT_MIN_OVERLAP",
+    "FragmentConfig",
+    "RGBDConfig",
+    "RosetteConfig",
+    "SynthConfig",
+    "TLSConfig",
+]
 
 #: station file formats of a data set
 FORMATS = ("ptx", "e57", "npz")
@@ -33,6 +46,14 @@ MIN_SIZE_M, MAX_SIZE_M = 1.0, 1000.0
 #: default minimal overlap of a station with the one it was set up from, in project scenes
 #: (low enough for links that only see each other through a doorway)
 PROJECT_MIN_OVERLAP = 0.15
+
+#: sensors of the lidar frames (``lidar_kind``)
+LIDAR_KINDS = ("spinning", "rosette")
+#: object views of the ``"object"`` scene unless ``views`` is given
+DEFAULT_OBJECT_VIEWS = 6
+#: depth noise sigma of object views unless ``noise_m`` is given, metres (a structured-light
+#: scanner's 0.1 mm, not a TLS's 3 mm)
+OBJECT_NOISE_M = 0.0001
 
 #: a finite number >= 0 (noise levels, ranges, angles)
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -194,6 +215,81 @@ class RGBDConfig(Config):
         return PinholeCamera(self.fx, self.fy, self.cx, self.cy, int(self.width), int(self.height))
 
 
+# ====================================================================================== rosette
+class RosetteConfig(Config):
+    """Narrow-field lidar with a non-repetitive rosette scan (Livox Avia / Mid-70 style).
+
+    One beam is steered by two prisms turning at incommensurate rates
+    (:data:`flexreg.synth.rosette.PRISM_HZ`): its direction sweeps petals through the centre
+    that never repeat, so each frame covers other parts of the field of view and the coverage
+    grows with integration time. The sensor frame is x forward, y left, z up.
+
+    Attributes
+    ----------
+    fov_deg : (float, float), degrees
+        Full field of view across (horizontal) and up-down (vertical), each within (0, 170]:
+        the rosette fills the ellipse of these axes (Avia: 70.4 x 77.2).
+    points : int
+        Shots per frame, 100..1000000 (returns are fewer: misses, range limits, dropouts).
+    rate_hz : float, hertz
+        Frame rate: a frame integrates ``1 / rate_hz`` seconds of the pattern.
+    speed_mps : float, metres per second
+        Speed along the trajectory: frames ``speed_mps / rate_hz`` apart.
+    range_noise_m : float, metres
+        Range noise standard deviation (Avia: 2 cm).
+    max_range_m : float, metres
+        Returns beyond this range are lost (returns nearer than 1 m too, the blind zone).
+    """
+
+    fov_deg: tuple[float, float] = (70.4, 77.2)
+    points: int = Field(24000, ge=100, le=1_000_000)
+    rate_hz: Positive = 10.0
+    speed_mps: Positive = 1.5
+    range_noise_m: NonNegative = 0.02
+    max_range_m: float = Field(190.0, gt=1.0, allow_inf_nan=False)
+
+    @field_validator("fov_deg")
+    @classmethod
+    def _fov(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not all(math.isfinite(a) and 0 < a <= 170 for a in v):
+            raise ValueError(
+                f"field of view must be within (0, 170] deg each way, got {v[0]:g}x{v[1]:g}"
+            )
+        return v
+
+
+# ====================================================================================== fragments
+class FragmentConfig(Config):
+    """Fused depth fragments (3DMatch style): consecutive depth frames of a hand-held camera
+    fused into one cloud in the first frame's coordinates.
+
+    Attributes
+    ----------
+    frames : int
+        Depth frames fused into each fragment, 1..1000 (3DMatch: 50).
+    voxel_m : float, metres
+        Voxel size of the fused cloud (each occupied voxel: the mean of its points), 1 mm..1 m.
+    overlap : (float, float)
+        ``0 < min < max < 1``: the overlap of consecutive fragments lies in this range (the
+        smaller share of a fragment's points within 3 voxels of the other's).
+    """
+
+    frames: int = Field(50, ge=1, le=1000)
+    voxel_m: float = Field(0.01, ge=0.001, le=1.0)
+    overlap: tuple[float, float] = (0.3, 0.7)
+
+    @field_validator("overlap")
+    @classmethod
+    def _overlap_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = v
+        if not (0 < lo < hi < 1 and hi - lo >= 0.05):
+            raise ValueError(
+                "overlap range must satisfy 0 < min < max < 1, at least 0.05 wide, got "
+                f"{lo:g}..{hi:g}"
+            )
+        return v
+
+
 # ====================================================================================== data set
 class SynthConfig(Config):
     """Everything ``flexreg synth`` needs; saved in ``gt.json``.
@@ -206,15 +302,18 @@ class SynthConfig(Config):
         ``"hall"``, ``"symmetric-room"``, ``"tunnel"``, ``"bays"`` and their ``"-cue"``
         variants), a project kind of :data:`~flexreg.synth.scenes.PROJECT_SCENE_KINDS`
         (``"building"``, ``"warehouse"``, ``"street"``: sized for the stations, placed as a
-        walked survey), or the path of a mesh file to scan.
+        walked survey), ``"object"`` (a procedural object of about 0.3 m for ``views``), or
+        the path of a mesh file to scan.
     stations : int
-        Number of TLS stations (1..200; a project needs at least 2 per group).
+        Number of TLS stations, 0..200: 0 only beside ``views`` (which replace them),
+        ``fragments`` or a sequence; a project needs at least 2 per group.
     width, height : int, pixels
         Station grid (azimuth columns x polar rows), within 8x4 .. 8192x4096 and the memory
         budget. See :mod:`flexreg.core.budget`; a station takes about
         :data:`STATION_PIXEL_BYTES` per pixel while it is simulated and written).
     noise_m : float, metres
-        Constant part of the range noise sigma (0..1 m).
+        Constant part of the range noise sigma of the stations (0..1 m); with ``views`` the
+        depth noise sigma of the views (:data:`OBJECT_NOISE_M` unless given).
     seed : int
         Seed of the scene, the station placement and the sensor noise (same seed, same data).
     format : {"ptx", "e57", "npz"}
@@ -239,7 +338,9 @@ class SynthConfig(Config):
     size_m : (float, float) or None, metres
         Floor size of a procedural scene, 1..1000 each way (None: the scene's own).
     embed_poses : bool
-        Write each station's true pose into its file instead of the identity.
+        Write each station's (and lidar frame's) true pose into its file instead of the
+        identity (not for object views, whose depth PNGs hold no pose, nor for fragments,
+        whose PLY files hold none).
     groups : int
         Project kinds only: number of disconnected sites (1..4) sharing the stations, far
         enough apart that no station of one sees anything of another.
@@ -247,6 +348,26 @@ class SynthConfig(Config):
         Mount a pinhole camera on the first station (:mod:`flexreg.synth.rig`): its image,
         intrinsics, a rough initial guess and the true ``T_camera_lidar`` in ``gt.json``; the
         stations then carry colours, and one station is the default.
+    views : int
+        Object views (0..1000; 0: none), which replace the stations: pinhole depth scans on
+        a ring around the object of ``scene`` (``"object"`` or a mesh file), each looking at
+        its centre (:mod:`flexreg.synth.objectscan`; ``"object"``: :data:`DEFAULT_OBJECT_VIEWS`
+        unless given).
+    view_step_rad : (float, float), radians
+        ``0 < min <= max <= pi``: azimuth between neighbouring object views, each drawn
+        uniformly from this range.
+    floor : bool
+        Object views: a floor under the object (by default it floats alone in the air).
+    lidar_kind : {"spinning", "rosette"}
+        Sensor of the lidar frames: a 64-ring spinning lidar, or a narrow-field rosette lidar
+        (table ``rosette``; unorganised PCD frames).
+    fragments : int
+        Fused fragments along a hand-held depth camera's path (0..10000; 0: none), table
+        ``fragment`` (:mod:`flexreg.synth.fragments`).
+    rosette : RosetteConfig
+        The rosette lidar of ``lidar_kind = "rosette"``.
+    fragment : FragmentConfig
+        How fragments are fused and how much consecutive ones overlap.
     """
 
     scene: str = "room"
@@ -268,6 +389,13 @@ class SynthConfig(Config):
     embed_poses: bool = False
     groups: int = Field(1, ge=1, le=4)
     rig: bool = False
+    views: int = Field(0, ge=0, le=1000)
+    view_step_rad: tuple[float, float] = (math.radians(30.0), math.radians(120.0))
+    floor: bool = False
+    lidar_kind: Annotated[str, one_of(LIDAR_KINDS)] = "spinning"
+    fragments: int = Field(0, ge=0, le=10000)
+    rosette: RosetteConfig = RosetteConfig()
+    fragment: FragmentConfig = FragmentConfig()
 
     @model_validator(mode="before")
     @classmethod
@@ -283,6 +411,22 @@ class SynthConfig(Config):
                 data = {**data, "min_overlap": PROJECT_MIN_OVERLAP}
         if isinstance(data, dict) and data.get("rig") is True and data.get("stations") is None:
             data = {**data, "stations": 1}  # a rig is one station and its camera
+        if isinstance(data, dict):
+            data = cls._object_defaults(data)
+        return data
+
+    @staticmethod
+    def _object_defaults(data: dict[str, Any]) -> dict[str, Any]:
+        """Object views: ``"object"`` takes :data:`DEFAULT_OBJECT_VIEWS`; views replace the
+        stations (none unless given, which is refused) and take a scanner's noise."""
+        if data.get("scene") in OBJECT_SCENE_KINDS and data.get("views") is None:
+            data = {**data, "views": DEFAULT_OBJECT_VIEWS}
+        views = data.get("views")
+        if isinstance(views, int) and not isinstance(views, bool) and views > 0:
+            if data.get("stations") is None:
+                data = {**data, "stations": 0}
+            if data.get("noise_m") is None:
+                data = {**data, "noise_m": OBJECT_NOISE_M}
         return data
 
     @field_validator("groups")
@@ -310,15 +454,16 @@ class SynthConfig(Config):
     @field_validator("scene")
     @classmethod
     def _scene(cls, v: str) -> str:
-        if v not in SCENE_KINDS and v not in PROJECT_SCENE_KINDS and not Path(v).is_file():
-            kinds = ", ".join((*SCENE_KINDS, *PROJECT_SCENE_KINDS))
+        kinds_ = (*SCENE_KINDS, *PROJECT_SCENE_KINDS, *OBJECT_SCENE_KINDS)
+        if v not in kinds_ and not Path(v).is_file():
+            kinds = ", ".join(kinds_)
             raise ValueError(f"scene must be one of {kinds} or an existing mesh file")
         return v
 
     @field_validator("stations", mode="before")
     @classmethod
     def _stations(cls, v: Any, info: ValidationInfo) -> Any:
-        if isinstance(v, bool) or int(v) != v or v < 1:
+        if isinstance(v, bool) or int(v) != v or v < 0:
             raise ValueError("stations must be a positive integer")
         if v > 200:
             raise ValueError("at most 200 stations")
@@ -388,6 +533,61 @@ class SynthConfig(Config):
         if not 0 <= v <= math.radians(30):
             raise ValueError(f"max tilt must be 0..30 deg, got {math.degrees(v):g} deg")
         return v
+
+    @field_validator("view_step_rad")
+    @classmethod
+    def _view_step(cls, v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = v
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi <= math.pi):
+            raise ValueError(
+                "view step must satisfy 0 < min <= max <= 180 deg, got "
+                f"{math.degrees(lo):g}..{math.degrees(hi):g} deg"
+            )
+        return v
+
+    @model_validator(mode="after")
+    def _products(self) -> SynthConfig:
+        """What the data set holds fits together: object views alone, on an object; a floor
+        only under one; no stations only when something else is made."""
+        on_object = self.scene in OBJECT_SCENE_KINDS or self.is_mesh
+        if self.views:
+            if not on_object:
+                raise ConfigError(
+                    f"views: object views need scene 'object' or a mesh file, not {self.scene!r}"
+                )
+            if self.stations:
+                raise ConfigError("stations: object views replace the stations; leave it out")
+            if self.rgbd_frames or self.lidar_frames or self.fragments or self.rig:
+                raise ConfigError(
+                    "views: object views come alone (no rgbd_frames, lidar_frames, fragments "
+                    "or rig)"
+                )
+            if self.embed_poses:
+                raise ConfigError(
+                    "embed_poses: object views are depth PNGs, which hold no pose (their "
+                    "poses are in gt.json)"
+                )
+        elif self.scene in OBJECT_SCENE_KINDS:
+            raise ConfigError("views: the object scene is scanned by object views (1..1000)")
+        if self.floor and not self.views:
+            raise ConfigError("floor: a floor goes under the object of object views (views)")
+        if self.lidar_kind != "spinning" and not self.lidar_frames:
+            raise ConfigError(f"lidar_kind: {self.lidar_kind} frames need lidar_frames")
+        if self.stations == 0 and not (
+            self.views or self.fragments or self.rgbd_frames or self.lidar_frames
+        ):
+            raise ConfigError(
+                "stations: stations must be a positive integer (0 only with views, fragments, "
+                "rgbd_frames or lidar_frames)"
+            )
+        if self.rig and self.stations == 0:
+            raise ConfigError("rig: a rig is mounted on a station; stations must be 1 or more")
+        return self
+
+    @property
+    def is_mesh(self) -> bool:
+        """Whether the scene is a mesh file (not a procedural, project or object kind)."""
+        return self.scene not in (*SCENE_KINDS, *PROJECT_SCENE_KINDS, *OBJECT_SCENE_KINDS)
 
     def tls_config(self) -> TLSConfig:
         """Sensor model of the stations."""

@@ -8,12 +8,19 @@
     rgbd/                  TUM-style RGB-D sequence (with --rgbd-frames N)
     camera.png ...         a camera on the first station (with --rig: camera.json, init.json
                            and T_camera_lidar in gt.json; see flexreg.synth.rig)
-    lidar/                 spinning-lidar sweeps and poses (with --lidar-frames N)
+    lidar/                 lidar frames (with --lidar-frames N): spinning-lidar sweeps in the
+                           stations' format, or rosette frames as PCD (--lidar-kind rosette)
+    views/                 object views instead of stations (with --views N, --scene object or
+                           a mesh): view_00.png + view_00.camera.json ...
+    fragments/             fused fragments (with --fragments N): fragment_000.ply ...
 
 The station files hold points in each scanner's own frame with an identity pose (as an
 unregistered scanner export would), unless ``embed_poses`` is set; the truth is in ``gt.json``.
-Nothing in the output depends on the time, the folder name or the machine: the same
-configuration gives byte-identical PTX, PLY, PNG and JSON files.
+So do the lidar frames and views (their sensor's frame) and the fragments (their first
+camera's frame); see :mod:`flexreg.synth.products`. Everything is written at the end or, on
+an error, nothing (:func:`flexreg.io.files.all_or_nothing`). Nothing in the output depends on
+the time, the folder name or the machine: the same configuration gives byte-identical PTX,
+PLY, PCD, PNG and JSON files.
 """
 
 from __future__ import annotations
@@ -34,8 +41,11 @@ from flexreg._version import __version__
 from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import ConfigError, InputError
 from flexreg.io import atomic_write, write_scan
+from flexreg.io.files import all_or_nothing
 from flexreg.synth.config import RGBDConfig, SynthConfig, TLSConfig
-from flexreg.synth.placement import free_map, place_stations, station_overlap, stream
+from flexreg.synth.paths import camera_trajectory, lidar_trajectory, smooth_path
+from flexreg.synth.placement import place_stations, station_overlap, stream
+from flexreg.synth.products import Products, plan_products, write_products
 from flexreg.synth.project import (
     ProjectPlacement,
     overlap_matrix,
@@ -45,24 +55,33 @@ from flexreg.synth.project import (
 from flexreg.synth.rig import Rig, place_rig, write_rig
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import (
+    OBJECT_SCENE_KINDS,
     PROJECT_SCENE_KINDS,
     SCENE_KINDS,
     make_project_scene,
     make_scene,
+    object_from_mesh,
+    procedural_object,
     scene_from_mesh,
 )
-from flexreg.synth.seeding import as_rng
-from flexreg.synth.sensors import (
-    lidar_config,
-    look_at,
-    scan_tls,
-    write_tum_sequence,
-)
+from flexreg.synth.sensors import scan_tls, write_tum_sequence
+
+__all__ = [
+    "PairInfo",
+    "StationInfo",
+    "SynthResult",
+    "build_scene",
+    "camera_trajectory",
+    "lidar_trajectory",
+    "make_project",
+    "smooth_path",
+    "synthesize",
+]
 
 Progress = Callable[[str, int, int], None]
 
-# stream ids (see placement.stream)
-_PLACEMENT, _TRAJECTORY, _RGBD, _LIDAR_TRAJ, _LIDAR, _STATION = 0, 1, 2, 3, 4, 100
+# stream ids (see placement.stream; 3, 4, 7, 8 and 9: flexreg.synth.products)
+_PLACEMENT, _TRAJECTORY, _RGBD, _STATION = 0, 1, 2, 100
 _RIG, _RIG_IMAGE = 5, 6
 
 
@@ -94,22 +113,43 @@ class PairInfo:
     T_target_source: NDArray[np.float64]
     distance_m: float
     overlap: float
+    kind: str | None = None
+    details: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d: dict[str, Any] = {
             "target": self.target,
             "source": self.source,
             "T_target_source": self.T_target_source.tolist(),
             "distance_m": self.distance_m,
             "overlap": self.overlap,
         }
+        if self.kind is not None:
+            d["kind"] = self.kind
+        return {**d, **self.details}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PairInfo:
+        """A pair of :func:`~flexreg.synth.products.write_products` (a dict with ``kind`` and
+        any details)."""
+        main = ("target", "source", "T_target_source", "distance_m", "overlap", "kind")
+        return cls(
+            str(d["target"]),
+            str(d["source"]),
+            np.asarray(d["T_target_source"], dtype=np.float64),
+            float(d["distance_m"]),
+            float(d["overlap"]),
+            d.get("kind"),
+            {k: v for k, v in d.items() if k not in main},
+        )
 
 
 @dataclass(eq=False)
 class SynthResult:
     """What :func:`synthesize` wrote (timings are reported here, never written to files);
     ``project`` is the ``"project"`` part of ``gt.json`` for project scenes (else empty),
-    ``rig`` the camera of ``--rig`` (else None)."""
+    ``rig`` the camera of ``--rig`` (else None), ``extras`` the ``"views"``, ``"lidar"`` and
+    ``"fragments"`` parts of ``gt.json`` that were made."""
 
     out_dir: Path
     scene: Scene
@@ -119,6 +159,7 @@ class SynthResult:
     seconds: dict[str, float] = field(default_factory=dict)
     project: dict[str, Any] = field(default_factory=dict)
     rig: Rig | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         return (
@@ -136,12 +177,20 @@ class SynthResult:
             "seconds": dict(self.seconds),
             "project": dict(self.project),
             "rig": None if self.rig is None else self.rig.to_dict(),
+            "extras": dict(self.extras),
         }
 
 
 def build_scene(config: SynthConfig) -> Scene:
-    """The scene of a configuration: procedural (seeded), a project sized for its stations, or
-    a mesh file."""
+    """The scene of a configuration: procedural (seeded), a project sized for its stations,
+    an object for object views (procedural or a mesh file, alone or on a floor), or a mesh
+    file."""
+    if config.scene in OBJECT_SCENE_KINDS:
+        return procedural_object(config.seed, floor=config.floor)
+    if config.views:
+        return object_from_mesh(
+            config.scene, scale=config.mesh_scale, up_axis=config.mesh_up_axis, floor=config.floor
+        )
     if config.scene in SCENE_KINDS:
         return make_scene(config.scene, config.seed, size_m=config.size_m)
     if config.scene in PROJECT_SCENE_KINDS:
@@ -153,164 +202,6 @@ def build_scene(config: SynthConfig) -> Scene:
             size_m=config.size_m,
         )
     return scene_from_mesh(config.scene, scale=config.mesh_scale, up_axis=config.mesh_up_axis)
-
-
-def _catmull_rom(p0: Any, p1: Any, p2: Any, p3: Any) -> NDArray[np.float64]:
-    """Catmull-Rom spline from ``p1`` to ``p2`` (excluding ``p2``), ~5 cm spacing."""
-    n = max(4, int(np.linalg.norm(p2 - p1) / 0.05))
-    t = np.linspace(0, 1, n, endpoint=False)[:, None]
-    return 0.5 * (
-        2 * p1
-        + (-p0 + p2) * t
-        + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
-        + (-p0 + 3 * p1 - 3 * p2 + p3) * t**3
-    )
-
-
-def smooth_path(
-    scene: Scene,
-    n_frames: int,
-    *,
-    step_m: float,
-    height_range_m: tuple[float, float] = (1.2, 1.7),
-    clearance_m: float = 0.5,
-    rng: np.random.Generator | int | None = 0,
-    tries: int = 200,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Positions and headings of a smooth walk through free space.
-
-    A random walk over free floor (steps of 0.8-2.5 m with gentle turns, stepping back out of
-    dead ends) is smoothed by a Catmull-Rom spline and sampled every ``step_m`` metres. Each new
-    waypoint is accepted only if the spline piece it completes stays on free floor and
-    ``clearance_m`` away from all surfaces.
-
-    Returns
-    -------
-    positions : (n_frames, 3) float64, metres
-    heading : (n_frames,) float64, radians
-        Direction of travel (azimuth from +X).
-    """
-    gen, _ = as_rng(rng)
-    if step_m <= 0:
-        raise ConfigError(f"step must be positive, got {step_m}")
-    fm = free_map(scene)
-    fy, fx = np.nonzero(fm.free)
-    if len(fx) == 0:
-        raise InputError(scene.name or "scene", "no free floor for a sensor path")
-    length = max(n_frames, 2) * step_m + 0.5
-    h0, h1 = height_range_m
-
-    def clear(pts: NDArray[np.float64]) -> bool:
-        return bool(fm.lookup(pts[:, :2])[0].all() and scene.distance(pts).min() >= clearance_m)
-
-    for _ in range(tries):
-        # a random walk over free floor (steps of 0.8-2.5 m, gentle turns); each new waypoint
-        # must keep the spline piece it completes on free floor and clear of all surfaces
-        c = gen.integers(0, len(fx))
-        xy0 = np.array([fm.x0 + fx[c] * fm.cell_m, fm.y0 + fy[c] * fm.cell_m])
-        W = [np.array([*xy0, fm.lookup(xy0[None])[1][0] + gen.uniform(h0, h1)])]
-        if not clear(W[0][None]):
-            continue
-        heading = gen.uniform(-math.pi, math.pi)
-        pieces: list[NDArray[np.float64]] = []
-        lengths: list[float] = []
-        stuck = backtracks = 0
-        while sum(lengths) < length and backtracks < 200:
-            if stuck >= 48:  # dead end: step back one waypoint and try elsewhere
-                if len(W) < 3:
-                    break
-                W.pop()
-                pieces.pop()
-                lengths.pop()
-                heading = gen.uniform(-math.pi, math.pi)
-                stuck = 0
-                backtracks += 1
-                continue
-            turn = gen.normal(0.0, 0.5) if stuck < 24 else gen.uniform(-math.pi, math.pi)
-            step = gen.uniform(0.8, 2.5)
-            h = heading + turn
-            qxy = W[-1][:2] + step * np.array([math.cos(h), math.sin(h)])
-            free, gz = fm.lookup(qxy[None])
-            if not free[0]:
-                stuck += 1
-                continue
-            q = np.array([*qxy, gz[0] + gen.uniform(h0, h1)])
-            if len(W) == 1:
-                seg = W[0] + np.linspace(0, 1, max(2, int(step / 0.05)))[:, None] * (q - W[0])
-                new = None
-                ok = clear(seg)
-            else:
-                p0 = W[-3] if len(W) >= 3 else 2 * W[-2] - W[-1]
-                new = _catmull_rom(p0, W[-2], W[-1], q)
-                ok = clear(new) and clear(q[None])
-            if not ok:
-                stuck += 1
-                continue
-            if new is not None:
-                pieces.append(new)
-                lengths.append(
-                    float(np.linalg.norm(np.diff(np.vstack([new, W[-1]]), axis=0), axis=1).sum())
-                )
-            W.append(q)
-            heading = h
-            stuck = 0
-        if sum(lengths) < length:
-            continue
-        dense = np.vstack(pieces)
-        cum = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))]
-        s = np.arange(n_frames) * step_m
-        P = np.column_stack([np.interp(s, cum, dense[:, i]) for i in range(3)])
-        ahead = np.column_stack([np.interp(s + 0.3, cum, dense[:, i]) for i in range(3)])
-        return P, np.arctan2(ahead[:, 1] - P[:, 1], ahead[:, 0] - P[:, 0])
-    raise InputError(
-        scene.name or "scene",
-        f"could not find a clear sensor path of {length:.1f} m in {tries} tries; use fewer frames "
-        "or a larger scene",
-    )
-
-
-def camera_trajectory(
-    scene: Scene,
-    n_frames: int,
-    *,
-    step_m: float,
-    rng: np.random.Generator | int | None = 0,
-) -> list[NDArray[np.float64]]:
-    """Hand-held RGB-D camera poses (x right, y down, z forward) along :func:`smooth_path`,
-    looking ahead with a slow pan (+-23 deg) and a downward tilt (11 +- 6 deg)."""
-    gen, _ = as_rng(rng)
-    P, heading = smooth_path(scene, n_frames, step_m=step_m, rng=gen)
-    phase = gen.uniform(0, 2 * math.pi, size=2)
-    poses = []
-    for i in range(n_frames):
-        s = i * step_m
-        yaw = heading[i] + 0.4 * math.sin(s / 2.0 + phase[0])
-        pitch = -0.2 + 0.1 * math.sin(s / 3.1 + phase[1])
-        d = [math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)]
-        poses.append(look_at(P[i], P[i] + d))
-    return poses
-
-
-def lidar_trajectory(
-    scene: Scene,
-    n_frames: int,
-    *,
-    step_m: float = 0.5,
-    rng: np.random.Generator | int | None = 0,
-) -> list[NDArray[np.float64]]:
-    """Level spinning-lidar poses (x forward, z up) every ``step_m`` along :func:`smooth_path`
-    (0.5 m: a 10 Hz lidar moving at 5 m/s)."""
-    P, heading = smooth_path(
-        scene, n_frames, step_m=step_m, height_range_m=(1.7, 1.9), clearance_m=0.3, rng=rng
-    )
-    poses = []
-    for p, h in zip(P, heading, strict=True):
-        T = np.eye(4)
-        c, s_ = math.cos(h), math.sin(h)
-        T[:3, :3] = [[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]
-        T[:3, 3] = p
-        poses.append(T)
-    return poses
 
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
@@ -328,6 +219,8 @@ def _place(
         if len(placed) != cfg.stations:
             raise ConfigError(f"poses: {len(placed)} given for {cfg.stations} stations")
         return placed, None
+    if cfg.stations == 0:
+        return [], None
     place = place_project if cfg.is_project else place_stations
     result = place(
         scene,
@@ -352,8 +245,10 @@ def synthesize(
 ) -> SynthResult:
     """Generate a scene, place and simulate stations, and write everything to ``out_dir``.
 
-    Nothing is written until the scene exists and all stations are placed, so bad settings
-    (e.g. an impossible distance range) leave no partial output.
+    Nothing is written until the scene exists and all stations (the object views, the lidar
+    path) are placed, so bad settings (e.g. an impossible distance range) leave no partial
+    output; the files are then staged and renamed into place together at the end, so a
+    failure on the way (fragments whose overlaps cannot be met) leaves none either.
 
     Parameters
     ----------
@@ -365,7 +260,7 @@ def synthesize(
         of placing them: a fixed view whatever the CPU (seeded placement depends on ray-cast
         ties between coplanar faces, see docs/determinism.md).
     progress : callable, optional
-        ``progress(stage, done, total)`` after each station / frame.
+        ``progress(stage, done, total)`` after each station / frame / view / fragment.
 
     Returns
     -------
@@ -386,6 +281,7 @@ def synthesize(
     secs["scene"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     placed, plan = _place(scene, cfg, tls, poses)
+    products = plan_products(scene, cfg)
     secs["placement"] = time.perf_counter() - t0
     traj: list[NDArray[np.float64]] = []
     rgbd_cfg = RGBDConfig()
@@ -396,70 +292,82 @@ def synthesize(
             step_m=rgbd_cfg.speed_mps / rgbd_cfg.rate_hz,
             rng=stream(cfg.seed, _TRAJECTORY),
         )
-    lidar_traj: list[NDArray[np.float64]] = []
-    if cfg.lidar_frames:
-        lidar_traj = lidar_trajectory(scene, cfg.lidar_frames, rng=stream(cfg.seed, _LIDAR_TRAJ))
     rig: Rig | None = None
     if cfg.rig:
         rig = place_rig(scene, placed[0], station_width=cfg.width, rng=stream(cfg.seed, _RIG))
 
-    # nothing is written before this point
-    out.mkdir(parents=True, exist_ok=True)
-    files: list[Path] = []
-    t0 = time.perf_counter()
-    files.append(scene.write(out / "scene.ply"))
-    secs["mesh"] = time.perf_counter() - t0
-    stations = _write_stations(out, scene, placed, cfg, tls, files, progress)
-    secs["stations"] = sum(s.seconds for s in stations)
-    t0 = time.perf_counter()
-    project_doc: dict[str, Any] = {}
-    if plan is None:
-        pairs = _station_pairs(scene, placed, stations, cfg, tls)
-    else:
-        overlap = overlap_matrix(scene, placed, config=tls)
-        pairs = _project_pairs(overlap, placed, stations, cfg)
-        names = [s.name for s in stations]
-        project_doc = project_ground_truth(plan, overlap, names, cfg.min_overlap)
-    secs["pairs"] = time.perf_counter() - t0
-    if cfg.rgbd_frames:
+    # nothing is written before this point, and everything or nothing at the end of the block
+    with all_or_nothing():
+        files: list[Path] = []
         t0 = time.perf_counter()
-        files += write_tum_sequence(
-            out / "rgbd",
-            scene,
-            traj,
-            config=rgbd_cfg,
-            rng=stream(cfg.seed, _RGBD),
-            progress=None if progress is None else (lambda d, n: progress("rgbd", d, n)),
-        )
-        secs["rgbd"] = time.perf_counter() - t0
-    lidar_doc: list[dict[str, Any]] = []
-    if cfg.lidar_frames:
+        files.append(scene.write(out / "scene.ply"))
+        secs["mesh"] = time.perf_counter() - t0
+        stations = _write_stations(out, scene, placed, cfg, tls, files, progress)
+        secs["stations"] = sum(s.seconds for s in stations)
         t0 = time.perf_counter()
-        lidar_doc = _write_lidar(out, scene, lidar_traj, cfg, files, progress)
-        secs["lidar"] = time.perf_counter() - t0
-    doc = _ground_truth(cfg, tls, scene, stations, pairs, rgbd_cfg, lidar_doc)
-    if rig is not None:
+        project_doc: dict[str, Any] = {}
+        if plan is None:
+            pairs = _station_pairs(scene, placed, stations, cfg, tls)
+        else:
+            overlap = overlap_matrix(scene, placed, config=tls)
+            pairs = _project_pairs(overlap, placed, stations, cfg)
+            names = [s.name for s in stations]
+            project_doc = project_ground_truth(plan, overlap, names, cfg.min_overlap)
+        secs["pairs"] = time.perf_counter() - t0
+        if cfg.rgbd_frames:
+            t0 = time.perf_counter()
+            files += write_tum_sequence(
+                out / "rgbd",
+                scene,
+                traj,
+                config=rgbd_cfg,
+                rng=stream(cfg.seed, _RGBD),
+                progress=None if progress is None else (lambda d, n: progress("rgbd", d, n)),
+            )
+            secs["rgbd"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        written, entry = write_rig(
-            out, scene, rig, station_file=stations[0].file, rng=stream(cfg.seed, _RIG_IMAGE)
-        )
-        files += written
-        doc["T_camera_lidar"] = entry["T_camera_lidar"]
-        doc["rig"] = entry
-        doc["convention"] += (
-            "; T_camera_lidar = inv(T_world_camera) @ T_world_scanner maps the first station "
-            "file's points into the camera frame (x right, y down, z forward)"
-        )
-        secs["rig"] = time.perf_counter() - t0
-    if plan is not None:
-        for entry, g, parent in zip(doc["stations"], plan.groups, plan.parents, strict=True):
-            entry["T_world_station"] = entry["T_world_scanner"]
-            entry["group"] = g
-            entry["parent"] = stations[parent].name if parent >= 0 else None
-        doc["project"] = project_doc
-    _write_json(out / "gt.json", doc)
-    files.append(out / "gt.json")
-    return SynthResult(out, scene, stations, pairs, files, secs, project_doc, rig)
+        made = write_products(out, scene, cfg, products, progress=progress)
+        files += made.files
+        pairs += [PairInfo.from_dict(p) for p in made.pairs]
+        secs["products"] = time.perf_counter() - t0
+        doc = _ground_truth(cfg, tls, scene, stations, pairs, rgbd_cfg, made)
+        if rig is not None:
+            t0 = time.perf_counter()
+            _add_rig(out, scene, rig, stations, cfg, files, doc)
+            secs["rig"] = time.perf_counter() - t0
+        if plan is not None:
+            for entry, g, parent in zip(doc["stations"], plan.groups, plan.parents, strict=True):
+                entry["T_world_station"] = entry["T_world_scanner"]
+                entry["group"] = g
+                entry["parent"] = stations[parent].name if parent >= 0 else None
+            doc["project"] = project_doc
+        _write_json(out / "gt.json", doc)
+        files.append(out / "gt.json")
+    return SynthResult(
+        out, scene, stations, pairs, files, secs, project_doc, rig, dict(made.sections)
+    )
+
+
+def _add_rig(
+    out: Path,
+    scene: Scene,
+    rig: Rig,
+    stations: list[StationInfo],
+    cfg: SynthConfig,
+    files: list[Path],
+    doc: dict[str, Any],
+) -> None:
+    """Write the rig's camera files (appending to ``files``) and add it to ``doc``."""
+    written, entry = write_rig(
+        out, scene, rig, station_file=stations[0].file, rng=stream(cfg.seed, _RIG_IMAGE)
+    )
+    files += written
+    doc["T_camera_lidar"] = entry["T_camera_lidar"]
+    doc["rig"] = entry
+    doc["convention"] += (
+        "; T_camera_lidar = inv(T_world_camera) @ T_world_scanner maps the first station "
+        "file's points into the camera frame (x right, y down, z forward)"
+    )
 
 
 def _write_stations(
@@ -535,33 +443,6 @@ def _project_pairs(
     return pairs
 
 
-def _write_lidar(
-    out: Path,
-    scene: Scene,
-    lidar_traj: list[NDArray[np.float64]],
-    cfg: SynthConfig,
-    files: list[Path],
-    progress: Progress | None,
-) -> list[dict[str, Any]]:
-    """Simulate and write the spinning-lidar sweeps (appending to ``files``); their entries of
-    ``gt.json``."""
-    lidar_doc: list[dict[str, Any]] = []
-    lcfg = lidar_config()
-    gen = stream(cfg.seed, _LIDAR)
-    for i, T in enumerate(lidar_traj):
-        name = f"lidar_{i:05d}"
-        scan = scan_tls(scene, T, config=lcfg, rng=gen, name=name)
-        if not cfg.embed_poses:
-            scan = replace(scan, T_world_scanner=np.eye(4))
-        path = out / "lidar" / f"{name}.{cfg.format}"
-        write_scan(path, scan)
-        files.append(path)
-        lidar_doc.append({"name": name, "file": f"lidar/{path.name}", "T_world_sensor": T.tolist()})
-        if progress is not None:
-            progress("lidar", i + 1, len(lidar_traj))
-    return lidar_doc
-
-
 def _ground_truth(
     cfg: SynthConfig,
     tls: TLSConfig,
@@ -569,7 +450,7 @@ def _ground_truth(
     stations: list[StationInfo],
     pairs: list[PairInfo],
     rgbd_cfg: RGBDConfig,
-    lidar_doc: list[dict[str, Any]],
+    made: Products,
 ) -> dict[str, Any]:
     """The content of ``gt.json``."""
     doc: dict[str, Any] = {
@@ -594,8 +475,13 @@ def _ground_truth(
             "frames": cfg.rgbd_frames,
             "camera": rgbd_cfg.camera().to_dict(),
         }
-    if cfg.lidar_frames:
-        doc["lidar"] = {"sensor": lidar_config().to_dict(), "frames": lidar_doc}
+    doc.update(made.sections)
+    if made.sections:
+        doc["convention"] += (
+            "; lidar frames and object views hold points in their sensor's frame, fragments "
+            "in their first camera's; their pairs carry a kind and their overlap is defined "
+            "in their part of this file"
+        )
     return doc
 
 

@@ -278,7 +278,7 @@ class RGBDFrame:
     ----------
     depth : (H, W) float32, metres
         Orthographic depth ``Z`` (paper eq. 2), NaN where there is no reading, quantised to the
-        TUM step of 0.2 mm.
+        TUM step of 0.2 mm (or the ``depth_step_m`` of :func:`render_rgbd`).
     image : (H, W, 3) uint8 (RGB) or (H, W) uint8 (grey)
     T_world_camera : (4, 4) float64
         Camera pose (x right, y down, z forward).
@@ -310,14 +310,22 @@ def render_rgbd(
     *,
     config: RGBDConfig | None = None,
     rng: np.random.Generator | int | None = 0,
+    depth_step_m: float = TUM_DEPTH_SCALE,
+    image: bool = True,
 ) -> RGBDFrame:
-    """Render one depth + shaded image pair.
+    """Render one depth + shaded image pair (or the depth alone).
 
     Depth noise ``sigma = depth_noise_m + depth_noise_quadratic * z^2``; no reading beyond the
     depth range, at grazing incidence, at random dropouts and (with ``edge_dropout_prob``) at
     depth edges. The image is the scene colour under a sun and a headlight, with a small
     world-fixed texture and Gaussian image noise; rays that hit nothing see a pale sky.
+    Depths are quantised to ``depth_step_m`` metres (the TUM step of 0.2 mm by default; a
+    finer one for close-range scanners whose files store finer units). With ``image=False``
+    only the depth is made (a third faster): the image is left black and its noise is not
+    drawn, which changes nothing of the depth.
     """
+    if not (math.isfinite(depth_step_m) and depth_step_m > 0):
+        raise ConfigError(f"depth_step_m must be a positive number of metres, got {depth_step_m}")
     cfg = config or RGBDConfig()
     gen, _ = as_rng(rng)
     T = as_transform(T_world_camera, name="T_world_camera")
@@ -336,7 +344,8 @@ def render_rgbd(
     z_noise = gen.standard_normal(N, dtype=np.float32)
     u_drop = gen.random(N, dtype=np.float32)
     u_edge = gen.random(N, dtype=np.float32)
-    img_noise = gen.standard_normal(N * 3 if cfg.colour else N, dtype=np.float32)
+    if image:
+        img_noise = gen.standard_normal(N * 3 if cfg.colour else N, dtype=np.float32)
 
     jump = _neighbour_jump(zr.reshape(H, W), False).reshape(-1)
     with np.errstate(invalid="ignore"):
@@ -347,24 +356,27 @@ def render_rgbd(
     with np.errstate(invalid="ignore"):
         valid &= zn > 0
     depth = np.where(valid, zn, np.nan)
-    step = 1.0 / 5000.0
+    step = depth_step_m
     depth = (np.rint(depth / step) * step).astype(np.float32).reshape(H, W)
+    if not image:
+        blank = np.zeros((H, W, 3) if cfg.colour else (H, W), dtype=np.uint8)
+        return RGBDFrame(depth=depth, image=blank, T_world_camera=T, camera=cam)
 
     hit = hits.hit
     pw = T[:3, 3] + np.where(hit, hits.t, 0.0)[:, None] * dirs.astype(np.float64)
     col = _shade(scene, hits, dirs, pw, cos_inc)
     sky = np.array([205.0, 218.0, 235.0], dtype=np.float32)
     col = np.where(hit[:, None], col, sky)
-    image: NDArray[np.uint8]
+    picture: NDArray[np.uint8]
     if cfg.colour:
         img = col + cfg.image_noise * img_noise.reshape(N, 3)
-        image = np.clip(img + 0.5, 0, 255).astype(np.uint8).reshape(H, W, 3)
+        picture = np.clip(img + 0.5, 0, 255).astype(np.uint8).reshape(H, W, 3)
     else:
         grey = col @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-        image = (
+        picture = (
             np.clip(grey + cfg.image_noise * img_noise + 0.5, 0, 255).astype(np.uint8).reshape(H, W)
         )
-    return RGBDFrame(depth=depth, image=image, T_world_camera=T, camera=cam)
+    return RGBDFrame(depth=depth, image=picture, T_world_camera=T, camera=cam)
 
 
 def look_at(eye: ArrayLike, target: ArrayLike) -> NDArray[np.float64]:

@@ -2,7 +2,8 @@
 and three ambiguous scenes (a symmetric room, a featureless tunnel, repeating bays), each also
 with one asymmetric cue; and project scenes sized for many stations (a multi-room building, a
 warehouse of identical rack bays, a street with a side street), optionally as several
-disconnected groups.
+disconnected groups; and objects to scan all around (a procedural object or a mesh file,
+:mod:`flexreg.synth.scenes.object`).
 
 Every generator draws all its randomness from one ``rng`` in a fixed order, so the same seed
 gives the same mesh bit for bit, and different seeds give different layouts. Geometry spans
@@ -25,6 +26,12 @@ from flexreg.synth.scenes.building import building
 from flexreg.synth.scenes.courtyard import courtyard
 from flexreg.synth.scenes.from_mesh import add_mesh_objects, scene_from_mesh
 from flexreg.synth.scenes.hall import hall
+from flexreg.synth.scenes.object import (
+    object_extent,
+    object_from_mesh,
+    procedural_object,
+    with_floor,
+)
 from flexreg.synth.scenes.room import room
 from flexreg.synth.scenes.street import street
 from flexreg.synth.scenes.symmetric_room import symmetric_room
@@ -36,6 +43,7 @@ __all__ = [
     "AMBIGUOUS_SCENE_KINDS",
     "CUE_SCENE_KINDS",
     "GROUP_GAP_M",
+    "OBJECT_SCENE_KINDS",
     "PROJECT_SCENE_KINDS",
     "SCENE_KINDS",
     "add_mesh_objects",
@@ -46,12 +54,16 @@ __all__ = [
     "hall",
     "make_project_scene",
     "make_scene",
+    "object_extent",
+    "object_from_mesh",
+    "procedural_object",
     "room",
     "scene_from_mesh",
     "street",
     "symmetric_room",
     "tunnel",
     "warehouse",
+    "with_floor",
 ]
 
 #: scenes whose symmetry or repetition lets several poses explain a station equally well
@@ -60,6 +72,9 @@ AMBIGUOUS_SCENE_KINDS = ("symmetric-room", "tunnel", "bays")
 CUE_SCENE_KINDS = ("symmetric-room-cue", "tunnel-cue", "bays-cue")
 #: every procedural scene kind of :func:`make_scene`
 SCENE_KINDS = ("room", "courtyard", "hall", *AMBIGUOUS_SCENE_KINDS, *CUE_SCENE_KINDS)
+
+#: objects to scan all around with object views (``SynthConfig.views``), not with stations
+OBJECT_SCENE_KINDS = ("object",)
 
 #: scenes of multi-station projects, sized by their number of stations
 PROJECT_SCENE_KINDS = ("building", "warehouse", "street")

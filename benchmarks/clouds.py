@@ -41,7 +41,9 @@ from _clouds_runs import (  # noqa: E402
     FLEXREG_METHODS,
     METHODS,
     agreement,
+    confident_off,
     confident_wrong,
+    frame_pairs,
     real_pairs,
     registered,
     run_pair,
@@ -58,12 +60,15 @@ SECTION = "## Any two clouds"
 SHARED = REPO.parent / "shared" / "data"
 BUNNY = SHARED / "mesh_models" / "bun_zipper_res3.ply"
 
+#: lidar frames paired this many frames apart (0.15 m to 4.5 m along the path)
+STEPS = (1, 5, 10, 20, 30)
 
-def datasets(data: Path, seeds: list[int], quick: bool) -> list[tuple[str, Path]]:
-    """Generate (or reuse) the synthetic sets: (kind, folder) per set."""
-    out: list[tuple[str, Path]] = []
+
+def datasets(data: Path, seeds: list[int], quick: bool) -> list[tuple[str, Path | None]]:
+    """Generate (or reuse) the synthetic sets: (kind, folder) per set (None: not generated)."""
+    out: list[tuple[str, Path | None]] = []
     views = ["--views", "4" if quick else "6"]
-    frames = "3" if quick else "5"
+    frames = "11" if quick else "31"
     for s in seeds:
         seed = ["--seed", str(s)]
         if BUNNY.is_file():
@@ -83,19 +88,20 @@ def datasets(data: Path, seeds: list[int], quick: bool) -> list[tuple[str, Path]
                 *seed,
             ]
             out.append(("rosette", synth(data / f"rosette-{scene}-s{s}", args)))
-        args = ["--scene", "room", "--stations", "0", "--fragments", frames, *seed]
+        args = ["--scene", "room", "--stations", "0", "--fragments", "4", *seed]
         out.append(("fragments", synth(data / f"fragments-room-s{s}", args)))
     return out
 
 
 def table(records: list[dict[str, Any]]) -> str:
-    """The Markdown table: per kind, pairs registered per method, and flexreg's confident
-    wrong answers."""
+    """The Markdown table: per set, pairs registered per method, what ``auto`` said of the
+    rest, the baseline's wrong answers and flexreg's confident wrong (and off) answers."""
     kinds = list(dict.fromkeys(r["kind"] for r in records if r.get("limits")))
     head = "| set | pairs | " + " | ".join(f"{m} registered" for m in METHODS)
-    head += " | auto: uncertain right / uncertain wrong / refused"
-    head += " | confident wrong (auto, flexion, geometric) |"
-    lines = [head, "|---|---:|" + "---:|" * (len(METHODS) + 2)]
+    head += " | auto: uncertain right / uncertain not right / refused"
+    head += f" | {BASELINE} wrong | confident wrong (auto, flexion, geometric)"
+    head += " | confident off (auto, flexion, geometric) |"
+    lines = [head, "|---|---:|" + "---:|" * (len(METHODS) + 4)]
     for k in kinds:
         rs = [r for r in records if r["kind"] == k and r.get("limits")]
         reg = [sum(registered(r, m) for r in rs) for m in METHODS]
@@ -103,11 +109,13 @@ def table(records: list[dict[str, Any]]) -> str:
         unc_r = sum(x["status"] == "uncertain" and x.get("right") is True for x in a)
         unc_w = sum(x["status"] == "uncertain" and x.get("right") is False for x in a)
         ref = sum(x["status"] not in ("confident", "uncertain") for x in a)
+        base_wrong = sum(r[BASELINE].get("right") is False for r in rs)
         cw = ", ".join(str(sum(confident_wrong(r, m) for r in rs)) for m in FLEXREG_METHODS)
+        co = ", ".join(str(sum(confident_off(r, m) for r in rs)) for m in FLEXREG_METHODS)
         lines.append(
             f"| {k} | {len(rs)} | "
             + " | ".join(map(str, reg))
-            + f" | {unc_r} / {unc_w} / {ref} | {cw} |"
+            + f" | {unc_r} / {unc_w} / {ref} | {base_wrong} | {cw} | {co} |"
         )
     return "\n".join(lines)
 
@@ -169,7 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     records: list[dict[str, Any]] = []
     pairs = []
     for kind, d in datasets(a.data, seeds, a.quick):
-        pairs += synthetic_pairs(kind, d)
+        if d is None:
+            continue
+        pairs += frame_pairs(kind, d, STEPS) if kind == "rosette" else synthetic_pairs(kind, d)
     if not a.no_real:
         pairs += real_pairs(SHARED)
     for p in pairs:

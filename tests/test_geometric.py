@@ -112,6 +112,8 @@ def test_route_per_method_and_scan_kind() -> None:
     assert route("auto", pin, True) == "flexion-first"
     assert route("auto", pano, False) == "both"
     assert route("auto", pin, False) == "both"
+    # a cloud the registration projects itself (a fragment, a lidar frame) is no station
+    assert route("auto", pano, True, grids=False) == "flexion-first"
 
 
 def test_method_is_validated_and_icp_only_is_method_init() -> None:

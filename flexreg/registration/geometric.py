@@ -13,11 +13,12 @@ between them and the feature images' hypotheses.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Literal
 
 from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
-from flexreg.core.scan import as_points
+from flexreg.core.scan import Scan, as_points
 from flexreg.errors import DegenerateGeometryError, InputError
 from flexreg.registration.candidates import Candidate
 from flexreg.registration.config import RegistrationConfig
@@ -36,19 +37,27 @@ def panoramic(images: list[RangeImage]) -> bool:
     return all(not isinstance(i.camera, PinholeCamera) for i in images)
 
 
-def route(method: str, images: list[RangeImage], found: bool) -> Route:
+def gridded(scans: Sequence[Scan | RangeImage]) -> bool:
+    """Whether every scan comes as a grid (a range image, or a file with its native grid: PTX,
+    gridded E57, organised PCD), not as a cloud the registration projects itself."""
+    return all(not isinstance(s, Scan) or s.has_grid for s in scans)
+
+
+def route(method: str, images: list[RangeImage], found: bool, grids: bool = True) -> Route:
     """Which hypotheses a pair's answer is chosen among.
 
     ``"flexion"``: the feature images' alone (``method="flexion"``; ``"init"``, whose one
-    hypothesis is the given transform; or ``"auto"`` for two
-    panoramas on which they ``found`` a prior: the stations they were made for);
-    ``"flexion-first"``: theirs alone first, and when that answer is not confident both
-    routes' together (``"auto"``, other scans with a prior of the feature images); ``"both"``:
-    both together at once (``"auto"`` without such a prior: only the geometric ones then);
-    ``"geometric"``: the geometric ones alone.
+    hypothesis is the given transform; or ``"auto"`` for two panoramic ``grids`` on which
+    they ``found`` a prior: the stations they were made for); ``"flexion-first"``: theirs
+    alone first, and when that answer is not confident both routes' together (``"auto"``,
+    other scans with a prior of the feature images: clouds projected from their origin,
+    depth images); ``"both"``: both together at once (``"auto"`` without such a prior:
+    only the geometric ones then); ``"geometric"``: the geometric ones alone.
 
     >>> route("auto", [], False)
     'both'
+    >>> route("auto", [], True, grids=False)
+    'flexion-first'
     """
     if method in ("flexion", "init"):  # init: the given transform alone (no search)
         return "flexion"
@@ -56,7 +65,7 @@ def route(method: str, images: list[RangeImage], found: bool) -> Route:
         return "geometric"
     if not found:
         return "both"
-    return "flexion" if panoramic(images) else "flexion-first"
+    return "flexion" if grids and panoramic(images) else "flexion-first"
 
 
 def geometric_priors(
@@ -90,4 +99,4 @@ def geometric_priors(
     return [("geometric", h.T_target_source) for h in hyps]
 
 
-__all__ = ["GEOMETRIC_HYPOTHESES", "Route", "geometric_priors", "panoramic", "route"]
+__all__ = ["GEOMETRIC_HYPOTHESES", "Route", "geometric_priors", "gridded", "panoramic", "route"]

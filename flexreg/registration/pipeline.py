@@ -52,7 +52,7 @@ from flexreg.registration.check import Check, TwoWay
 from flexreg.registration.conclude import Judging, conclude, slid_answer
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
-from flexreg.registration.geometric import geometric_priors, route
+from flexreg.registration.geometric import geometric_priors, gridded, route
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
@@ -337,7 +337,8 @@ def _answer(
     """The answer of the routes ``config.method`` takes (:func:`route`): the feature images'
     hypotheses alone, the geometric ones alone, or both judged together by one
     :func:`_finish` (after the feature images' alone when that may already be confident)."""
-    way = route(config.method, images, bool(m.priors) or (bool(plans) and not m.few))
+    found = bool(m.priors) or (bool(plans) and not m.few)
+    way = route(config.method, images, found, gridded(scans))
     if way == "flexion":
         return _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
     first: RegistrationResult | None = None

@@ -192,7 +192,8 @@ def synth(out: Path, args: list[str]) -> Path | None:
     """Run ``flexreg synth --out out ARGS`` once (kept when ``out/gt.json`` exists); None, and
     its error line printed, when the generator refuses (a fragment path whose overlap jumps)."""
     if not (out / "gt.json").is_file():
-        cmd = [sys.executable, "-m", "flexreg", "synth", "--out", str(out), *args]
+        exe = Path(sys.executable).with_name("flexreg")  # the console script beside Python
+        cmd = [str(exe), "synth", "--out", str(out), *args]
         run = subprocess.run(cmd, capture_output=True, text=True)
         if run.returncode != 0:
             print(f"{out.name}: not generated: {run.stderr.strip().splitlines()[-1]}", flush=True)

@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.transforms import invert
 from flexreg.errors import InputError
 from flexreg.io.depth import TUM_DEPTH_SCALE, write_depth_png
 from flexreg.synth.config import RGBDConfig
+from flexreg.synth.placement import neighbour_pairs
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import object_extent
 from flexreg.synth.seeding import as_rng
@@ -336,18 +336,11 @@ def write_views(
         if progress is not None:
             progress(i + 1, n)
     tol = 3.0 * config.depth_noise_m + 0.005 * ring.distance_m
-    pairs = []
-    for i in range(n - 1):
-        Ta, Tb = ring.poses[i], ring.poses[i + 1]
-        seen_b = view_overlap(scene, world[i + 1], Ta, config, tol_m=tol)
-        seen_a = view_overlap(scene, world[i], Tb, config, tol_m=tol)
-        pairs.append(
-            {
-                "target": views[i]["name"],
-                "source": views[i + 1]["name"],
-                "T_target_source": invert(Ta) @ Tb,
-                "distance_m": float(np.linalg.norm(Tb[:3, 3] - Ta[:3, 3])),
-                "overlap": min(seen_a, seen_b),
-            }
-        )
+
+    def overlap(i: int, j: int) -> float:
+        P = ring.poses
+        seen_j = view_overlap(scene, world[j], P[i], config, tol_m=tol)
+        return min(seen_j, view_overlap(scene, world[i], P[j], config, tol_m=tol))
+
+    pairs = neighbour_pairs([v["name"] for v in views], list(ring.poses[:n]), overlap)
     return files, views, pairs

@@ -10,6 +10,7 @@ the other one measured.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -503,3 +504,30 @@ def station_pair(
         station_overlap(sc, Ta, Tb, config=cfg),
         float(np.linalg.norm(Tb[:3, 3] - Ta[:3, 3])),
     )
+
+
+def neighbour_pairs(
+    names: list[str],
+    poses: list[NDArray[np.float64]],
+    overlap: Callable[[int, int], float],
+) -> list[dict[str, Any]]:
+    """Each item of a sequence (views, lidar frames) with the next, for ``gt.json``: their
+    ``T_target_source = inv(T_world_target) @ T_world_source``, the distance between them
+    (metres) and ``overlap(i, i + 1)``.
+
+    >>> import numpy as np
+    >>> T = [np.eye(4), np.eye(4)]
+    >>> T[1][0, 3] = 2.0
+    >>> neighbour_pairs(["a", "b"], T, lambda i, j: 0.5)[0]["distance_m"]
+    2.0
+    """
+    return [
+        {
+            "target": names[i],
+            "source": names[i + 1],
+            "T_target_source": invert(poses[i]) @ poses[i + 1],
+            "distance_m": float(np.linalg.norm(poses[i + 1][:3, 3] - poses[i][:3, 3])),
+            "overlap": overlap(i, i + 1),
+        }
+        for i in range(len(names) - 1)
+    ]

@@ -34,9 +34,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from flexreg.core.scan import Scan
-from flexreg.core.transforms import as_transform, invert
+from flexreg.core.transforms import as_transform
 from flexreg.io import write_scan
 from flexreg.synth.config import RosetteConfig
+from flexreg.synth.placement import neighbour_pairs
 from flexreg.synth.scene import Scene
 from flexreg.synth.seeding import as_rng
 
@@ -272,18 +273,10 @@ def write_rosette_frames(
         if progress is not None:
             progress(i + 1, len(poses))
     tol = 3.0 * config.range_noise_m + 0.01
-    pairs = []
-    for i in range(len(poses) - 1):
-        Ta, Tb = poses[i], poses[i + 1]
-        share_b = rosette_overlap(scene, world[i + 1], Ta, config, tol_m=tol)
-        share_a = rosette_overlap(scene, world[i], Tb, config, tol_m=tol)
-        pairs.append(
-            {
-                "target": frames[i]["name"],
-                "source": frames[i + 1]["name"],
-                "T_target_source": invert(Ta) @ Tb,
-                "distance_m": float(np.linalg.norm(Tb[:3, 3] - Ta[:3, 3])),
-                "overlap": min(share_a, share_b),
-            }
-        )
+
+    def overlap(i: int, j: int) -> float:
+        share_j = rosette_overlap(scene, world[j], poses[i], config, tol_m=tol)
+        return min(share_j, rosette_overlap(scene, world[i], poses[j], config, tol_m=tol))
+
+    pairs = neighbour_pairs([f["name"] for f in frames], list(poses), overlap)
     return files, frames, pairs

@@ -256,8 +256,8 @@ def _kitti(path: Path) -> list[NDArray[np.float64]]:
 
 def real_pairs(data: Path) -> list[Pair]:
     """The real pairs of ``data`` (the shared data folder) that are not terrestrial stations:
-    a 3DMatch fragment pair, two Ouster frame pairs, the Stanford bunny, the PCL tutorial's
-    Kinect clouds (no truth). Missing folders are skipped."""
+    a 3DMatch fragment pair, two Ouster frame pairs, the Stanford bunny, the PCL tutorials'
+    room scans and Kinect clouds (no truth). Missing folders are skipped."""
     out: list[Pair] = []
     d = data / "reg_3dmatch_geotransformer_demo"
     if d.is_dir():
@@ -296,6 +296,18 @@ def real_pairs(data: Path) -> list[Pair]:
         a, b = read_scans(d / "derived_bunny_grids_and_gt.npz")
         T = invert(a.T_world_scanner) @ b.T_world_scanner
         out.append(Pair("real", "bunny bun000 <- bun045", a, b, T, "bun.conf", trans_m=0.003))
+    d = data / "pcl_room_scans"
+    if d.is_dir():
+        out.append(
+            Pair(
+                "real",
+                "PCL room_scan1 <- room_scan2",
+                read_scan(d / "room_scan1.pcd"),
+                read_scan(d / "room_scan2.pcd"),
+                None,
+                "none (odometry guess only)",
+            )
+        )
     d = data / "pcl_organized_kinect_pairwise"
     if d.is_dir():
         for i in range(1, 5):

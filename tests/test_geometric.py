@@ -188,3 +188,13 @@ def test_auto_keeps_the_feature_images_alone_on_stations():
     assert np.array_equal(a.T_target_source, f.T_target_source)
     assert a.verdict.status == f.verdict.status
     assert "geometric" not in a.timings_s
+
+
+def test_spacing_of_a_cloud_that_holds_every_point_twice() -> None:
+    """PCL's room scans hold each point twice: the spacing is that of the distinct points (a
+    2 cm grid here), not 0 (which refused the pair: "the target's points coincide")."""
+    from flexreg.stages.sampling import median_spacing
+
+    g = np.stack(np.meshgrid(np.arange(50), np.arange(50), [0.0]), -1).reshape(-1, 3) * 0.02
+    assert median_spacing(np.concatenate([g, g])) == pytest.approx(0.02)
+    assert median_spacing(g) == pytest.approx(0.02)

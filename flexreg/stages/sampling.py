@@ -231,10 +231,23 @@ def median_spacing(
     The nearest neighbours are found exactly in a grid of cells that holds only the points'
     indices (:func:`_nearest_other`), which gives bit for bit the distances a k-d tree gives
     (the same float64 sum of squared differences) without building the tree over every point.
+    Points repeated exactly (a cloud that holds each point twice) count once when the
+    median would otherwise be 0.
     """
     P = _float_points(points)
     if len(P) < 2:
         raise RegistrationError("cannot estimate point spacing from fewer than 2 points")
+    spacing = _median_spacing(P, sample, seed, tree_points)
+    if spacing == 0.0:  # a cloud written with every point twice: the spacing of distinct ones
+        U = np.unique(np.asarray(P, dtype=np.float64), axis=0)
+        if 2 <= len(U) < len(P):
+            return median_spacing(U, sample=sample, seed=seed, tree_points=tree_points)
+    return spacing
+
+
+def _median_spacing(
+    P: NDArray[np.floating], sample: int, seed: int, tree_points: int | None
+) -> float:
     if tree_points is not None and len(P) > tree_points:
         P = P[np.random.default_rng(seed).choice(len(P), tree_points, replace=False)]
     P = np.ascontiguousarray(P, dtype=np.float64)

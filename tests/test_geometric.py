@@ -34,7 +34,7 @@ def _apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ T[:3, :3].T + T[:3, 3]
 
 
-def test_hypotheses_best_supported_first_and_the_look_alike_second() -> None:
+def test_hypotheses_the_truth_first_and_the_look_alike_second() -> None:
     """40 matches agree with the truth, 25 with a look-alike 3 m along, 60 are random: the
     truth first, the look-alike as the runner-up, each within the noise (1 mm) of its pose."""
     rng = np.random.default_rng(4)

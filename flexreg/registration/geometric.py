@@ -72,7 +72,7 @@ def geometric_priors(
     images: list[RangeImage], config: RegistrationConfig, notes: list[str]
 ) -> list[Candidate]:
     """The FPFH hypotheses of two working images' points, as ``("geometric", T)`` candidates
-    (best supported first); none, and a note why, when the descriptors support none.
+    (in the order found); none, and a note why, when the descriptors support none.
 
     Parameters
     ----------

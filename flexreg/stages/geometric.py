@@ -215,7 +215,8 @@ def hypotheses_from_matches(
     max_iterations: int = 50_000,
     rng: RngLike = None,
 ) -> list[Hypothesis]:
-    """Up to ``count`` distinct poses that putative correspondences support, best first.
+    """Up to ``count`` distinct poses that putative correspondences support, in the order
+    found: each from the largest consistent set the earlier ones left.
 
     The largest mutually consistent subset (:func:`~flexreg.stages.alignment.
     consistent_subset`, pairwise distances kept within twice ``threshold_m``) is solved by
@@ -301,7 +302,8 @@ def geometric_hypotheses(
     Returns
     -------
     hypotheses : list of Hypothesis
-        Best supported first; the inlier distance is 1.5 voxels.
+        In the order found (:func:`hypotheses_from_matches`); the inlier distance is 1.5
+        voxels. Every one is judged, so the order only breaks exact ties.
     target_described, source_described : Described
     """
     if voxel_m is None:

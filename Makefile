@@ -7,7 +7,7 @@ DEMO   ?= demo-output
 # test processes of make test (pytest-xdist; each test file runs whole in one of them)
 TEST_WORKERS ?= 2
 
-.PHONY: install demo test test-variants lint bench bench-registration bench-calibration bench-verdict bench-survey bench-compare bench-perf clean
+.PHONY: install demo test test-variants lint bench bench-registration bench-calibration bench-verdict bench-survey bench-clouds bench-compare bench-perf clean
 
 install: $(STAMP)
 
@@ -65,6 +65,9 @@ bench-verdict: $(STAMP)
 
 bench-survey: $(STAMP)
 	$(BIN)/python benchmarks/survey.py --write-docs
+
+bench-clouds: $(STAMP)
+	$(BIN)/python benchmarks/clouds.py --write-docs
 
 bench-compare: $(STAMP)
 	$(BIN)/flexreg bench --suite all --out bench-results

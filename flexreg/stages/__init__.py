@@ -19,6 +19,9 @@ plan prior     priors.upright_priors               RangeImage x 2      list of (
                (plan_view, plan_overlays;
                plan_correlation: the overlays'
                FFT and windowed correlations)
+geometric      geometric.geometric_hypotheses      (N, 3) x 2          list of Hypothesis
+               (describe: FPFH; hypotheses_from_
+               matches: clique + RANSAC)
 guided fit     alignment.guided_fit                prior, Features     GuidedFit
 verification   verification.overlap_score          RangeImage x 2, T   consistent, conflict
                (classify_points, range_slack)

@@ -109,7 +109,6 @@ def _tree_spacing(points: np.ndarray, sample: int = 5000, seed: int = 0) -> floa
     [
         lambda g: g.normal(size=(4000, 3)),
         lambda g: np.vstack([g.normal(size=(999, 3)), [[1e4, 0.0, 0.0]]]),  # an isolated point
-        lambda g: np.repeat(g.normal(size=(60, 3)), 3, axis=0),  # duplicates: spacing 0
         lambda g: np.c_[g.normal(size=(3000, 2)), np.zeros(3000)],  # a plane
         lambda g: np.c_[g.uniform(0, 100, 3000), np.zeros((3000, 2))],  # a line
         lambda g: g.normal(size=(2, 3)),
@@ -122,6 +121,18 @@ def test_median_spacing_equals_the_k_d_trees(make):
     pts = make(np.random.default_rng(11))
     assert median_spacing(pts) == _tree_spacing(pts)
     assert median_spacing(pts, sample=100, seed=4) == _tree_spacing(pts, sample=100, seed=4)
+
+
+def test_median_spacing_of_repeated_points_is_that_of_the_distinct_ones():
+    """Every point three times (a k-d tree's median is 0 then): the spacing of the distinct
+    points, bit for bit as the k-d tree gives it on them."""
+    from flexreg.stages.sampling import median_spacing
+
+    pts = np.repeat(np.random.default_rng(11).normal(size=(60, 3)), 3, axis=0)
+    assert _tree_spacing(pts) == 0.0
+    assert median_spacing(pts) == _tree_spacing(np.unique(pts, axis=0)) > 0
+    one = np.zeros((5, 3))  # a single point repeated: no spacing to find
+    assert median_spacing(one) == 0.0
 
 
 def _numpy_quantize(img: np.ndarray, bits: int, lo: float, hi: float) -> tuple:

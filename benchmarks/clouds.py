@@ -144,10 +144,9 @@ def per_pair(records: list[dict[str, Any]]) -> str:
 
 
 def markdown(runs: list[tuple[str, list[dict[str, Any]]]], command: str) -> str:
-    """The section: per run (its title and records), the summary table and every pair."""
+    """The section's body (its heading is :data:`SECTION`): per run (its title and records),
+    the summary table and every pair."""
     out = [
-        SECTION,
-        "",
         f"Measured with `{command}` on {machine_info()['cpu']}. A pair is right within 1° and "
         "1 % of the source's median range of the truth (3DMatch: 15° / 30 cm, its benchmark's "
         "limits, since ICP started from its reference pose moves 1.5° / 11 cm; Ouster: 10 cm; "

@@ -113,11 +113,11 @@ def test_route_per_method_and_scan_kind() -> None:
     assert route("init", pin, False) == "flexion"  # the given transform alone
     assert route("geometric", pano, True) == "geometric"
     assert route("auto", pano, True) == "flexion"  # stations: the feature images alone
-    assert route("auto", pin, True) == "flexion-first"
+    assert route("auto", pin, True) == "both"  # a depth image: both routes judged together
     assert route("auto", pano, False) == "both"
     assert route("auto", pin, False) == "both"
     # a cloud the registration projects itself (a fragment, a lidar frame) is no station
-    assert route("auto", pano, True, grids=False) == "flexion-first"
+    assert route("auto", pano, True, grids=False) == "both"
 
 
 def test_method_is_validated_and_icp_only_is_method_init() -> None:

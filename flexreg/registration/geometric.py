@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 #: geometric hypotheses judged per pair: the best supported and its distinct runner-ups
 GEOMETRIC_HYPOTHESES = 3
 
-Route = Literal["flexion", "flexion-first", "both", "geometric"]
+Route = Literal["flexion", "both", "geometric"]
 
 
 def panoramic(images: list[RangeImage]) -> bool:
@@ -48,24 +48,23 @@ def route(method: str, images: list[RangeImage], found: bool, grids: bool = True
 
     ``"flexion"``: the feature images' alone (``method="flexion"``; ``"init"``, whose one
     hypothesis is the given transform; or ``"auto"`` for two panoramic ``grids`` on which
-    they ``found`` a prior: the stations they were made for); ``"flexion-first"``: theirs
-    alone first, and when that answer is not confident both routes' together (``"auto"``,
-    other scans with a prior of the feature images: clouds projected from their origin,
-    depth images); ``"both"``: both together at once (``"auto"`` without such a prior:
-    only the geometric ones then); ``"geometric"``: the geometric ones alone.
+    they ``found`` a prior: the stations they were made for); ``"both"``: both routes'
+    hypotheses judged together (``"auto"`` on every other pair: depth images, clouds
+    projected from their origin, or stations on which the feature images found nothing; a
+    confident answer of the feature images alone is not enough there, since on such scans
+    they can fit a look-alike that only the other route's hypotheses reveal);
+    ``"geometric"``: the geometric ones alone.
 
     >>> route("auto", [], False)
     'both'
     >>> route("auto", [], True, grids=False)
-    'flexion-first'
+    'both'
     """
     if method in ("flexion", "init"):  # init: the given transform alone (no search)
         return "flexion"
     if method == "geometric":
         return "geometric"
-    if not found:
-        return "both"
-    return "flexion" if grids and panoramic(images) else "flexion-first"
+    return "flexion" if found and grids and panoramic(images) else "both"
 
 
 def geometric_priors(

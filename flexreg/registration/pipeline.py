@@ -334,27 +334,15 @@ def _answer(
     aliases: Aliases | None,
     window: Window | None,
 ) -> RegistrationResult:
-    """The answer of the routes ``config.method`` takes (:func:`route`): the feature images'
+    """The answer of the route ``config.method`` takes (:func:`route`): the feature images'
     hypotheses alone, the geometric ones alone, or both judged together by one
-    :func:`_finish` (after the feature images' alone when that may already be confident)."""
+    :func:`_finish`."""
     found = bool(m.priors) or (bool(plans) and not m.few)
     way = route(config.method, images, found, gridded(scans))
     if way == "flexion":
         return _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
-    first: RegistrationResult | None = None
-    if way == "flexion-first":
-        try:
-            first = _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
-        except RegistrationError as e:
-            log.info("the feature images alone: %s", e)
-        else:
-            if first.verdict is not None and first.verdict.confident:
-                return first
-            log.info("the feature images' answer is not confident: geometric hypotheses too")
     with run.stage("geometric"):
         geo = geometric_priors(images, config, m.notes)
-    if not geo and first is not None:
-        return first
     if way == "geometric":
         m, plans = _Matched(m.thr, m.pairs, geo, m.notes), []
     else:

@@ -275,10 +275,10 @@ class RegistrationConfig(Config):
         Where the hypotheses come from: ``"flexion"`` the feature images (and the plan
         views of levelled scanners); ``"geometric"`` FPFH descriptors of the clouds, made
         consistent and solved by RANSAC (:mod:`flexreg.stages.geometric`); ``"auto"`` the
-        feature images alone for two panoramic stations on which they find a prior, both
-        otherwise (an object scanned from outside, a narrow-field lidar frame, a fragment,
-        or a station the feature images find nothing on), the answer of the feature images
-        alone when it is confident; ``"init"`` the given initial transform only
+        feature images alone for two panoramic stations (read with their grids) on which
+        they find a prior, both routes judged together on every other pair (an object
+        scanned from outside, a narrow-field lidar frame, a fragment, a depth image, or a
+        station the feature images find nothing on); ``"init"`` the given initial transform only
         (``register(..., init=T)``, refined by ICP: no search; the ``icp_only`` switch of
         earlier releases). Every hypothesis is judged by the same dense check and verdict.
     image : str

@@ -322,6 +322,7 @@ def _finish(
 
 
 def _answer(
+    grids: bool,
     scans: list[Scan | RangeImage],
     images: list[RangeImage],
     kps: list[Keypoints3D],
@@ -336,9 +337,10 @@ def _answer(
 ) -> RegistrationResult:
     """The answer of the route ``config.method`` takes (:func:`route`): the feature images'
     hypotheses alone, the geometric ones alone, or both judged together by one
-    :func:`_finish`."""
+    :func:`_finish`. ``grids``: both scans came as grids (:func:`~flexreg.registration.
+    geometric.gridded`: their files' native grids, or working images the caller gave)."""
     found = bool(m.priors) or (bool(plans) and not m.few)
-    way = route(config.method, images, found, gridded(scans))
+    way = route(config.method, images, found, grids)
     if way == "flexion":
         return _finish(scans, kps, views, m, plans, config, run, init, aliases, window)
     with run.stage("geometric"):
@@ -562,6 +564,7 @@ def register(
     images = None  # the working images made below replace the given ones
     with run.stage("range images"):
         images = range_images_of(given, config)
+    grids = gridded(given)  # a working image given for a scan read lean is its grid
     del given
     roles = [(True, False), (False, True)]
     with _single_threaded(2) as pool:
@@ -578,7 +581,9 @@ def register(
         plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         run.wait("preparation")
         views = view_job.result()
-    return _answer(scans, images, kps, views, matched, plans, config, run, init, aliases, win)
+    return _answer(
+        grids, scans, images, kps, views, matched, plans, config, run, init, aliases, win
+    )
 
 
 class Registration:
@@ -697,7 +702,10 @@ class Registration:
             matched = _match(images, kps, config, run)
             plans, aliases = _plan_candidates(plan_job, config, run, matched.notes)
         scans, views = [target.scan, source.scan], [target.view, source.view]
-        return _answer(scans, images, kps, views, matched, plans, config, run, init, aliases, win)
+        grids = gridded(scans)
+        return _answer(
+            grids, scans, images, kps, views, matched, plans, config, run, init, aliases, win
+        )
 
 
 __all__ = [

@@ -308,3 +308,17 @@ def test_7scenes_depth_frames(shared_data):
     assert s.grid_shape == (480, 640) and len(s) == int(valid.sum())
     np.testing.assert_allclose(np.sort(s.points[:, 2]), np.sort(raw[valid] / 1000.0))
     assert 0.3 < np.median(s.points[:, 2]) < 4.0  # a kitchen seen from arm's length
+
+
+def test_an_intensity_beyond_float32_is_refused(tmp_path):
+    """1e39 does not fit the float32 intensities (it would read as inf): one error line."""
+    from flexreg.errors import InputError
+    from flexreg.io import ptx
+
+    text = (
+        "2\n2\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0.5 -1 2 1\n"
+        "1 2 3 1e39\n0 0 0 0\n-1 2.5 3 0.25\n4 -5 6e-1 1\n"
+    )
+    (tmp_path / "big.ptx").write_text(text)
+    with pytest.raises(InputError, match="intensity beyond float32"):
+        ptx.read(tmp_path / "big.ptx")

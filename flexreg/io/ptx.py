@@ -329,6 +329,8 @@ class _Cloud:
             lo, hi = float(self.points.min()), float(self.points.max())
             if not (-FLOAT32_MAX_M <= lo and hi <= FLOAT32_MAX_M):
                 raise _Wide()
+        if self.intensity is not None and m and not np.isfinite(self.intensity).all():
+            raise InputError(path, f"cloud {self.index}: an intensity beyond float32's range")
         if not is_rigid(M):
             log.warning("%s: cloud %d has a non-rigid transform (kept as given)", path, self.index)
         if self.stride:

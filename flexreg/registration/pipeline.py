@@ -33,7 +33,6 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.core.camera import PinholeCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.scan import Scan, as_points
 from flexreg.core.transforms import as_transform
@@ -52,7 +51,7 @@ from flexreg.registration.check import Check, TwoWay
 from flexreg.registration.conclude import Judging, conclude, slid_answer
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.fullres import full_pair_of
-from flexreg.registration.geometric import geometric_priors, gridded, route
+from flexreg.registration.geometric import geometric_priors, gridded, panoramic, route
 from flexreg.registration.preparation import (
     PreparedScan,
     Progress,
@@ -479,8 +478,8 @@ def _check_init(
 
 def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
     """Plan views for these images: ``upright="on"``, or ``"auto"`` and all panoramas."""
-    panoramic = all(not isinstance(i.camera, PinholeCamera) for i in images)
-    return config.prior.upright == "on" or (config.prior.upright == "auto" and panoramic)
+    auto = config.prior.upright == "auto" and panoramic(images)
+    return config.prior.upright == "on" or auto
 
 
 @contextmanager

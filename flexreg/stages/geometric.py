@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 from flexreg.core.transforms import rotation_error_deg, translation_error_m
 from flexreg.errors import DegenerateGeometryError, InputError
 from flexreg.stages.alignment import RngLike, consistent_subset, ransac_rigid, squared_residuals
+from flexreg.stages.sampling import median_spacing
 
 log = logging.getLogger(__name__)
 
@@ -105,20 +106,13 @@ def descriptor_voxel(points: ArrayLike, *, keep: int = DESCRIBED_POINTS) -> floa
     """
     P = np.asarray(points, dtype=np.float64)
     if len(P) <= keep:
-        return float(_spacing(P))
+        return median_spacing(P)
     lo, hi = P.min(axis=0), P.max(axis=0)
     v = float(np.linalg.norm(hi - lo)) / math.sqrt(keep)
     for _ in range(2):
         n = len(np.unique(np.floor((P - lo) / v).astype(np.int64), axis=0))
         v *= math.sqrt(max(n, 1) / keep)
-    return max(v, float(_spacing(P)))
-
-
-def _spacing(P: NDArray[np.float64]) -> float:
-    """The median distance from a point to its nearest neighbour (of up to 2000 points)."""
-    idx = np.linspace(0, len(P) - 1, min(len(P), 2000)).astype(np.int64)
-    d, _ = cKDTree(P).query(P[idx], k=2)
-    return float(np.median(d[:, 1])) or 1e-3
+    return max(v, median_spacing(P))
 
 
 def describe(

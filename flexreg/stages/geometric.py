@@ -259,9 +259,9 @@ def hypotheses_from_matches(
             continue
         T = rr.T_target_source
         near = squared_residuals(T, pt[left], ps[left]) < (2 * threshold_m) ** 2
-        support = int((squared_residuals(T, pt, ps) < threshold_m**2).sum())
+        inl = squared_residuals(T, pt, ps) < threshold_m**2
+        support = int(inl.sum())
         if support >= MIN_SUPPORT and _distinct(T, out, DISTINCT_VOXELS * threshold_m):
-            inl = squared_residuals(T, pt, ps) < threshold_m**2
             out.append(Hypothesis(T, support, pt[inl], ps[inl]))
         left = left[~near] if near.any() else np.setdiff1d(left, idx)
     log.info(

@@ -170,6 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--quick", action="store_true", help="4 views, 3 frames, one seed")
     ap.add_argument("--no-real", action="store_true")
+    ap.add_argument(
+        "--kinds",
+        nargs="+",
+        choices=["object", "rosette", "fragments", "real"],
+        default=["object", "rosette", "fragments", "real"],
+        help="the sets to run (all by default)",
+    )
     ap.add_argument("--data", type=Path, default=RESULTS / "clouds-data")
     ap.add_argument("--results", type=Path, default=RESULTS)
     ap.add_argument("--write-docs", action="store_true")
@@ -199,10 +206,10 @@ def main(argv: list[str] | None = None) -> int:
     records: list[dict[str, Any]] = []
     pairs = []
     for kind, d in datasets(a.data, seeds, a.quick):
-        if d is None:
+        if d is None or kind not in a.kinds:
             continue
         pairs += frame_pairs(kind, d, STEPS) if kind == "rosette" else synthetic_pairs(kind, d)
-    if not a.no_real:
+    if not a.no_real and "real" in a.kinds:
         pairs += real_pairs(SHARED)
     for p in pairs:
         rec = run_pair(p, 0)

@@ -66,6 +66,7 @@ def _refine(
             threshold_m=thr,
             method=config.icp,
             voxel_m=config.voxel_m,
+            projective=not (vt.gaps or vs.gaps),
             check=lambda T_: check.judge(T_, *TOLERANCE.fine(thr))[0],
             target_image=vt.image,
             target_normals=vt.normals,

@@ -15,8 +15,9 @@ tests are built so that nothing but a real disagreement counts:
   silhouettes seen from two viewpoints do not count. A pixel without a return in that square
   leaves the point unknown on a sensor's own grid (the ray may have met something dark);
   on a cloud projected into an image with gaps between its returns (a narrow-field lidar's
-  rosette, a fused fragment: :func:`sampling_gaps`) an empty pixel is a direction never
-  sampled, and the square's returns alone bound the open space around a returned pixel;
+  rosette, a fused fragment: :func:`~flexreg.stages.projection.sampling_gaps`) an empty
+  pixel is a direction never sampled, and the square's returns alone bound the open space
+  around a returned pixel;
 * points on their own scan's silhouettes (range slack above :data:`MAX_SLACK_PER_M` of their
   range) take no part.
 
@@ -45,17 +46,12 @@ from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
 from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
+from flexreg.stages.projection import sampling_gaps
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
 
 #: points whose own range slack exceeds this share of their range (silhouettes, grazing
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
 MAX_SLACK_PER_M = 0.05
-
-#: an image whose returns have an empty pixel beside them this often (of its returns) is a
-#: cloud projected at its own density, its empty pixels directions never sampled: a
-#: sensor's grid has its no-returns in regions (sky, glass, beyond range), beside a few
-#: per cent of its returns, a rosette or a fused cloud beside nearly all of them
-SAMPLING_GAPS_SHARE = 0.5
 
 #: the open-space test looks at the smallest range over this many pixels square around a
 #: point's pixel: a thin bar, a cabinet's edge or a sill seen edge-on covers less than a pixel
@@ -79,8 +75,8 @@ class FullView:
     nearest : (H, W) float32 (the measured image's type), metres
         The smallest measured range over each pixel's :data:`NEIGHBOURHOOD` square; ``-inf`` where a
         neighbour has no return (nothing is known to be open there), or, on an image with
-        :func:`sampling_gaps`, the smallest over the square's returns where the pixel itself
-        has one (``-inf`` where it has none).
+        :func:`~flexreg.stages.projection.sampling_gaps`, the smallest over the square's
+        returns where the pixel itself has one (``-inf`` where it has none).
     points : (N, 3) float32 or float64 (the image's type), metres
         Its valid points off its own silhouettes (see :data:`MAX_SLACK_PER_M`).
     point_slack : (N,) float32 or float64, metres
@@ -143,36 +139,6 @@ def full_view(
     keep = own <= max_slack_per_m * np.sqrt(np.einsum("ij,ij->i", pts, pts, dtype=np.float64))
     n = grid_normals(image) if normals is None else normals
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], n[valid][keep])
-
-
-def sampling_gaps(seen: NDArray[np.bool_], wraps: bool = False) -> bool:
-    """Whether an image's empty pixels are gaps between a cloud's returns rather than rays
-    that returned nothing: at least :data:`SAMPLING_GAPS_SHARE` of its returns have an empty
-    pixel among their 8 neighbours.
-
-    Parameters
-    ----------
-    seen : (H, W) bool
-        Pixels that hold a return.
-    wraps : bool
-        Columns wrap around (a full turn).
-
-    Returns
-    -------
-    bool
-
-    Examples
-    --------
-    >>> grid = np.ones((6, 6), dtype=bool); grid[:2] = False  # a sky band
-    >>> sparse = np.zeros((6, 6), dtype=bool); sparse[::2, ::2] = True
-    >>> sampling_gaps(grid), sampling_gaps(sparse)
-    (False, True)
-    """
-    if not seen.any():
-        return False
-    modes = ["nearest", "wrap" if wraps else "nearest"]
-    beside = ndimage.minimum_filter(seen, size=3, mode=modes)
-    return float((seen & ~beside).sum()) >= SAMPLING_GAPS_SHARE * float(seen.sum())
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -542,7 +508,6 @@ __all__ = [
     "MASKS_BUDGET_BYTES",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
-    "SAMPLING_GAPS_SHARE",
     "FullPair",
     "FullView",
     "full_masks",
@@ -551,5 +516,4 @@ __all__ = [
     "full_scores",
     "full_view",
     "pose_masks",
-    "sampling_gaps",
 ]

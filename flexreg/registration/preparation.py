@@ -35,7 +35,7 @@ from flexreg.stages.levelling import Levelling
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.overlap import keep_overlap_inputs
 from flexreg.stages.priors import PlanView, TopView, plan_view
-from flexreg.stages.projection import fill_holes, with_camera, working_image
+from flexreg.stages.projection import fill_holes, sampling_gaps, with_camera, working_image
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
 from flexreg.stages.sampling import area_sample_cell, area_sample_image
 from flexreg.stages.verification import measured_image, range_slack
@@ -88,6 +88,10 @@ class ScanView:
         As source: even sample for the quick ICP.
     refine_sample : (float, (M, 3) float64) or None
         The projective refinement's even sample of the whole scan and its cell, metres.
+    gaps : bool
+        The image has :func:`~flexreg.stages.projection.sampling_gaps` (a cloud projected at
+        its own density, not a sensor's grid): the refinement pairs nearest points instead of
+        pixels.
     """
 
     image: RangeImage
@@ -97,6 +101,7 @@ class ScanView:
     sample: NDArray[np.float64] | None = None
     polish_sample: NDArray[np.float64] | None = None
     refine_sample: tuple[float, NDArray[np.float64]] | None = None
+    gaps: bool = False
 
 
 @dataclass(eq=False)
@@ -247,7 +252,8 @@ def _scan_view(
     """The parts of :class:`ScanView` the scan's roles need (the refinement's sample only
     with ``scan``: the caller computed it otherwise)."""
     v = ScanView(with_camera(image))
-    projective = config.refine and uses_projective(config.icp, config.voxel_m)
+    v.gaps = sampling_gaps(v.image.valid, v.image.wraps)
+    projective = config.refine and uses_projective(config.icp, config.voxel_m) and not v.gaps
     # both roles: the verdict checks the transform in both directions
     v.measured = measured_image(v.image)
     v.slack = range_slack(v.image, v.measured)
@@ -256,7 +262,7 @@ def _scan_view(
     v.sample = area_sample_image(image.xyz, image.valid, CHECK_POINTS)  # no copy of the points
     if source:
         v.polish_sample = area_sample_image(image.xyz, image.valid, POLISH_POINTS)
-    if scan is not None:
+    if scan is not None and not v.gaps:
         v.refine_sample = refinement_sample(scan, config)
     return v
 

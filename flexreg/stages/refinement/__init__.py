@@ -50,6 +50,7 @@ def refine(
     threshold_m: float,
     method: str = "point-to-plane",
     voxel_m: float | None = None,
+    projective: bool = True,
     check: Callable[[NDArray[np.float64]], float] | None = None,
     target_image: RangeImage | None = None,
     target_normals: NDArray[np.float32] | None = None,
@@ -69,7 +70,8 @@ def refine(
     the pose; pairing in both directions keeps either scan's viewpoint and normals alone from
     deciding it.
 
-    **GICP, point-to-point, or a fixed voxel: Open3D** nearest-neighbour ICP at two scales.
+    **GICP, point-to-point, a fixed voxel, or clouds that are no sensor's grid: Open3D**
+    nearest-neighbour ICP at two scales.
     First on voxels sized so that the target keeps about :data:`AREA_ICP_POINTS`
     (:func:`~flexreg.stages.sampling.area_cell`, area-weighted as above), then at the finest
     voxels the point budget allows (:func:`~flexreg.stages.refinement.icp.refine_icp`), started
@@ -86,6 +88,11 @@ def refine(
     method : {"point-to-plane", "gicp", "point-to-point"}
     voxel_m : float, optional
         A fixed voxel: Open3D ICP at that voxel, no second scale.
+    projective : bool
+        False when either scan's image is no sensor's grid but a cloud projected with gaps
+        between its returns (:func:`~flexreg.stages.projection.sampling_gaps`: a rosette, a
+        fused fragment): a pixel then pairs a point with whichever return fell nearest its
+        ray, or none, so point-to-plane pairs nearest points (Open3D) instead.
     check : callable, optional
         Open3D path: ``check(T) -> score`` (higher is better); default the consistent minus
         three times the conflicting fraction of
@@ -107,7 +114,7 @@ def refine(
     IcpResult
     """
     kind: Any = method
-    if uses_projective(method, voxel_m):
+    if projective and uses_projective(method, voxel_m):
         vt = target_image if target_image is not None else camera_image(target)
         vs = source_image if source_image is not None else camera_image(source)
         cell_s, src_sample, tgt_sample = (

@@ -194,3 +194,37 @@ def test_wrap_is_pythons_modulo_in_every_turn():
         got = projective._wrap(u, W)
         assert got == u % W, u  # -0.0 stays -0.0 (the same number, the same pixel)
     assert np.isnan(projective._wrap(float("nan"), W))
+
+
+def test_open_space_between_a_clouds_returns_is_bounded_by_the_returns():
+    """A wall 10 m in front of a pinhole camera, seen on every other pixel of every other row
+    (a cloud projected with gaps between its returns) or on every pixel but a band of sky (a
+    sensor's grid). A point 5 m out on a returned pixel: in open space among the sparse
+    returns (the empty pixels were never sampled), unknown beside the grid's sky (its ray may
+    have met something dark); on an empty pixel: never in open space."""
+    from flexreg.stages.projection import sampling_gaps
+
+    cam = PinholeCamera(50.0, 50.0, 20.0, 20.0, 41, 41)
+    sparse = np.full((41, 41), np.nan)
+    sparse[::2, ::2] = 10.0
+    grid = np.full((41, 41), 10.0)
+    grid[:, 22:] = np.nan  # no return right of the pixel column 21
+    views = {}
+    for name, d in (("sparse", sparse), ("grid", grid)):
+        image = from_depth(d, cam)
+        views[name] = full_view(image, measured_image(image), range_slack(image))
+    assert sampling_gaps(np.isfinite(sparse)) and not sampling_gaps(np.isfinite(grid))
+
+    def ray(u, v, depth):  # camera-frame point on pixel (u, v) at this depth
+        return np.array([[(u - 20.0) / 50.0 * depth, (v - 20.0) / 50.0 * depth, depth]])
+
+    def opens(view, u, v):
+        _, o = full_masks(view, ray(u, v, 5.0), np.zeros(1), np.eye(4), 0.05)
+        return bool(o[0])
+
+    assert opens(views["sparse"], 20, 20)  # a returned pixel: the returns around bound it
+    assert not opens(views["sparse"], 21, 20)  # an empty pixel: nothing measured there
+    assert opens(views["grid"], 10, 20)  # the wall all around
+    assert not opens(views["grid"], 20, 20)  # the sky two columns away: unknown
+    explained, _ = full_masks(views["sparse"], ray(20, 20, 10.0), np.zeros(1), np.eye(4), 0.05)
+    assert explained[0]

@@ -186,6 +186,26 @@ def test_estimate_up_a_vault_facet_without_floor_is_no_vertical():
     assert lev.vertical_area_m2 == pytest.approx(180.0)
 
 
+def test_estimate_up_needs_a_floor_below_the_scanner():
+    """The same room seen without its floor (a camera facing a wall and a ceiling, an object
+    seen from outside): walls and a ceiling give a vertical, but nothing below the scanner
+    faces up, so with points there is no levelling; a floor of 8 m² under 60 m² of ceiling
+    (above the 10 % share) is enough."""
+    nrm = np.repeat(np.array([[0, 0, -1.0], [0, 1.0, 0], [0, -1.0, 0], [1.0, 0, 0]]), 10, 0)
+    area = np.repeat(np.array([60.0, 60.0, 60.0, 60.0]) / 10, 10)
+    pts = np.repeat(np.array([[0, 0, 2.5], [0, -4.0, 0], [0, 4.0, 0], [-9.0, 0, 0]]), 10, 0)
+    assert topview.estimate_up(nrm, area).tilt_rad < 1e-6  # without points: not tested
+    with pytest.raises(DegenerateGeometryError, match="no floor below the scanner"):
+        topview.estimate_up(nrm, area, points=pts)
+    floor = (np.repeat([[0, 0, 1.0]], 10, 0), np.full(10, 0.8), np.repeat([[0, 0, -1.5]], 10, 0))
+    lev = topview.estimate_up(
+        np.vstack([nrm, floor[0]]),
+        np.concatenate([area, floor[1]]),
+        points=np.vstack([pts, floor[2]]),
+    )
+    assert lev.tilt_rad < 1e-6 and lev.horizontal_area_m2 == pytest.approx(68.0)
+
+
 def test_estimate_up_tilt_beyond_limit_raises():
     R = rotation_about_axis([1.0, 0.0, 0.0], math.radians(12.0))
     img = from_depth(_box_ranges(PANO, R, BOX_LO, BOX_HI), PANO)

@@ -197,11 +197,43 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     return scan
 
 
+def auto_viewpoint(file: Path, scan: Any, option: str) -> tuple[Any, Any]:
+    """A cloud not centred on its scanner (:func:`flexreg.io.origin.centring_problem`), moved
+    to a virtual viewpoint chosen where it hides least of itself
+    (:func:`flexreg.stages.viewpoint.choose_viewpoint`), said in one line naming ``option``
+    (which gives the scanner's real position); a centred scan as it is.
+
+    Returns
+    -------
+    scan : Scan
+        Float32 near its viewpoint, as :func:`read_input` gives a recentred cloud.
+    origin : (3,) float64 or None
+        The viewpoint in the file's frame (None: the scan is as it was).
+    """
+    from flexreg.io.origin import centring_problem, recentre
+    from flexreg.io.scans import single_precision
+    from flexreg.stages.viewpoint import choose_viewpoint
+
+    why = centring_problem(scan)
+    if why is None:
+        return scan, None
+    origin, hidden = choose_viewpoint(scan.points)
+    err_console.print(
+        f"{file}: not centred on its scanner ({why}): seen from a viewpoint chosen where it "
+        f"hides least of itself, ({origin[0]:.3f}, {origin[1]:.3f}, {origin[2]:.3f}) in the "
+        f"file's frame ({100 * hidden:.0f}% of its points behind its own there); {option} "
+        "X Y Z gives the scanner's position",
+        markup=False,
+        soft_wrap=True,
+    )
+    return single_precision(recentre(scan, origin)), origin
+
+
 def read_pair(
     target: Path,
     source: Path,
     origins: tuple[Any, Any] | None = None,
-    options: tuple[str, str] | None = None,
+    options: tuple[str | None, str | None] | None = None,
     *,
     intensity: bool = True,
 ) -> list[Any]:

@@ -12,6 +12,7 @@ import typer
 
 from flexreg.cli._common import (
     about_pair,
+    auto_viewpoint,
     console,
     exit_for,
     pair_label,
@@ -37,7 +38,6 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from flexreg.cli._common import WorkingPair
     from flexreg.core.scan import Scan
     from flexreg.registration.pipeline import RegistrationResult
 
@@ -384,7 +384,7 @@ def register_command(
     )
     T_true = None if truth is None else read_truth(truth, target, source)
     T_file = None if init in (None, "stored") else read_truth(Path(init), target, source)
-    scans, working = _read(target, source, config, matches, (target_origin, source_origin))
+    scans, images, origins = _read(target, source, config, matches, (target_origin, source_origin))
     stored = stored_T_target_source(scans[0], scans[1])
     if init == "stored" and stored is None:
         raise InputError(
@@ -398,7 +398,7 @@ def register_command(
             config,
             progress=spinners,
             init=T_init,
-            images=None if working is None else working.take_images(),  # handed over
+            images=images,  # handed over
         )
     errors = None if T_true is None else _errors(result, T_true)
     check = None if stored is None or init is not None else _stored_check(result, stored)
@@ -409,7 +409,7 @@ def register_command(
         "errors": errors,
         "init": None if init is None else {"from": init, "T_target_source": T_init},
         "stored_pose_check": check,
-        "origins": (target_origin, source_origin),
+        "origins": origins,
         "txt_frame": frame,
     }
     writers = _writers(scans[0], scans[1], result, meta, out, txt, matches, merged)
@@ -492,17 +492,35 @@ def _read(
     config: RegistrationConfig,
     matches: Path | None,
     origins: tuple[Any, Any],
-) -> tuple[list[Scan], WorkingPair | None]:
+) -> tuple[list[Scan], list[Any] | None, tuple[Any, Any]]:
     """Both scans, read for what the call and the outputs need: their points and working
     images straight from a PTX file unless the match figure needs the scans' grids, the
-    intensity image their intensities, or a scanner position moves their points."""
-    options = ("--target-origin", "--source-origin")
+    intensity image their intensities, or a scanner position moves their points. A cloud
+    not centred on its scanner and without its position given is seen from a virtual
+    viewpoint (:func:`~flexreg.cli._common.auto_viewpoint`). Returns the scans, their
+    working images (None: made by the call) and the origins used (given or chosen)."""
+    names = ("--target-origin", "--source-origin")
+    options = (
+        names[0] if origins[0] is not None else None,
+        names[1] if origins[1] is not None else None,
+    )
+    images: list[Any] | None = None
     if matches is None and config.image != "intensity" and not any(origins):
         pixels = config.max_image_pixels
-        working = read_pair_working(target, source, max_pixels=pixels, options=options)
-        return working.scans, working
-    intensity = config.image == "intensity"  # no other stage or output reads it
-    return read_pair(target, source, origins, options, intensity=intensity), None
+        working = read_pair_working(target, source, max_pixels=pixels, options=None)
+        scans, images = working.scans, working.take_images()
+    else:
+        intensity = config.image == "intensity"  # no other stage or output reads it
+        scans = read_pair(target, source, origins, options, intensity=intensity)
+    used = list(origins)
+    for k, file in enumerate((target, source)):
+        if origins[k] is None:
+            scans[k], chosen = auto_viewpoint(scan_file(file), scans[k], names[k])
+            if chosen is not None:
+                used[k] = tuple(float(v) for v in chosen)
+                if images is not None:
+                    images[k] = None  # made from the points as read: made again
+    return scans, images, (used[0], used[1])
 
 
 def _writers(

@@ -35,6 +35,7 @@ from flexreg.registration.config import (
     JudgeConfig,
 )
 from flexreg.stages.verification import classify_points, classify_points_at, soft_score
+from flexreg.stages.viewpoint import one_viewpoint
 
 
 @dataclass(frozen=True)
@@ -115,18 +116,30 @@ class Check:
         :func:`~flexreg.stages.verification.range_slack`.
     sample : (N, 3) float64
         The source's points spread evenly over its surfaces.
+    hidden : float or None
+        The share of the target cloud's points hidden behind its own from its origin
+        (:func:`~flexreg.stages.viewpoint.hidden_share`; None: a grid). A cloud not taken
+        from one point (:func:`~flexreg.stages.viewpoint.one_viewpoint`) tells no open space:
+        no sampled point conflicts with its view.
     """
 
     view: RangeImage
     measured: NDArray[np.float32]
     slack: NDArray[np.float32]
     sample: NDArray[np.float64]
+    hidden: float | None = None
+
+    @property
+    def free_space(self) -> bool:
+        """Whether the view's open space is known (the target was taken from one point)."""
+        return one_viewpoint(self.hidden)
 
     def classify(
         self, T: NDArray[np.float64], tol: float, rel: float
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
         """The sample in the target frame, and which points are consistent / conflicting."""
-        return classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
+        q, ok, bad = classify_points(self.view, self.sample, T, tol, rel, self.slack, self.measured)
+        return q, ok, bad if self.free_space else np.zeros_like(bad)
 
     def judge(self, T: NDArray[np.float64], tol: float, rel: float) -> tuple[float, float, float]:
         """``consistent - 3 conflicting`` (conflicts are strong evidence), and both."""
@@ -146,13 +159,17 @@ class TwoWay:
     def score(self, T: NDArray[np.float64], tol: float) -> Scored:
         """:func:`~flexreg.stages.verification.soft_score` of both directions at ``tol``
         (metres, plus 0.2% of the range)."""
-        f = soft_score(*self._args(self.forward, T, tol))
-        b = soft_score(*self._args(self.backward, invert(T), tol))
-        return Scored(T, tol, f, b)
+        f = self._soft(self.forward, T, tol)
+        return Scored(T, tol, f, self._soft(self.backward, invert(T), tol))
 
     @staticmethod
-    def _args(c: Check, T: NDArray[np.float64], tol: float) -> tuple[Any, ...]:
-        return c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured
+    def _soft(c: Check, T: NDArray[np.float64], tol: float) -> Any:
+        s, q, ok, bad = soft_score(
+            c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured
+        )
+        if c.free_space or len(bad) == 0:
+            return s, q, ok, bad
+        return s + 3.0 * float(bad.mean()), q, ok, np.zeros_like(bad)  # no open space known
 
 
 @dataclass(eq=False)
@@ -209,7 +226,7 @@ def check_masks(
         check.slack,
         check.measured,
     )
-    return explained, free
+    return explained, free if check.free_space else np.zeros_like(free)
 
 
 def duel(A: Masks, B: Masks) -> tuple[float, float]:

@@ -225,6 +225,14 @@ def _strength(
     }
 
 
+def _no_viewpoint(two: TwoWay) -> dict[str, float]:
+    """The clouds not taken from one point (``target``, ``source``) and the share of their
+    points hidden behind their own from their origin: nothing is tested for open space in
+    their view (:attr:`~flexreg.registration.check.Check.free_space`)."""
+    sides = (("target", two.forward), ("source", two.backward))
+    return {k: _r(c.hidden) for k, c in sides if not c.free_space and c.hidden is not None}
+
+
 def gather(
     two: TwoWay,
     final: Scored,
@@ -321,6 +329,7 @@ def gather(
             "target_conflict_ratio": _r(_frac(badb) / sb) if sb > 0 else None,
             "tolerance_m": _r(free_tol),
             "tolerance_rel": free_rel,
+            "no_viewpoint": _no_viewpoint(two),
         },
         "inliers": {
             "count": len(inlier_points),

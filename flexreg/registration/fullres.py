@@ -48,6 +48,7 @@ from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
 from flexreg.stages.projection import sampling_gaps
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
+from flexreg.stages.viewpoint import one_viewpoint
 
 #: points whose own range slack exceeds this share of their range (silhouettes, grazing
 #: surfaces beyond about 3 degrees of incidence) take no part in a full-resolution duel
@@ -102,6 +103,7 @@ def full_view(
     normals: NDArray[np.float32] | None = None,
     *,
     max_slack_per_m: float = MAX_SLACK_PER_M,
+    free_space: bool = True,
 ) -> FullView:
     """A :class:`FullView` of a range image (with a camera model).
 
@@ -115,6 +117,10 @@ def full_view(
         Its :func:`~flexreg.stages.normals.grid_normals` (computed when not given).
     max_slack_per_m : float
         Points whose own slack exceeds this share of their range are left out.
+    free_space : bool
+        False for a cloud not taken from one point
+        (:func:`~flexreg.stages.viewpoint.one_viewpoint`): nothing is known to be open space
+        in its view (``nearest`` is ``-inf`` everywhere).
 
     Returns
     -------
@@ -125,7 +131,9 @@ def full_view(
     m = np.asarray(measured)
     seen = np.isfinite(m)
     modes = ["nearest", "wrap" if image.wraps else "nearest"]
-    if sampling_gaps(seen, image.wraps):  # empty pixels are unsampled: the returns bound it
+    if not free_space:
+        nearest = np.full(m.shape, -np.inf, dtype=m.dtype)
+    elif sampling_gaps(seen, image.wraps):  # empty pixels are unsampled: the returns bound it
         near = ndimage.minimum_filter(
             np.where(seen, m, np.array(np.inf, dtype=m.dtype)), size=NEIGHBOURHOOD, mode=modes
         )
@@ -458,12 +466,13 @@ _FULL_VIEWS: weakref.WeakKeyDictionary[Any, FullView] = weakref.WeakKeyDictionar
 
 def _full_view_of(v: Any) -> FullView:
     """:func:`full_view` of a prepared view, made once per view object."""
+    free = one_viewpoint(getattr(v, "hidden", None))
     try:
         hit = _FULL_VIEWS.get(v)
     except TypeError:  # not weakly referable: made each time
-        return full_view(v.image, v.measured, v.slack, v.normals)
+        return full_view(v.image, v.measured, v.slack, v.normals, free_space=free)
     if hit is None:
-        hit = _FULL_VIEWS[v] = full_view(v.image, v.measured, v.slack, v.normals)
+        hit = _FULL_VIEWS[v] = full_view(v.image, v.measured, v.slack, v.normals, free_space=free)
     return hit
 
 

@@ -363,8 +363,8 @@ def _checks(vt: ScanView, vs: ScanView) -> tuple[Check, TwoWay]:
     """The dense check (the source's sample in the target's view) and both directions."""
     assert vt.measured is not None and vt.slack is not None and vt.sample is not None
     assert vs.measured is not None and vs.slack is not None and vs.sample is not None
-    check = Check(vt.image, vt.measured, vt.slack, vs.sample)
-    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample))
+    check = Check(vt.image, vt.measured, vt.slack, vs.sample, vt.hidden)
+    return check, TwoWay(check, Check(vs.image, vs.measured, vs.slack, vt.sample, vs.hidden))
 
 
 def _polisher(

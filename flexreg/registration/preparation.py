@@ -39,6 +39,7 @@ from flexreg.stages.projection import fill_holes, sampling_gaps, with_camera, wo
 from flexreg.stages.refinement import PROJECTIVE_ICP_POINTS, uses_projective
 from flexreg.stages.sampling import area_sample_cell, area_sample_image
 from flexreg.stages.verification import measured_image, range_slack
+from flexreg.stages.viewpoint import hidden_share
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +93,12 @@ class ScanView:
         The image has :func:`~flexreg.stages.projection.sampling_gaps` (a cloud projected at
         its own density, not a sensor's grid): the refinement pairs nearest points instead of
         pixels.
+    hidden : float or None
+        The share of a cloud's points that lie behind its own from its origin
+        (:func:`~flexreg.stages.viewpoint.hidden_share`); None for a grid (one viewpoint by
+        construction) or a scan not at hand. Beyond
+        :data:`~flexreg.stages.viewpoint.MAX_HIDDEN_SHARE` the cloud was not taken from one
+        point, and nothing is known to be open space in its view.
     """
 
     image: RangeImage
@@ -102,6 +109,7 @@ class ScanView:
     polish_sample: NDArray[np.float64] | None = None
     refine_sample: tuple[float, NDArray[np.float64]] | None = None
     gaps: bool = False
+    hidden: float | None = None
 
 
 @dataclass(eq=False)
@@ -264,6 +272,8 @@ def _scan_view(
         v.polish_sample = area_sample_image(image.xyz, image.valid, POLISH_POINTS)
     if scan is not None and not v.gaps:
         v.refine_sample = refinement_sample(scan, config)
+    if isinstance(scan, Scan) and not scan.has_grid and len(scan):
+        v.hidden = hidden_share(scan.points)
     return v
 
 

@@ -293,7 +293,8 @@ def reasons(evidence: Evidence, judge: JudgeConfig = JudgeConfig()) -> list[Reas
 
 def _notes(evidence: Evidence, judge: JudgeConfig) -> list[Reason]:
     """What is worth knowing and does not make the answer uncertain: a weak axis a sweep
-    settled, a refinement the guard discarded."""
+    settled, open space not tested in a cloud not taken from one point, a refinement the
+    guard discarded."""
     notes: list[Reason] = []
     if _sweep_settled(evidence) and _axis_reason(evidence, judge) is None:
         a = evidence.axis_strength or {}
@@ -308,6 +309,17 @@ def _notes(evidence: Evidence, judge: JudgeConfig) -> list[Reason]:
                     "one fits them (a unique object decides)",
                 )
             )
+    blind = (evidence.free_space or {}).get("no_viewpoint") or {}
+    if blind:
+        which = " and ".join(f"the {k} hides {100 * v:.0f}%" for k, v in blind.items())
+        notes.append(
+            Reason(
+                "free_space_unknown",
+                f"open space not tested in the view of a cloud not taken from one point ({which}"
+                " of its points behind its own, seen from its origin): the answer rests on the "
+                "surfaces it explains and the other tests",
+            )
+        )
     ref = evidence.refinement
     if ref and not ref.get("kept", True):
         notes.append(

@@ -302,3 +302,17 @@ def test_startup_loads_cached_serial_kernels_without_compiling():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout.split()
     assert int(out[0]) >= 1 and int(out[1]) == 0
+
+
+def test_two_runs_started_in_one_second_write_two_folders(tmp_path):
+    """Two benchmark runs started at once (the same timestamp) never share a results folder:
+    the second one's records would overwrite the first one's."""
+    from datetime import datetime
+
+    from flexreg.bench.harness import results_folder
+
+    when = datetime(2026, 1, 2, 3, 4, 5)
+    a = results_folder(tmp_path, "clouds", when=when)
+    b = results_folder(tmp_path, "clouds", when=when)
+    assert a.name == "clouds-20260102-030405" and b.name == "clouds-20260102-030405-2"
+    assert a.is_dir() and b.is_dir()

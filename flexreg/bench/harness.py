@@ -28,10 +28,18 @@ __all__ = [
 
 
 def results_folder(parent: str | PathLike[str], name: str, *, when: datetime | None = None) -> Path:
-    """``parent/<name>-<YYYYmmdd-HHMMSS>/``, created (with its parents)."""
-    folder = Path(parent) / f"{name}-{when or datetime.now():%Y%m%d-%H%M%S}"
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+    """``parent/<name>-<YYYYmmdd-HHMMSS>/``, created (with its parents); a run started in the
+    same second as another gets ``-2``, ``-3``, ... so that no two runs write one folder."""
+    base = Path(parent) / f"{name}-{when or datetime.now():%Y%m%d-%H%M%S}"
+    base.parent.mkdir(parents=True, exist_ok=True)
+    folder, k = base, 1
+    while True:
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            k += 1
+            folder = base.with_name(f"{base.name}-{k}")
 
 
 def json_text(obj: Any, *, indent: int = 1) -> str:

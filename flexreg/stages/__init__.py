@@ -8,6 +8,9 @@ stage          function (module.function)          input               output
 =============  ==================================  ==================  =====================
 range image    projection.working_image            Scan                RangeImage
 holes          projection.fill_holes               RangeImage          RangeImage
+gaps           projection.sampling_gaps            (H, W) bool         bool (no sensor grid)
+viewpoint      viewpoint.hidden_share              (N, 3), origin      share hidden
+               (choose_viewpoint: a virtual one)
 feature image  feature_images.feature_image        RangeImage          (H, W) uint8, mask
                (convert, quantize: eq. 9-14)
 keypoints      keypoints.detect_and_describe       uint8 image, mask   Features

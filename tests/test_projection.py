@@ -268,3 +268,23 @@ def test_projecting_into_every_kth_pixel_is_downsampling_the_full_projection(
         working_image(scan, max_pixels=budget).index,
         downsample_image(range_image(scan), k).index,
     )
+
+
+@pytest.mark.parametrize("wraps", [False, True])
+def test_sampling_gaps_counts_the_returns_beside_an_empty_pixel(wraps):
+    """The share of returns with an empty pixel among their 8 neighbours (edges repeat, or
+    columns wrap), against the 30 % line: a sky band leaves returns at its border beside it, a
+    regular lattice of returns leaves every one; large images look at every k-th row."""
+    from flexreg.stages.projection import SAMPLING_GAPS_SHARE, sampling_gaps
+
+    grid = np.ones((40, 60), dtype=bool)
+    grid[:10] = False  # sky: the returns of row 10 (1 in 30) lie beside it
+    assert not sampling_gaps(grid, wraps)
+    lattice = np.zeros((40, 60), dtype=bool)
+    lattice[::2, ::2] = True
+    assert sampling_gaps(lattice, wraps)
+    # every third return with an empty pixel beside it, in every row: 1/3 >= 30 %
+    stripes = np.ones((600, 60), dtype=bool)
+    stripes[:, ::6] = False  # columns 1, 5 (of each 6) lie beside a gap: 2 of 5 returns
+    assert sampling_gaps(stripes, wraps) == (2 / 5 >= SAMPLING_GAPS_SHARE)
+    assert not sampling_gaps(np.zeros((3, 3), dtype=bool), wraps)

@@ -13,7 +13,6 @@ from dataclasses import replace
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from flexreg.core.budget import check_memory
 from flexreg.core.camera import ANGLE_CHUNK, Camera, SphericalCamera, azimuth_polar_extent
@@ -361,11 +360,15 @@ def fill_holes(image: RangeImage, *, min_neighbours: int = 5, max_jump: float = 
 #: range grids, 95 % of a rosette frame (a cloud of evenly spread points: 97 %)
 SAMPLING_GAPS_SHARE = 0.3
 
+#: rows (about) of a large image whose returns :func:`sampling_gaps` looks at
+GAPS_ROWS = 256
+
 
 def sampling_gaps(seen: NDArray[np.bool_], wraps: bool = False) -> bool:
     """Whether an image's empty pixels are gaps between a cloud's returns rather than rays
     that returned nothing: at least :data:`SAMPLING_GAPS_SHARE` of its returns have an empty
-    pixel among their 8 neighbours. Such an image is no sensor's grid: its empty pixels
+    pixel among their 8 neighbours (counted on every k-th row of an image of more than
+    :data:`GAPS_ROWS` rows). Such an image is no sensor's grid: its empty pixels
     bound no open space, and its pixels pair no points for a projective ICP.
 
     Parameters
@@ -386,11 +389,17 @@ def sampling_gaps(seen: NDArray[np.bool_], wraps: bool = False) -> bool:
     >>> sampling_gaps(grid), sampling_gaps(sparse)
     (False, True)
     """
-    if not seen.any():
+    H = seen.shape[0]
+    rows = np.arange(0, H, max(1, H // GAPS_ROWS))  # every k-th row of a large image
+    block = seen[np.clip(rows[:, None] + np.arange(-1, 2), 0, H - 1)]  # (R, 3, W) row trios
+    mid = block[:, 1]
+    if not mid.any():
         return False
-    modes = ["nearest", "wrap" if wraps else "nearest"]
-    beside = ndimage.minimum_filter(seen, size=3, mode=modes)
-    return float((seen & ~beside).sum()) >= SAMPLING_GAPS_SHARE * float(seen.sum())
+    full = block.all(axis=1)  # columns whose three rows hold returns
+    left = np.roll(full, 1, axis=1) if wraps else np.pad(full, ((0, 0), (1, 0)), "edge")[:, :-1]
+    right = np.roll(full, -1, axis=1) if wraps else np.pad(full, ((0, 0), (0, 1)), "edge")[:, 1:]
+    beside = mid & ~(full & left & right)
+    return float(beside.sum()) >= SAMPLING_GAPS_SHARE * float(mid.sum())
 
 
 #: range images larger than this are subsampled (every k-th row and column) for the image stages

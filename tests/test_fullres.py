@@ -210,10 +210,11 @@ def test_open_space_between_a_clouds_returns_is_bounded_by_the_returns():
     grid = np.full((41, 41), 10.0)
     grid[:, 22:] = np.nan  # no return right of the pixel column 21
     views = {}
+    assert sampling_gaps(np.isfinite(sparse)) and not sampling_gaps(np.isfinite(grid))
     for name, d in (("sparse", sparse), ("grid", grid)):
         image = from_depth(d, cam)
-        views[name] = full_view(image, measured_image(image), range_slack(image))
-    assert sampling_gaps(np.isfinite(sparse)) and not sampling_gaps(np.isfinite(grid))
+        gaps = sampling_gaps(image.valid)  # as a cloud's prepared view finds them
+        views[name] = full_view(image, measured_image(image), range_slack(image), gaps=gaps)
 
     def ray(u, v, depth):  # camera-frame point on pixel (u, v) at this depth
         return np.array([[(u - 20.0) / 50.0 * depth, (v - 20.0) / 50.0 * depth, depth]])

@@ -46,7 +46,6 @@ from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
 from flexreg.registration.check import TOLERANCE, Masks
 from flexreg.stages.normals import grid_normals
-from flexreg.stages.projection import sampling_gaps
 from flexreg.stages.refinement.projective import camera_params, spherical_pixel
 from flexreg.stages.viewpoint import one_viewpoint
 
@@ -104,6 +103,7 @@ def full_view(
     *,
     max_slack_per_m: float = MAX_SLACK_PER_M,
     free_space: bool = True,
+    gaps: bool = False,
 ) -> FullView:
     """A :class:`FullView` of a range image (with a camera model).
 
@@ -117,6 +117,11 @@ def full_view(
         Its :func:`~flexreg.stages.normals.grid_normals` (computed when not given).
     max_slack_per_m : float
         Points whose own slack exceeds this share of their range are left out.
+    gaps : bool
+        The image is a cloud projected with gaps between its returns
+        (:attr:`~flexreg.registration.preparation.ScanView.gaps`): an empty pixel is a
+        direction never sampled, and the returns of a returned pixel's square bound its open
+        space.
     free_space : bool
         False for a cloud not taken from one point
         (:func:`~flexreg.stages.viewpoint.one_viewpoint`): nothing is known to be open space
@@ -133,7 +138,7 @@ def full_view(
     modes = ["nearest", "wrap" if image.wraps else "nearest"]
     if not free_space:
         nearest = np.full(m.shape, -np.inf, dtype=m.dtype)
-    elif sampling_gaps(seen, image.wraps):  # empty pixels are unsampled: the returns bound it
+    elif gaps:  # empty pixels are unsampled: the returns bound it
         near = ndimage.minimum_filter(
             np.where(seen, m, np.array(np.inf, dtype=m.dtype)), size=NEIGHBOURHOOD, mode=modes
         )
@@ -466,13 +471,16 @@ _FULL_VIEWS: weakref.WeakKeyDictionary[Any, FullView] = weakref.WeakKeyDictionar
 
 def _full_view_of(v: Any) -> FullView:
     """:func:`full_view` of a prepared view, made once per view object."""
-    free = one_viewpoint(getattr(v, "hidden", None))
+    kw = {
+        "free_space": one_viewpoint(getattr(v, "hidden", None)),
+        "gaps": bool(getattr(v, "gaps", False)),
+    }
     try:
         hit = _FULL_VIEWS.get(v)
     except TypeError:  # not weakly referable: made each time
-        return full_view(v.image, v.measured, v.slack, v.normals, free_space=free)
+        return full_view(v.image, v.measured, v.slack, v.normals, **kw)
     if hit is None:
-        hit = _FULL_VIEWS[v] = full_view(v.image, v.measured, v.slack, v.normals, free_space=free)
+        hit = _FULL_VIEWS[v] = full_view(v.image, v.measured, v.slack, v.normals, **kw)
     return hit
 
 

@@ -90,9 +90,12 @@ class ScanView:
     refine_sample : (float, (M, 3) float64) or None
         The projective refinement's even sample of the whole scan and its cell, metres.
     gaps : bool
-        The image has :func:`~flexreg.stages.projection.sampling_gaps` (a cloud projected at
-        its own density, not a sensor's grid): the refinement pairs nearest points instead of
-        pixels.
+        A cloud without a native grid whose image has
+        :func:`~flexreg.stages.projection.sampling_gaps` (projected at its own density: a
+        rosette, a fused fragment): its empty pixels are directions never sampled (the
+        full-resolution open-space test, :func:`~flexreg.registration.fullres.full_view`),
+        and the refinement pairs nearest points instead of pixels. A native grid's empty
+        pixels are rays that returned nothing, whatever their pattern.
     hidden : float or None
         The share of a cloud's points that lie behind its own from its origin
         (:func:`~flexreg.stages.viewpoint.hidden_share`); None for a grid (one viewpoint by
@@ -260,7 +263,8 @@ def _scan_view(
     """The parts of :class:`ScanView` the scan's roles need (the refinement's sample only
     with ``scan``: the caller computed it otherwise)."""
     v = ScanView(with_camera(image))
-    v.gaps = sampling_gaps(v.image.valid, v.image.wraps)
+    # a native grid (no camera of its own: its pixels are the scanner's rays) has no gaps
+    v.gaps = image.camera is not None and sampling_gaps(image.valid, image.wraps)
     projective = config.refine and uses_projective(config.icp, config.voxel_m) and not v.gaps
     # both roles: the verdict checks the transform in both directions
     v.measured = measured_image(v.image)

@@ -189,8 +189,8 @@ def test_estimate_up_a_vault_facet_without_floor_is_no_vertical():
 def test_estimate_up_needs_a_floor_below_the_scanner():
     """The same room seen without its floor (a camera facing a wall and a ceiling, an object
     seen from outside): walls and a ceiling give a vertical, but nothing below the scanner
-    faces up, so with points there is no levelling; a floor of 8 m² under 60 m² of ceiling
-    (above the 10 % share) is enough."""
+    faces up, so with points there is no levelling; a floor of 8 m² under 60 m² of ceiling is
+    enough."""
     nrm = np.repeat(np.array([[0, 0, -1.0], [0, 1.0, 0], [0, -1.0, 0], [1.0, 0, 0]]), 10, 0)
     area = np.repeat(np.array([60.0, 60.0, 60.0, 60.0]) / 10, 10)
     pts = np.repeat(np.array([[0, 0, 2.5], [0, -4.0, 0], [0, 4.0, 0], [-9.0, 0, 0]]), 10, 0)

@@ -120,8 +120,10 @@ def choose_viewpoint(points: ArrayLike) -> tuple[NDArray[np.float64], float]:
     A compass search over :func:`hidden_share` (on an even subset of
     :data:`SEARCH_POINTS` points): from the better of the points' median and the centre of
     their bounding box, it moves by a step (an eighth of the box's diagonal at first) along
-    each axis either way to the position that hides least, and halves the step when none
-    hides less, down to :data:`SEARCH_STOP` of the diagonal. A scan taken from one point
+    each axis either way, within the box, to the position that hides least, and halves the
+    step when none hides less, down to :data:`SEARCH_STOP` of the diagonal (outside its
+    points a viewpoint sees them all at a sliver of the sphere, where nothing hides by a
+    share of its range: no scanner's place). A scan taken from one point
     hides nothing from where its scanner stood, so the search ends near it; a cloud fused
     from many viewpoints ends where it hides least, which is still more than
     :data:`MAX_HIDDEN_SHARE` (its open space is then not tested).
@@ -147,7 +149,7 @@ def choose_viewpoint(points: ArrayLike) -> tuple[NDArray[np.float64], float]:
     step = diagonal / 8
     moves = np.vstack([np.eye(3), -np.eye(3)])
     while step > SEARCH_STOP * diagonal and share > 0.0:
-        tried = [best + step * m for m in moves]
+        tried = [np.clip(best + step * m, lo, hi) for m in moves]  # among the points
         found = [hidden_share(S, c) for c in tried]
         k = int(np.argmin(found))
         if found[k] < share:

@@ -485,15 +485,22 @@ def _plan_wanted(config: RegistrationConfig, images: list[RangeImage]) -> bool:
 @contextmanager
 def _single_threaded(workers: int) -> Iterator[ThreadPoolExecutor]:
     """A pool of background threads; the calling thread runs single-threaded in numba until
-    the block ends (every thread single-threaded, so that together they fill the cores)."""
+    the block ends (every thread single-threaded, so that together they fill the cores).
+    Interrupted (Ctrl-C, SIGTERM: not an ``Exception``), the block does not wait for the jobs
+    still running (a kernel compiling on a cold cache takes a minute): the command unwinds
+    and exits without them."""
     pool = ThreadPoolExecutor(max_workers=workers)
     threads = numba.get_num_threads()
+    interrupted = False
     try:
         numba.set_num_threads(1)
         yield pool
+    except BaseException as e:
+        interrupted = not isinstance(e, Exception)
+        raise
     finally:
         numba.set_num_threads(threads)
-        pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=not interrupted, cancel_futures=True)
 
 
 def register(

@@ -170,3 +170,16 @@ def test_txt_frame_refused_one_line(laz, tmp_path, extra, message):
     rc, _, err = run_cli(["register", t, s, "--out", tmp_path / "T.json", *extra])
     assert rc == 1 and message in one_error_line(err)
     assert not (tmp_path / "T.json").exists()
+
+
+def test_register_refuses_a_cloud_of_one_point_before_choosing_a_viewpoint(tmp_path):
+    """Copies of one point lie outside the file's origin, but there is no viewpoint to choose:
+    one line naming the file, exit 1, nothing written."""
+    one, other = tmp_path / "one.ply", tmp_path / "other.ply"
+    write_scan(one, Scan(points=np.tile([[1.0, 2.0, 3.0]], (50, 1))))
+    write_scan(other, Scan(points=np.random.default_rng(0).normal(size=(5000, 3)) * 5.0))
+    out = tmp_path / "T.json"
+    rc, _, err = run_cli(["register", one, other, "--out", out])
+    line = one_error_line(err)
+    assert rc == 1 and not out.exists()
+    assert "one.ply" in line and "50 copies of one point" in line

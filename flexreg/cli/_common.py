@@ -182,9 +182,7 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     from flexreg.io.origin import centring_problem, origin_hint, recentre
     from flexreg.io.scans import single_precision
 
-    if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
-        what = "a single point" if len(scan) == 1 else f"{len(scan)} copies of one point"
-        raise InputError(file, f"holds {what}: nothing to make an image of")
+    _refuse_one_point(file, scan)
     if origin is not None:
         try:
             moved = recentre(scan, origin)  # in float64
@@ -195,6 +193,15 @@ def _centred(file: Path, scan: Any, origin: Any, option: str) -> Any:
     if why is not None:
         raise InputError(file, origin_hint(why, option))
     return scan
+
+
+def _refuse_one_point(file: Path, scan: Any) -> None:
+    """A scan of one point, or of copies of one, has nothing to make an image of."""
+    from flexreg.errors import InputError
+
+    if len(scan) and (scan.points.min(axis=0) == scan.points.max(axis=0)).all():
+        what = "a single point" if len(scan) == 1 else f"{len(scan)} copies of one point"
+        raise InputError(file, f"holds {what}: nothing to make an image of")
 
 
 def auto_viewpoint(file: Path, scan: Any, option: str) -> tuple[Any, Any]:
@@ -214,6 +221,7 @@ def auto_viewpoint(file: Path, scan: Any, option: str) -> tuple[Any, Any]:
     from flexreg.io.scans import single_precision
     from flexreg.stages.viewpoint import choose_viewpoint
 
+    _refuse_one_point(file, scan)
     why = centring_problem(scan)
     if why is None:
         return scan, None
@@ -276,15 +284,12 @@ class WorkingPair:
         return images
 
 
-def read_pair_working(
-    target: Path, source: Path, *, max_pixels: int, options: tuple[str, str] | None = None
-) -> WorkingPair:
+def read_pair_working(target: Path, source: Path, *, max_pixels: int) -> WorkingPair:
     """:func:`read_pair` for a command that needs each scan's points and working image only:
     a PTX or E57 file is read straight into both (:func:`flexreg.io.read_working_scan`: no
     grid index, intensity or colour, 12 bytes per point instead of 24); another file as
-    :func:`read_input` reads it without intensities, and no image. With ``options`` (the
-    scanner position options), a cloud in project coordinates is refused naming its
-    option, as :func:`read_pair` refuses it."""
+    :func:`read_input` reads it without intensities, and no image. The points are as the
+    files hold them (a cloud in project coordinates is the caller's to place)."""
     from flexreg.io import detect_format
     from flexreg.io.scans import read_working_scans
     from flexreg.io.selector import parse_scan_ref
@@ -292,17 +297,13 @@ def read_pair_working(
     def read(k: int) -> Any:
         path = (target, source)[k]
         ref = parse_scan_ref(path)
-        option = None if options is None else options[k]
         if detect_format(ref.path)[1] not in ("ptx", "e57"):
-            (scan,) = read_input(path, intensity=False, origin_option=option)
+            (scan,) = read_input(path, intensity=False)
             return scan, None
         pairs = read_working_scans(path, max_pixels=max_pixels)
         if len(pairs) > 1:  # without a selector: refused as read_input refuses it
             raise _several(ref.path, [s.name for s, _ in pairs], [len(s) for s, _ in pairs])
-        scan, image = pairs[0]
-        if option is not None:  # centred on its scanner, else refused (nothing moved)
-            _centred(ref.path, scan, None, option)
-        return scan, image
+        return pairs[0]
 
     pairs = _read_both(target, source, read, lambda pair: pair[0])
     return WorkingPair([p[0] for p in pairs], [p[1] for p in pairs])

@@ -507,7 +507,7 @@ def _read(
     images: list[Any] | None = None
     if matches is None and config.image != "intensity" and not any(origins):
         pixels = config.max_image_pixels
-        working = read_pair_working(target, source, max_pixels=pixels, options=None)
+        working = read_pair_working(target, source, max_pixels=pixels)
         scans, images = working.scans, working.take_images()
     else:
         intensity = config.image == "intensity"  # no other stage or output reads it

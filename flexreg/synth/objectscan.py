@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from flexreg.errors import InputError
 from flexreg.io.depth import TUM_DEPTH_SCALE, write_depth_png
 from flexreg.synth.config import RGBDConfig
-from flexreg.synth.placement import neighbour_pairs
+from flexreg.synth.placement import in_line_of_sight, neighbour_pairs
 from flexreg.synth.scene import Scene
 from flexreg.synth.scenes import object_extent
 from flexreg.synth.seeding import as_rng
@@ -211,10 +211,8 @@ def view_ring(
 def view_points(depth_m: NDArray[np.floating], config: RGBDConfig) -> NDArray[np.float64]:
     """Camera-frame points (N, 3) float64, metres, of a depth image's readings (row-major
     order), as ``read_scan`` gives them back (paper eq. 2)."""
-    cam = config.camera()
     v, u = np.nonzero(np.isfinite(depth_m) & (depth_m > 0))
-    z = np.asarray(depth_m, dtype=np.float64)[v, u]
-    return np.column_stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z])
+    return config.camera().backproject(u, v, np.asarray(depth_m, dtype=np.float64)[v, u])
 
 
 def view_overlap(
@@ -259,12 +257,11 @@ def view_overlap(
     seen = np.zeros(len(pc), dtype=bool)
     idx = np.flatnonzero(inside)
     if len(idx):
-        ray = points_world[idx] - T[:3, 3]
-        dist = np.linalg.norm(ray, axis=1)
-        dirs = ray / dist[:, None]
-        hits = scene.cast(T[:3, 3], dirs)
-        cos_inc = np.abs(np.einsum("ij,ij->i", hits.normal, dirs))
-        seen[idx] = (hits.t >= dist - tol_m) & (cos_inc >= math.cos(config.max_incidence_rad))
+        dist = np.linalg.norm(points_world[idx] - T[:3, 3], axis=1)
+        seen[idx] = in_line_of_sight(
+            scene, T[:3, 3], points_world[idx], dist,
+            tol_m=tol_m, max_incidence_rad=config.max_incidence_rad,
+        )  # fmt: skip
     return float(seen.mean())
 
 

@@ -506,6 +506,24 @@ def station_pair(
     )
 
 
+def in_line_of_sight(
+    scene: Scene,
+    origin: NDArray[np.float64],
+    points_world: NDArray[np.float64],
+    dist: NDArray[np.float64],
+    *,
+    tol_m: float,
+    max_incidence_rad: float,
+) -> NDArray[np.bool_]:
+    """Whether a sensor at ``origin`` sees each of ``points_world`` (at distances ``dist``,
+    metres): the scene's first hit towards the point lies no nearer than ``dist - tol_m`` and
+    meets its surface within ``max_incidence_rad`` of the normal. (N,) bool."""
+    dirs = (points_world - origin) / dist[:, None]
+    hits = scene.cast(origin, dirs)
+    cos_inc = np.abs(np.einsum("ij,ij->i", hits.normal.astype(np.float64), dirs))
+    return (hits.t >= dist - tol_m) & (cos_inc >= math.cos(max_incidence_rad))
+
+
 def neighbour_pairs(
     names: list[str],
     poses: list[NDArray[np.float64]],

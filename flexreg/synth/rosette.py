@@ -37,7 +37,7 @@ from flexreg.core.scan import Scan
 from flexreg.core.transforms import as_transform
 from flexreg.io import write_scan
 from flexreg.synth.config import RosetteConfig
-from flexreg.synth.placement import neighbour_pairs
+from flexreg.synth.placement import in_line_of_sight, neighbour_pairs
 from flexreg.synth.scene import Scene
 from flexreg.synth.seeding import as_rng
 
@@ -202,10 +202,10 @@ def rosette_overlap(
     seen = np.zeros(len(local), dtype=bool)
     idx = np.flatnonzero(inside)
     if len(idx):
-        dirs = (points_world[idx] - T[:3, 3]) / dist[idx, None]
-        hits = scene.cast(T[:3, 3], dirs)
-        cos_inc = np.abs(np.einsum("ij,ij->i", hits.normal.astype(np.float64), dirs))
-        seen[idx] = (hits.t >= dist[idx] - tol_m) & (cos_inc >= math.cos(MAX_INCIDENCE_RAD))
+        seen[idx] = in_line_of_sight(
+            scene, T[:3, 3], points_world[idx], dist[idx],
+            tol_m=tol_m, max_incidence_rad=MAX_INCIDENCE_RAD,
+        )  # fmt: skip
     return float(seen.mean())
 
 

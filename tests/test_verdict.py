@@ -87,9 +87,10 @@ def _views(lo, hi, blocks, T_wt, T_ws):
     return views, TwoWay(*checks)
 
 
-def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives):
+def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives, rmse=0.003):
     """The verdict at the true pose, with the true pose and ``alternatives`` (world-frame
-    motions of the source station) as the judged candidates."""
+    motions of the source station) as the judged candidates; ``rmse`` the refinement's
+    residual, metres (NaN: nothing paired)."""
     (vt, _), two = _views(lo, hi, blocks, T_wt, T_ws)
     T = invert(T_wt) @ T_ws
     thr = 0.02
@@ -111,7 +112,7 @@ def _verdict(lo, hi, blocks, T_wt, T_ws, alternatives):
         fit_to_matches=False,
         runner_up=ups,
         candidates=len(judged),
-        inlier_rmse_m=0.003,
+        inlier_rmse_m=rmse,
         fitness=0.9,
         threshold_m=thr,
         residual_kind="point-to-plane",
@@ -155,6 +156,16 @@ def test_box_with_one_cue_is_confident():
     ev = v.evidence
     assert ev["overlap"]["source_explained"] > 0.8 and ev["overlap"]["target_explained"] > 0.8
     assert ev["free_space"]["source_conflicting"] < 0.01
+
+
+def test_a_refinement_that_paired_nothing_has_no_residual_figure():
+    """NaN from a refinement with no pair is kept out of the evidence (None) and out of the
+    reason's words; the pose is then uncertain for it alone."""
+    v = _verdict(*BOX, CUE, _station(0.6, 0.4), _station(-1.0, 0.5, 30), [], rmse=float("nan"))
+    residual = v.to_dict()["evidence"]["residual"]
+    assert residual["inlier_rmse_m"] is None and residual["rmse_over_threshold"] is None
+    assert [r.code for r in v.reasons] == ["high_residual"]
+    assert "nan" not in v.summary().lower()
 
 
 def test_box_with_a_cupboard_wins_the_duel():
@@ -291,6 +302,15 @@ def test_each_failed_test_gives_its_reason(changes, code, words):
     v = decide(_with(**changes))
     assert v.status == "uncertain" and [r.code for r in v.reasons] == [code]
     assert words in v.reasons[0].message and words in v.summary()
+
+
+def test_a_residual_nothing_was_paired_for_says_so_without_a_number():
+    """No point paired after the refinement: the residual is unmeasured (None, never NaN) and
+    the reason says the surfaces do not meet, with no figure in its place."""
+    ev = _with(residual__inlier_rmse_m=None, residual__rmse_over_threshold=None)
+    (r,) = decide(ev).reasons
+    assert r.code == "high_residual" and "do not meet" in r.message
+    assert "nan" not in r.message.lower() and "cm" not in r.message
 
 
 @pytest.mark.parametrize(

@@ -344,10 +344,13 @@ def gather(
         "runner_up": None,
         "candidates": int(candidates),
         "residual": {
-            "inlier_rmse_m": _r(inlier_rmse_m, 5),
+            # None: no point paired after the refinement, so no residual was measured
+            "inlier_rmse_m": _r(inlier_rmse_m, 5) if np.isfinite(inlier_rmse_m) else None,
             "fitness": _r(fitness),
             "threshold_m": _r(threshold_m, 5),
-            "rmse_over_threshold": _r(inlier_rmse_m / threshold_m) if threshold_m > 0 else None,
+            "rmse_over_threshold": _r(inlier_rmse_m / threshold_m)
+            if threshold_m > 0 and np.isfinite(inlier_rmse_m)
+            else None,
             "kind": residual_kind,
         },
         "refinement": refinement,

@@ -241,7 +241,15 @@ def _twin_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
 
 def _residual_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     r = ev.residual
-    if not r or r.get("rmse_over_threshold") is None or r.get("kind") == "open3d":
+    if not r or r.get("kind") == "open3d":
+        return None
+    if "inlier_rmse_m" in r and r["inlier_rmse_m"] is None:  # nothing paired: unmeasured
+        return Reason(
+            "high_residual",
+            "after the refinement no point of either scan lies on the other's surfaces (no "
+            "residual to measure): they do not meet",
+        )
+    if r.get("rmse_over_threshold") is None:
         return None
     if r["rmse_over_threshold"] <= MAX_RMSE_RATIO:
         return None

@@ -305,7 +305,7 @@ def test_an_unplaced_station_says_what_is_wrong_and_what_to_do():
     for e in links[3:]:
         assert e.why == "uncertain (see the link's reasons), and no loop confirms it"
     reason = sol.reasons["s3"]
-    assert reason.startswith("no link places it (2 tried: uncertain (see the link's reasons)")
+    assert reason.startswith("no link places it (2 tried: 2 uncertain with no loop to confirm")
     assert reason.endswith(
         "; to place it: --link s2 s3 T.txt (a transform from flexreg register s2 s3), rough "
         "positions (--positions) to confirm a link, or a scan between it and s2"
@@ -501,6 +501,20 @@ def test_planted_wrong_hypotheses_among_right_ones_are_left_out():
             assert translation_error_m(e.T_target_source, truth) < 1e-9, i
         else:
             assert e.status == "rejected" and i % 2 == 1
+
+
+def test_an_unplaced_stations_reason_counts_its_links_outcomes():
+    """Each link's own reason stays on the link; the station's reason counts them, most
+    frequent first, so that a station with many links still reads in one line."""
+    names, links, config = _lone_doubtful()
+    failed = Link("s0", "s3", None, None, None, why="no overlap: the best transform explains 2%")
+    sol = solve_graph(names, [*links, failed], config, reference="s0")
+    reason = sol.reasons["s3"]
+    assert reason.startswith(
+        "no link places it (3 tried: 2 uncertain with no loop to confirm them, 1 failed to "
+        "register); "
+    )
+    assert "2%" not in reason and failed.why.startswith("no overlap")
 
 
 def test_a_separate_group_no_loop_checks_is_not_posed():

@@ -312,6 +312,40 @@ def single_link(stem: str, ref: str, links: list[Link]) -> str:
     return f"confident links that no loop checks fix it, one after the other ({what})"
 
 
+#: A link's outcome in a few words (a piece of its ``why``, and the words for it), for the
+#: count in an unplaced station's reason: each link's own reason, with its figures, stays on
+#: the link (poses.json, the report's link table).
+_OUTCOMES = (
+    ("uncertain (see the link's reasons)", "uncertain with no loop to confirm them"),
+    ("fits ", "fit several poses (look-alike rooms or bays)"),
+    ("the group's other links place", "uncertain and at odds with their group's other links"),
+    ("no loop checks it", "confident but alone (a single link places no station on its own)"),
+    (CONTESTED, "confident in a loop that does not close"),
+    ("cut by the map check", "cut by the map check"),
+    ("off the adjusted poses", "far off the adjusted poses"),
+    ("disagrees with the loop", "at odds with the loop they close"),
+    ("rough positions", "picked by the rough positions with no loop to confirm them"),
+)
+
+
+def _tally(links: list[Link]) -> str:
+    """The outcomes of a station's links counted, most frequent first: ``"9 failed to
+    register, 4 uncertain with no loop to confirm them, 1 cut by the map check"``."""
+    counts: dict[str, int] = {}
+    for e in links:
+        why = e.why or e.status
+        words = (
+            "failed to register"
+            if e.status == "failed"
+            else "accepted"
+            if e.status == "accepted"
+            else next((w for key, w in _OUTCOMES if key in why), why)
+        )
+        counts[words] = counts.get(words, 0) + 1
+    order = sorted(counts.items(), key=lambda kv: -kv[1])  # stable: first seen first on ties
+    return ", ".join(f"{n} {words}" for words, n in order)
+
+
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
     """Why a station is not placed, and the one thing that would place it."""
     members = set(group)
@@ -341,9 +375,7 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         if not mine
         else f"all {len(mine)} link(s) failed to register"
         if all(e.status == "failed" for e in mine)
-        else f"no link places it ({len(mine)} tried: "
-        + "; ".join(sorted({e.why or e.status for e in mine if e.status != "accepted"}))
-        + ")"
+        else f"no link places it ({len(mine)} tried: {_tally(mine)})"
     )
     many = max(
         (e for e in toward if e.usable and e.fits), key=lambda e: len(e.alternatives), default=None

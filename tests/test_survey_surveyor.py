@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import one_error_line, room_project, run_cli
 
+from flexreg.cli.survey import rejected_lines
 from flexreg.core.transforms import (
     invert,
     make_transform,
@@ -305,12 +306,41 @@ def test_a_wrong_hand_link_is_refused_with_its_loop_error(project, tmp_path):
         args += ["--link", t, s, f]
     out = tmp_path / "out"
     keep = ["--set", "refine=false", "--set", "judge.checks=[]"]  # the pose as given
-    rc, _, err = _survey(project, out, *ICP_ONLY, *keep, *args)
+    rc, stdout, err = _survey(project, out, *ICP_ONLY, *keep, *args)
     assert rc == 3, err
+    out_lines = stdout.splitlines()
     (e,) = _links(_doc(out), "station_00", "station_02")
     assert translation_error_m(np.asarray(e["T_target_source"]), truth) > 0.9  # as given
     assert e["status"] == "rejected" and e["loop_error_m"] > 0.9, e
     assert "loop" in e["why"]
+    # named on the console, a link given by hand being news whatever its verdict
+    (line,) = [x for x in out_lines if x.startswith("rejected link")]
+    assert "station_00" in line and "station_02" in line and "loop error" in line
+
+
+def test_the_console_names_refuted_trusted_links_and_counts_the_uncertain_ones():
+    """A confident or hand-given link a loop refutes gets its own line; the uncertain ones a
+    loop left out (the graph at work) one line counting them."""
+
+    def link(t, s, verdict, origin="place", status="rejected", loop=1.5):
+        return {
+            "target": t, "source": s, "verdict": verdict, "origin": origin, "status": status,
+            "why": "disagrees with the loop it closes", "loop_error_deg": loop,
+            "loop_error_m": None if loop is None else 0.2,
+        }  # fmt: skip
+
+    links = [
+        link("a", "b", "confident"), link("a", "c", "uncertain", "hand"),
+        link("b", "c", "uncertain"), link("c", "d", "uncertain"),
+        link("d", "e", "uncertain", loop=None), link("e", "f", "confident", status="accepted"),
+    ]  # fmt: skip
+    lines = rejected_lines(links)
+    assert len(lines) == 3
+    assert lines[0].startswith("rejected link target = a, source = b: disagrees")
+    assert lines[0].endswith("(loop error 1.50°, 0.200 m)")
+    assert "source = c" in lines[1]
+    assert lines[2].startswith("2 uncertain link(s) disagreed with the loops they close")
+    assert rejected_lines(links[4:]) == []
 
 
 def test_rough_positions_link_the_stations_they_put_near_each_other(project, tmp_path):

@@ -342,14 +342,27 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
         markup=False,
         soft_wrap=True,
     )
-    for e in doc["links"]:
-        if e["status"] == "rejected" and e["loop_error_deg"] is not None:
-            console.print(
-                f"rejected link {pair_label(e['target'], e['source'])}: {e['why']} (loop error "
-                f"{e['loop_error_deg']:.2f}°, {e['loop_error_m']:.3f} m)",
-                markup=False,
-                soft_wrap=True,
-            )
+    for line in rejected_lines(doc["links"]):
+        console.print(line, markup=False, soft_wrap=True)
+
+
+def rejected_lines(links: list[dict[str, Any]]) -> list[str]:
+    """The console's lines on links a loop refuted: one per confident or hand-given link (news:
+    two registrations the survey trusted disagree), and one counting the uncertain ones (the
+    graph at work: a look-alike pose left out), each with its loop error in poses.json."""
+    looped = [e for e in links if e["status"] == "rejected" and e["loop_error_deg"] is not None]
+    news = [e for e in looped if e["verdict"] == "confident" or e["origin"] == "hand"]
+    lines = [
+        f"rejected link {pair_label(e['target'], e['source'])}: {e['why']} (loop error "
+        f"{e['loop_error_deg']:.2f}°, {e['loop_error_m']:.3f} m)"
+        for e in news
+    ]
+    if len(looped) > len(news):
+        lines.append(
+            f"{len(looped) - len(news)} uncertain link(s) disagreed with the loops they close "
+            "and were left out (each with its loop error in poses.json and the report)"
+        )
+    return lines
 
 
 class _SurveyCommand(TyperCommand):

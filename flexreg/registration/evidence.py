@@ -162,6 +162,19 @@ def _vec(v: NDArray[np.float64], nd: int = 4) -> list[float]:
     return [round(float(x), nd) for x in v]
 
 
+def _residual(rmse_m: float, fitness: float, threshold_m: float, kind: str) -> dict[str, Any]:
+    """The evidence's ``residual`` section; the RMSE and its ratio None (never NaN) when no
+    point paired after the refinement, so that no residual was measured."""
+    measured = bool(np.isfinite(rmse_m))
+    return {
+        "inlier_rmse_m": _r(rmse_m, 5) if measured else None,
+        "fitness": _r(fitness),
+        "threshold_m": _r(threshold_m, 5),
+        "rmse_over_threshold": _r(rmse_m / threshold_m) if measured and threshold_m > 0 else None,
+        "kind": kind,
+    }
+
+
 def runner_ups(
     judged: Sequence[Judged],
     T: NDArray[np.float64],
@@ -343,16 +356,7 @@ def gather(
         "axis_strength": _strength(two.forward.view, target_normals, overlap_q),
         "runner_up": None,
         "candidates": int(candidates),
-        "residual": {
-            # None: no point paired after the refinement, so no residual was measured
-            "inlier_rmse_m": _r(inlier_rmse_m, 5) if np.isfinite(inlier_rmse_m) else None,
-            "fitness": _r(fitness),
-            "threshold_m": _r(threshold_m, 5),
-            "rmse_over_threshold": _r(inlier_rmse_m / threshold_m)
-            if threshold_m > 0 and np.isfinite(inlier_rmse_m)
-            else None,
-            "kind": residual_kind,
-        },
+        "residual": _residual(inlier_rmse_m, fitness, threshold_m, residual_kind),
         "refinement": refinement,
     }
     c = overlap_q.mean(axis=0) if len(overlap_q) else np.zeros(3)

@@ -119,8 +119,10 @@ def _worker_environ():
 def test_local_workers_keep_the_allocators_defaults_and_one_thread(monkeypatch):
     """Dask's default ``MALLOC_TRIM_THRESHOLD_`` for its workers switches off glibc's adaptive
     mmap threshold and made every link 1.4-1.5 times slower; the local cluster's workers
-    start without it (unless the user set it) and keep the one-thread caps."""
+    start without it (unless the user set it) and keep the one-thread caps (unless the user
+    set them: a run under ``scripts/cpu-variant.sh generic-4-threads`` asks for 4)."""
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     with dask_client(2, None) as client:
         envs = list(client.run(_worker_environ).values())
     assert envs == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}] * 2

@@ -12,8 +12,8 @@ Usage::
     .venv/bin/python benchmarks/survey_diff.py BASE OTHER [OTHER ...]
 
 Each argument is a survey's output folder (``poses.json``) or a ``benchmarks/survey.py``
-results folder (its ``runs/*/poses.json``, matched by project folder name); with folders of
-several survey output folders, those matched by name. Prints a markdown table.
+results folder (its ``runs/*/poses.json``, matched by project folder name; two single
+survey folders are compared whatever their names). Prints a markdown table.
 """
 
 from __future__ import annotations
@@ -111,7 +111,10 @@ def table(folders: list[Path]) -> str:
         "|---|---|---|---:|---:|---|---|---|",
     ]
     for folder in folders[1:]:
-        for name, path in runs(folder).items():
+        found = runs(folder)
+        if len(found) == 1 and len(base) == 1:  # two survey folders: one project, any names
+            found = {next(iter(base)): next(iter(found.values()))}
+        for name, path in found.items():
             if name not in base:
                 lines.append(f"| {folder.name} | {name} | not in the base | | | | | |")
                 continue

@@ -164,12 +164,16 @@ class TwoWay:
 
     @staticmethod
     def _soft(c: Check, T: NDArray[np.float64], tol: float) -> Any:
-        s, q, ok, bad = soft_score(
-            c.view, c.sample, T, tol, TOLERANCE.fine_rel, c.slack, c.measured
+        return soft_score(
+            c.view,
+            c.sample,
+            T,
+            tol,
+            TOLERANCE.fine_rel,
+            c.slack,
+            c.measured,
+            open_space=c.free_space,
         )
-        if c.free_space or len(bad) == 0:
-            return s, q, ok, bad
-        return s + 3.0 * float(bad.mean()), q, ok, np.zeros_like(bad)  # no open space known
 
 
 @dataclass(eq=False)

@@ -237,6 +237,8 @@ def soft_score(
     tolerance_rel: float,
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
+    *,
+    open_space: bool = True,
 ) -> tuple[float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """A continuous version of the dense check: how well ``T_target_source`` explains the
     target's view of the points ``ps``, sensitive to changes far below the tolerance.
@@ -250,6 +252,10 @@ def soft_score(
     ----------
     target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         As :func:`classify_points`.
+    open_space : bool
+        Whether the target's view tells open space (a scan taken from one point): False
+        counts no point as conflicting (a cloud fused from many viewpoints,
+        :func:`~flexreg.stages.viewpoint.one_viewpoint`).
 
     Returns
     -------
@@ -262,13 +268,14 @@ def soft_score(
         q, ok, bad = classify_points(
             target, ps, T_target_source, tolerance_m, tolerance_rel, slack, ref
         )
+        bad = bad if open_space else np.zeros_like(bad)
         return (float(ok.mean() - 3 * bad.mean()) if len(q) else 0.0), q, ok, bad
     T = np.asarray(T_target_source, dtype=np.float64)
     q = ps @ T[:3, :3].T + T[:3, 3]
     d, r, tol = _ray_ranges(target, q, tolerance_m, tolerance_rel, slack, ref)
     with np.errstate(invalid="ignore"):
         ok = np.abs(d - r) < tol
-        bad = d < r - tol
+        bad = (d < r - tol) if open_space else np.zeros(len(q), dtype=bool)
     w = np.zeros(len(q))
     w[ok] = 1.0 - ((d[ok] - r[ok]) / tol[ok]) ** 2
     return float(w.mean() - 3 * bad.mean()), q, ok, bad

@@ -154,6 +154,47 @@ def full_view(
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], n[valid][keep])
 
 
+#: points a full-resolution check projects together before testing them: the projections of a
+#: block (turn, shift, the arc tangents of eq. 4-7) are independent of one another, and done
+#: apart from the tests and sums that read their pixels their long chains of arithmetic
+#: overlap instead of waiting on each other (about a quarter faster than one point at a time,
+#: with the same numbers: each point is projected and tested exactly as before, in order)
+BLOCK = 64
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _project_block(spherical, points, i0, m, R, t, cam, W, Q, U, V, D):  # pragma: no cover
+    """Points ``i0 .. i0 + m - 1`` turned by ``R``, moved by each ``t[k]`` and projected:
+    ``U[k, j]``, ``V[k, j]`` their pixel coordinates before rounding, ``D[k, j]`` their range
+    along the ray (``spherical``, eq. 4-7) or depth (pinhole, eq. 1); where that is not
+    positive, ``U`` and ``V`` are left as they were (the tests skip the point). ``Q``
+    (3, :data:`BLOCK`) takes the turned points."""
+    c0, c1, c2, c3, c4 = cam[0], cam[1], cam[2], cam[3], cam[4]
+    r00, r01, r02, r10, r11, r12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    for j in range(m):
+        px = np.float64(points[i0 + j, 0])
+        py, pz = np.float64(points[i0 + j, 1]), np.float64(points[i0 + j, 2])
+        Q[0, j] = r00 * px + r01 * py + r02 * pz
+        Q[1, j] = r10 * px + r11 * py + r12 * pz
+        Q[2, j] = r20 * px + r21 * py + r22 * pz
+    for k in range(t.shape[0]):
+        tx, ty, tz = t[k, 0], t[k, 1], t[k, 2]
+        for j in range(m):
+            qx, qy, qz = Q[0, j] + tx, Q[1, j] + ty, Q[2, j] + tz
+            if spherical:  # range along the ray (eq. 4-7)
+                d = math.sqrt(qx * qx + qy * qy + qz * qz)
+                if d > 0.0:
+                    U[k, j], V[k, j] = spherical_pixel(qx, qy, qz, d, c0, c1, c2, c3, c4, W)
+            else:  # pinhole: depth (eq. 1)
+                d = qz
+                if d > 0.0:
+                    x, y = qx / qz, qy / qz
+                    U[k, j] = c0 * x + c4 * y + c2
+                    V[k, j] = c1 * y + c3
+            D[k, j] = d
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _check_loop(
     spherical,
@@ -174,7 +215,8 @@ def _check_loop(
     opens,
 ):  # pragma: no cover
     """The loop of :func:`_check_full` for one kind of camera (``spherical`` a constant where
-    it is inlined, so the camera's branch leaves the inner loop)."""
+    it is inlined, so the camera's branch leaves the inner loop): the points :data:`BLOCK` at
+    a time, projected (:func:`_project_block`), then tested in order."""
     H, W = measured.shape[0], measured.shape[1]
     wrap = spherical and cam[4] > 0.5
     masks = explained.shape[0] == points.shape[0]
@@ -183,49 +225,38 @@ def _check_loop(
     free_m = free_k * threshold_m
     explain_m = free_m if coarse else threshold_m / 2
     explain_rel = free_rel if coarse else fine_rel
-    c0, c1, c2, c3, c4 = cam[0], cam[1], cam[2], cam[3], cam[4]
-    r00, r01, r02, r10, r11, r12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     total = np.zeros(K)
     bad_count = np.zeros(K, dtype=np.int64)
-    for i in range(points.shape[0]):
-        px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
-        rx = r00 * px + r01 * py + r02 * pz
-        ry = r10 * px + r11 * py + r12 * pz
-        rz = r20 * px + r21 * py + r22 * pz
-        own_i = np.float64(own[i])
-        ok = bad = False
-        for k in range(K):
-            qx, qy, qz = rx + t[k, 0], ry + t[k, 1], rz + t[k, 2]
-            if spherical:  # range along the ray (eq. 4-7)
-                d = math.sqrt(qx * qx + qy * qy + qz * qz)
+    Q = np.empty((3, BLOCK))
+    U, V, D = np.empty((K, BLOCK)), np.empty((K, BLOCK)), np.empty((K, BLOCK))
+    n = points.shape[0]
+    for i0 in range(0, n, BLOCK):
+        m = min(BLOCK, n - i0)
+        _project_block(spherical, points, i0, m, R, t, cam, W, Q, U, V, D)
+        for j in range(m):
+            own_i = np.float64(own[i0 + j])
+            ok = bad = False
+            for k in range(K):
+                d = D[k, j]
                 if not d > 0.0:
                     continue
-                u, v = spherical_pixel(qx, qy, qz, d, c0, c1, c2, c3, c4, W)
-            else:  # pinhole: depth (eq. 1)
-                d = qz
-                if not d > 0.0:
+                fu, fv = math.floor(U[k, j] + 0.5), math.floor(V[k, j] + 0.5)
+                if wrap and fu >= W:
+                    fu -= W
+                if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
                     continue
-                x, y = qx / qz, qy / qz
-                u = c0 * x + c4 * y + c2
-                v = c1 * y + c3
-            fu, fv = math.floor(u + 0.5), math.floor(v + 0.5)
-            if wrap and fu >= W:
-                fu -= W
-            if not (fu >= 0 and fu < W and fv >= 0 and fv < H):  # NaN fails too
-                continue
-            iu, iv = int(fu), int(fv)
-            e = d - np.float64(measured[iv, iu])
-            tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
-            free = free_m + free_rel * d + own_i
-            ok = abs(e) < tol
-            bad = d < nearest[iv, iu] - free
-            r = e / tol
-            total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
-            bad_count[k] += bad
-        if masks:  # one pose: its tests of this point (none when it falls outside)
-            explained[i] = ok
-            open_space[i] = bad
+                iu, iv = int(fu), int(fv)
+                e = d - np.float64(measured[iv, iu])
+                tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
+                free = free_m + free_rel * d + own_i
+                ok = abs(e) < tol
+                bad = d < nearest[iv, iu] - free
+                r = e / tol
+                total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
+                bad_count[k] += bad
+            if masks:  # one pose: its tests of this point (none when it falls outside)
+                explained[i0 + j] = ok
+                open_space[i0 + j] = bad
     for k in range(K):
         scores[k] += total[k] - 3.0 * bad_count[k]
     if opens.shape[0] == K:

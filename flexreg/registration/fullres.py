@@ -157,8 +157,9 @@ def full_view(
 #: points a full-resolution check projects together before testing them: the projections of a
 #: block (turn, shift, the arc tangents of eq. 4-7) are independent of one another, and done
 #: apart from the tests and sums that read their pixels their long chains of arithmetic
-#: overlap instead of waiting on each other (about a quarter faster than one point at a time,
-#: with the same numbers: each point is projected and tested exactly as before, in order)
+#: overlap instead of waiting on each other (about 14 % less time a test than one point at a
+#: time, docs/benchmarks.md; the same numbers: each point is projected and tested exactly as
+#: before, in order)
 BLOCK = 64
 
 

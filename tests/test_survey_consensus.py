@@ -7,7 +7,7 @@ import numpy as np
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.consensus import LoopTolerance, cycle_votes, hypotheses_of
-from flexreg.survey.graph import Link, solve_graph
+from flexreg.survey.graph import Link, Veto, solve_graph
 from flexreg.survey.links import Alternative
 from flexreg.survey.mapcheck import PairJudge, PairLook
 
@@ -262,6 +262,45 @@ def test_two_windowed_links_that_agree_place_a_station_and_one_alone_does_not():
     assert sol.confidence["s3"] == "confident"  # a loop of confident links placed it
     slid = [_windowed(P, "s2", "s3"), _windowed(P, "s1", "s3", _moved(P, "s1", "s3", [0.14, 0, 0]))]
     sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+
+
+def _plain(P, a, b, T=None, codes=("low_overlap",)):
+    """An uncertain link doubted only for how little its scans share (a doorway's worth)."""
+    e = _link(P, a, b, "uncertain", T=T)
+    e.reasons = [{"code": c, "message": c} for c in codes]
+    return e
+
+
+def test_two_answers_uncertain_only_for_their_overlap_that_agree_place_a_station():
+    """s3 seen through two doorways, from s1 and from s2, each link uncertain only for its
+    small overlap: two registrations of different pairs of scans that agree around the loop
+    place it (confidence ``uncertain``: the map then tests it at full resolution); one of
+    them alone places nothing, nor do two 14 cm apart (one slid by a wall's thickness), nor
+    two that agree but are also doubted for something their scans contradict (open space:
+    look-alike rooms alias such links alike)."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    two = [_plain(P, "s2", "s3"), _plain(P, "s1", "s3")]
+    assert all(e.plain for e in two) and not base[0].plain
+    sol = solve_graph(sorted(P), [*base, *two], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in two)
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert sol.confidence["s3"] == "uncertain"
+    held = frozenset({"s0", "s1", "s2"})
+    refuted = Veto("s0", "s3", invert(P["s0"]) @ P["s3"], "open space", held)
+    two = [_plain(P, "s2", "s3"), _plain(P, "s1", "s3")]
+    sol = solve_graph(sorted(P), [*base, *two], SurveyConfig(), reference="s0", vetoes=[refuted])
+    assert "s3" not in sol.groups[0]  # the map refuted it at full resolution
+    one = [_plain(P, "s2", "s3")]
+    sol = solve_graph(sorted(P), [*base, *one], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    slid = [_plain(P, "s2", "s3"), _plain(P, "s1", "s3", _moved(P, "s1", "s3", [0.14, 0, 0]))]
+    sol = solve_graph(sorted(P), [*base, *slid], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    doubted = [_plain(P, a, "s3", codes=("low_overlap", "free_space")) for a in ("s2", "s1")]
+    assert not any(e.plain for e in doubted)
+    sol = solve_graph(sorted(P), [*base, *doubted], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]
 
 

@@ -65,6 +65,24 @@ def test_lone_placements_are_paired_with_the_confirmed_stations_they_see():
     np.testing.assert_allclose(todo[1][2], invert(sol.poses["s2"]) @ sol.poses["s4"])
 
 
+def test_placements_uncertain_links_make_are_tested_like_lone_ones():
+    """A station placed through uncertain links (confidence ``uncertain``: two doorway links
+    that agree) is paired with the confirmed stations it sees, and refuted like a lone one."""
+    T = np.eye(4)
+    conf = {"a": "confident", "u": "uncertain", "s": "single"}
+
+    def look(a, b):
+        return PairLook(a, b, T, (0.2, 0.2), (0.0, 0.0), (1000, 1000))
+
+    looks = [look("a", "u"), look("u", "s"), look("s", "a")]
+    todo = unconfirmed_pairs(looks, conf, SurveyConfig().map_min_conflict)
+    assert [(a, b) for a, b, _ in todo] == [("a", "u"), ("s", "a")]
+    vetoes = refuted_at_full(todo, [(0.01, 0.2, 900), (0.0, 0.2, 900)], conf, 0.003, 0.03)
+    assert [(v.a, v.b) for v in vetoes] == [("a", "u")]
+    assert "u, which no loop of confident links confirms, against a" in vetoes[0].why
+    assert vetoes[0].held == {"a", "s"}
+
+
 def test_a_pair_refuted_at_the_limit_holds_the_lone_stations_that_passed():
     T = np.eye(4)
     conf = {"a": "confident", "b": "confident", "x": "single", "y": "single", "z": "single"}
@@ -79,7 +97,8 @@ def test_a_pair_refuted_at_the_limit_holds_the_lone_stations_that_passed():
     assert [(v.a, v.b) for v in vetoes] == [("a", "x")]
     assert vetoes[0].held == {"a", "b", "y"}
     assert vetoes[0].why.startswith("at full resolution 0.30% of both stations' points")
-    assert "x, which no loop confirms, against a, which loops confirm" in vetoes[0].why
+    why = vetoes[0].why
+    assert "x, which no loop of confident links confirms, against a, which loops confirm" in why
     assert refuted_at_full(todo, [(0.0029, 0.2, 900)] + tested[1:], conf, 0.003, 0.03) == []
     assert JudgeConfig().settle_open_share == 0.003  # the limit the survey passes
 

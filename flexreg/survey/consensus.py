@@ -27,9 +27,13 @@ of stations, the way PCM merges the maps of several robots.
    vote of a link's answer: a twin or runner-up closing a cycle is no independent route)
    and no distinct placement of the same groups is as well supported; then everything is
    looked at again.
-   Uncertain links never confirm each other unless rough positions picked their poses: in
-   look-alike rooms and bays several are wrong the same way, and only the positions say
-   which bay or room each means. Nor do they settle a dispute between trusted answers: one
+   Uncertain links confirm each other only when rough positions picked their poses (the
+   positions say which bay or room each means) or when nothing but their small overlap
+   doubts them (:attr:`~flexreg.survey.links.Link.plain`: two doorway links of different
+   pairs of scans, each finding one pose and nothing against it, that agree to the loop
+   tolerance; the map then tests what they place at full resolution): in look-alike rooms
+   and bays several uncertain links are wrong the same way, for the twins, rivals or open
+   space that made them uncertain. Nor do they settle a dispute between trusted answers: one
    that a cycle of trusted answers contradicts and none confirms is *disputed* (one link of
    that cycle is wrong, and nothing says it is not this one), and a cycle through it is no
    firm vote; where two distinct placements of the same groups each hold a trusted answer
@@ -150,6 +154,12 @@ class Hypothesis:
         """The pose of the link the surveyor's rough positions picked, alone of its fitting
         poses within their window (:func:`flexreg.survey.positions.choose`)."""
         return self.alternative is None and self.link.vouched == "positions"
+
+    @property
+    def plain(self) -> bool:
+        """The answer of a link uncertain only for its small overlap
+        (:attr:`~flexreg.survey.links.Link.plain`)."""
+        return self.alternative is None and self.link.plain and not self.link.vouched
 
     @property
     def weight(self) -> float:
@@ -461,7 +471,9 @@ class _Set:
         picked pose of another pair of scans (two doorway links of a room, each uncertain
         for the little the scans share, that agree to the loop tolerance: a slide of either
         opens the loop). One picked pose alone does not: positions pick a bay, not
-        centimetres."""
+        centimetres. Two answers of links uncertain only for their small overlap
+        (:attr:`Hypothesis.plain`) count as picked poses do: each registration found one pose
+        and nothing against it, and a slide of either opens the loop."""
         return bool(self.confirmed_by)
 
     @property
@@ -469,14 +481,18 @@ class _Set:
         """What confirms it around a loop (:attr:`firmly_confirmed`): ``"registration"``
         when a confident answer is among the two, or a cycle of trusted answers closes
         through one of its answers; ``"positions"`` when only poses the positions picked
-        do; empty when nothing does."""
+        do, with or without plain answers (:attr:`Hypothesis.plain`); ``"overlap"`` when
+        only plain answers do; empty when nothing does."""
         confident = sum(h.confident for h in self.members)
         sited = sum(h.sited and not h.confident for h in self.members)
+        plain = sum(h.plain for h in self.members)
         if any(h.firm_votes for h in self.members if h.alternative is None) or (
-            confident and confident + sited >= 2
+            confident and confident + sited + plain >= 2
         ):
             return "registration"
-        return "positions" if sited >= 2 else ""
+        if sited + plain >= 2:
+            return "positions" if sited else "overlap"
+        return ""
 
 
 def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:

@@ -266,6 +266,20 @@ class Link:
         return all(r.get("code") in ("ambiguous", "low_overlap") for r in self.reasons)
 
     @property
+    def plain(self) -> bool:
+        """Whether it is uncertain only because the scans share little (``low_overlap``: a
+        doorway's worth): its registration found no rival pose, no twin, nothing in open
+        space and no weak axis. Two such answers of different pairs of scans that agree
+        around a loop confirm each other (:mod:`flexreg.survey.consensus`), and the stations
+        they place are tested at full resolution like a lone link's
+        (:func:`flexreg.survey.mapcheck.unconfirmed_pairs`)."""
+        return (
+            self.verdict == "uncertain"
+            and bool(self.reasons)
+            and all(r.get("code") == "low_overlap" for r in self.reasons)
+        )
+
+    @property
     def usable(self) -> bool:
         return self.T_target_source is not None and self.status != "failed"
 

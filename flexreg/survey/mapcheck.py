@@ -311,9 +311,12 @@ def unconfirmed_pairs(
 
     A station that confident links place through one that closes no loop (confidence
     ``single``: :attr:`~flexreg.survey.graph.GraphSolution.confidence`) rests on that one
-    registration, and in a hall that repeats bay by bay a wrong answer explains its two scans
-    as well as the right one; the sample's map check cannot tell either (stray returns at
-    depth edges fill a few percent of each sample at every pose). The stations that loops
+    registration, one that uncertain links place (``uncertain``: two answers uncertain only
+    for their small overlap that agree around a loop, or poses rough positions picked) on
+    registrations that saw little of each other, and in a hall that repeats bay by bay a
+    wrong answer explains its two scans as well as the right one; the sample's map check
+    cannot tell either (stray returns at depth edges fill a few percent of each sample at
+    every pose). The stations that loops
     confirm around the placement can, at full resolution: there a right pose puts almost
     none of either station's points where the other saw open space, and one a few bays off
     puts the hall's unique objects there (:func:`refuted_at_full`). Pairs that do not see
@@ -321,7 +324,8 @@ def unconfirmed_pairs(
     many of them."""
     out = []
     for p in looks:
-        if {confidence.get(p.a), confidence.get(p.b)} != {"single", "confident"}:
+        ca, cb = confidence.get(p.a), confidence.get(p.b)
+        if None in (ca, cb) or (ca == "confident") == (cb == "confident"):
             continue
         if max(p.seen) >= min_seen:
             out.append((p.a, p.b, np.asarray(p.T_a_b, dtype=np.float64)))
@@ -345,7 +349,7 @@ def refuted_at_full(
     ``min_seen`` of the points explained (``map_min_conflict``: the two see each other). A
     chain of lone links is then cut beyond the last station it placed right, not along its
     whole length."""
-    lone_of = [a if confidence.get(a) == "single" else b for a, b, _ in todo]
+    lone_of = [b if confidence.get(a) == "confident" else a for a, b, _ in todo]
     refuted = {s for s, (share, _, _) in zip(lone_of, tested, strict=True) if share >= limit}
     seen = {s for s, (_, x, _) in zip(lone_of, tested, strict=True) if x >= min_seen}
     held = frozenset(s for s, c in confidence.items() if c == "confident") | (seen - refuted)
@@ -355,8 +359,8 @@ def refuted_at_full(
             firm = b if lone == a else a
             why = (
                 f"at full resolution {100 * share:.2f}% of both stations' points lie where the "
-                f"other saw open space: {lone}, which no loop confirms, against {firm}, which "
-                f"loops confirm (refuted from {100 * limit:.2f}%)"
+                f"other saw open space: {lone}, which no loop of confident links confirms, "
+                f"against {firm}, which loops confirm (refuted from {100 * limit:.2f}%)"
             )
             out.append(Veto(a, b, T, why, held))
     return out

@@ -7,7 +7,7 @@ import numpy as np
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.consensus import LoopTolerance, cycle_votes, hypotheses_of
-from flexreg.survey.graph import Link, Veto, solve_graph
+from flexreg.survey.graph import Link, Veto, solve_graph, uncertain_via
 from flexreg.survey.links import Alternative
 from flexreg.survey.mapcheck import PairJudge, PairLook
 
@@ -287,6 +287,8 @@ def test_two_answers_uncertain_only_for_their_overlap_that_agree_place_a_station
     assert "s3" in sol.groups[0] and all(e.status == "accepted" for e in two)
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
     assert sol.confidence["s3"] == "uncertain"
+    assert uncertain_via("s3", "s0", [*base, *two]) in (["s2 <- s3"], ["s1 <- s3"])
+    assert uncertain_via("s2", "s0", [*base, *two]) == []  # confident links all the way
     held = frozenset({"s0", "s1", "s2"})
     refuted = Veto("s0", "s3", invert(P["s0"]) @ P["s3"], "open space", held)
     two = [_plain(P, "s2", "s3"), _plain(P, "s1", "s3")]

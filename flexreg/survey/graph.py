@@ -312,6 +312,18 @@ def single_link(stem: str, ref: str, links: list[Link]) -> str:
     return f"confident links that no loop checks fix it, one after the other ({what})"
 
 
+def uncertain_via(stem: str, ref: str, links: list[Link]) -> list[str]:
+    """The uncertain accepted links on a shortest walk of accepted links from ``stem`` to
+    ``ref``, as ``target <- source``, nearest the station first: what places a station of
+    confidence ``uncertain`` (each confirmed by a loop of other uncertain links)."""
+    adj: dict[str, list[tuple[str, Link]]] = {}
+    for e in links:
+        if e.status == "accepted":
+            adj.setdefault(e.target, []).append((e.source, e))
+            adj.setdefault(e.source, []).append((e.target, e))
+    return [f"{e.target} <- {e.source}" for _, e in walk(adj, stem, ref) or [] if not e.confident]
+
+
 #: A link's outcome in a few words (a piece of its ``why``, and the words for it), for the
 #: count in an unplaced station's reason: each link's own reason, with its figures, stays on
 #: the link (poses.json, the report's link table).
@@ -720,4 +732,13 @@ def _solve_once(
     return GraphSolution(ref, poses, ordered, grefs, confidence, reasons, _stats(links))
 
 
-__all__ = ["GraphSolution", "Judge", "Link", "Veto", "loop_error", "single_link", "solve_graph"]
+__all__ = [
+    "GraphSolution",
+    "Judge",
+    "Link",
+    "Veto",
+    "loop_error",
+    "single_link",
+    "solve_graph",
+    "uncertain_via",
+]

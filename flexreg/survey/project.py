@@ -35,7 +35,7 @@ from flexreg.survey.execute import (
     run_tasks,
 )
 from flexreg.survey.frames import Frame, read_origins_csv, site_of_reference
-from flexreg.survey.graph import GraphSolution, Link, Veto, single_link, solve_graph
+from flexreg.survey.graph import GraphSolution, Link, Veto, single_link, solve_graph, uncertain_via
 from flexreg.survey.links import Matrix
 from flexreg.survey.mapcheck import (
     PairJudge,
@@ -199,7 +199,8 @@ class SurveyResult:
         if self.adjustment is None:
             return "accuracy unchecked: the final alignment was off (--no-refine)"
         if self.solution.confidence.get(stem) == "uncertain" and stem not in self.adjustment.why:
-            return "placed only through uncertain links that a loop confirms; check them"
+            via = ", ".join(uncertain_via(stem, self.solution.reference, self.links))
+            return f"placed only through uncertain links that a loop confirms ({via}); check them"
         if self.solution.confidence.get(stem) == "single":
             why = self.adjustment.why.get(stem)
             link = single_link(stem, self.solution.reference, self.links)

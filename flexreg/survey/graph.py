@@ -92,7 +92,13 @@ def _choose(
         hyps,
         tol,
         (config.registration.judge.ambiguity_ratio, config.registration.judge.decisive_ratio),
-        (judge, config.map_min_conflict, config.map_conflict_ratio, config.map_radius_m)
+        (
+            judge,
+            config.map_min_conflict,
+            config.map_conflict_ratio,
+            config.map_radius_m,
+            config.registration.judge.settle_open_share,
+        )
         if judge is not None
         else None,
         broken,

@@ -41,7 +41,9 @@ of stations, the way PCM merges the maps of several robots.
    half round aliases every link of its station alike: a confident answer and the uncertain
    links of that station then agree on the turn.) Where distinct placements compete, the map's
    free-space check may pick the one under which the groups' nearest stations see each
-   other without contradiction, every other contradicting decisively more. Once no such
+   other without contradiction, every other contradicting decisively more; where plain
+   answers disagree (a doorway link slid along a wall), its full-resolution test picks the
+   one placement that puts no witness's points in open space, every other refuted. Once no such
    merge is left, a lone trusted answer (or the surveyor's word) places its stations
    unchecked unless the map check refutes it; one that a cycle of trusted answers
    contradicts, only where the map sees the groups at ease, and when nothing else is left

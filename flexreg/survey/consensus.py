@@ -41,9 +41,7 @@ of stations, the way PCM merges the maps of several robots.
    half round aliases every link of its station alike: a confident answer and the uncertain
    links of that station then agree on the turn.) Where distinct placements compete, the map's
    free-space check may pick the one under which the groups' nearest stations see each
-   other without contradiction, every other contradicting decisively more; where plain
-   answers disagree (a doorway link slid along a wall), its full-resolution test picks the
-   one placement that puts no witness's points in open space, every other refuted. Once no such
+   other without contradiction, every other contradicting decisively more. Once no such
    merge is left, a lone trusted answer (or the surveyor's word) places its stations
    unchecked unless the map check refutes it; one that a cycle of trusted answers
    contradicts, only where the map sees the groups at ease, and when nothing else is left
@@ -68,17 +66,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexreg.core.transforms import invert
+from flexreg.survey.config import MIN_EXPLAINED
 from flexreg.survey.links import Alternative, Judge, Link, Matrix, loop_error, walk
-from flexreg.survey.mapcheck import at_full, clean_at_full, decisive_one, refutes, sees
 
 log = logging.getLogger(__name__)
-
-#: The map's check as the graph asks it: the judge (:data:`~flexreg.survey.links.Judge`,
-#: with a ``full`` test when it can make one: :meth:`~flexreg.survey.mapcheck.PairJudge.full`),
-#: ``map_min_conflict``, ``map_conflict_ratio``, ``map_radius_m`` and the registration's
-#: ``judge.settle_open_share`` (the full-resolution test's limit).
-MapJudge = tuple[Judge, float, float, float, float]
-Witness = tuple[str, str, Matrix]  # two stations and their relative pose T_a_b
 
 #: A hypothesis's weight: a trusted answer counts whole, an uncertain answer half, an
 #: alternative half its support (a runner-up's score ratio, a twin's share of the answer's).
@@ -572,11 +563,14 @@ def _rival(
     return None
 
 
-def _witnesses(s: _Set, place: Placement, g2: str, radius_m: float) -> list[Witness]:
-    """The :data:`MAP_PAIRS` nearest pairs of stations (one of each group) within
-    ``radius_m`` where the set places the second group, with their relative poses. The
-    set's own links' pairs are no witnesses (their registrations fitted them, and their
-    verdicts judged them already)."""
+def _contradiction(
+    s: _Set, place: Placement, g2: str, judge: Judge, radius_m: float
+) -> tuple[float, float, float] | None:
+    """What the map's check says of the two groups' stations where the set places the
+    second: over the :data:`MAP_PAIRS` nearest pairs of stations (one of each group) within
+    ``radius_m``, the worst contradiction and conflict and the best explained share of the
+    judge's. The set's own links' pairs are no witnesses (their registrations fitted them,
+    and their verdicts judged them already); None when the map cannot tell for any pair."""
     c = s.centre.link
     g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
     at = {x: _placed(place, s.X, g2, x) for x in place.members(g1) + place.members(g2)}
@@ -587,32 +581,24 @@ def _witnesses(s: _Set, place: Placement, g2: str, radius_m: float) -> list[Witn
         for b in place.members(g2)
         if frozenset((a, b)) not in own
     )
-    return [(a, b, invert(at[a]) @ at[b]) for d, a, b in pairs[:MAP_PAIRS] if d <= radius_m]
-
-
-def _contradiction(
-    s: _Set, place: Placement, g2: str, judge: Judge, radius_m: float
-) -> tuple[float, float, float] | None:
-    """What the map's check says of the two groups' stations where the set places the
-    second: over its witnesses (:func:`_witnesses`), the worst contradiction and conflict
-    and the best explained share of the judge's; None when the map cannot tell for any
-    pair."""
-    said = [judge(a, b, T) for a, b, T in _witnesses(s, place, g2, radius_m)]
+    said = [judge(a, b, invert(at[a]) @ at[b]) for d, a, b in pairs[:MAP_PAIRS] if d <= radius_m]
     seen = [x for x in said if x is not None]
     if not seen:
         return None
     return max(x[0] for x in seen), max(x[1] for x in seen), max(x[2] for x in seen)
 
 
-def _plain_placements(sets: list[_Set], place: Placement, g2: str, tol: LoopTolerance) -> list:
-    """The distinct placements of the second group that plain answers give
-    (:attr:`Hypothesis.plain`: registrations with nothing against them but their small
-    overlap), best supported first."""
-    out: list[_Set] = []
-    for s in sets:
-        if s.centre.plain and all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in out):
-            out.append(s)
-    return out
+def _refuted(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
+    """The map check's own test (:meth:`~flexreg.survey.mapcheck.PairLook.conflicts`): at
+    least ``min_conflict`` of a scan in the other's free space, and ``ratio`` times what it
+    explains there."""
+    return said is not None and said[1] >= min_conflict and said[0] >= ratio / (1.0 + ratio)
+
+
+def _seen(said: tuple[float, float, float] | None) -> bool:
+    """The two groups see each other there: a pair explains :data:`~flexreg.survey.config.
+    MIN_EXPLAINED` of both samples."""
+    return said is not None and said[2] >= MIN_EXPLAINED
 
 
 @dataclass(frozen=True)
@@ -631,7 +617,7 @@ def _decide(
     g2: str,
     tol: LoopTolerance,
     ratios: tuple[float, float],
-    judge: MapJudge | None,
+    judge: tuple[Judge, float, float, float] | None,
     alone: bool,
 ) -> _Pick | None:
     """The set that merges two groups, or None. What chooses it (:attr:`_Pick.how`):
@@ -666,21 +652,13 @@ def _decide(
         said = _contradiction(top, place, g2, judge[0], judge[3]) if judge else None
         log.debug("%s <- %s alone: the map says %s", top.centre.link.target,
                   top.centre.link.source, said)  # fmt: skip
-        if judge is not None and refutes(said, judge[1], judge[2]):
+        if judge is not None and _refuted(said, judge[1], judge[2]):
             return None
-        if contradicted and not sees(said):
+        if contradicted and not _seen(said):
             return None
         return _Pick(top, "hand" if vouched else "alone", said[0] if said else 0.0)
     if judge is None or rival is None:
         return None
-    plain = _plain_placements(sets, place, g2, tol)
-    if 1 < len(plain) <= MAP_PLACEMENTS:
-        # doorway links that disagree (one slid along a wall explains more in the sample):
-        # at full resolution a right pose puts almost nothing in open space
-        tested = [at_full(judge[0], _witnesses(p, place, g2, judge[3])) for p in plain]
-        best = clean_at_full(tested, judge[4], judge[1])
-        if best is not None:
-            return _Pick(plain[best], "map")
     distinct: list[_Set] = []  # the distinct placements, best supported first
     for s in sets:
         if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
@@ -688,13 +666,37 @@ def _decide(
     if len(distinct) > MAP_PLACEMENTS:
         return None
     judged = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
-    best = decisive_one(judged, judge[1], judge[2], decisive)
+    best = _decisive(judged, judge, decisive)
     if best is None:
         return None
     return _Pick(distinct[best], "map", min(x[0] for x in judged if x is not None))
 
 
-def _blame(cycles: Sequence[Cycle], judge: MapJudge, decisive: float) -> bool:
+def _decisive(
+    said: Sequence[tuple[float, float, float] | None],
+    judge: tuple[Judge, float, float, float],
+    decisive: float,
+) -> int | None:
+    """Of several hypotheses the map scored, the one it finds clean (the stations see each
+    other, the map check does not refute them) while every other contradicts ``decisive``
+    times as much and puts ``map_min_conflict`` of a scan in the other's free space; None
+    when there is no such one, or the map cannot tell for one of them."""
+    if any(x is None for x in said):
+        return None
+    scores = [x for x in said if x is not None]
+    best = min(range(len(scores)), key=lambda i: scores[i][0])
+    low = scores[best][0]
+    if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
+        return None
+    others = (x for i, x in enumerate(scores) if i != best)
+    if all(x[0] >= decisive * low and x[0] > low and x[1] >= judge[1] for x in others):
+        return best
+    return None
+
+
+def _blame(
+    cycles: Sequence[Cycle], judge: tuple[Judge, float, float, float], decisive: float
+) -> bool:
     """For the first cycle of trusted answers that does not close and that the map can
     decide: each of its links in turn is the hypothesis "this one is wrong and the rest is
     right"; the rest then places that link's two stations, and the map's check scores them
@@ -707,7 +709,7 @@ def _blame(cycles: Sequence[Cycle], judge: MapJudge, decisive: float) -> bool:
             continue
         n = len(cyc.stations)
         said = [judge[0](cyc.stations[i], cyc.stations[(i + 1) % n], cyc.rest(i)) for i in range(n)]
-        best = decisive_one(said, judge[1], judge[2], decisive)
+        best = _decisive(said, judge, decisive)
         if best is not None:
             cyc.links[best].blamed = True
             for h in cyc.links:
@@ -721,7 +723,7 @@ def merge_groups(
     hyps: dict[frozenset[str], list[Hypothesis]],
     tol: LoopTolerance,
     ratios: tuple[float, float],
-    judge: MapJudge | None = None,
+    judge: tuple[Judge, float, float, float] | None = None,
     broken: Sequence[Cycle] = (),
 ) -> tuple[Placement, dict[int, Chosen]]:
     """Step 2: the groups, and what each link that merged groups was given (by link id).
@@ -739,9 +741,9 @@ def merge_groups(
         apart unless the map decides: the one placement under which the groups see each
         other and the map check does not refute them, every other contradicting at least
         the second times as much.
-    judge : MapJudge, optional
-        The map's free-space check, its ``map_min_conflict``, ``map_conflict_ratio`` and
-        ``map_radius_m``, and the full-resolution test's limit (:data:`MapJudge`).
+    judge : (Judge, float, float, float), optional
+        The map's free-space check, and its ``map_min_conflict``, ``map_conflict_ratio`` and
+        ``map_radius_m``.
     broken : sequence of Cycle
         The cycles of trusted answers that do not close (:func:`cycle_votes`): when no merge
         is left, the map may name the wrong link of one (:func:`_blame`), and merging goes

@@ -92,13 +92,7 @@ def _choose(
         hyps,
         tol,
         (config.registration.judge.ambiguity_ratio, config.registration.judge.decisive_ratio),
-        (
-            judge,
-            config.map_min_conflict,
-            config.map_conflict_ratio,
-            config.map_radius_m,
-            config.registration.judge.settle_open_share,
-        )
+        (judge, config.map_min_conflict, config.map_conflict_ratio, config.map_radius_m)
         if judge is not None
         else None,
         broken,

@@ -47,7 +47,6 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-from collections.abc import Sequence
 from dataclasses import astuple, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -60,13 +59,8 @@ from flexreg.errors import InputError
 from flexreg.registration.check import TOLERANCE, Check, check_masks
 from flexreg.registration.fullres import full_pair_of, pose_masks
 from flexreg.stages.correspondences import derive_threshold
-from flexreg.survey.config import (
-    COINCIDENT_EXPLAINED,
-    COINCIDENT_M,
-    MIN_EXPLAINED,
-    SurveyConfig,
-)
-from flexreg.survey.links import Judge, Veto
+from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
+from flexreg.survey.links import Veto
 from flexreg.survey.stations import (
     PREPARED_SUFFIX,
     CacheEntryError,
@@ -540,25 +534,6 @@ class PairJudge:
             self._kept_looks()[stored] = np.asarray([*tested, 0, 0, 0], dtype=np.float64)
             self._new += 1
 
-    def full(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, int] | None:
-        """The full-resolution test of the pair at ``T_a_b`` (:func:`open_space_at_full`)
-        in this process: remembered, or made now and remembered (:meth:`remember_full`);
-        None when a station has no prepared file or glance. The graph asks it to decide
-        between the placements doorway links disagree on
-        (:mod:`flexreg.survey.consensus`)."""
-        known = self.recall_full(a, b, T_a_b)
-        if known is not None:
-            return known
-        if not ({a, b} <= self.files.keys() and {a, b} <= self.glances.keys()):
-            return None
-        T = np.asarray(T_a_b, dtype=np.float64)
-        files, glances = (self.files[a], self.files[b]), (self.glances[a], self.glances[b])
-        tested = open_space_at_full(files, glances, T)
-        log.debug("map judge at full resolution %s <- %s: %.4f open, %.4f seen", a, b,
-                  *tested[:2])  # fmt: skip
-        self.remember_full(a, b, T, tested)
-        return tested
-
     def _full_key(self, a: str, b: str, T_a_b: Matrix) -> tuple[Any, str | None]:
         pose = _pose_key(np.asarray(T_a_b, dtype=np.float64))
         stored = self._stored_key(a, b, pose)
@@ -591,81 +566,6 @@ class PairJudge:
             if s >= self.config.map_min_conflict
         )
         return float(r), float(max(look.conflicting)), float(min(look.explained))
-
-
-def refutes(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
-    """The map check's own test (:meth:`PairLook.conflicts`) on a judge's answer
-    (:meth:`PairJudge.__call__`): at least ``min_conflict`` of a scan in the other's free
-    space, and ``ratio`` times what it explains there."""
-    return said is not None and said[1] >= min_conflict and said[0] >= ratio / (1.0 + ratio)
-
-
-def sees(said: tuple[float, float, float] | None) -> bool:
-    """The two stations see each other there: a pair explains
-    :data:`~flexreg.survey.config.MIN_EXPLAINED` of both samples."""
-    return said is not None and said[2] >= MIN_EXPLAINED
-
-
-def decisive_one(
-    said: Sequence[tuple[float, float, float] | None],
-    min_conflict: float,
-    ratio: float,
-    decisive: float,
-) -> int | None:
-    """Of several hypotheses the map scored, the one it finds clean (the stations see each
-    other, the map check does not refute them) while every other contradicts ``decisive``
-    times as much and puts ``min_conflict`` of a scan in the other's free space; None when
-    there is no such one, or the map cannot tell for one of them."""
-    if any(x is None for x in said):
-        return None
-    scores = [x for x in said if x is not None]
-    best = min(range(len(scores)), key=lambda i: scores[i][0])
-    low = scores[best][0]
-    if not sees(scores[best]) or refutes(scores[best], min_conflict, ratio):
-        return None
-    others = (x for i, x in enumerate(scores) if i != best)
-    if all(x[0] >= decisive * low and x[0] > low and x[1] >= min_conflict for x in others):
-        return best
-    return None
-
-
-def at_full(
-    judge: Judge, witnesses: Sequence[tuple[str, str, Matrix]]
-) -> tuple[float, float] | None:
-    """The full-resolution test (``judge.full``: :meth:`PairJudge.full`) of the pairs of
-    ``witnesses`` (two stations and their relative pose) that the sample's check sees each
-    other (``judge`` answers): the largest share in open space and the largest share
-    explained; None when the judge makes no such test or no pair sees the other."""
-    full = getattr(judge, "full", None)
-    if full is None:
-        return None
-    seen = [(a, b, T) for a, b, T in witnesses if judge(a, b, T) is not None]
-    found = [t for t in (full(a, b, T) for a, b, T in seen) if t is not None]
-    return (max(t[0] for t in found), max(t[1] for t in found)) if found else None
-
-
-def clean_at_full(
-    tested: Sequence[tuple[float, float] | None], limit: float, min_seen: float
-) -> int | None:
-    """Of distinct placements tested at full resolution (each: the largest share of its
-    witnesses' points in open space, the largest share explained), the one under ``limit``
-    on every witness while one sees the other (``min_seen`` explained), every other at
-    ``limit`` or more on one; None when there is no such one or one was not tested. A right
-    pose puts almost nothing in open space at full resolution; ``limit`` is the
-    registration's ``judge.settle_open_share``, as :func:`refuted_at_full` uses it.
-
-    >>> clean_at_full([(0.0, 0.13), (0.0033, 0.17)], 0.003, 0.03)
-    0
-    >>> clean_at_full([(0.0, 0.13), (0.0010, 0.17)], 0.003, 0.03) is None  # both clean
-    True
-    """
-    if any(t is None for t in tested):
-        return None
-    clean = [i for i, t in enumerate(tested) if t is not None and t[0] < limit]
-    if len(clean) != 1:
-        return None
-    seen = tested[clean[0]]
-    return clean[0] if seen is not None and seen[1] >= min_seen else None
 
 
 def pairs_to_check(
@@ -728,17 +628,12 @@ __all__ = [
     "PairJudge",
     "PairLook",
     "assemble",
-    "at_full",
-    "clean_at_full",
-    "decisive_one",
     "glance_path",
     "look_from",
     "open_space_at_full",
     "pairs_to_check",
     "plan_looks",
     "refuted_at_full",
-    "refutes",
-    "sees",
     "unconfirmed_pairs",
     "write_glance",
 ]

@@ -360,3 +360,20 @@ def test_rough_positions_link_the_stations_they_put_near_each_other(project, tmp
     rc, _, err = _survey(project, out2, "--set", "pairs=sequential")
     assert rc in (0, 3), err
     assert not _links(_doc(out2), "station_00", "station_02")
+
+
+def test_the_console_counts_links_in_the_positions_phase_as_links():
+    """Links registered in rough positions' windows are links: a failed one is counted as a
+    failed link, not as an unreadable station (the label of the preparation's failures)."""
+    from rich.progress import Progress, TextColumn
+
+    from flexreg.cli.survey import _Bars
+    from flexreg.survey.execute import ProgressEvent
+
+    progress = Progress(TextColumn("{task.description} {task.fields[counts]}"))
+    bars = _Bars(progress)
+    bars(ProgressEvent("positions", 5, 9, 1, 2, 2, 1.0))
+    bars(ProgressEvent("prepare", 3, 4, 0, 0, 1, 1.0))
+    counts = {t.description: t.fields["counts"] for t in progress.tasks}
+    assert counts["Links the positions bring near"] == "confident 1, uncertain 2, failed 2"
+    assert counts["Preparing stations"] == "unreadable 1"

@@ -38,9 +38,14 @@ add_config("survey", SurveyConfig)
 PHASES = {
     "prepare": "Preparing stations",
     "links": "Registering links",
+    "positions": "Links the positions bring near",
     "map check": "Checking the map",
     "refine": "Final alignment",
 }
+
+#: the phases whose tasks are links (confident, uncertain or failed); in the others a task
+#: that fails is a station that could not be read
+LINK_PHASES = ("links", "positions")
 
 _ScansArgument = Annotated[
     list[Path],
@@ -263,7 +268,7 @@ class _Bars:
                 PHASES.get(ev.phase, ev.phase), total=0, counts=""
             )
         counts = ""
-        if ev.phase == "links":
+        if ev.phase in LINK_PHASES:
             counts = f"confident {ev.confident}, uncertain {ev.uncertain}, failed {ev.failed}"
         elif ev.failed:
             counts = f"unreadable {ev.failed}"

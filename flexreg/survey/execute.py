@@ -56,7 +56,8 @@ class ProgressEvent:
 
     Attributes
     ----------
-    phase : {"prepare", "links", "refine"}
+    phase : {"prepare", "links", "positions", "map check", "refine"}
+        ``"positions"``: the links rough positions bring near, registered in their windows.
     done, total : int
         Tasks finished and in all, in this phase.
     confident, uncertain, failed : int

@@ -316,12 +316,8 @@ def uncertain_via(stem: str, ref: str, links: list[Link]) -> list[str]:
     """The uncertain accepted links on a shortest walk of accepted links from ``stem`` to
     ``ref``, as ``target <- source``, nearest the station first: what places a station of
     confidence ``uncertain`` (each confirmed by a loop of other uncertain links)."""
-    adj: dict[str, list[tuple[str, Link]]] = {}
-    for e in links:
-        if e.status == "accepted":
-            adj.setdefault(e.target, []).append((e.source, e))
-            adj.setdefault(e.source, []).append((e.target, e))
-    return [f"{e.target} <- {e.source}" for _, e in walk(adj, stem, ref) or [] if not e.confident]
+    path = _accepted_path(links, ref, stem)  # from the station to ref
+    return [f"{e.target} <- {e.source}" for e in path if not e.confident]
 
 
 #: A link's outcome in a few words (a piece of its ``why``, and the words for it), for the

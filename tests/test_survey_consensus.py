@@ -6,8 +6,8 @@ import numpy as np
 
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.survey.config import SurveyConfig
-from flexreg.survey.consensus import LoopTolerance, cycle_votes, hypotheses_of
 from flexreg.survey.graph import Link, Veto, solve_graph, uncertain_via
+from flexreg.survey.hypotheses import LoopTolerance, cycle_votes, hypotheses_of
 from flexreg.survey.links import Alternative
 from flexreg.survey.mapcheck import PairJudge, PairLook
 
@@ -465,3 +465,59 @@ def test_a_twin_closing_a_loop_with_a_bay_shifted_confident_link_confirms_nothin
                       judge=_Judge(P))  # fmt: skip
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
     assert seq.status == "accepted" and "twin" in (seq.picked or "")
+
+
+class _Fit:
+    """Where all the overlap of two groups fits, knowing the truth: from a start whose
+    stations lie within ``basin`` metres of their true places, the true placement; from
+    anywhere else, the start (a minimum of its own). Records what it was given."""
+
+    def __init__(self, P, basin=0.3):
+        self.P, self.basin, self.calls = P, basin, []
+
+    def __call__(self, target, source, X):
+        self.calls.append((sorted(target), sorted(source)))
+        a, A = next(iter(target.items()))
+        b, B = next(iter(source.items()))
+        true = invert(self.P[a] @ invert(A)) @ self.P[b] @ invert(B)
+        far = max(np.linalg.norm((X @ S)[:3, 3] - (true @ S)[:3, 3]) for S in source.values())
+        return true if far <= self.basin else X
+
+
+def test_a_doorway_link_slid_along_a_wall_reaches_the_right_one_fitted_on_all_overlap():
+    """s3 seen through two doorways, from s1 and from s2, each link uncertain only for its
+    small overlap, the one from s1 slid 14 cm along a wall (where its few shared points
+    fit the wall's two faces). Fitted on all the overlap between the two groups, from
+    either link's placement, s3 comes to one place, where s2's link puts it: s3 is placed
+    there through s2's link, and s1's, off it, is rejected with its loop error. Two links
+    that both slid (the fit comes to a place neither gives), or a second one a room (3 m)
+    off (beyond the fit's reach: it is not even fitted), place nothing; nor, without the
+    map's judge, does the slide."""
+    P = _poses(4)
+
+    def slid(a, offset):
+        return _plain(P, a, "s3", _moved(P, a, "s3", offset))
+
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    right, off = _plain(P, "s2", "s3"), slid("s1", [0.14, 0, 0])
+    fit = _Fit(P)
+    sol = solve_graph(sorted(P), [*base, right, off], SurveyConfig(), reference="s0",
+                      judge=_Judge(P), fit=fit)  # fmt: skip
+    assert "s3" in sol.groups[0] and sol.confidence["s3"] == "uncertain"
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert right.status == "accepted" and off.status == "rejected"
+    assert off.loop_error_m is not None and 0.13 < off.loop_error_m < 0.15
+    assert all(s == ["s3"] and {"s1", "s2"} <= set(t) for t, s in fit.calls)
+    both = [slid("s2", [0, 0.1, 0]), slid("s1", [0.14, 0, 0])]
+    sol = solve_graph(sorted(P), [*base, *both], SurveyConfig(), reference="s0",
+                      judge=_Judge(P), fit=_Fit(P))  # fmt: skip
+    assert "s3" not in sol.groups[0]
+    fit = _Fit(P)
+    room = [_plain(P, "s2", "s3"), slid("s1", [3.0, 0, 0])]  # the map cannot tell them apart
+    sol = solve_graph(sorted(P), [*base, *room], SurveyConfig(), reference="s0",
+                      judge=_Judge(P, wrong=0.02), fit=fit)  # fmt: skip
+    assert "s3" not in sol.groups[0] and fit.calls == []
+    right, off = _plain(P, "s2", "s3"), slid("s1", [0.14, 0, 0])
+    sol = solve_graph(sorted(P), [*base, right, off], SurveyConfig(), reference="s0",
+                      fit=_Fit(P))  # fmt: skip
+    assert "s3" not in sol.groups[0]

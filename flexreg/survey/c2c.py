@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -65,6 +66,8 @@ CELL_VOXELS = 10
 CORRELATION_M = 2.0
 #: residual limits of the per-link figures, metres (ReCap's 6 mm; the 1 cm outer limit)
 WITHIN_M = (0.006, 0.010)
+#: reach of the first (capture) stage of :func:`fit_pair`, in voxels
+CAPTURE_VOXELS = 8
 #: most Gauss-Newton steps of one ICP stage
 ICP_ITERATIONS = 30
 #: a capture stage of :func:`fit_pair` (its wide kernels) stops once a step moves the points
@@ -449,6 +452,87 @@ def _shift(A: NDArray[np.float64], B: NDArray[np.float64], reach_m: float) -> fl
     return translation_error_m(A, B) + np.radians(rotation_error_deg(A, B)) * reach_m
 
 
+def _align(
+    tgt: NDArray[np.float64],
+    tgt_n: NDArray[np.float64],
+    tree: Any,
+    source: tuple[NDArray[np.float64], NDArray[np.float64]],
+    T: NDArray[np.float64],
+    scale: tuple[float, float],
+) -> tuple[NDArray[np.float64], float]:
+    """The stages of :func:`fit_pair` from ``T``: the source points and normals ``source``
+    moved onto the target's, ``scale`` the voxel (m) and the source's median range (m).
+    Returns the pose and the last stage's kernel width (m)."""
+    (src, src_n), (voxel_m, lever_m) = source, scale
+    for max_v, k_v in ((CAPTURE_VOXELS, 4), (3, 1.5)):  # capture: stop at a step of 1 %
+        step_m = CAPTURE_STOP * k_v * voxel_m  # (a turn: at the median range)
+        stop = (step_m / max(lever_m, 1.0), step_m)
+        T = _icp(tgt, tgt_n, tree, src, src_n, T, max_v * voxel_m, k_v * voxel_m, stop)
+    _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree, src_n)
+    sigma = _robust_sigma(r, voxel_m)
+    k = TUKEY_C * sigma
+    step_m = FINAL_STOP * sigma
+    stop = (step_m / max(lever_m, 1.0), step_m)
+    # the last stage moves a point by far less than its reach (3 k): the source points with
+    # no target point within twice that reach cannot find one, and are left out of its
+    # steps unless a point did move by as much (then it runs again with every point)
+    near, _, _ = _correspond(tgt, tgt_n, src, T, 6 * k, tree)
+    start = T
+    T = _icp(tgt, tgt_n, tree, src[near], src_n[near], T, 3 * k, k, stop)
+    if _shift(T, start, float(np.sqrt(np.max(np.einsum("ij,ij->i", src, src))))) >= 3 * k:
+        T = _icp(tgt, tgt_n, tree, src, src_n, T, 3 * k, k, stop)
+    return T, k
+
+
+def fit_groups(
+    target: Sequence[tuple[str, NDArray[np.float64]]],
+    source: Sequence[tuple[str, NDArray[np.float64]]],
+    X: NDArray[np.float64],
+    voxel_m: float,
+) -> NDArray[np.float64]:
+    """Align two groups of placed stations as two clouds, by :func:`fit_pair`'s stages.
+
+    Parameters
+    ----------
+    target, source : sequence of (str, (4, 4) float64)
+        Each group's stations: adjustment cloud (:func:`adjustment_cloud`) and pose in the
+        group's frame. The target's clouds are used whole, the source's one point per cell
+        (:func:`read_cloud`); each point keeps its own scanner's normal, so the normal-side
+        rule of :func:`_correspond` still keeps a wall's two faces apart.
+    X : (4, 4) float64
+        Start: ``T_target_source`` of the groups' frames.
+    voxel_m : float
+        The clouds' voxel, metres.
+
+    Returns
+    -------
+    (4, 4) float64
+        ``T_target_source`` where all the overlap of the two groups fits.
+
+    Raises
+    ------
+    ValueError
+        Fewer than six points on a side.
+    """
+    from scipy.spatial import cKDTree
+
+    def union(group: Sequence[tuple[str, NDArray[np.float64]]], sparse: bool) -> list[Any]:
+        ps, ns, lever = [], [], 1.0
+        for path, P in group:
+            p, n, r = read_cloud(path, sparse=sparse)
+            ps.append(p @ P[:3, :3].T + P[:3, 3])
+            ns.append(n @ P[:3, :3].T)
+            lever = max(lever, r)
+        return [np.vstack(ps), np.vstack(ns), lever]
+
+    tgt, tgt_n, _ = union(target, False)
+    src, src_n, lever_m = union(source, True)
+    if len(tgt) < 6 or len(src) < 6:
+        raise ValueError("too few points to align")
+    X = np.asarray(X, dtype=np.float64)
+    return _align(tgt, tgt_n, cKDTree(tgt), (src, src_n), X, (voxel_m, lever_m))[0]
+
+
 def fit_pair(
     target_cloud: str, source_cloud: str, T_init: NDArray[np.float64], voxel_m: float
 ) -> PairFit:
@@ -478,23 +562,7 @@ def fit_pair(
     if len(tgt) < 6 or len(src) < 6:
         raise ValueError("too few points to align")
     tree = cKDTree(tgt)
-    for max_v, k_v in ((8, 4), (3, 1.5)):  # capture: stop at a step of 1 % of the kernel
-        step_m = CAPTURE_STOP * k_v * voxel_m  # (a turn: at the median range)
-        stop = (step_m / max(lever_m, 1.0), step_m)
-        T = _icp(tgt, tgt_n, tree, src, src_n, T, max_v * voxel_m, k_v * voxel_m, stop)
-    _, _, r = _correspond(tgt, tgt_n, src, T, 3 * voxel_m, tree, src_n)
-    sigma = _robust_sigma(r, voxel_m)
-    k = TUKEY_C * sigma
-    step_m = FINAL_STOP * sigma
-    stop = (step_m / max(lever_m, 1.0), step_m)
-    # the last stage moves a point by far less than its reach (3 k): the source points with
-    # no target point within twice that reach cannot find one, and are left out of its
-    # steps unless a point did move by as much (then it runs again with every point)
-    near, _, _ = _correspond(tgt, tgt_n, src, T, 6 * k, tree)
-    start = T
-    T = _icp(tgt, tgt_n, tree, src[near], src_n[near], T, 3 * k, k, stop)
-    if _shift(T, start, float(np.sqrt(np.max(np.einsum("ij,ij->i", src, src))))) >= 3 * k:
-        T = _icp(tgt, tgt_n, tree, src, src_n, T, 3 * k, k, stop)
+    T, k = _align(tgt, tgt_n, tree, (src, src_n), T, (voxel_m, lever_m))
     i, j, r = _correspond(tgt, tgt_n, src, T, 3 * k, tree, src_n)
     sigma = _robust_sigma(r, voxel_m)
     k = TUKEY_C * sigma
@@ -577,6 +645,7 @@ def _robust_sigma(r: NDArray[np.float64], voxel_m: float) -> float:
 
 
 __all__ = [
+    "CAPTURE_VOXELS",
     "CELL_VOXELS",
     "CORRELATION_M",
     "FIT_FORMAT",
@@ -587,6 +656,7 @@ __all__ = [
     "cloud_path",
     "cluster_covariance",
     "fit_cache_path",
+    "fit_groups",
     "fit_pair",
     "information",
     "jacobian",

@@ -8,13 +8,11 @@ positions) offers its one pose. One mechanism chooses among them for the whole p
 pairwise consistency maximisation (PCM, Mangelson et al., ICRA 2018) applied between groups
 of stations, the way PCM merges the maps of several robots.
 
-1. **Cycle votes** (:func:`cycle_votes`). Every cycle of three or four stations, and every
-   longer cycle through the spanning forest of the trusted answers (confident or vouched),
-   is composed for every combination of its links' hypotheses. A combination that closes
-   within the loop tolerance (``loop_max_deg``; ``loop_max_m`` plus ``loop_per_link_m`` per
-   link) is an independent route, and each of its hypotheses gets a vote: a *firm* vote
-   when the rest of the cycle is trusted answers. A cycle of trusted answers that does not
-   close contradicts each of them (:attr:`Hypothesis.against`).
+1. **Cycle votes** (:mod:`flexreg.survey.hypotheses`). Every short cycle, and every longer
+   one through the spanning forest of the trusted answers, is composed for every
+   combination of its links' hypotheses; one that closes within the loop tolerance votes
+   for each of them (a *firm* vote when the rest of the cycle is trusted answers), and a
+   cycle of trusted answers that does not close contradicts each of them.
 2. **Merges** (:func:`merge_groups`). Starting from single stations, the hypotheses of the
    links between two groups form consistent sets: two are consistent when the cycle they
    close through the groups' own poses meets (PCM's test, the groups' poses in the role of
@@ -31,7 +29,9 @@ of stations, the way PCM merges the maps of several robots.
    positions say which bay or room each means) or when nothing but their small overlap
    doubts them (:attr:`~flexreg.survey.links.Link.plain`: two doorway links of different
    pairs of scans, each finding one pose and nothing against it, that agree to the loop
-   tolerance; the map then tests what they place at full resolution): in look-alike rooms
+   tolerance, or that reach one placement once fitted on all the overlap of the two
+   groups: a doorway link may slide along a wall, :func:`_refit`; the map then tests what
+   they place at full resolution): in look-alike rooms
    and bays several uncertain links are wrong the same way, for the twins, rivals or open
    space that made them uncertain. Nor do they settle a dispute between trusted answers: one
    that a cycle of trusted answers contradicts and none confirms is *disputed* (one link of
@@ -58,328 +58,25 @@ thresholds decide.
 
 from __future__ import annotations
 
-import itertools
 import logging
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from flexreg.core.transforms import invert
 from flexreg.survey.config import MIN_EXPLAINED
-from flexreg.survey.links import Alternative, Judge, Link, Matrix, loop_error, walk
+from flexreg.survey.hypotheses import Cycle, Hypothesis, LoopTolerance
+from flexreg.survey.links import GroupFit, Judge, Matrix, loop_error
 
 log = logging.getLogger(__name__)
 
-#: A hypothesis's weight: a trusted answer counts whole, an uncertain answer half, an
-#: alternative half its support (a runner-up's score ratio, a twin's share of the answer's).
-UNCERTAIN_WEIGHT = 0.5
 #: Most distinct placements of two groups the map's free-space check looks at: where more
 #: remain, the groups stay apart (a periodic hall offers one per bay).
 MAP_PLACEMENTS = 6
 #: Pairs of stations, one of each group, the map's check scores per placement: the nearest.
 MAP_PAIRS = 8
-
-
-@dataclass(frozen=True)
-class LoopTolerance:
-    """How far a cycle of links may be from closing: ``max_deg`` degrees, and ``max_m``
-    plus ``per_link_m`` per link metres (errors add up along a path)."""
-
-    max_deg: float
-    max_m: float
-    per_link_m: float
-
-    def metres(self, hops: int) -> float:
-        return self.max_m + self.per_link_m * hops
-
-    def agrees(self, err: tuple[float, float], hops: int) -> bool:
-        """Whether a loop error (degrees, metres) over ``hops`` links is within it."""
-        return err[0] <= self.max_deg and err[1] <= self.metres(hops)
-
-
-@dataclass(eq=False)
-class Hypothesis:
-    """One pose a link may have.
-
-    Attributes
-    ----------
-    link : Link
-    T : (4, 4) float64
-        ``T_target_source`` of the hypothesis.
-    alternative : Alternative or None
-        None for the link's answer.
-    votes : int
-        Cycles it closes (within the loop tolerance).
-    firm_votes : int
-        Those of them whose other links are all trusted answers (confident, or vouched for)
-        and none of them disputed: a trusted answer that a cycle of trusted answers
-        contradicts and none confirms may be the wrong one of that cycle, and confirms
-        nothing (:func:`cycle_votes`).
-    misfit : float
-        Over those cycles, how far each closes at best, as a share of the tolerance
-        (rotation and translation added): which of equally voted hypotheses fits tightest.
-    against : int
-        Cycles of trusted answers through it (it one of them) that do not close.
-    blamed : bool
-        The map named it the wrong link of such a cycle (:func:`_blame`): it places nothing.
-    """
-
-    link: Link
-    T: Matrix
-    alternative: Alternative | None = None
-    votes: int = 0
-    firm_votes: int = 0
-    misfit: float = 0.0
-    against: int = 0
-    blamed: bool = False
-    rests: list[tuple[Hypothesis, ...]] = field(default_factory=list)  # of its firm votes
-
-    @property
-    def vouched(self) -> bool:
-        return self.alternative is None and self.link.vouched == "hand"
-
-    @property
-    def firm(self) -> bool:
-        """A trusted answer: confident, or vouched for."""
-        return self.alternative is None and self.link.trusted
-
-    @property
-    def confident(self) -> bool:
-        """A confident link's answer (:attr:`~flexreg.survey.links.Link.confident`)."""
-        return self.alternative is None and self.link.confident
-
-    @property
-    def sited(self) -> bool:
-        """The pose of the link the surveyor's rough positions picked, alone of its fitting
-        poses within their window (:func:`flexreg.survey.positions.choose`)."""
-        return self.alternative is None and self.link.vouched == "positions"
-
-    @property
-    def plain(self) -> bool:
-        """The answer of a link uncertain only for its small overlap
-        (:attr:`~flexreg.survey.links.Link.plain`)."""
-        return self.alternative is None and self.link.plain and not self.link.vouched
-
-    @property
-    def weight(self) -> float:
-        if self.alternative is not None:
-            return UNCERTAIN_WEIGHT * float(self.alternative.support)
-        return 1.0 if self.link.trusted else UNCERTAIN_WEIGHT
-
-    def oriented(self, a: str) -> Matrix:
-        """The pose as ``T_a_other`` (``a`` one of the link's stations)."""
-        return self.T if self.link.target == a else invert(self.T)
-
-
-def hypotheses_of(link: Link) -> list[Hypothesis]:
-    """A link's hypotheses: its answer, then, for an uncertain link, its alternatives (a
-    confident verdict has decided between its poses on the dense check; the surveyor or rough
-    positions vouch for one pose)."""
-    out = [Hypothesis(link, np.asarray(link.T_target_source, dtype=np.float64))]
-    if not link.trusted and not link.vouched:
-        out += [Hypothesis(link, np.asarray(a.T_target_source), a) for a in link.alternatives]
-    return out
-
-
-# ------------------------------------------------------------------ step 1: cycle votes
-
-
-@dataclass(frozen=True)
-class Cycle:
-    """A cycle of stations and the trusted answer of each link around it (``links[i]``
-    joins ``stations[i]`` and ``stations[i + 1]``, the last the first)."""
-
-    stations: tuple[str, ...]
-    links: list[Hypothesis]
-
-    def rest(self, i: int) -> Matrix:
-        """``T_{stations[i], stations[i + 1]}`` composed along the other links."""
-        n = len(self.stations)
-        P = np.eye(4)  # T_{v[i+1], x} along v[i+1] -> v[i+2] -> ... -> v[i]
-        for j in range(1, n):
-            x = self.stations[(i + j) % n]
-            P = P @ self.links[(i + j) % n].oriented(x)
-        return invert(P)
-
-
-def _angles_deg(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Geodesic angles between the rotation blocks of two stacks of 4x4 (broadcast)."""
-    c = (np.einsum("...ji,...ji->...", A[..., :3, :3], B[..., :3, :3]) - 1.0) / 2.0
-    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
-
-
-def _cycles(adj: dict[str, set[str]]) -> Iterator[tuple[str, ...]]:
-    """Every simple cycle of three or four stations once (its smallest station first)."""
-    for a in sorted(adj):
-        for b, c in itertools.combinations(sorted(x for x in adj[a] if x > a), 2):
-            if c in adj[b]:
-                yield (a, b, c)
-    for a in sorted(adj):
-        for c in sorted(x for x in adj if x > a):
-            common = sorted(x for x in adj[a] & adj[c] if x > a)
-            for b, d in itertools.combinations(common, 2):
-                yield (a, b, c, d)
-
-
-def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> list[Cycle]:
-    """Step 1: each hypothesis's :attr:`~Hypothesis.votes` and :attr:`~Hypothesis.against`
-    (set in place). ``hyps``: the hypotheses per pair of stations. Returns the cycles of
-    three or four trusted answers that do not close (for :func:`_blame`)."""
-    adj: dict[str, set[str]] = {}
-    for pair in hyps:
-        a, b = sorted(pair)
-        adj.setdefault(a, set()).add(b)
-        adj.setdefault(b, set()).add(a)
-
-    def stack(x: str, y: str) -> tuple[list[Hypothesis], np.ndarray]:
-        hs = hyps[frozenset((x, y))]
-        return hs, np.stack([h.oriented(x) for h in hs])
-
-    n = 0
-    broken: list[Cycle] = []
-    for cyc in _cycles(adj):
-        n += 1
-        if len(cyc) == 3:  # T_ab T_bc against T_ac
-            a, b, c = cyc
-            left = [stack(a, b), stack(b, c)]
-            right = [stack(a, c)]
-        else:  # a-b-c-d: T_ab T_bc against T_ad T_dc
-            a, b, c, d = cyc
-            left = [stack(a, b), stack(b, c)]
-            right = [stack(a, d), stack(d, c)]
-        A = np.einsum("iab,jbc->ijac", left[0][1], left[1][1])
-        B = right[0][1] if len(right) == 1 else np.einsum("iab,jbc->ijac", right[0][1], right[1][1])
-        A = A.reshape(-1, 4, 4)
-        B = B.reshape(-1, 4, 4)
-        deg = _angles_deg(A[:, None], B[None, :])
-        m = np.linalg.norm(A[:, None, :3, 3] - B[None, :, :3, 3], axis=-1)
-        closes = (deg <= tol.max_deg) & (m <= tol.metres(len(cyc)))
-        if _contradict(closes, left, right):
-            edges = [hyps[frozenset((x, cyc[(i + 1) % len(cyc)]))] for i, x in enumerate(cyc)]
-            firm = [[h for h in e if h.firm] for e in edges]
-            if all(len(f) == 1 for f in firm):
-                broken.append(Cycle(cyc, [f[0] for f in firm]))
-        closing = np.argwhere(closes)
-        if not len(closing):
-            continue
-        misfit = deg / tol.max_deg + m / tol.metres(len(cyc))
-        fit: dict[int, tuple[float, Hypothesis, tuple[Hypothesis, ...] | None]] = {}
-        nl1 = len(left[1][0])
-        nr1 = len(right[1][0]) if len(right) == 2 else 1
-        for i, k in closing:
-            members = [left[0][0][i // nl1], left[1][0][i % nl1]]
-            members += (
-                [right[0][0][k]]
-                if len(right) == 1
-                else [right[0][0][k // nr1], right[1][0][k % nr1]]
-            )
-            for h in members:
-                f = float(misfit[i, k])
-                rest = tuple(o for o in members if o is not h)
-                backed = rest if all(o.firm for o in rest) else None
-                was = fit.get(id(h))
-                if was is None or (backed is not None, -f) > (was[2] is not None, -was[0]):
-                    fit[id(h)] = (f, h, backed)
-        for f, h, backed in fit.values():
-            _vote(h, f, backed)
-    closed = _tree_votes(hyps, tol)
-    log.debug("%d short cycles, %d longer ones closed", n, closed)
-    _settle_firm_votes(hyps)
-    return broken
-
-
-def _settle_firm_votes(hyps: dict[frozenset[str], list[Hypothesis]]) -> None:
-    """Firm votes only through undisputed trusted answers. A trusted answer is disputed when
-    a cycle of trusted answers through it does not close and none closes: one link of that
-    cycle is wrong and nothing says it is not this one (a confident answer into a look-alike
-    room, agreeing with the alias of every other link of the same station). One confirmed by
-    a closing cycle of trusted answers stays undisputed: the broken cycle's wrong link is
-    another."""
-    every = [h for hs in hyps.values() for h in hs]
-    disputed = {id(h) for h in every if h.firm and h.against and not h.rests}
-    for h in every:
-        h.firm_votes = sum(all(id(o) not in disputed for o in rest) for rest in h.rests)
-
-
-def _contradict(closes: np.ndarray, *sides: list[tuple[list[Hypothesis], np.ndarray]]) -> bool:
-    """A cycle whose links all have a trusted answer, and whose trusted answers do not
-    close: each of them is contradicted (:attr:`Hypothesis.against`; returns True).
-    ``closes``: which combinations of the left side's (rows) and the right side's (columns)
-    close."""
-    firm = []
-    for side in sides:
-        hs = [x[0] for x in side]
-        combos = np.ones(1, dtype=bool)
-        for lst in hs:
-            combos = np.outer(combos, [h.firm for h in lst]).ravel()
-        firm.append(combos)
-    if not (firm[0].any() and firm[1].any()) or closes[np.ix_(firm[0], firm[1])].any():
-        return False
-    for side in sides:
-        for lst in (x[0] for x in side):
-            for h in lst:
-                h.against += h.firm
-    return True
-
-
-def _vote(h: Hypothesis, misfit: float, firm: tuple[Hypothesis, ...] | None) -> None:
-    """One closing cycle for ``h``; ``firm``: the rest of the cycle when it is all trusted
-    answers (a firm vote, counted by :func:`_settle_firm_votes`), else None."""
-    h.votes += 1
-    h.misfit += misfit
-    if firm is not None:
-        h.rests.append(firm)
-
-
-def _tree_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> int:
-    """Votes of the longer cycles: the trusted answers' spanning forest (best overlap first,
-    Kruskal), and every other hypothesis closing a cycle of five or more links through it;
-    returns how many such cycles closed."""
-    up: dict[str, str] = {}
-
-    def find(x: str) -> str:
-        while up.setdefault(x, x) != x:
-            up[x] = up[up[x]]
-            x = up[x]
-        return x
-
-    firm = [h for hs in hyps.values() for h in hs if h.firm]
-    adj: dict[str, list[tuple[str, Hypothesis]]] = {}
-    in_tree: set[int] = set()
-    for h in sorted(firm, key=lambda h: -h.link.overlap):
-        a, b = find(h.link.target), find(h.link.source)
-        if a != b:
-            up[a] = b
-            in_tree.add(id(h))
-            adj.setdefault(h.link.target, []).append((h.link.source, h))
-            adj.setdefault(h.link.source, []).append((h.link.target, h))
-    closed = 0
-    for hs in hyps.values():
-        for h in hs:
-            if id(h) in in_tree:
-                continue
-            path = walk(adj, h.link.target, h.link.source)
-            if path is None or len(path) + 1 <= 4:
-                continue  # another tree, or a short cycle (counted already)
-            T = np.eye(4)  # T_target_source along the tree
-            x = h.link.target
-            for y, e in path:
-                T = T @ e.oriented(x)
-                x = y
-            err = (float(_angles_deg(T, h.T)), float(np.linalg.norm(T[:3, 3] - h.T[:3, 3])))
-            if tol.agrees(err, len(path) + 1):
-                closed += 1
-                f = err[0] / tol.max_deg + err[1] / tol.metres(len(path) + 1)
-                edges = [e for _, e in path]
-                _vote(h, f, tuple(edges))  # the rest of its cycle: the forest's trusted answers
-                for e in edges:
-                    rest = tuple(o for o in [h, *edges] if o is not e)
-                    _vote(e, f, rest if h.firm else None)
-            elif h.firm:  # a cycle of trusted answers that does not close
-                for k in [h, *(e for _, e in path)]:
-                    k.against += 1
-    return closed
 
 
 # ------------------------------------------------------------------ step 2: merges
@@ -500,11 +197,10 @@ def _placed(place: Placement, X: Matrix, g2: str, s: str) -> Matrix:
 
 
 def _fit(h: Hypothesis, place: Placement, X: Matrix, g2: str) -> tuple[float, float]:
-    """Loop error (degrees, metres) of hypothesis ``h`` where ``X`` (``T_g1_g2``) places
-    group ``g2``."""
-    return loop_error(
-        h.T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source)
-    )
+    """Loop error (degrees, metres) of hypothesis ``h`` (its :attr:`~Hypothesis.refit` when
+    it has one) where ``X`` (``T_g1_g2``) places group ``g2``."""
+    T = h.T if h.refit is None else h.refit
+    return loop_error(T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source))
 
 
 def _sets(
@@ -515,6 +211,8 @@ def _sets(
     the placement it proposes (the cycle through both and the groups' poses closes)."""
     out = []
     for c in items:
+        if c.refit is not None:
+            continue  # all the overlap fits elsewhere: it places nothing itself
         X = _proposal(c, place, g1)
         best: dict[int, tuple[float, Hypothesis]] = {id(c.link): (0.0, c)}
         for h in items:
@@ -545,6 +243,8 @@ def _medoid(s: _Set, place: Placement, g1: str, g2: str) -> _Set:
         return s
     best: tuple[float, Hypothesis, Matrix] | None = None
     for c in s.members:
+        if c.refit is not None:
+            continue
         X = _proposal(c, place, g1)
         cost = sum(_fit(h, place, X, g2)[1] for h in s.members)
         if best is None or cost < best[0]:
@@ -573,19 +273,73 @@ def _contradiction(
     and their verdicts judged them already); None when the map cannot tell for any pair."""
     c = s.centre.link
     g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
-    at = {x: _placed(place, s.X, g2, x) for x in place.members(g1) + place.members(g2)}
     own = {frozenset((h.link.target, h.link.source)) for h in s.members}
-    pairs = sorted(
-        (float(np.linalg.norm(at[a][:3, 3] - at[b][:3, 3])), a, b)
-        for a in place.members(g1)
-        for b in place.members(g2)
-        if frozenset((a, b)) not in own
-    )
-    said = [judge(a, b, invert(at[a]) @ at[b]) for d, a, b in pairs[:MAP_PAIRS] if d <= radius_m]
+    at, pairs = _nearest(place, s.X, (g1, g2), radius_m, own)
+    said = [judge(a, b, invert(at[a]) @ at[b]) for a, b in pairs]
     seen = [x for x in said if x is not None]
     if not seen:
         return None
     return max(x[0] for x in seen), max(x[1] for x in seen), max(x[2] for x in seen)
+
+
+def _nearest(
+    place: Placement,
+    X: Matrix,
+    groups: tuple[str, str],
+    radius_m: float,
+    skip: set[frozenset[str]] = frozenset(),  # type: ignore[assignment]
+) -> tuple[dict[str, Matrix], list[tuple[str, str]]]:
+    """The stations of both groups where ``X`` (``T_g1_g2``) places the second, and the
+    :data:`MAP_PAIRS` nearest pairs of stations (one of each) within ``radius_m``, but those
+    of ``skip``."""
+    g1, g2 = groups
+    at = {x: _placed(place, X, g2, x) for x in place.members(g1) + place.members(g2)}
+    pairs = sorted(
+        (float(np.linalg.norm(at[a][:3, 3] - at[b][:3, 3])), a, b)
+        for a in place.members(g1)
+        for b in place.members(g2)
+        if frozenset((a, b)) not in skip
+    )
+    return at, [(a, b) for d, a, b in pairs[:MAP_PAIRS] if d <= radius_m]
+
+
+def _refit(
+    items: list[Hypothesis],
+    place: Placement,
+    groups: tuple[str, str],
+    fit: tuple[GroupFit, float],
+    radius_m: float,
+    tol: LoopTolerance,
+) -> bool:
+    """Where all the overlap of two groups fits, from each placement a plain answer
+    (:attr:`Hypothesis.plain`) of a link between them gives, when another link's plain answer
+    places them within ``fit``'s reach (metres, at the stations: translation plus the turn
+    over ``radius_m``) of it. A doorway link may slide along a wall where its few shared
+    points fit as well (the wall's two faces, one seen by each scan): fitted on the
+    overlap of every near pair of the groups' stations (``fit``, with its normal-side rule),
+    it comes to where the right one is. An answer whose own pose is off the fitted placement
+    (beyond the loop tolerance) gets that pose as its :attr:`Hypothesis.refit`: it joins a
+    set through it (two links of different pairs of scans that reach one placement confirm
+    it, as two that agree do) but places nothing itself. Returns whether one got one."""
+    g1, g2 = groups
+    plain = [h for h in items if h.plain]
+    starts = {id(h): _proposal(h, place, g1) for h in plain}
+    todo = []
+    for h in plain:
+        errs = (_fit(f, place, starts[id(h)], g2) for f in plain if f.link is not h.link)
+        if any(m + np.radians(d) * radius_m <= fit[1] for d, m in errs):
+            todo.append(h)
+    for h in todo:
+        _, pairs = _nearest(place, starts[id(h)], groups, radius_m)
+        near = {h.link.target, h.link.source}.union(*pairs)
+        sides = [{x: place.pose[x] for x in sorted(near) if place.root[x] == g} for g in groups]
+        X = fit[0](sides[0], sides[1], starts[id(h)])
+        if X is None or tol.agrees(_fit(h, place, X, g2), 2):
+            continue
+        h.refit = invert(_placed(place, X, g2, h.link.target)) @ _placed(
+            place, X, g2, h.link.source
+        )
+    return any(h.refit is not None for h in todo)
 
 
 def _refuted(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
@@ -625,6 +379,8 @@ def _decide(
     placements; ``"hand"``, the surveyor's word; ``"alone"``, one trusted answer no loop
     checks. The last two only when ``alone`` (once no set a loop confirms is left) where a
     cycle of trusted answers contradicts them."""
+    if not sets:  # every hypothesis between them refitted elsewhere
+        return None
     rival_ratio, decisive = ratios
     top = sets[0]
     rival = _rival(sets, top, place, g2, tol)
@@ -718,6 +474,29 @@ def _blame(
     return False
 
 
+def _best(
+    memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]],
+    decide: tuple[Placement, LoopTolerance, tuple[float, float], Any],
+    alone: bool,
+) -> tuple[tuple[float, ...], str, str, _Pick] | None:
+    """The best merge of the project (:func:`_decide` per pair of groups, remembered in
+    ``memo``); ``decide``: the placement, tolerance, ratios and judge."""
+    place, tol, ratios, judge = decide
+    best: tuple[tuple[float, ...], str, str, _Pick] | None = None
+    for (g1, g2), (found, decided) in sorted(memo.items()):
+        if alone not in decided:
+            decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone)
+        pick = decided[alone]
+        if pick is None:
+            continue
+        p = pick.set
+        overlap = sum(h.link.overlap for h in p.members)
+        rank = (*p.rank[:5], -pick.contradiction, -p.misfit, p.rank[5], overlap)
+        if best is None or rank > best[0]:
+            best = (rank, g1, g2, pick)
+    return best
+
+
 def merge_groups(
     stems: list[str],
     hyps: dict[frozenset[str], list[Hypothesis]],
@@ -725,6 +504,7 @@ def merge_groups(
     ratios: tuple[float, float],
     judge: tuple[Judge, float, float, float] | None = None,
     broken: Sequence[Cycle] = (),
+    fit: tuple[GroupFit, float] | None = None,
 ) -> tuple[Placement, dict[int, Chosen]]:
     """Step 2: the groups, and what each link that merged groups was given (by link id).
 
@@ -748,12 +528,17 @@ def merge_groups(
         The cycles of trusted answers that do not close (:func:`cycle_votes`): when no merge
         is left, the map may name the wrong link of one (:func:`_blame`), and merging goes
         on without it.
+    fit : (GroupFit, float), optional
+        Where all the overlap of two groups fits, and how far apart (metres) two starts may
+        be for it to bring them together: when nothing a loop confirms is left, plain answers
+        are fitted on it (:func:`_refit`; with ``judge`` only).
     """
     place = Placement({s: s for s in stems}, {s: np.eye(4) for s in stems})
     chosen: dict[int, Chosen] = {}
     # per pair of groups, its sets and what decides them (without, with lone links): a
     # merge changes only the pairs of the two groups it joins, a blame every pair
     memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]] = {}
+    refitted: set[tuple[str, str]] = set()
     while True:
         between: dict[tuple[str, str], list[Hypothesis]] = {}
         for pair, hs in hyps.items():
@@ -764,37 +549,40 @@ def merge_groups(
                 between.setdefault(key, []).extend(
                     h for h in hs if id(h.link) not in chosen and not h.blamed
                 )
-        best: tuple[tuple[float, ...], str, str, _Pick] | None = None
         for k, items in sorted(between.items()):
             if items and k not in memo:
+                for h in items:
+                    h.refit = None
                 memo[k] = (_sets(place, *k, items, tol), {})
-        for alone in (False, True):  # what a loop confirms first, then lone trusted links
-            for (g1, g2), (found, decided) in sorted(memo.items()):
-                if alone not in decided:
-                    decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone)
-                pick = decided[alone]
-                if pick is None:
-                    continue
-                p = pick.set
-                overlap = sum(h.link.overlap for h in p.members)
-                rank = (*p.rank[:5], -pick.contradiction, -p.misfit, p.rank[5], overlap)
-                if best is None or rank > best[0]:
-                    best = (rank, g1, g2, pick)
-            if best is not None:
-                break
+        decide = (place, tol, ratios, judge)
+        best = _best(memo, decide, False)  # what a loop confirms first
+        if best is None and fit is not None and judge is not None:  # then slid doorway links
+            for k in sorted(memo.keys() - refitted):
+                refitted.add(k)
+                if _refit(between[k], place, k, fit, judge[3], tol):
+                    memo[k] = (_sets(place, *k, between[k], tol), {})
+            best = _best(memo, decide, False)
+        best = best or _best(memo, decide, True)  # then lone trusted links
         if best is None:
             if judge is not None and _blame(broken, judge, ratios[1]):
                 memo.clear()
+                refitted.clear()
                 continue
             return place, chosen
         _, g1, g2, picked = best
         memo = {k: v for k, v in memo.items() if g1 not in k and g2 not in k}
+        refitted = {k for k in refitted if g1 not in k and g2 not in k}
         how, med = picked.how, _medoid(picked.set, place, g1, g2)
         for s in place.members(g2):
             place.pose[s] = med.X @ place.pose[s]
             place.root[s] = g1
         for h in med.members:
+            if h.refit is not None:
+                continue  # its own pose is off the placement: the group's check rejects it
             # an uncertain pose agreeing with the merge closes a loop with its own link: the
             # loop confirms it (though, no independent route, it confirms nothing else)
             loop = med.firmly_confirmed or (h is not med.centre and not h.firm)
             chosen[id(h.link)] = Chosen(h, h is med.centre, how, loop)
+
+
+__all__ = ["MAP_PAIRS", "MAP_PLACEMENTS", "Chosen", "Placement", "merge_groups"]

@@ -34,17 +34,13 @@ import numpy as np
 
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.errors import InputError
+from flexreg.survey.c2c import CAPTURE_VOXELS
 from flexreg.survey.config import MAP_DOUBT_MARGIN, PRUNE_THRESHOLD, SurveyConfig
-from flexreg.survey.consensus import (
-    Hypothesis,
-    LoopTolerance,
-    Placement,
-    cycle_votes,
-    hypotheses_of,
-    merge_groups,
-)
+from flexreg.survey.consensus import Placement, merge_groups
+from flexreg.survey.hypotheses import Hypothesis, LoopTolerance, cycle_votes, hypotheses_of
 from flexreg.survey.links import (
     GraphSolution,
+    GroupFit,
     Judge,
     Link,
     Matrix,
@@ -77,7 +73,11 @@ def _consistent(err: tuple[float, float], hops: int, config: SurveyConfig) -> bo
 
 
 def _choose(
-    stems: list[str], links: list[Link], config: SurveyConfig, judge: Judge | None
+    stems: list[str],
+    links: list[Link],
+    config: SurveyConfig,
+    judge: Judge | None,
+    fit: GroupFit | None = None,
 ) -> Placement:
     """Steps 1-3 (:mod:`flexreg.survey.consensus`): the hypothesis of every pending link,
     the groups they make and their poses; links left out are rejected with why."""
@@ -96,6 +96,7 @@ def _choose(
         if judge is not None
         else None,
         broken,
+        (fit, 2 * CAPTURE_VOXELS * config.refine_voxel_m) if fit is not None else None,
     )
     for e in pending:
         c = chosen.get(id(e))
@@ -449,6 +450,7 @@ def solve_graph(
     reference: str | None = None,
     vetoes: Sequence[Veto] = (),
     judge: Judge | None = None,
+    fit: GroupFit | None = None,
 ) -> GraphSolution:
     """Steps 1-5 of this module: statuses of ``links`` (set in place), poses and groups.
 
@@ -473,6 +475,10 @@ def solve_graph(
         that relative pose (:data:`~flexreg.survey.links.Judge`); it decides between
         distinct placements of two groups and names the wrong link of a cycle of confident
         links that does not close (step 1). Default: no judge.
+    fit : callable, optional
+        ``fit(target, source, X)``: where all the overlap of two groups of stations fits
+        (:data:`~flexreg.survey.links.GroupFit`); with ``judge``, doorway links that slid
+        along a wall are fitted on it (:func:`flexreg.survey.consensus.merge_groups`).
 
     Returns
     -------
@@ -485,7 +491,7 @@ def solve_graph(
     """
     config = config if config is not None else SurveyConfig()
     dropped: dict[int, str] = {}
-    sol = _solve_once(stations, links, config, reference, dropped, judge)
+    sol = _solve_once(stations, links, config, reference, dropped, (judge, fit))
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
         cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
@@ -493,7 +499,7 @@ def solve_graph(
             break
         for e, why in cuts:
             dropped[id(e)] = why
-        sol = _solve_once(stations, links, config, reference, dropped, judge)
+        sol = _solve_once(stations, links, config, reference, dropped, (judge, fit))
     return sol
 
 
@@ -640,9 +646,10 @@ def _solve_once(
     config: SurveyConfig,
     reference: str | None,
     dropped: dict[int, str],
-    judge: Judge | None = None,
+    maps: tuple[Judge | None, GroupFit | None] = (None, None),
 ) -> GraphSolution:
-    """Steps 1-3 with the links of ``dropped`` rejected beforehand."""
+    """Steps 1-3 with the links of ``dropped`` rejected beforehand; ``maps``: the judge and
+    the group fit."""
     for e in links:
         e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
         e.loop_error_deg = e.loop_error_m = None
@@ -653,7 +660,7 @@ def _solve_once(
             e.why = dropped.get(id(e)) or e.refused or None
             if e.why is not None:
                 e.status = "rejected"
-    forest = _choose(stations, links, config, judge)
+    forest = _choose(stations, links, config, *maps)
     comp = forest.root
     ref = _reference(stations, comp, links, reference)
     members: dict[str, list[str]] = {}

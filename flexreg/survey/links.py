@@ -464,11 +464,17 @@ lands on its surfaces or in its free space; the larger share of a station's samp
 other's free space; the smaller share of a station's sample on the other's surfaces — or
 None when the two hardly see each other there."""
 
+GroupFit = Callable[[dict[str, Matrix], dict[str, Matrix], Matrix], "Matrix | None"]
+"""Where all the overlap of two groups of stations fits: ``fit(target, source, X)``, each
+group given as its stations' poses in its own frame (``{stem: T_group_station}``) and ``X``
+the start (``T_target_source`` of the groups' frames); the fitted ``T_target_source``, or None
+when too little overlaps."""
 
 __all__ = [
     "MAX_ALTERNATIVES",
     "Alternative",
     "GraphSolution",
+    "GroupFit",
     "Judge",
     "Link",
     "Matrix",

@@ -59,6 +59,7 @@ from flexreg.errors import InputError
 from flexreg.registration.check import TOLERANCE, Check, check_masks
 from flexreg.registration.fullres import full_pair_of, pose_masks
 from flexreg.stages.correspondences import derive_threshold
+from flexreg.survey.c2c import adjustment_cloud, fit_groups
 from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
 from flexreg.survey.links import Veto
 from flexreg.survey.stations import (
@@ -409,6 +410,7 @@ class PairJudge:
         self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
         self._full: dict[tuple[str, str, bytes], tuple[float, float, int]] = {}
+        self._fits: dict[bytes, Matrix | None] = {}
         self._kept: dict[str, NDArray[np.float64]] | None = None  # read on first use
         self._new = 0
         self._used: set[str] = set()  # the kept looks this run asked for
@@ -545,6 +547,32 @@ class PairJudge:
             return None
         ka, kb = (os.path.basename(self.files[s]).removesuffix(PREPARED_SUFFIX) for s in (a, b))
         return f"{ka}|{kb}|{pose.hex()}"
+
+    def fit_groups(
+        self, target: dict[str, Matrix], source: dict[str, Matrix], X: Matrix
+    ) -> Matrix | None:
+        """Where all the overlap of two groups' stations fits, from ``X`` (``T_target_source``
+        of the groups' frames; each group given as its stations' poses in its frame): their
+        adjustment clouds (made here when the final alignment has not yet) aligned by
+        :func:`~flexreg.survey.c2c.fit_groups`. None when a station has no prepared file or
+        too few points overlap. Answers are remembered per stations and poses (see
+        :data:`~flexreg.survey.links.GroupFit`)."""
+        X = np.asarray(X, dtype=np.float64)
+        key = b"".join(
+            s.encode() + _pose_key(P) for g in (target, source) for s, P in sorted(g.items())
+        ) + _pose_key(X)
+        if key not in self._fits:
+            voxel = self.config.refine_voxel_m
+            try:
+                sides = [
+                    [(adjustment_cloud(self.files[s], voxel), P) for s, P in sorted(g.items())]
+                    for g in (target, source)
+                ]
+                self._fits[key] = fit_groups(sides[0], sides[1], X, voxel)
+            except (KeyError, ValueError, CacheEntryError) as e:
+                log.debug("group fit %s <- %s: %s", sorted(target), sorted(source), e)
+                self._fits[key] = None
+        return self._fits[key]
 
     def __call__(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, float] | None:
         """How much ``a`` and ``b`` contradict each other at ``T_a_b`` (see

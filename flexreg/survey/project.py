@@ -589,16 +589,14 @@ def _link_rounds(
     progress: Progress,
     timings: dict[str, float],
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
-    """The links of the candidates and the graph they make, then the proximity rounds
-    (``stores``: the prepared files and the stored poses; ``plan``: what was given, the
-    candidates, the place-recognition scores and the most links). Rough positions (or the
-    stored poses, declared rough by ``stored_sigma_m``) seed the links and decide between
-    each link's poses before every solve. Returns the links, the solution, the
-    glances and the map's loop judge; the solves' seconds are added to ``timings["graph"]``."""
+    """The links of the candidates and their graph, then the proximity rounds (``stores``:
+    prepared files, stored poses; ``plan``: what was given, candidates, place-recognition
+    scores, most links). Rough positions (or rough stored poses) seed the links and decide
+    between each link's poses. Returns the links, solution, glances and the map's judge."""
 
     def solve(found: list[Link]) -> GraphSolution:
         t = time.perf_counter()
-        sol = solve_graph(stems, found, config, reference=reference, judge=judge)
+        sol = solve_graph(stems, found, config, reference=reference, judge=judge, fit=fit)
         timings["graph"] = timings.get("graph", 0.0) + time.perf_counter() - t
         return sol
 
@@ -607,6 +605,7 @@ def _link_rounds(
     priors = given.positions or stored_positions(stored, config.stored_sigma_m)
     found = _register(client, cands, files, config, progress, stored)
     glances, judge = _glances(client, stems, files, config, progress)
+    fit = judge.fit_groups if judge is not None else None
     budget = max_links - len(found) if given.automatic else 0  # a pairs CSV: its pairs only
     found = _positioned(client, found, stores, config, priors, progress, (stems, budget))
     sol = solve(found)
@@ -733,7 +732,8 @@ def _map_check(
             break
         vetoes.extend(found)
         log.info("map check: %d pair(s) of placed stations contradict each other", len(found))
-        sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge)
+        sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge,
+                          fit=judge.fit_groups if judge else None)  # fmt: skip
     return sol, looks
 
 

@@ -334,8 +334,10 @@ def _refit(
         near = {h.link.target, h.link.source}.union(*pairs)
         sides = [{x: place.pose[x] for x in sorted(near) if place.root[x] == g} for g in groups]
         X = fit[0](sides[0], sides[1], starts[id(h)])
-        if X is None or tol.agrees(_fit(h, place, X, g2), 2):
+        if X is None or tol.agrees(err := _fit(h, place, X, g2), 2):
             continue
+        log.debug("%s <- %s fitted on its groups' overlap: its own pose %.3f deg / %.3f m off",
+                  h.link.target, h.link.source, *err)  # fmt: skip
         h.refit = invert(_placed(place, X, g2, h.link.target)) @ _placed(
             place, X, g2, h.link.source
         )

@@ -507,6 +507,7 @@ def test_a_doorway_link_slid_along_a_wall_reaches_the_right_one_fitted_on_all_ov
     np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
     assert right.status == "accepted" and off.status == "rejected"
     assert off.loop_error_m is not None and 0.13 < off.loop_error_m < 0.15
+    assert (off.why or "").startswith("slid")
     assert all(s == ["s3"] and {"s1", "s2"} <= set(t) for t, s in fit.calls)
     both = [slid("s2", [0, 0.1, 0]), slid("s1", [0.14, 0, 0])]
     sol = solve_graph(sorted(P), [*base, *both], SurveyConfig(), reference="s0",

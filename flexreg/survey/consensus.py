@@ -104,8 +104,9 @@ class Placement:
 @dataclass(frozen=True, eq=False)
 class Chosen:
     """What a merge gave a link: its hypothesis, whether it is the merge's own link (the
-    others of its set close loops with it), what decided (``"loop"``, ``"map"``) and
-    whether a loop confirms it."""
+    others of its set close loops with it), what decided (``"loop"``, ``"map"``; ``"fit"``
+    for a link whose own pose is off the placement its fitted pose joined, :func:`_refit`)
+    and whether a loop confirms it."""
 
     hypothesis: Hypothesis
     centre: bool
@@ -579,8 +580,9 @@ def merge_groups(
             place.pose[s] = med.X @ place.pose[s]
             place.root[s] = g1
         for h in med.members:
-            if h.refit is not None:
-                continue  # its own pose is off the placement: the group's check rejects it
+            if h.refit is not None:  # its own pose is off the placement: it is rejected
+                chosen[id(h.link)] = Chosen(h, False, "fit", False)
+                continue
             # an uncertain pose agreeing with the merge closes a loop with its own link: the
             # loop confirms it (though, no independent route, it confirms nothing else)
             loop = med.firmly_confirmed or (h is not med.centre and not h.firm)

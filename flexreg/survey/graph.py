@@ -100,6 +100,10 @@ def _choose(
     )
     for e in pending:
         c = chosen.get(id(e))
+        if c is not None and c.how == "fit":
+            P_t, P_s = place.pose[e.target], place.pose[e.source]
+            _reject(e, SLID, loop_error(np.asarray(e.T_target_source), P_t, P_s))
+            continue
         if c is not None:
             if c.hypothesis.alternative is not None:
                 e.take(c.hypothesis.alternative, "the map" if c.how == "map" else "the loop")
@@ -132,6 +136,13 @@ def _choose(
             )
     return place
 
+
+#: Why a doorway link is left out when fitted on all the overlap it joins another's placement.
+SLID = (
+    "slid (along a wall, where its few shared points fit too): fitted on all the overlap of "
+    "the two groups it joins, it comes to where another doorway link places them, and its "
+    "own pose is off that by its loop error"
+)
 
 #: Why a confident link between two groups placed nothing when confident links disagree.
 CONTESTED = (
@@ -328,6 +339,7 @@ _OUTCOMES = (
     ("uncertain (see the link's reasons)", "uncertain with no loop to confirm them"),
     ("fits ", "fit several poses (look-alike rooms or bays)"),
     ("the group's other links place", "uncertain and at odds with their group's other links"),
+    ("slid (along a wall", "slid along a wall (another doorway link places them)"),
     ("no loop checks it", "confident but alone (a single link places no station on its own)"),
     (CONTESTED, "confident in a loop that does not close"),
     ("cut by the map check", "cut by the map check"),

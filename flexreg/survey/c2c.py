@@ -516,14 +516,16 @@ def fit_groups(
     """
     from scipy.spatial import cKDTree
 
-    def union(group: Sequence[tuple[str, NDArray[np.float64]]], sparse: bool) -> list[Any]:
+    def union(
+        group: Sequence[tuple[str, NDArray[np.float64]]], sparse: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         ps, ns, lever = [], [], 1.0
         for path, P in group:
             p, n, r = read_cloud(path, sparse=sparse)
             ps.append(p @ P[:3, :3].T + P[:3, 3])
             ns.append(n @ P[:3, :3].T)
             lever = max(lever, r)
-        return [np.vstack(ps), np.vstack(ns), lever]
+        return np.vstack(ps), np.vstack(ns), lever
 
     tgt, tgt_n, _ = union(target, False)
     src, src_n, lever_m = union(source, True)

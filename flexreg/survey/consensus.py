@@ -59,9 +59,8 @@ thresholds decide.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Container, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -288,7 +287,7 @@ def _nearest(
     X: Matrix,
     groups: tuple[str, str],
     radius_m: float,
-    skip: set[frozenset[str]] = frozenset(),  # type: ignore[assignment]
+    skip: Container[frozenset[str]] = (),
 ) -> tuple[dict[str, Matrix], list[tuple[str, str]]]:
     """The stations of both groups where ``X`` (``T_g1_g2``) places the second, and the
     :data:`MAP_PAIRS` nearest pairs of stations (one of each) within ``radius_m``, but those
@@ -479,7 +478,9 @@ def _blame(
 
 def _best(
     memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]],
-    decide: tuple[Placement, LoopTolerance, tuple[float, float], Any],
+    decide: tuple[
+        Placement, LoopTolerance, tuple[float, float], tuple[Judge, float, float, float] | None
+    ],
     alone: bool,
 ) -> tuple[tuple[float, ...], str, str, _Pick] | None:
     """The best merge of the project (:func:`_decide` per pair of groups, remembered in

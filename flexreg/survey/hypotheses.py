@@ -185,7 +185,8 @@ def _cycles(adj: dict[str, set[str]]) -> Iterator[tuple[str, ...]]:
 def cycle_votes(hyps: dict[frozenset[str], list[Hypothesis]], tol: LoopTolerance) -> list[Cycle]:
     """Step 1: each hypothesis's :attr:`~Hypothesis.votes` and :attr:`~Hypothesis.against`
     (set in place). ``hyps``: the hypotheses per pair of stations. Returns the cycles of
-    three or four trusted answers that do not close (for :func:`_blame`)."""
+    three or four trusted answers that do not close (the map may blame one of its links:
+    :func:`flexreg.survey.consensus.merge_groups`)."""
     adj: dict[str, set[str]] = {}
     for pair in hyps:
         a, b = sorted(pair)

@@ -590,9 +590,9 @@ def _link_rounds(
     timings: dict[str, float],
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
     """The links of the candidates and their graph, then the proximity rounds (``stores``:
-    prepared files, stored poses; ``plan``: what was given, candidates, place-recognition
-    scores, most links). Rough positions (or rough stored poses) seed the links and decide
-    between each link's poses. Returns the links, solution, glances and the map's judge."""
+    prepared files, stored poses; ``plan``: given, candidates, place scores, most links).
+    Rough positions (or rough stored poses) seed links and decide between their poses.
+    Returns links, solution, glances, the map's judge; solves' seconds: timings["graph"]."""
 
     def solve(found: list[Link]) -> GraphSolution:
         t = time.perf_counter()
@@ -733,7 +733,7 @@ def _map_check(
         vetoes.extend(found)
         log.info("map check: %d pair(s) of placed stations contradict each other", len(found))
         sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge,
-                          fit=judge.fit_groups if judge else None)  # fmt: skip
+                          fit=judge.fit_groups if judge is not None else None)  # fmt: skip
     return sol, looks
 
 

@@ -7,12 +7,16 @@ on: the command would finish and write its outputs as though nothing had happene
 handlers here also note the signal, and :func:`raise_if_signalled` (at the end of every
 stage, at each survey progress event, and before the outputs are renamed into place) raises
 it again, so a command interrupted at any moment writes nothing and exits 130 / 143.
+The interpreter's "Exception ignored ... Traceback" report of such a swallowed raise is
+silenced (:func:`_unraisable`): the command ends with its one line, as for any signal.
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 from types import FrameType
+from typing import Any
 
 __all__ = ["Terminated", "clear", "install", "raise_if_signalled", "signalled"]
 
@@ -24,6 +28,8 @@ class Terminated(BaseException):
 
 #: the signal received and not yet acted on (0: none)
 _pending: list[int] = [0]
+#: the unraisable-exception report in place before :func:`install` (the interpreter's own)
+_report: list[Any] = [sys.__unraisablehook__]
 
 
 def _raise_for(signum: int) -> None:
@@ -38,9 +44,23 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
     _raise_for(signum)
 
 
+def _unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook``: a raise of this module's handler that landed where Python can
+    only drop it (a finaliser, a ctypes callback such as numba's cache writer) is not
+    reported, since the signal is still pending and ends the command at its next check;
+    anything else goes to the report in place before (the interpreter's own)."""
+    if _pending[0] and isinstance(unraisable.exc_value, KeyboardInterrupt | Terminated):
+        return
+    _report[0](unraisable)
+
+
 def install() -> None:
     """Handle SIGTERM, and SIGINT unless the process was started with SIGINT ignored (a job
-    run in the background of a non-interactive shell keeps ignoring Ctrl-C, as Python would)."""
+    run in the background of a non-interactive shell keeps ignoring Ctrl-C, as Python would);
+    a swallowed raise of either is not reported as "Exception ignored"."""
+    if sys.unraisablehook is not _unraisable:
+        _report[0] = sys.unraisablehook
+        sys.unraisablehook = _unraisable
     signal.signal(signal.SIGTERM, _on_signal)
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_signal)

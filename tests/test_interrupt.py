@@ -298,7 +298,7 @@ def cli_signals():
     sys.unraisablehook = hook
 
 
-def test_a_swallowed_signal_is_not_reported_but_other_errors_are(capsys):
+def test_a_swallowed_signal_is_not_reported_but_other_errors_are(cli_signals, capsys):
     """A signal raised in a finaliser or a ctypes callback (numba's cache writer, met by a
     SIGTERM in CI) is dropped by Python with an "Exception ignored ... Traceback" report; the
     command still ends with its one line, so that report is silenced. Any other exception a
@@ -306,34 +306,23 @@ def test_a_swallowed_signal_is_not_reported_but_other_errors_are(capsys):
     hook in place before."""
     from types import SimpleNamespace
 
-    from flexreg.cli import signals
-
-    old = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
-    hook = sys.unraisablehook
     seen: list = []
-    try:
-        sys.unraisablehook = seen.append
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        signals.install()
-        signals.install()  # twice (one process, two commands): still one report in place
-        _Finaliser()  # its KeyboardInterrupt is dropped: pending, not reported
-        assert signals.signalled() == signal.SIGINT
-        assert seen == []
+    sys.unraisablehook = seen.append  # the hook in place before (the fixture restores it)
+    cli_signals.install()
+    cli_signals.install()  # twice (one process, two commands): still one report in place
+    _Finaliser()  # its KeyboardInterrupt is dropped: pending, not reported
+    assert cli_signals.signalled() == signal.SIGINT
+    assert seen == []
 
-        class _Broken:
-            def __del__(self) -> None:
-                raise ValueError("a finaliser's own error")
+    class _Broken:
+        def __del__(self) -> None:
+            raise ValueError("a finaliser's own error")
 
-        _Broken()
-        assert [type(u.exc_value) for u in seen] == [ValueError]
-        signals.clear()
-        sys.unraisablehook(SimpleNamespace(exc_value=KeyboardInterrupt()))
-        assert [type(u.exc_value) for u in seen] == [ValueError, KeyboardInterrupt]
-    finally:
-        signals.clear()
-        signal.signal(signal.SIGINT, old[0])
-        signal.signal(signal.SIGTERM, old[1])
-        sys.unraisablehook = hook
+    _Broken()
+    assert [type(u.exc_value) for u in seen] == [ValueError]
+    cli_signals.clear()
+    sys.unraisablehook(SimpleNamespace(exc_value=KeyboardInterrupt()))
+    assert [type(u.exc_value) for u in seen] == [ValueError, KeyboardInterrupt]
     assert "Traceback" not in capsys.readouterr().err
 
 

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import signal
 import sys
+from collections.abc import Callable
 from types import FrameType
-from typing import Any
 
 __all__ = ["Terminated", "clear", "install", "raise_if_signalled", "signalled"]
 
@@ -29,7 +29,7 @@ class Terminated(BaseException):
 #: the signal received and not yet acted on (0: none)
 _pending: list[int] = [0]
 #: the unraisable-exception report in place before :func:`install` (the interpreter's own)
-_report: list[Any] = [sys.__unraisablehook__]
+_report: list[Callable[[sys.UnraisableHookArgs], object]] = [sys.__unraisablehook__]
 
 
 def _raise_for(signum: int) -> None:
@@ -44,7 +44,7 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
     _raise_for(signum)
 
 
-def _unraisable(unraisable: Any) -> None:
+def _unraisable(unraisable: sys.UnraisableHookArgs) -> None:
     """``sys.unraisablehook``: a raise of this module's handler that landed where Python can
     only drop it (a finaliser, a ctypes callback such as numba's cache writer) is not
     reported, since the signal is still pending and ends the command at its next check;

@@ -12,7 +12,10 @@ from flexreg.core.range_image import from_depth
 from flexreg.core.transforms import invert, make_transform, rotation_about_axis
 from flexreg.registration.check import TOLERANCE
 from flexreg.registration.fullres import (
+    BEHIND_COS,
     FullPair,
+    FullView,
+    even_solid_angle,
     full_masks,
     full_score,
     full_scores,
@@ -39,9 +42,14 @@ def _view(camera, rng):
     return full_view(image, measured_image(image), range_slack(image))
 
 
-def _reference(view, points, own, T, thr, coarse):
+def _reference(view, points, own, T, thr, coarse, normals=None):
     """The module's tests, point by point through the camera model's own projection."""
     q = points @ T[:3, :3].T + T[:3, 3]
+    behind = np.zeros(len(points), bool)
+    if normals is not None:  # turned normals pointing away from the view's scanner
+        n = normals @ T[:3, :3].T
+        with np.errstate(invalid="ignore"):
+            behind = np.einsum("ij,ij->i", n, q) > BEHIND_COS * np.linalg.norm(q, axis=1)
     u, v, d = view.image.camera.project(q)
     W, H = view.image.width, view.image.height
     explained = np.zeros(len(points), bool)
@@ -60,7 +68,7 @@ def _reference(view, points, own, T, thr, coarse):
         tol = base + rel * d[i] + float(view.slack[iv, iu])
         free_m, free_rel = TOLERANCE.free(thr)
         free = free_m + free_rel * d[i] + own[i]
-        explained[i] = abs(e) < tol
+        explained[i] = abs(e) < tol and not behind[i]
         open_space[i] = d[i] < view.nearest[iv, iu] - free
         score += (1.0 - (e / tol) ** 2 if explained[i] else 0.0) - 3.0 * open_space[i]
     return explained, open_space, score
@@ -76,19 +84,24 @@ def _pose(rng, scale=0.3):
 def test_compiled_checks_equal_the_camera_models_tests(name):
     rng = np.random.default_rng(7)
     target, source = _view(CAMERAS[name], rng), _view(CAMERAS[name], rng)
-    tested = 0
+    tested = behind = 0
     for _ in range(4):
         T = _pose(rng)
-        ok, bad = full_masks(target, source.points, source.point_slack, T, 0.05)
-        ok_ref, bad_ref, _ = _reference(target, source.points, source.point_slack, T, 0.05, False)
-        np.testing.assert_array_equal(ok, ok_ref)
-        np.testing.assert_array_equal(bad, bad_ref)
-        for coarse in (False, True):
-            s = full_score(target, source.points, source.point_slack, T, 0.05, coarse=coarse)
-            ref = _reference(target, source.points, source.point_slack, T, 0.05, coarse)[2]
-            assert s == pytest.approx(ref, rel=1e-12, abs=1e-9)
-        tested += int(ok.sum()) + int(bad.sum())
+        args = (source.points, source.point_slack, T, 0.05)
+        # the normals as they are, and turned round: the points seen from behind
+        for normals in (None, source.normals, -source.normals):
+            ok, bad = full_masks(target, *args, normals=normals)
+            ok_ref, bad_ref, _ = _reference(target, *args, False, normals)
+            np.testing.assert_array_equal(ok, ok_ref)
+            np.testing.assert_array_equal(bad, bad_ref)
+            for coarse in (False, True):
+                s = full_score(target, *args, coarse=coarse, normals=normals)
+                ref = _reference(target, *args, coarse, normals)[2]
+                assert s == pytest.approx(ref, rel=1e-12, abs=1e-9)
+            tested += int(ok.sum()) + int(bad.sum())
+        behind += int(full_masks(target, *args)[0].sum() - ok.sum())
     assert tested > 100  # the poses put points on both tests
+    assert behind > 50  # and turned round, many explained ones are seen from behind
 
 
 def test_no_points_and_no_camera_score_nothing():
@@ -229,3 +242,55 @@ def test_open_space_between_a_clouds_returns_is_bounded_by_the_returns():
     assert not opens(views["grid"], 20, 20)  # the sky two columns away: unknown
     explained, _ = full_masks(views["sparse"], ray(20, 20, 10.0), np.zeros(1), np.eye(4), 0.05)
     assert explained[0]
+
+
+def _facing_wall(x_m: float, side: float) -> FullView:
+    """A panorama of one wall, the plane ``x = x_m`` (own frame), seen where the rays head
+    its way (``side`` +1: towards +x)."""
+    cam = SphericalCamera.from_reference(256, 128, 0.3, np.pi - 0.3)
+    rays = cam.rays()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(side * rays[..., 0] > 0.3, x_m / rays[..., 0], np.nan)
+    image = from_depth(r, cam)
+    return full_view(image, measured_image(image), range_slack(image))
+
+
+def test_a_walls_two_faces_do_not_explain_a_pose_slid_by_its_thickness():
+    # a 14 cm wall between two rooms: the target scanner 2 m before its face at x = 2, the
+    # source 2 m beyond its other face at x = 2.14 (the truth: the source at x = 4.14).
+    # Slid 14 cm, the source's face lands on the target's: every point fits in range, but
+    # each faces away from the scanner that would see it
+    target, source = _facing_wall(2.0, +1.0), _facing_wall(-2.0, -1.0)
+    pair = FullPair(target, source)
+    truth, slid = make_transform(np.eye(3), [4.14, 0, 0]), make_transform(np.eye(3), [4.0, 0, 0])
+    n = len(source.points)
+    assert n > 1000
+    bare, _ = full_masks(target, source.points, source.point_slack, slid, 0.05)
+    assert bare.mean() > 0.9  # without the side test the slid pose explains the wall
+    known = [np.isfinite(v.normals).all(axis=1) for v in (source, target)]
+    assert known[0].mean() > 0.95  # the image's border rows and columns have no normal
+    for T in (truth, slid):
+        (fwd, fwd_open), (bwd, bwd_open) = pose_masks(pair, T, 0.05)
+        assert not fwd[known[0]].any() and not bwd[known[1]].any()
+        assert not fwd_open.any() and not bwd_open.any()  # behind a wall is not open space
+    for coarse in (False, True):
+        args = (target, source.points, source.point_slack, slid, 0.05)
+        sided = full_score(*args, coarse=coarse, normals=source.normals)
+        assert sided < 0.05 * full_score(*args, coarse=coarse)
+
+
+def test_panorama_rows_keep_their_share_of_solid_angle_evenly_spaced():
+    # rows at 30, 60 and 90 degrees from the zenith: pixels of sin(theta) = 1/2, 0.87 and 1 of
+    # an equator pixel's solid angle, so 4 (every other), 6 or 7, and all 8 of each row
+    cam = SphericalCamera(8, 3, -np.pi, np.pi, np.pi / 6, 2 * np.pi / 3)
+    image = from_depth(np.full((3, 8), 5.0), cam)
+    keep = even_solid_angle(image).reshape(3, 8)
+    assert keep[0].sum() == 4 and set(np.diff(np.flatnonzero(keep[0]))) == {2}
+    assert keep[1].sum() in (6, 7) and keep[2].all()
+    # a pinhole's pixels off its axis cover less: the centre keeps all, the corners fewer
+    pin = from_depth(np.full((60, 80), 3.0), CAMERAS["pinhole"])
+    kept = even_solid_angle(pin).reshape(60, 80)
+    assert kept[25:35, 35:45].mean() > 0.97 and kept[:10, :10].mean() < 0.6
+    # an image of no pixels keeps none; the full view's points are the kept ones
+    assert even_solid_angle(from_depth(np.full((3, 8), np.nan), cam)).shape == (0,)
+    assert len(full_view(image, measured_image(image), range_slack(image)).points) <= 19

@@ -142,3 +142,33 @@ def test_projective_icp_pairs_no_point_with_the_back_of_a_wall():
     r = projective_icp(target, wall - [0, 0, 0.5], ahead, max_distance_m=0.3, facing=True)
     moved = (wall - [0, 0, 0.5]) @ r.T_target_source[:3, :3].T + r.T_target_source[:3, 3]
     assert r.fitness > 0.9 and np.abs(moved[:, 2] - 2.0).max() < 1e-3
+
+
+def _ceiling(balance_rows: slice, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Normals of a ceiling 1.5 m above a panoramic scanner (2 mm range noise) and its rays."""
+    cam = SphericalCamera.from_reference(512, 256, 0.0, np.pi / 2)
+    rays = cam.rays()
+    rng = np.random.default_rng(seed)
+    r = 1.5 / rays[..., 2] + rng.normal(0.0, 0.002, rays.shape[:2])
+    img = RangeImage(
+        xyz=rays * r[..., None],
+        valid=np.ones(r.shape, bool),
+        index=np.arange(r.size).reshape(r.shape),
+        camera=cam,
+    )
+    return grid_normals(img)[balance_rows], rays[balance_rows]
+
+
+def test_grid_normals_straight_above_a_panorama_widen_their_row_offset():
+    # rows from 2 to 20 degrees off the zenith (neighbours a pixel apart in a row of 512
+    # columns lie 0.6 to 7 mm apart): with those neighbours the 2 mm of range noise tilts a
+    # quarter of the normals beyond 25 degrees; with the row offset widened until the rows'
+    # rays span as much angle as the columns', under 1 %
+    n, _ = _ceiling(slice(6, 57))
+    down = -n[..., 2]
+    assert np.isfinite(down).all()
+    assert np.mean(down < np.cos(np.radians(25.0))) < 0.02
+    assert np.median(down) > np.cos(np.radians(5.0))
+    # near the horizon the row neighbours already span the columns' angle: sharp as before
+    n, _ = _ceiling(slice(120, 128))
+    assert np.quantile(-n[..., 2], 0.01) > np.cos(np.radians(5.0))

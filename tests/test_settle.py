@@ -83,7 +83,7 @@ def test_facing_score_peaks_on_the_niche():
     best at the true position; a pose a metre or more off scores clearly less."""
     pair, T = _full_pair(*CORRIDOR, NICHE, _station(0, 0), _station(-1.5, 0.3))
     axis = np.array([1.0, 0.0, 0.0])
-    score = _FacingScorer.of(pair, T, axis, 0.02)
+    score = _FacingScorer.facing(pair, T, axis, 0.02)
     assert 0 < len(score.points) < len(pair.source.points) / 5
     offsets = np.arange(-4.0, 4.01, 0.25)
     s = np.array([score(make_transform(np.eye(3), d * axis) @ T) for d in offsets])

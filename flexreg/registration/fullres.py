@@ -3,9 +3,10 @@
 The dense check's duel (:func:`flexreg.registration.check.duel`) counts, on each scan's even
 sample of about 20 000 points, the points one pose explains and the other puts in open space.
 A small cue near the stations (a forklift, a niche, a bookshelf) holds a few dozen of them,
-no more than the edges of a repeating structure put on both sides. Here every valid pixel of
-both range images takes part, so objects near the scanners weigh what they cover, and the
-tests are built so that nothing but a real disagreement counts:
+no more than the edges of a repeating structure put on both sides. Here the valid pixels of
+both range images take part, one per about equal solid angle, so objects near the scanners
+weigh what they cover, and the tests are built so that nothing but a real disagreement
+counts:
 
 * a point *explains* a pose when the other scanner measured its range along its ray (half an
   inlier threshold plus 0.2 % of the range plus the pixel's range slack);
@@ -19,7 +20,12 @@ tests are built so that nothing but a real disagreement counts:
   pixel is a direction never sampled, and the square's returns alone bound the open space
   around a returned pixel;
 * points on their own scan's silhouettes (range slack above :data:`MAX_SLACK_PER_M` of their
-  range) take no part.
+  range) take no part, and each scan's points are thinned to one per about equal solid angle
+  (:func:`even_solid_angle`: a panorama's rows near its poles hold many times the points of
+  its equator per square metre);
+* a point explains nothing where the other scanner would have seen its surface from behind
+  (:data:`BEHIND_COS`): a wall's two faces, seen from the rooms
+  either side, do not fit.
 
 Under two poses of a symmetric or repeating scene the same surfaces fit, so both poses explain
 the same points: only where they disagree, on the cue, does one pose explain what the other
@@ -42,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from flexreg.core.camera import PinholeCamera, SphericalCamera
 from flexreg.core.range_image import RangeImage
 from flexreg.core.transforms import invert
 from flexreg.registration.check import TOLERANCE, Masks
@@ -58,6 +65,15 @@ MAX_SLACK_PER_M = 0.05
 #: of a distant scanner while the near one resolves it (3 x 3 left 30-200 such points on
 #: right poses of the synthetic tunnels and arcades, 5 x 5 none to two)
 NEIGHBOURHOOD = 5
+
+#: a point whose normal (towards its own scanner), turned into the other scan's frame,
+#: points away from that scanner by more than this cosine (about 15 degrees beyond grazing)
+#: lies on a surface that scanner saw from behind, if at all: it explains nothing there. The
+#: two faces of an interior wall, seen from the rooms either side, otherwise fit a pose slid
+#: by the wall's thickness (10.6 % of a doorway pair's points at such a pose, about 1 % on
+#: right poses: thin boards seen from both sides, normals a few degrees off on grazing
+#: surfaces; docs/benchmarks.md)
+BEHIND_COS = 0.25
 
 
 @dataclass(eq=False)
@@ -78,7 +94,8 @@ class FullView:
         :func:`~flexreg.stages.projection.sampling_gaps`, the smallest over the square's
         returns where the pixel itself has one (``-inf`` where it has none).
     points : (N, 3) float32 or float64 (the image's type), metres
-        Its valid points off its own silhouettes (see :data:`MAX_SLACK_PER_M`).
+        Its valid points off its own silhouettes (see :data:`MAX_SLACK_PER_M`), thinned to
+        about one per equal solid angle (:func:`even_solid_angle`).
     point_slack : (N,) float32 or float64, metres
         Their own range slack.
     normals : (N, 3) float32 (the normals' type)
@@ -150,8 +167,40 @@ def full_view(
     pts = image.xyz[valid]
     own = np.asarray(slack)[valid]
     keep = own <= max_slack_per_m * np.sqrt(np.einsum("ij,ij->i", pts, pts, dtype=np.float64))
+    keep &= even_solid_angle(image)
     n = grid_normals(image) if normals is None else normals
     return FullView(image, measured, slack, nearest, pts[keep], own[keep], n[valid][keep])
+
+
+def even_solid_angle(image: RangeImage) -> NDArray[np.bool_]:
+    """Which valid pixels (row-major, as ``image.xyz[image.valid]``) to keep so that each kept
+    one stands for about the same solid angle.
+
+    A panorama's pixel covers ``sin(theta)`` of the solid angle of one on its equator (eq. 7:
+    equal steps in azimuth and polar angle), so the ceiling straight above a scanner holds
+    ten times the points per square metre of its walls at the same range; a pinhole's pixel
+    ``cos^3`` of its principal ray's (eq. 1). Counted point by point, a full-resolution test
+    then lets a pose win by laying one scan's dense patch above its scanner into a doorway
+    the other scanner sees the ceiling through (docs/benchmarks.md). Each row keeps that share
+    of its pixels, evenly spaced (the shares' running sum over the pixels in row-major order:
+    a pixel is kept where it passes a whole number); an image without a camera keeps all.
+
+    Returns
+    -------
+    (N,) bool
+    """
+    cam = image.camera
+    v, u = np.nonzero(image.valid)
+    if isinstance(cam, SphericalCamera):
+        share = np.abs(np.sin(cam.theta_min + v * cam.dtheta))
+    elif isinstance(cam, PinholeCamera):
+        x, y = cam.normalized(u.astype(np.float64), v.astype(np.float64))
+        share = (1.0 + x * x + y * y) ** -1.5
+    else:
+        return np.ones(len(v), dtype=bool)
+    # from a quarter, so that no common share (a half, a third) lands on whole numbers
+    passed = np.floor(np.cumsum(share) + 0.25)
+    return np.asarray(np.diff(passed, prepend=0.0) > 0)
 
 
 #: points a full-resolution check projects together before testing them: the projections of a
@@ -201,6 +250,7 @@ def _check_loop(
     spherical,
     points,
     own,
+    normals,
     R,
     t,
     cam,
@@ -221,8 +271,9 @@ def _check_loop(
     H, W = measured.shape[0], measured.shape[1]
     wrap = spherical and cam[4] > 0.5
     masks = explained.shape[0] == points.shape[0]
+    sided = normals.shape[0] == points.shape[0]
     K = t.shape[0]
-    fine_rel, free_k, free_rel = tolerance
+    fine_rel, free_k, free_rel, behind_cos = tolerance
     free_m = free_k * threshold_m
     explain_m = free_m if coarse else threshold_m / 2
     explain_rel = free_rel if coarse else fine_rel
@@ -237,6 +288,14 @@ def _check_loop(
         for j in range(m):
             own_i = np.float64(own[i0 + j])
             ok = bad = False
+            gx = gy = gz = 0.0  # its normal turned into the view's frame (none: no side test)
+            if sided:
+                a0, a1 = np.float64(normals[i0 + j, 0]), np.float64(normals[i0 + j, 1])
+                a2 = np.float64(normals[i0 + j, 2])
+                if math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2):
+                    gx = R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2
+                    gy = R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2
+                    gz = R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2
             for k in range(K):
                 d = D[k, j]
                 if not d > 0.0:
@@ -250,7 +309,12 @@ def _check_loop(
                 e = d - np.float64(measured[iv, iu])
                 tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
                 free = free_m + free_rel * d + own_i
-                ok = abs(e) < tol
+                qx, qy, qz = Q[0, j] + t[k, 0], Q[1, j] + t[k, 1], Q[2, j] + t[k, 2]
+                # seen from behind: its surface faces away from the view's scanner
+                behind = gx * qx + gy * qy + gz * qz > behind_cos * math.sqrt(
+                    qx * qx + qy * qy + qz * qz
+                )
+                ok = abs(e) < tol and not behind
                 bad = d < nearest[iv, iu] - free
                 r = e / tol
                 total[k] += (1.0 - r * r) if ok else 0.0  # a select, not a branch
@@ -269,6 +333,7 @@ def _check_loop(
 def _check_full(
     points,
     own,
+    normals,
     R,
     t,
     kind,
@@ -287,7 +352,8 @@ def _check_full(
     """The tests of :func:`full_masks` and the soft score of :func:`full_score` in one pass over
     the points, without temporaries, for the poses ``(R, t[k])`` at the tolerances
     ``tolerance`` (``fine_rel, free_k, free_rel`` of a
-    :class:`~flexreg.registration.check.Tolerance`): each point turned by ``R``
+    :class:`~flexreg.registration.check.Tolerance`, then the cosine beyond which a point's
+    ``normals`` face away from the view's scanner): each point turned by ``R``
     (once) and moved by each ``t[k]`` into the view's frame, projected through its camera
     (``kind``, ``cam``: :func:`camera_params`) onto the nearest pixel, and tested there.
     Adds each pose's score to ``scores[k]`` (and its count of points in open space to
@@ -295,24 +361,27 @@ def _check_full(
     (one pose) when they are as long as ``points``."""
     if kind == 0:
         _check_loop(
-            True, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
-            coarse, explained, open_space, scores, opens,
+            True, points, own, normals, R, t, cam, measured, slack, nearest, threshold_m,
+            tolerance, coarse, explained, open_space, scores, opens,
         )  # fmt: skip
     else:
         _check_loop(
-            False, points, own, R, t, cam, measured, slack, nearest, threshold_m, tolerance,
-            coarse, explained, open_space, scores, opens,
+            False, points, own, normals, R, t, cam, measured, slack, nearest, threshold_m,
+            tolerance, coarse, explained, open_space, scores, opens,
         )  # fmt: skip
 
 
 _NO_COUNT = np.zeros(0, dtype=np.int64)
+_NO_NORMALS = np.zeros((0, 3), dtype=np.float32)
 
 
-def _kernel_tolerance() -> tuple[float, float, float]:
-    """The dense check's :data:`~flexreg.registration.check.TOLERANCE` as the kernel takes it:
-    an argument, not a global (a compiled kernel keeps a global's value in its cache, and the
-    cache follows this file only)."""
-    return float(TOLERANCE.fine_rel), float(TOLERANCE.free_k), float(TOLERANCE.free_rel)
+def _kernel_tolerance() -> tuple[float, float, float, float]:
+    """The dense check's :data:`~flexreg.registration.check.TOLERANCE` as the kernel takes it,
+    with :data:`BEHIND_COS`: an argument, not a global (a
+    compiled kernel keeps a global's value in its cache, and the cache follows this file
+    only)."""
+    t = TOLERANCE
+    return float(t.fine_rel), float(t.free_k), float(t.free_rel), float(BEHIND_COS)
 
 
 def _floats(a: NDArray[Any]) -> NDArray[Any]:
@@ -325,6 +394,7 @@ def _run_check(
     view: FullView,
     points: NDArray[np.floating[Any]],
     point_slack: NDArray[np.floating[Any]],
+    normals: NDArray[np.floating[Any]] | None,
     T: NDArray[np.float64],
     shifts: NDArray[np.float64] | None,
     threshold_m: float,
@@ -334,7 +404,9 @@ def _run_check(
     opens: NDArray[np.int64] = _NO_COUNT,
 ) -> NDArray[np.float64]:
     """Scores of ``T`` moved by each of ``shifts`` (``T`` alone when None), masks of ``T``,
-    counts of points in open space per pose (into ``opens`` when it has a slot per pose)."""
+    counts of points in open space per pose (into ``opens`` when it has a slot per pose);
+    with ``normals`` (the points' own, NaN where unknown) points seen from behind
+    (:data:`BEHIND_COS`) explain nothing."""
     T = np.asarray(T, dtype=np.float64)
     t = T[:3, 3][None] if shifts is None else T[:3, 3] + np.asarray(shifts, dtype=np.float64)
     scores = np.zeros(len(t))
@@ -344,6 +416,7 @@ def _run_check(
     _check_full(  # float32 inputs stay float32 (read as float64 in the kernel: no copies)
         _floats(points),
         _floats(point_slack),
+        _NO_NORMALS if normals is None else _floats(normals),
         np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(t.reshape(-1, 3)), kind, cam,
         np.ascontiguousarray(view.measured, dtype=np.float32),
         np.ascontiguousarray(view.slack, dtype=np.float32),
@@ -363,6 +436,8 @@ def full_masks(
     point_slack: NDArray[np.floating[Any]],
     T_view_points: NDArray[np.float64],
     threshold_m: float,
+    *,
+    normals: NDArray[np.floating[Any]] | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Which of ``points`` a pose explains in ``view`` and which it puts in open space.
 
@@ -373,7 +448,10 @@ def full_masks(
     measured; in *open space* when it lies nearer than the smallest range of the pixel's
     :data:`NEIGHBOURHOOD` square by more than the free-space tolerance
     (:meth:`~flexreg.registration.check.Tolerance.free`: 2.5 inlier thresholds plus 1 % of its
-    range) plus its own range slack. Points outside the view are neither.
+    range) plus its own range slack. Points outside the view are neither. With their
+    ``normals``, points on a surface the view's scanner saw from behind (the normal turned
+    away from it beyond :data:`BEHIND_COS`) are not explained:
+    a wall's two faces, seen from either side, do not fit one another.
 
     Parameters
     ----------
@@ -387,6 +465,9 @@ def full_masks(
         Maps the points into the view's frame.
     threshold_m : float, metres
         The registration's inlier threshold.
+    normals : (N, 3) float32 or float64, optional
+        The points' unit normals (their :attr:`FullView.normals`), oriented towards their own
+        scanner, NaN where unknown; without them no point is seen from behind.
 
     Returns
     -------
@@ -395,8 +476,9 @@ def full_masks(
     explained = np.zeros(len(points), dtype=bool)
     open_space = np.zeros(len(points), dtype=bool)
     _run_check(
-        view, points, point_slack, T_view_points, None, threshold_m, False, explained, open_space
-    )
+        view, points, point_slack, normals, T_view_points, None, threshold_m, False, explained,
+        open_space,
+    )  # fmt: skip
     return explained, open_space
 
 
@@ -408,6 +490,7 @@ def full_score(
     threshold_m: float,
     *,
     coarse: bool = False,
+    normals: NDArray[np.floating[Any]] | None = None,
 ) -> float:
     """A pose's soft score on full-resolution points: each explained point counts
     ``1 - (e / tol)^2`` (``e`` its range residual, 1 when exact), each point in open space
@@ -415,13 +498,14 @@ def full_score(
 
     It peaks where a cue fits exactly, so a pose can be placed along an axis that only the
     cue fixes. With ``coarse`` a point counts as explained within the open-space tolerance
-    (for poses not yet polished).
+    (for poses not yet polished). ``normals`` as :func:`full_masks`.
     """
     return float(
         _run_check(
-            view, points, point_slack, T_view_points, None, threshold_m, coarse, _NO_MASK, _NO_MASK
+            view, points, point_slack, normals, T_view_points, None, threshold_m, coarse,
+            _NO_MASK, _NO_MASK,
         )[0]
-    )
+    )  # fmt: skip
 
 
 def full_scores(
@@ -433,6 +517,7 @@ def full_scores(
     threshold_m: float,
     *,
     coarse: bool = False,
+    normals: NDArray[np.floating[Any]] | None = None,
     open_counts: NDArray[np.int64] | None = None,
 ) -> NDArray[np.float64]:
     """:func:`full_score` of ``T_view_points`` moved by each of ``shifts_m`` (added to its
@@ -442,7 +527,7 @@ def full_scores(
 
     Parameters
     ----------
-    view, points, point_slack, T_view_points, threshold_m, coarse
+    view, points, point_slack, T_view_points, threshold_m, coarse, normals
         As :func:`full_score`.
     shifts_m : (K, 3) float64, metres
     open_counts : (K,) int64, optional
@@ -456,8 +541,8 @@ def full_scores(
     shifts = np.asarray(shifts_m, dtype=np.float64).reshape(-1, 3)
     opens = _NO_COUNT if open_counts is None else open_counts
     return _run_check(
-        view, points, point_slack, T_view_points, shifts, threshold_m, coarse, _NO_MASK,
-        _NO_MASK, opens,
+        view, points, point_slack, normals, T_view_points, shifts, threshold_m, coarse,
+        _NO_MASK, _NO_MASK, opens,
     )  # fmt: skip
 
 
@@ -544,8 +629,8 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
         )
         return ((a, b), (c, d))
     out = (
-        full_masks(t, s.points, s.point_slack, T, threshold_m),
-        full_masks(s, t.points, t.point_slack, invert(T), threshold_m),
+        full_masks(t, s.points, s.point_slack, T, threshold_m, normals=s.normals),
+        full_masks(s, t.points, t.point_slack, invert(T), threshold_m, normals=t.normals),
     )
     pair.masks[key] = [np.packbits(m) for direction in out for m in direction]
     while sum(p.nbytes for v in pair.masks.values() for p in v) > MASKS_BUDGET_BYTES:
@@ -554,11 +639,13 @@ def pose_masks(pair: FullPair, T_target_source: NDArray[np.float64], threshold_m
 
 
 __all__ = [
+    "BEHIND_COS",
     "MASKS_BUDGET_BYTES",
     "MAX_SLACK_PER_M",
     "NEIGHBOURHOOD",
     "FullPair",
     "FullView",
+    "even_solid_angle",
     "full_masks",
     "full_pair_of",
     "full_score",

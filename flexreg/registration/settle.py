@@ -185,6 +185,7 @@ class _Scorer:
     target: FullView
     points: NDArray[np.floating[Any]]
     slack: NDArray[np.floating[Any]]
+    normals: NDArray[np.floating[Any]]
     threshold_m: float
 
     @classmethod
@@ -192,16 +193,20 @@ class _Scorer:
         s = pair.source
         k = max(1, -(-len(s.points) // points))
         pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
-        return cls(pair.target, pts, slack, threshold_m)
+        return cls(pair.target, pts, slack, np.ascontiguousarray(s.normals[::k]), threshold_m)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
-        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
+        return full_score(
+            self.target, self.points, self.slack, T, self.threshold_m, coarse=True,
+            normals=self.normals,
+        )  # fmt: skip
 
     def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
         """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
         return full_scores(
-            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
-        )
+            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True,
+            normals=self.normals,
+        )  # fmt: skip
 
 
 def _facing(
@@ -218,7 +223,7 @@ def _facing(
 
 
 @dataclass(eq=False)
-class _FacingScorer:
+class _FacingScorer(_Scorer):
     """Scores a pose on the source's points facing the sweep's direction only (at most
     :data:`FACING_POINTS`, every k-th), with the open-space tolerance (coarse). Along a
     tunnel the other surfaces change their score with the grazing angles and the reach of
@@ -226,30 +231,14 @@ class _FacingScorer:
     percent below a pose metres away: docs/benchmarks.md, Verdict); on the facing points it
     peaks at the cue."""
 
-    target: FullView
-    points: NDArray[np.floating[Any]]
-    slack: NDArray[np.floating[Any]]
-    threshold_m: float
-
     @classmethod
-    def of(
+    def facing(
         cls, pair: FullPair, base: NDArray[np.float64], direction: NDArray[np.float64], thr: float
     ) -> _FacingScorer:
         s = pair.source
         idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
         idx = idx[:: max(1, -(-len(idx) // FACING_POINTS))]
-        return cls(pair.target, s.points[idx], s.point_slack[idx], thr)
-
-    def __call__(self, T: NDArray[np.float64]) -> float:
-        if len(self.points) == 0:
-            return 0.0
-        return full_score(self.target, self.points, self.slack, T, self.threshold_m, coarse=True)
-
-    def shifted(self, T: NDArray[np.float64], shifts: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The scores of ``T`` moved by each of ``shifts`` ((K, 3), target frame) at once."""
-        return full_scores(
-            self.target, self.points, self.slack, T, shifts, self.threshold_m, coarse=True
-        )
+        return cls(pair.target, s.points[idx], s.point_slack[idx], s.normals[idx], thr)
 
 
 def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
@@ -320,7 +309,7 @@ def sweep_candidates(
         s = score.shifted(base, offsets[:, None] * u)
         found = [float(offsets[i]) for i in _peaks(s, SWEEP_PEAKS, n if b == 0 else None)]
         # the surfaces facing the axis in half steps: where the cue fits, whatever the rest
-        facing = _FacingScorer.of(pair, base, u, threshold_m)
+        facing = _FacingScorer.facing(pair, base, u, threshold_m)
         f = facing.shifted(base, fine[:, None] * u)
         for i in _peaks(f, SWEEP_PEAKS, 2 * n if b == 0 else None, away=2):
             if all(abs(fine[i] - d) >= step_m for d in found):
@@ -375,13 +364,16 @@ def place_along(
     """
     s = pair.source
     facing = _facing(pair, T[:3, :3], direction)
-    pts, slack = s.points[facing], s.point_slack[facing]
+    pts, slack, normals = s.points[facing], s.point_slack[facing], s.normals[facing]
     if len(pts) == 0:
         return T
     best = 0.0
     for step in (span_m / 10, span_m / 100):
         offsets = best + np.arange(-10, 11) * step
-        scores = full_scores(pair.target, pts, slack, T, offsets[:, None] * direction, threshold_m)
+        scores = full_scores(
+            pair.target, pts, slack, T, offsets[:, None] * direction, threshold_m,
+            normals=normals,
+        )  # fmt: skip
         best = float(offsets[int(np.argmax(scores))])
     return _shifted(T, best * direction)
 

@@ -127,8 +127,12 @@ def shares(pair: FullPair, T: NDArray[np.float64], threshold_m: float) -> tuple[
     (:func:`~flexreg.registration.fullres.full_masks`)."""
     s, t = pair.source, pair.target
     ks, kt = _every(len(s.points), CHECK_POINTS), _every(len(t.points), CHECK_POINTS)
-    fe, fo = full_masks(t, s.points[::ks], s.point_slack[::ks], T, threshold_m)
-    be, bo = full_masks(s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m)
+    fe, fo = full_masks(
+        t, s.points[::ks], s.point_slack[::ks], T, threshold_m, normals=s.normals[::ks]
+    )
+    be, bo = full_masks(
+        s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m, normals=t.normals[::kt]
+    )
     n = len(fe) + len(be)
     if n == 0:
         return 0.0, 0.0
@@ -183,12 +187,13 @@ def _slides(
     s = pair.source
     k = _every(len(s.points), SWEEP_POINTS)
     pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
+    normals = np.ascontiguousarray(s.normals[::k])
     m = max(1, len(pts))
     for a in axes:
         opens = np.zeros(len(offsets), dtype=np.int64)
         scores = full_scores(
             pair.target, pts, slack, T, offsets[:, None] * a, threshold_m, coarse=True,
-            open_counts=opens,
+            normals=normals, open_counts=opens,
         )  # fmt: skip
         for i in _candidates((scores + 3.0 * opens) / m, opens / m, offsets, answer_factor):
             Tk = T.copy()

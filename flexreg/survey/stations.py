@@ -66,7 +66,7 @@ GLOBAL_KEYPOINTS = 300
 #: prepared stations a worker keeps loaded (a link needs two; neighbours share stations)
 KEEP_LOADED = 4
 #: bumped when the cached layout changes (old entries are then ignored)
-CACHE_FORMAT = 3
+CACHE_FORMAT = 4
 #: the layout of a cache entry (its ``__meta__`` names it; any other is not read)
 CACHE_SCHEMA = "flexreg.cache/1"
 #: suffixes of a prepared station's entry and of its global descriptor's

@@ -24,8 +24,7 @@ counts:
   (:func:`even_solid_angle`: a panorama's rows near its poles hold many times the points of
   its equator per square metre);
 * a point explains nothing where the other scanner would have seen its surface from behind
-  (:data:`BEHIND_COS`): a wall's two faces, seen from the rooms
-  either side, do not fit.
+  (:data:`BEHIND_COS`): a wall's two faces, seen from the rooms either side, do not fit.
 
 Under two poses of a symmetric or repeating scene the same surfaces fit, so both poses explain
 the same points: only where they disagree, on the cue, does one pose explain what the other
@@ -110,6 +109,12 @@ class FullView:
     points: NDArray[np.floating[Any]]
     point_slack: NDArray[np.floating[Any]]
     normals: NDArray[np.floating[Any]]
+
+    def take(self, which: Any) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
+        """Its points, their slack and their normals at ``which`` (a slice, indices or a
+        mask), contiguous: the arguments of :func:`full_masks` and the scores for a subset."""
+        c = np.ascontiguousarray
+        return c(self.points[which]), c(self.point_slack[which]), c(self.normals[which])
 
 
 def full_view(
@@ -310,10 +315,10 @@ def _check_loop(
                 tol = explain_m + explain_rel * d + np.float64(slack[iv, iu])
                 free = free_m + free_rel * d + own_i
                 qx, qy, qz = Q[0, j] + t[k, 0], Q[1, j] + t[k, 1], Q[2, j] + t[k, 2]
-                # seen from behind: its surface faces away from the view's scanner
-                behind = gx * qx + gy * qy + gz * qz > behind_cos * math.sqrt(
-                    qx * qx + qy * qy + qz * qz
-                )
+                # seen from behind: its surface faces away from the view's scanner (a
+                # panorama's d is the point's range already)
+                rq = d if spherical else math.sqrt(qx * qx + qy * qy + qz * qz)
+                behind = gx * qx + gy * qy + gz * qz > behind_cos * rq
                 ok = abs(e) < tol and not behind
                 bad = d < nearest[iv, iu] - free
                 r = e / tol
@@ -377,9 +382,8 @@ _NO_NORMALS = np.zeros((0, 3), dtype=np.float32)
 
 def _kernel_tolerance() -> tuple[float, float, float, float]:
     """The dense check's :data:`~flexreg.registration.check.TOLERANCE` as the kernel takes it,
-    with :data:`BEHIND_COS`: an argument, not a global (a
-    compiled kernel keeps a global's value in its cache, and the cache follows this file
-    only)."""
+    with :data:`BEHIND_COS`: an argument, not a global (a compiled kernel keeps a global's
+    value in its cache, and the cache follows this file only)."""
     t = TOLERANCE
     return float(t.fine_rel), float(t.free_k), float(t.free_rel), float(BEHIND_COS)
 
@@ -450,8 +454,8 @@ def full_masks(
     (:meth:`~flexreg.registration.check.Tolerance.free`: 2.5 inlier thresholds plus 1 % of its
     range) plus its own range slack. Points outside the view are neither. With their
     ``normals``, points on a surface the view's scanner saw from behind (the normal turned
-    away from it beyond :data:`BEHIND_COS`) are not explained:
-    a wall's two faces, seen from either side, do not fit one another.
+    away from it beyond :data:`BEHIND_COS`) are not explained: a wall's two faces, seen from
+    either side, do not fit one another.
 
     Parameters
     ----------

@@ -192,8 +192,7 @@ class _Scorer:
     def of(cls, pair: FullPair, threshold_m: float, points: int = SWEEP_POINTS) -> _Scorer:
         s = pair.source
         k = max(1, -(-len(s.points) // points))
-        pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
-        return cls(pair.target, pts, slack, np.ascontiguousarray(s.normals[::k]), threshold_m)
+        return cls(pair.target, *s.take(np.s_[::k]), threshold_m)
 
     def __call__(self, T: NDArray[np.float64]) -> float:
         return full_score(
@@ -238,7 +237,7 @@ class _FacingScorer(_Scorer):
         s = pair.source
         idx = np.flatnonzero(_facing(pair, base[:3, :3], direction))
         idx = idx[:: max(1, -(-len(idx) // FACING_POINTS))]
-        return cls(pair.target, s.points[idx], s.point_slack[idx], s.normals[idx], thr)
+        return cls(pair.target, *s.take(idx), thr)
 
 
 def _peaks(scores: NDArray[np.float64], count: int, skip: int | None, away: int = 0) -> list[int]:
@@ -364,7 +363,7 @@ def place_along(
     """
     s = pair.source
     facing = _facing(pair, T[:3, :3], direction)
-    pts, slack, normals = s.points[facing], s.point_slack[facing], s.normals[facing]
+    pts, slack, normals = s.take(facing)
     if len(pts) == 0:
         return T
     best = 0.0

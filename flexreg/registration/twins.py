@@ -127,12 +127,10 @@ def shares(pair: FullPair, T: NDArray[np.float64], threshold_m: float) -> tuple[
     (:func:`~flexreg.registration.fullres.full_masks`)."""
     s, t = pair.source, pair.target
     ks, kt = _every(len(s.points), CHECK_POINTS), _every(len(t.points), CHECK_POINTS)
-    fe, fo = full_masks(
-        t, s.points[::ks], s.point_slack[::ks], T, threshold_m, normals=s.normals[::ks]
-    )
-    be, bo = full_masks(
-        s, t.points[::kt], t.point_slack[::kt], invert(T), threshold_m, normals=t.normals[::kt]
-    )
+    ps, pss, psn = s.take(np.s_[::ks])
+    pt, pts, ptn = t.take(np.s_[::kt])
+    fe, fo = full_masks(t, ps, pss, T, threshold_m, normals=psn)
+    be, bo = full_masks(s, pt, pts, invert(T), threshold_m, normals=ptn)
     n = len(fe) + len(be)
     if n == 0:
         return 0.0, 0.0
@@ -186,8 +184,7 @@ def _slides(
     :data:`MIN_SHIFT_M` from ``T``."""
     s = pair.source
     k = _every(len(s.points), SWEEP_POINTS)
-    pts, slack = np.ascontiguousarray(s.points[::k]), np.ascontiguousarray(s.point_slack[::k])
-    normals = np.ascontiguousarray(s.normals[::k])
+    pts, slack, normals = s.take(np.s_[::k])
     m = max(1, len(pts))
     for a in axes:
         opens = np.zeros(len(offsets), dtype=np.int64)

@@ -446,6 +446,37 @@ def test_refinement_guard_keeps_the_coarse_transform_when_icp_is_worse(monkeypat
     assert not np.array_equal(off.T_target_source, off.T_coarse)
 
 
+def test_a_refinement_the_score_refuses_is_kept_when_it_wins_at_full_resolution(monkeypatch):
+    """The guard's score refuses the refinement (here: it must gain a whole point of score);
+    from a coarse pose 30 cm off along a wall the refinement reaches the truth, which wins
+    the full-resolution duel decisively (the coarse pose puts the room's far walls in open
+    space): it is kept, and the duel recorded. Without the ``full`` check the coarse pose
+    stays."""
+    import flexreg.registration.conclude as conclude
+    import flexreg.registration.pipeline as pipeline
+
+    pair = station_pair("room", seed=2, resolution=(512, 256))
+    real = conclude.conclude
+
+    def off_by_30_cm(c, settled, j):
+        T = make_transform(np.eye(3), [0.3, 0.0, 0.0]) @ c.T_target_source
+        return real(replace(c, T_target_source=T), settled, j)
+
+    monkeypatch.setattr(pipeline, "conclude", off_by_30_cm)
+    monkeypatch.setattr(conclude, "GUARD_MARGIN", -1.0)
+    gt = pair.T_target_source
+    r = register(pair.target, pair.source, RegistrationConfig())
+    assert translation_error_m(r.T_coarse, gt) > 0.25
+    assert translation_error_m(r.T_target_source, gt) < 0.01
+    ref = r.verdict.evidence["refinement"]
+    won, lost = ref["full_duel"]
+    assert ref["kept"] is True and won > 10 * max(lost, 1e-4)
+    checks = ("polish", "aliases", "settle", "twins", "guard")
+    off = register(pair.target, pair.source, RegistrationConfig(judge={"checks": checks}))
+    assert np.array_equal(off.T_target_source, off.T_coarse)
+    assert "full_duel" not in off.verdict.evidence["refinement"]
+
+
 # ---------------------------------------------------------------------------- aliases and rivals
 
 

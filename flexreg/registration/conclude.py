@@ -17,10 +17,10 @@ from flexreg.core.range_image import RangeImage
 from flexreg.core.results import Verdict
 from flexreg.core.scan import Scan
 from flexreg.registration.candidates import Coarse, Keypoints3D, at_pose, dense_prior
-from flexreg.registration.check import TOLERANCE, Check, Scored, TwoWay
+from flexreg.registration.check import TOLERANCE, Check, Scored, TwoWay, decisive_full, duel
 from flexreg.registration.config import GUARD_MARGIN, RegistrationConfig
 from flexreg.registration.evidence import MAX_RIVALS, full_evidence, gather, runner_ups
-from flexreg.registration.fullres import FullPair
+from flexreg.registration.fullres import FullPair, pose_masks
 from flexreg.registration.preparation import Run, ScanView
 from flexreg.registration.settle import Settlement, pin_along
 from flexreg.registration.twins import find_twins, slide_refuted
@@ -52,8 +52,10 @@ def _refine(
     check: Check,
     config: RegistrationConfig,
     run: Run,
+    reach_m: float | None = None,
 ) -> Any:
-    """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`)."""
+    """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`),
+    pairing from ``reach_m`` when given (default three inlier thresholds)."""
     vt, vs = views
     samples = None
     if vs.refine_sample is not None and vt.refine_sample is not None:
@@ -73,6 +75,7 @@ def _refine(
             source_image=vs.image,
             source_normals=vs.normals,
             samples=samples,
+            reach_m=reach_m,
         )
 
 
@@ -181,7 +184,15 @@ def conclude(c: Coarse, settled: Settlement, j: Judging) -> Concluded:
     )
     info = point_information(q[cons])
     refinement = None
-    icp = _refine(j.scans, j.views, T, thr, j.check, j.config, j.run) if j.config.refine else None
+    # from two plan cells: a coarse pose may be that far off (a plan overlay's cell, or a
+    # doorway link slid by a wall's thickness, which pairs within three inlier thresholds
+    # hold: only pairs seen from the same side reach across it)
+    reach = 2 * j.config.prior.plan_cell_m
+    icp = (
+        _refine(j.scans, j.views, T, thr, j.check, j.config, j.run, reach)
+        if j.config.refine
+        else None
+    )
     if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
         icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, T))
     with j.run.stage("verdict"):
@@ -204,6 +215,20 @@ def conclude(c: Coarse, settled: Settlement, j: Judging) -> Concluded:
                 kind = "point-to-plane" if icp.association == "projective" else "open3d"
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
+        if icp is not None and refinement is not None and not kept and judge.runs("full"):
+            # the sample counts a wall's far face laid on its near face as explained; at full
+            # resolution a point seen from behind explains nothing (one point per solid angle)
+            pair = j.pair()
+            won, lost = duel(
+                pose_masks(pair, icp.T_target_source, thr), pose_masks(pair, T_coarse, thr)
+            )
+            if decisive_full(won, lost, judge, points=pair.points):
+                log.info("the refinement wins the full-resolution duel (%.5f / %.5f)", won, lost)
+                T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
+                info, denom, scored = icp.information, _icp_denominator(icp), refined
+                kind = "point-to-plane" if icp.association == "projective" else "open3d"
+                refinement["kept"] = True
+                refinement["full_duel"] = [round(won, 6), round(lost, 6)]
         stage = (rmse, fitness, kind)
         verdict = _verdict(
             c, scored, j.two, j.views[0], stage, thr, refinement, j.config, settled, j.pair,

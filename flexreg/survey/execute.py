@@ -374,7 +374,7 @@ def _io_error(e: OSError) -> InputError:
 
 #: bumped when the pairwise registration's answers change: links cached by older code are
 #: registered again (the prepared stations stay valid)
-LINK_FORMAT = 2
+LINK_FORMAT = 3
 
 
 def link_cache_path(

@@ -57,6 +57,7 @@ def refine(
     source_image: RangeImage | None = None,
     source_normals: NDArray[np.float32] | None = None,
     samples: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None,
+    reach_m: float | None = None,
 ) -> IcpResult:
     """ICP refinement of a coarse ``T_target_source``.
 
@@ -108,6 +109,11 @@ def refine(
     samples : (float, (N, 3) float64, (M, 3) float64), optional
         The projective path's area samples (source cell size, source and target points), when
         already at hand.
+    reach_m : float, optional
+        Projective path: the first correspondence distance, when ``T_init`` may be further
+        off than three inlier thresholds (a pose slid by a wall's thickness: only pairs
+        seen from the same side reach across it); one level more than from
+        ``3 * threshold_m``. Default three inlier thresholds.
 
     Returns
     -------
@@ -124,7 +130,8 @@ def refine(
             vt,
             src_sample,
             T_init,
-            max_distance_m=3 * threshold_m,
+            max_distance_m=max(3 * threshold_m, reach_m or 0.0),
+            levels=3 if reach_m is None else 4,
             normals=target_normals if target_image is not None else None,
             source=vs,
             target_points=tgt_sample,

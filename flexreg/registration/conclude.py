@@ -52,10 +52,11 @@ def _refine(
     check: Check,
     config: RegistrationConfig,
     run: Run,
-    reach_m: float | None = None,
 ) -> Any:
     """ICP refinement of the coarse transform (:func:`~flexreg.stages.refinement.refine`),
-    pairing from ``reach_m`` when given (default three inlier thresholds)."""
+    pairing from two plan cells: a coarse pose may be that far off (a plan overlay's cell, or
+    a doorway link slid by a wall's thickness, which pairs within three inlier thresholds
+    hold: only pairs seen from the same side reach across it)."""
     vt, vs = views
     samples = None
     if vs.refine_sample is not None and vt.refine_sample is not None:
@@ -75,7 +76,7 @@ def _refine(
             source_image=vs.image,
             source_normals=vs.normals,
             samples=samples,
-            reach_m=reach_m,
+            reach_m=2 * config.prior.plan_cell_m,
         )
 
 
@@ -184,15 +185,7 @@ def conclude(c: Coarse, settled: Settlement, j: Judging) -> Concluded:
     )
     info = point_information(q[cons])
     refinement = None
-    # from two plan cells: a coarse pose may be that far off (a plan overlay's cell, or a
-    # doorway link slid by a wall's thickness, which pairs within three inlier thresholds
-    # hold: only pairs seen from the same side reach across it)
-    reach = 2 * j.config.prior.plan_cell_m
-    icp = (
-        _refine(j.scans, j.views, T, thr, j.check, j.config, j.run, reach)
-        if j.config.refine
-        else None
-    )
+    icp = _refine(j.scans, j.views, T, thr, j.check, j.config, j.run) if j.config.refine else None
     if icp is not None and settled.axis is not None:  # the cue, not ICP, fixes the axis
         icp = replace(icp, T_target_source=pin_along(settled, icp.T_target_source, T))
     with j.run.stage("verdict"):
@@ -201,6 +194,17 @@ def conclude(c: Coarse, settled: Settlement, j: Judging) -> Concluded:
         if icp is not None:
             refined = j.two.score(icp.T_target_source, fine_tol)
             kept = not judge.runs("guard") or refined.value >= coarse.value - GUARD_MARGIN
+            duelled = None
+            if not kept and judge.runs("full"):
+                # the sample counts a wall's far face laid on its near face as explained; at
+                # full resolution a point seen from behind explains nothing
+                pair = j.pair()
+                won, lost = duel(
+                    pose_masks(pair, icp.T_target_source, thr), pose_masks(pair, T_coarse, thr)
+                )
+                if decisive_full(won, lost, judge, points=pair.points):
+                    kept, duelled = True, [round(won, 6), round(lost, 6)]
+                    log.info("the refinement wins at full resolution (%.5f / %.5f)", won, lost)
             refinement = {
                 "kept": kept,
                 "score_coarse": round(coarse.value, 6),
@@ -209,26 +213,14 @@ def conclude(c: Coarse, settled: Settlement, j: Judging) -> Concluded:
                 "margin": GUARD_MARGIN,
                 "method": j.config.icp,
             }
+            if duelled is not None:
+                refinement["full_duel"] = duelled
             if kept:
                 T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
                 info, denom, scored = icp.information, _icp_denominator(icp), refined
                 kind = "point-to-plane" if icp.association == "projective" else "open3d"
             else:
                 log.info("refinement discarded: %.4f -> %.4f", coarse.value, refined.value)
-        if icp is not None and refinement is not None and not kept and judge.runs("full"):
-            # the sample counts a wall's far face laid on its near face as explained; at full
-            # resolution a point seen from behind explains nothing (one point per solid angle)
-            pair = j.pair()
-            won, lost = duel(
-                pose_masks(pair, icp.T_target_source, thr), pose_masks(pair, T_coarse, thr)
-            )
-            if decisive_full(won, lost, judge, points=pair.points):
-                log.info("the refinement wins the full-resolution duel (%.5f / %.5f)", won, lost)
-                T, rmse, fitness = icp.T_target_source, icp.inlier_rmse_m, icp.fitness
-                info, denom, scored = icp.information, _icp_denominator(icp), refined
-                kind = "point-to-plane" if icp.association == "projective" else "open3d"
-                refinement["kept"] = True
-                refinement["full_duel"] = [round(won, 6), round(lost, 6)]
         stage = (rmse, fitness, kind)
         verdict = _verdict(
             c, scored, j.two, j.views[0], stage, thr, refinement, j.config, settled, j.pair,

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from importlib.metadata import PackageNotFoundError, version
+from multiprocessing.reduction import ForkingPickler
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -159,10 +160,21 @@ def _child(
             args = (*args, *pickle.load(f))
     m = measure_call(partial(fn, *args, **kwargs))
     try:
-        conn.send(m)
-    except Exception as e:  # an unpicklable result still reports something
-        conn.send(Measured("error", None, f"result not transferable: {e}", m.time_s, None))
-    conn.close()
+        _send(conn, m)
+    except OSError:  # the parent stopped listening (interrupted, timed out): no one to tell
+        pass
+    finally:
+        conn.close()
+
+
+def _send(conn: Any, m: Measured) -> None:
+    """Send ``m``; an unpicklable result still reports something."""
+    try:
+        payload = ForkingPickler.dumps(m)
+    except Exception as e:
+        m = Measured("error", None, f"result not transferable: {e}", m.time_s, None)
+        payload = ForkingPickler.dumps(m)
+    conn.send_bytes(payload)
 
 
 #: every module a method imports on its first call (imports are not part of the measured

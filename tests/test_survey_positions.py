@@ -125,6 +125,31 @@ def test_positions_pick_a_doorway_link_but_not_one_its_scans_contradict():
         assert not e.vouched and "no pose of the link fits the scans" in e.undecided
 
 
+def test_positions_pick_a_link_whose_open_space_only_the_sample_finds():
+    """A right answer among racks is often uncertain for ``free_space`` on the even sample
+    alone (stray returns between a rack and the wall, one sample cell each); where full
+    resolution clears it (``open_clear``) the positions pick its pose. Not where full
+    resolution contradicts it too, nor where it was not checked there."""
+
+    def freed(clear):
+        e = Link("s0", "s1", T_target_source=_pose(6.0, 0.0), verdict="uncertain")
+        e.reasons = [{"code": "free_space", "message": "sample"}]
+        e.open_clear = clear
+        return e
+
+    pos = {
+        "s0": Position(np.zeros(3), False, 0.0, 1.0),
+        "s1": Position(np.array([6.4, 0.2, 0.0]), False, 0.05, 1.0),
+    }
+    clear, contradicted, unchecked = freed(True), freed(False), freed(None)
+    axis = freed(True)
+    axis.reasons.append({"code": "weak_axis", "message": "tunnel"})
+    assert apply_positions([clear, contradicted, unchecked, axis], pos) == 1
+    assert clear.vouched == "positions" and not clear.trusted
+    for e in (contradicted, unchecked, axis):
+        assert not e.vouched and "no pose of the link fits the scans" in e.undecided
+
+
 def test_the_site_frame_of_the_positions():
     """Registered poses in the reference's frame, rough positions in a site frame turned by
     30 degrees and shifted: the fit recovers the turn and the shift."""

@@ -25,7 +25,7 @@ from flexreg.registration import RegistrationConfig, register
 from flexreg.registration.candidates import Aliases, alias_candidates, self_symmetries
 from flexreg.registration.check import Check, Judged, TwoWay, decisive_full, duel
 from flexreg.registration.config import FULL_DECISIVE_SHARE, JudgeConfig
-from flexreg.registration.evidence import gather, runner_ups
+from flexreg.registration.evidence import Evidence, gather, runner_ups
 from flexreg.registration.fullres import FullPair, full_view, pose_masks
 from flexreg.registration.settle import (
     half_turn,
@@ -756,6 +756,31 @@ def test_full_resolution_test_reports_one_free_space_reason():
     ev = _with(free_space__source_conflicting=0.5)
     ev["full_resolution"] = {"points": 757_580, "open_space_share": 0.2}
     assert [r.code for r in decide(ev).reasons] == ["free_space"]
+
+
+@pytest.mark.parametrize(
+    ("why", "open_space", "clear"),
+    [
+        ("settling", 0.0001, True),  # a right pose among racks
+        ("settling", 0.0076, False),  # two bays off
+        ("check", 0.0124, True),  # confident, checked anyway: things that moved
+        ("check", 0.0429, False),
+    ],
+)
+def test_an_answer_full_resolution_clears_keeps_the_samples_free_space_reason(
+    why, open_space, clear
+):
+    """The sample's stray returns make a right answer ``free_space``; full resolution,
+    which allows each point its own range step, says whether it clears the answer by the
+    verdict's own limit there (:func:`full_open_clear`). The verdict keeps the sample's
+    reason either way (a pose a whole bay off contradicts little at full resolution too)."""
+    from flexreg.registration.verdict import full_open_clear
+
+    ev = _with(free_space__source_conflicting=0.3)
+    ev["full_resolution"] = {"points": 500_000, "open_space_share": open_space, "why": why}
+    assert full_open_clear(Evidence.of(ev)) is clear
+    assert [r.code for r in decide(ev).reasons] == ["free_space"]
+    assert full_open_clear(Evidence.of(_with())) is None  # not checked at full resolution
 
 
 def test_classify_points_at_two_tolerances_equals_classifying_twice():

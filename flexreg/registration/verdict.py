@@ -85,18 +85,47 @@ def _free_space_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
     return None
 
 
-def _full_open_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
-    """The answer puts more than ``judge.open_share`` (where the settling compared the
-    scans: a twin beside the truth is likely) or ``judge.full_max_open_check`` (a confident
-    answer checked anyway) of both scans' points in the other's open space at full
-    resolution: one bay, aisle or room beside the right pose, which the samples' checks
-    cannot tell."""
+def _full_open_limit(ev: Evidence, judge: JudgeConfig) -> float:
+    """The most of both scans' points the answer may put in open space at full resolution:
+    ``judge.open_share`` where the settling compared the scans (a twin beside the truth is
+    likely), ``judge.full_max_open_check`` for a confident answer checked anyway."""
+    f = ev.full_resolution or {}
+    return judge.full_max_open_check if f.get("why") == "check" else judge.open_share
+
+
+def full_open_clear(ev: Evidence, judge: JudgeConfig = JudgeConfig()) -> bool | None:
+    """Whether the answer, checked at full resolution, puts no more of both scans' points in
+    the other's open space than the verdict allows there (:func:`_full_open_limit`); None
+    when it was not checked there.
+
+    A ``free_space`` reason of an answer that is clear here comes from the even sample's
+    shares alone, which count a scanner's stray returns (mixed pixels between a rack and the
+    wall behind it, one sample cell each) against right poses as well: on a hall of racks
+    the right answers' ratio has a median of 0.23 (docs/benchmarks.md, "Mixed pixels in the
+    dense check's sample"). Full resolution allows each point its own range step. It does not
+    tell a pose a whole bay off (those contradict little there too), which is why the
+    verdict keeps the sample's reason: only what decides between a link's poses by other
+    means (rough positions) reads this.
+
+    >>> ev = Evidence(full_resolution={"points": 1000, "open_space_share": 0.001,
+    ...                                "why": "settling"})
+    >>> full_open_clear(ev), full_open_clear(Evidence())
+    (True, None)
+    """
     f = ev.full_resolution
     if not f:
         return None
-    allowed = judge.full_max_open_check if f.get("why") == "check" else judge.open_share
-    if f["open_space_share"] <= allowed:
+    return bool(f["open_space_share"] <= _full_open_limit(ev, judge))
+
+
+def _full_open_reason(ev: Evidence, judge: JudgeConfig) -> Reason | None:
+    """The answer puts more than :func:`_full_open_limit` of both scans' points in the
+    other's open space at full resolution: one bay, aisle or room beside the right pose,
+    which the samples' checks cannot tell."""
+    f = ev.full_resolution
+    if not f or full_open_clear(ev, judge):
         return None
+    allowed = _full_open_limit(ev, judge)
     return Reason(
         "free_space",
         f"at full resolution {100 * f['open_space_share']:.2f}% of both scans' points land where "
@@ -389,4 +418,4 @@ def decide(
     return Verdict(status, tuple(found), ev, tuple(runner_up), tuple(_notes(ev, judge)))
 
 
-__all__ = ["TESTS", "VerdictTest", "decide", "reasons"]
+__all__ = ["TESTS", "VerdictTest", "decide", "full_open_clear", "reasons"]

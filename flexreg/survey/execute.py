@@ -33,6 +33,7 @@ from flexreg.errors import ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.evidence import Evidence
 from flexreg.registration.pipeline import Registration
+from flexreg.registration.verdict import full_open_clear
 from flexreg.survey.links import Alternative, Link, alternatives_of
 from flexreg.survey.pairs import Candidate
 from flexreg.survey.stations import (
@@ -374,7 +375,7 @@ def _io_error(e: OSError) -> InputError:
 
 #: bumped when the pairwise registration's answers change: links cached by older code are
 #: registered again (the prepared stations stay valid)
-LINK_FORMAT = 3
+LINK_FORMAT = 4
 
 
 def link_cache_path(
@@ -518,6 +519,7 @@ def align_link(
         ),
         vouched=_vouched(cand),
         windowed=window is not None,
+        open_clear=full_open_clear(ev, config.judge),
     )
     _store_link(cache, link)
     return link

@@ -156,6 +156,10 @@ class Link:
         Registered only inside the window of two rough positions
         (:func:`flexreg.survey.positions.window_of`): its verdict is then partly theirs (they
         ruled out every pose beyond the window), so even a confident one needs a loop.
+    open_clear : bool or None
+        Its answer, checked at full resolution, puts no more in open space than the verdict
+        allows there (:func:`flexreg.registration.verdict.full_open_clear`); None when not
+        checked there. A ``free_space`` reason of such a link is the even sample's alone.
     alternatives : list of Alternative
         The clearly different poses the registration found fitting almost as well (its
         runner-ups) or the answer moved a whole bay or room that fits too (its twins):
@@ -198,6 +202,7 @@ class Link:
     refused: str = ""
     undecided: str = ""
     windowed: bool = False
+    open_clear: bool | None = None
 
     @property
     def overlap(self) -> float:
@@ -260,10 +265,13 @@ class Link:
     def fits_where_seen(self) -> bool:
         """Whether its poses fit what both scans see: it :attr:`fits`, or it is uncertain
         also (or only) because the scans share little (``low_overlap``: a doorway's worth),
-        not because its answer contradicts them (open space, a weak axis, a high residual).
-        Rough positions may pick the pose of such a link
+        not because its answer contradicts them (a weak axis, a high residual, open space
+        at full resolution). Open space only the even sample finds (its stray returns) does
+        not count where full resolution clears the answer (:attr:`open_clear`). Rough
+        positions may pick the pose of such a link
         (:func:`flexreg.survey.positions.apply_positions`)."""
-        return all(r.get("code") in ("ambiguous", "low_overlap") for r in self.reasons)
+        fit = {"ambiguous", "low_overlap"} | ({"free_space"} if self.open_clear else set())
+        return all(r.get("code") in fit for r in self.reasons)
 
     @property
     def plain(self) -> bool:
@@ -323,6 +331,7 @@ class Link:
             "picked": self.picked or None,
             "refused": self.refused or None,
             "windowed": self.windowed,
+            "open_space_clear_at_full_resolution": self.open_clear,
         }
 
 

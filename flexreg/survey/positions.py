@@ -199,7 +199,8 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
 def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int:
     """Let rough positions decide each link between two stations that have one (in place),
     among the poses the registration found fitting what both scans see (a confident answer,
-    or an answer uncertain only because it is ambiguous or the scans share little, with its
+    or an answer uncertain only because it is ambiguous or the scans share little, or for
+    open space only the even sample finds where full resolution clears it, with its
     alternatives, :attr:`~flexreg.survey.links.Link.fits_where_seen`; a link whose answer
     contradicts its scans, in open space or along a weak axis, has none): the one
     pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.

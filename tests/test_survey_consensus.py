@@ -522,3 +522,27 @@ def test_a_doorway_link_slid_along_a_wall_reaches_the_right_one_fitted_on_all_ov
     sol = solve_graph(sorted(P), [*base, right, off], SurveyConfig(), reference="s0",
                       fit=_Fit(P))  # fmt: skip
     assert "s3" not in sol.groups[0]
+
+
+def test_a_runner_up_that_explains_almost_nothing_at_full_resolution_is_no_alternative():
+    """A street's plan turned half round scores well on the samples at long range (their
+    tolerance grows with the range) yet explains almost nothing of the scans at full
+    resolution: it is no pose the graph or the map may pick. Runner-ups not compared at
+    full resolution, and those that explain a fair share there, stay alternatives."""
+    from flexreg.core.results import Hypothesis
+    from flexreg.registration.config import TWIN_MIN_RATIO, JudgeConfig
+    from flexreg.survey.links import alternatives_of
+
+    turned = make_transform(rotation_about_axis([0, 0, 1], np.pi), [6.1, -21.6, 0.0])
+    bay = make_transform(np.eye(3), [5.9, 0.0, 0.0])
+    near = make_transform(np.eye(3), [0.0, 3.0, 0.0])
+    ups = [
+        Hypothesis(turned, 0.64, 180.0, 48.4, "alias"),
+        Hypothesis(bay, 0.9, 0.0, 5.9, "plan"),
+        Hypothesis(near, 0.7, 0.0, 3.0, "descriptors"),
+    ]
+    duels = [{"full_support": 0.009}, {"full_support": TWIN_MIN_RATIO}, {}]
+    kept = alternatives_of(np.eye(4), ups, None, JudgeConfig(), duels)
+    assert [a.support for a in kept] == [0.9, 0.7]
+    assert np.allclose(kept[0].T_target_source, bay)
+    assert len(alternatives_of(np.eye(4), ups, None, JudgeConfig())) == 3  # nothing measured

@@ -375,7 +375,7 @@ def _io_error(e: OSError) -> InputError:
 
 #: bumped when the pairwise registration's answers change: links cached by older code are
 #: registered again (the prepared stations stay valid)
-LINK_FORMAT = 4
+LINK_FORMAT = 5
 
 
 def link_cache_path(
@@ -515,7 +515,11 @@ def align_link(
         origin=cand.origin,
         place_score=cand.place_score,
         alternatives=alternatives_of(
-            r.T_target_source, () if v is None else v.runner_up, ev.twins, config.judge
+            r.T_target_source,
+            () if v is None else v.runner_up,
+            ev.twins,
+            config.judge,
+            ev.runner_ups or (),
         ),
         vouched=_vouched(cand),
         windowed=window is not None,

@@ -57,10 +57,18 @@ MAX_ALTERNATIVES = 6
 
 
 def alternatives_of(
-    T: Matrix, runner_ups: Sequence[Any], twins: Mapping[str, Any] | None, judge: JudgeConfig
+    T: Matrix,
+    runner_ups: Sequence[Any],
+    twins: Mapping[str, Any] | None,
+    judge: JudgeConfig,
+    duels: Sequence[Mapping[str, Any]] = (),
 ) -> list[Alternative]:
     """A link's alternatives: the registration's runner-ups (each a
-    :class:`~flexreg.core.results.Hypothesis`) and the twins of its answer ``T`` that fit by
+    :class:`~flexreg.core.results.Hypothesis`; ``duels`` are their entries of the evidence's
+    ``runner_ups``, in the same order: one that explains less than
+    :data:`~flexreg.registration.config.TWIN_MIN_RATIO` of what the answer explains at full
+    resolution, ``full_support``, is no pose the scans fit, whatever the samples scored it)
+    and the twins of its answer ``T`` that fit by
     the verdict's own measure (the ``twins`` section of its evidence; the answer moved by
     each twin's ``offset_m``, target frame): at least
     :data:`~flexreg.registration.config.TWIN_MIN_RATIO` of what the answer explains, no more
@@ -76,9 +84,15 @@ def alternatives_of(
     ...  for a in alternatives_of(T, [], twins, JudgeConfig())]
     [('twin', 0.9, 5.9)]
     """
+    weak = {
+        i
+        for i, d in enumerate(duels)
+        if d.get("full_support") is not None and d["full_support"] < TWIN_MIN_RATIO
+    }
     found: list[Alternative] = [
         Alternative(np.asarray(h.T_target_source, dtype=np.float64), "runner_up", h.score_ratio)
-        for h in runner_ups
+        for i, h in enumerate(runner_ups)
+        if i not in weak
     ]
     answer = (twins or {}).get("answer") or {}
     explained = float(answer.get("explained_share") or 0.0)

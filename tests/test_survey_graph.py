@@ -15,9 +15,10 @@ from flexreg.core.transforms import (
 from flexreg.errors import InputError
 from flexreg.survey.config import SurveyConfig
 from flexreg.survey.graph import Link, solve_graph
-from flexreg.survey.links import Alternative
+from flexreg.survey.links import Alternative, GraphSolution
 from flexreg.survey.pairs import (
     auto_pairs,
+    chain_pairs,
     hypothesis_pairs,
     later_pairs,
     place_score,
@@ -605,6 +606,7 @@ def test_later_pairs_give_every_unplaced_station_its_next_partner_first():
         frozenset(("a0", "c")): 7,
         frozenset(("a0", "b")): 9,
         frozenset(("a2", "b")): 5,
+        frozenset(("a2", "c")): 3,  # under MIN_PLACE_MATCHES: as in the first round, no link
     }
     kw = {"reach_m": 5.0, "place_candidates": 2}  # no pose of b's link brings a pair that near
     got = later_pairs(stems, sol, links, tried, scores, budget=3, **kw)
@@ -616,3 +618,62 @@ def test_later_pairs_give_every_unplaced_station_its_next_partner_first():
         frozenset(p) for p in [("a0", "b"), ("a0", "c"), ("a2", "b"), ("a1", "c")]
     }
     assert all(c.origin == "place" for c in got)
+    # c's third partner scores 3: no link, however much budget is left
+    got = later_pairs(stems, sol, links, tried, scores, budget=10, reach_m=5.0, place_candidates=3)
+    assert frozenset(("a2", "c")) not in {c.key for c in got} and len(got) == 4
+
+
+def _truthful_judge(P, seen_m=float("inf")):
+    """A map that finds two stations seeing each other, clean, at their true relative pose
+    when they are within ``seen_m`` (None beyond: they hardly see each other), and
+    contradicting each other anywhere 0.5 m or more off it."""
+
+    def judge(a, b, T_a_b):
+        truth = invert(P[a]) @ P[b]
+        if np.linalg.norm(truth[:3, 3]) > seen_m:
+            return None
+        if translation_error_m(T_a_b, truth) >= 0.5:
+            return (0.9, 0.3, 0.05)
+        return (0.01, 0.002, 0.6)
+
+    return judge
+
+
+def test_a_hypothesis_the_map_refutes_brings_no_pair_and_unseen_pairs_give_way():
+    P, links, sol = _hypothesis_project()
+    stems = sorted(P)
+    tried = {frozenset((e.target, e.source)) for e in links}
+    kw = {"reach_m": 15.0, "place_candidates": 0, "budget": 10}
+    # without a map: the runner-up's pair (b beside a2) first, then the answer's
+    got = later_pairs(stems, sol, links, tried, {}, **kw)
+    assert [c.key for c in got] == [frozenset(("a2", "b")), frozenset(("a0", "b"))]
+    # the map refutes the runner-up where it puts b: only the answer's nearest pair is left
+    got = later_pairs(stems, sol, links, tried, {}, judge=(_truthful_judge(P), 0.03, 1.0), **kw)
+    assert [(c.target, c.source) for c in got] == [("a0", "b")]
+    # b sees nothing of a0 or a2 from 12.2 m: no pair tests the answer either
+    judge = (_truthful_judge(P, seen_m=11.0), 0.03, 1.0)
+    assert later_pairs(stems, sol, links, tried, {}, judge=judge, **kw) == []
+
+
+def test_a_chain_of_confident_links_brings_the_pair_that_would_close_its_loop():
+    P = {"s0": _turned(0, 0, 0.2), "s1": _turned(3, 0, 1.1), "s2": _turned(6, 0.5, -2.0)}
+    chain = [_link(P, "s0", "s1"), _link(P, "s1", "s2")]
+    stems = sorted(P)
+    # the three apart, as where the map kept each lone link from placing its stations
+    sol = GraphSolution("s0", {}, [["s0"], ["s1"], ["s2"]], ["s0", "s1", "s2"], {}, {}, {})
+    order = {s: i for i, s in enumerate(stems)}
+    tried = {frozenset((e.target, e.source)) for e in chain}
+    got = chain_pairs(sol, chain, tried, 12.0, order)
+    assert [[(a, b) for _, a, b, _ in options] for options in got] == [[("s0", "s2")]]
+    d, _, _, T = got[0][0]
+    truth = invert(P["s0"]) @ P["s2"]
+    assert translation_error_m(T, truth) < 1e-9 and d == pytest.approx(np.linalg.norm(truth[:3, 3]))
+    assert chain_pairs(sol, chain, tried, 5.0, order) == []  # 6 m apart
+    got = later_pairs(stems, sol, chain, tried, {}, reach_m=12.0, place_candidates=0, budget=5)
+    assert [(c.target, c.source, c.origin) for c in got] == [("s0", "s2", "proximity")]
+    # an uncertain link, or a confident one a loop contradicts, chains nothing
+    chain[1].loop_error_m, chain[1].loop_error_deg = 0.4, 2.0
+    assert chain_pairs(sol, chain, tried, 12.0, order) == []
+    chain[1].loop_error_m = chain[1].loop_error_deg = None
+    chain[0].verdict = "uncertain"
+    assert chain_pairs(sol, chain, tried, 12.0, order) == []

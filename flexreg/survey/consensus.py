@@ -65,9 +65,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexreg.core.transforms import invert
-from flexreg.survey.config import MIN_EXPLAINED
 from flexreg.survey.hypotheses import Cycle, Hypothesis, LoopTolerance
-from flexreg.survey.links import GroupFit, Judge, Matrix, loop_error
+from flexreg.survey.links import GroupFit, Judge, Matrix, loop_error, map_refutes, map_sees
 
 log = logging.getLogger(__name__)
 
@@ -344,19 +343,6 @@ def _refit(
     return any(h.refit is not None for h in todo)
 
 
-def _refuted(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
-    """The map check's own test (:meth:`~flexreg.survey.mapcheck.PairLook.conflicts`): at
-    least ``min_conflict`` of a scan in the other's free space, and ``ratio`` times what it
-    explains there."""
-    return said is not None and said[1] >= min_conflict and said[0] >= ratio / (1.0 + ratio)
-
-
-def _seen(said: tuple[float, float, float] | None) -> bool:
-    """The two groups see each other there: a pair explains :data:`~flexreg.survey.config.
-    MIN_EXPLAINED` of both samples."""
-    return said is not None and said[2] >= MIN_EXPLAINED
-
-
 @dataclass(frozen=True)
 class _Pick:
     """What merges two groups: the set, what chose it, and how much the map finds the
@@ -410,9 +396,9 @@ def _decide(
         said = _contradiction(top, place, g2, judge[0], judge[3]) if judge else None
         log.debug("%s <- %s alone: the map says %s", top.centre.link.target,
                   top.centre.link.source, said)  # fmt: skip
-        if judge is not None and _refuted(said, judge[1], judge[2]):
+        if judge is not None and map_refutes(said, judge[1], judge[2]):
             return None
-        if contradicted and not _seen(said):
+        if contradicted and not map_sees(said):
             return None
         return _Pick(top, "hand" if vouched else "alone", said[0] if said else 0.0)
     if judge is None or rival is None:
@@ -444,7 +430,7 @@ def _decisive(
     scores = [x for x in said if x is not None]
     best = min(range(len(scores)), key=lambda i: scores[i][0])
     low = scores[best][0]
-    if not _seen(scores[best]) or _refuted(scores[best], judge[1], judge[2]):
+    if not map_sees(scores[best]) or map_refutes(scores[best], judge[1], judge[2]):
         return None
     others = (x for i, x in enumerate(scores) if i != best)
     if all(x[0] >= decisive * low and x[0] > low and x[1] >= judge[1] for x in others):

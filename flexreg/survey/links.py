@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 from flexreg.core.transforms import invert, rotation_error_deg, translation_error_m
 from flexreg.registration.check import decisive_full
 from flexreg.registration.config import TWIN_MIN_RATIO, JudgeConfig
+from flexreg.survey.config import MIN_EXPLAINED
 
 Matrix = NDArray[np.float64]
 E = TypeVar("E")
@@ -493,6 +494,20 @@ group given as its stations' poses in its own frame (``{stem: T_group_station}``
 the start (``T_target_source`` of the groups' frames); the fitted ``T_target_source``, or None
 when too little overlaps."""
 
+
+def map_refutes(said: tuple[float, float, float] | None, min_conflict: float, ratio: float) -> bool:
+    """The map check's own test of a :data:`Judge`'s answer
+    (:meth:`~flexreg.survey.mapcheck.PairLook.conflicts`): at least ``min_conflict`` of a scan
+    in the other's free space, and ``ratio`` times what it explains there."""
+    return said is not None and said[1] >= min_conflict and said[0] >= ratio / (1.0 + ratio)
+
+
+def map_sees(said: tuple[float, float, float] | None) -> bool:
+    """Two stations see each other at the pose a :data:`Judge` scored: each explains
+    :data:`~flexreg.survey.config.MIN_EXPLAINED` of the other's sample."""
+    return said is not None and said[2] >= MIN_EXPLAINED
+
+
 __all__ = [
     "MAX_ALTERNATIVES",
     "Alternative",
@@ -505,6 +520,8 @@ __all__ = [
     "alternatives_of",
     "bridges",
     "loop_error",
+    "map_refutes",
+    "map_sees",
     "reached",
     "walk",
 ]

@@ -16,8 +16,11 @@ station overlaps only its few neighbours. The candidates come from two cheap cue
 
 The total is capped at ``max_links_per_station * N``; the file-order links come first, then
 the place-recognition links by score. Later rounds (:func:`later_pairs`) add pairs whose
-solved positions are close, then the pairs that would test each pose a link between two groups
-may have (:func:`hypothesis_pairs`), then the unplaced stations' next place partners.
+solved positions are close, then the pairs that would close a loop through a chain of confident
+links between groups (:func:`chain_pairs`), then the pairs that would test each pose a link
+between two groups may have (:func:`hypothesis_pairs`), then the unplaced stations' next place
+partners; the map's free-space check keeps only the pairs that would see each other at the pose
+that suggests them.
 
 A surveyor can add pairs (a CSV, :func:`read_pairs_csv`) and links given by hand with their
 ``T_target_source`` (:func:`hand_links`, e.g. from ``flexreg register --init`` or a point-pair
@@ -43,7 +46,7 @@ from flexreg.core.transforms import as_transform, invert
 from flexreg.errors import InputError
 from flexreg.io.transform_io import read_pair_transform
 from flexreg.stages.alignment import consistent_subset
-from flexreg.survey.links import GraphSolution, Link
+from flexreg.survey.links import GraphSolution, Judge, Link, map_refutes, map_sees
 from flexreg.survey.stations import GlobalDescriptor
 
 #: Lowe's ratio of the place-recognition matches
@@ -52,6 +55,9 @@ PLACE_RATIO = 0.85
 PLACE_TOLERANCE_M, PLACE_RELATIVE = 0.15, 0.02
 #: a place-recognition score under this many consistent matches proposes no link
 MIN_PLACE_MATCHES = 4
+#: most pairs the map looks at for one hypothesis of a link before giving it up (as many as
+#: the graph scores for one placement of two groups)
+HYPOTHESIS_LOOKS = 8
 
 _NUMBERED = re.compile(r"^(.*?)(\d+)$")
 
@@ -341,15 +347,26 @@ def later_pairs(
     reach_m: float,
     place_candidates: int,
     budget: int,
+    judge: tuple[Judge, float, float] | None = None,
 ) -> list[Candidate]:
     """The pairs a solution suggests, at most ``budget``: stations of one group whose solved
-    positions are within ``reach_m`` (loops), then the pairs each hypothesis of a link
-    between two groups brings within ``reach_m`` (:func:`hypothesis_pairs`: the loops that
-    would test it), then the unplaced stations' next ``place_candidates`` place-recognition
-    partners, every station's first before any station's second (a cut budget reaches every
-    station)."""
+    positions are within ``reach_m`` (loops), then stations of different groups that a chain
+    of trusted answers between the groups brings within ``reach_m`` (:func:`chain_pairs`:
+    the loop that would check them), then the pairs each hypothesis of a link between two
+    groups brings within ``reach_m`` (:func:`hypothesis_pairs`: the loops that would test
+    it), then the unplaced stations' next ``place_candidates`` place-recognition partners
+    that score :data:`MIN_PLACE_MATCHES` (as in the first round), every station's first
+    before any station's second (a cut budget reaches every station).
+
+    With the map's free-space check (``judge``: the judge, ``map_min_conflict`` and
+    ``map_conflict_ratio``), a pair is proposed only where the stations would see each other
+    at the pose that suggests it (:func:`~flexreg.survey.links.map_sees`): a registration
+    can confirm a pose only where the two scans share surfaces there. A hypothesis the map
+    refutes (:func:`~flexreg.survey.links.map_refutes`, at the nearest pairs it looks at)
+    needs no loop to refute it, and a pair that sees nothing of the other at the pose that
+    suggests it would only fail."""
     order = {s: i for i, s in enumerate(stems)}
-    near: list[tuple[float, str, str]] = []
+    near: list[_Pose] = []
     for g in sol.groups:
         for i, a in enumerate(g):
             for b in g[i + 1 :]:
@@ -357,16 +374,29 @@ def later_pairs(
                     continue
                 d = float(np.linalg.norm(sol.poses[a][:3, 3] - sol.poses[b][:3, 3]))
                 if d <= reach_m:
-                    near.append((d, a, b))
+                    near.append((d, a, b, invert(sol.poses[a]) @ sol.poses[b]))
     near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
-    loops = [(a, b) for _, a, b in near] + hypothesis_pairs(sol, links, tried, reach_m, order)
-    out = [Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b)) for a, b in loops]
+    looks = _MapLooks(judge)
+    loops: list[tuple[str, str] | None] = [
+        (a, b) for _, a, b, T in near if looks.worth(a, b, T) == "seen"
+    ]
+    for options in [
+        *chain_pairs(sol, links, tried, reach_m, order),
+        *_hypothesis_options(sol, links, tried, reach_m, order),
+    ]:
+        loops.append(looks.first_seen(options))
+    out = [
+        Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b))
+        for x in loops
+        if x is not None
+        for a, b in [x]
+    ]
     unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
     extra = [
         [
             (o, sc)
             for o, sc in ranked_partners(s, stems, scores)
-            if frozenset((s, o)) not in tried and sc > 0
+            if frozenset((s, o)) not in tried and sc >= MIN_PLACE_MATCHES
         ][:place_candidates]
         for s in unplaced
     ]
@@ -385,6 +415,158 @@ def later_pairs(
     return unique[: max(0, budget)]
 
 
+_Pose = tuple[float, str, str, "NDArray[np.float64]"]
+"""A pair a pose suggests: distance (metres), stations ``a`` and ``b``, ``T_a_b``."""
+
+
+class _MapLooks:
+    """Whether a pair is worth registering at the pose that suggests it: ``seen`` (the map
+    finds the stations seeing each other there, or there is no map), ``unseen`` or
+    ``refuted``. Each pair and pose is looked at once (the judge remembers)."""
+
+    def __init__(self, judge: tuple[Judge, float, float] | None) -> None:
+        self.judge = judge
+
+    def worth(self, a: str, b: str, T_a_b: NDArray[np.float64]) -> str:
+        if self.judge is None:
+            return "seen"
+        said = self.judge[0](a, b, T_a_b)
+        if map_refutes(said, self.judge[1], self.judge[2]):
+            return "refuted"
+        return "seen" if map_sees(said) else "unseen"
+
+    def first_seen(self, options: list[_Pose]) -> tuple[str, str] | None:
+        """Of the pairs one placement of two groups brings near (nearest first), the first
+        the map finds seeing each other, looking at no more than :data:`HYPOTHESIS_LOOKS`;
+        None when the map refutes the placement at one of them first, or none of them sees
+        the other."""
+        for _, a, b, T in options[:HYPOTHESIS_LOOKS]:
+            said = self.worth(a, b, T)
+            if said == "refuted":
+                return None
+            if said == "seen":
+                return a, b
+        return None
+
+
+def _cross(
+    sol: GraphSolution,
+    groups: tuple[int, int],
+    X: NDArray[np.float64],
+    tried: set[frozenset[str]],
+    reach_m: float,
+    order: dict[str, int],
+) -> list[_Pose]:
+    """The untried pairs, one station of each group, that ``X`` (``T_g1_g2`` of the groups'
+    frames) brings within ``reach_m``, nearest first, with their relative poses."""
+    eye = np.eye(4)
+    A, B = sol.groups[groups[0]], sol.groups[groups[1]]
+    out: list[_Pose] = []
+    for a in A:
+        Pa = sol.poses.get(a, eye)
+        for b in B:
+            if frozenset((a, b)) in tried:
+                continue
+            T = invert(Pa) @ X @ sol.poses.get(b, eye)
+            d = float(np.linalg.norm(T[:3, 3]))
+            if d <= reach_m:
+                out.append((d, a, b, T))
+    out.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
+    return out
+
+
+def chain_pairs(
+    sol: GraphSolution,
+    links: Sequence[Link],
+    tried: set[frozenset[str]],
+    reach_m: float,
+    order: dict[str, int],
+) -> list[list[_Pose]]:
+    """The untried pairs of stations of different groups that chains of trusted answers
+    between groups (confident links no loop has checked yet, nor any contradicts) bring
+    within ``reach_m``: each the link that would close a loop through the chain and so
+    confirm its links or refute one of them (a single station joined by confident links to
+    the stations on either side is placed only once such a loop closes). One list per pair
+    of groups a chain joins, nearest pair first; the groups' frames are joined along a
+    spanning tree of those answers, in the links' order."""
+    frame: dict[int, NDArray[np.float64]] = {}  # T_tree_group of the groups chains reach
+    tree: dict[int, int] = {}
+    group = {s: i for i, g in enumerate(sol.groups) for s in g}
+    eye = np.eye(4)
+    edges = [
+        e
+        for e in links
+        if e.T_target_source is not None
+        and e.trusted
+        and e.loop_error_m is None
+        and group.get(e.target, -1) != group.get(e.source, -1)
+        and e.target in group
+        and e.source in group
+    ]
+    adj: dict[int, list[tuple[int, NDArray[np.float64]]]] = {}
+    for e in edges:
+        gt, gs = group[e.target], group[e.source]
+        X = (
+            sol.poses.get(e.target, eye)
+            @ np.asarray(e.T_target_source)
+            @ invert(sol.poses.get(e.source, eye))
+        )  # T_gt_gs
+        adj.setdefault(gt, []).append((gs, X))
+        adj.setdefault(gs, []).append((gt, invert(X)))
+    for root in sorted(adj):
+        if root in frame:
+            continue
+        frame[root], tree[root] = np.eye(4), root
+        todo = [root]
+        while todo:
+            g = todo.pop(0)
+            for h, X in adj[g]:
+                if h not in frame:
+                    frame[h], tree[h] = frame[g] @ X, root
+                    todo.append(h)
+    out = []
+    members = sorted(frame)
+    for i, g1 in enumerate(members):
+        for g2 in members[i + 1 :]:
+            if tree[g1] != tree[g2]:
+                continue
+            X = invert(frame[g1]) @ frame[g2]
+            options = _cross(sol, (g1, g2), X, tried, reach_m, order)
+            if options:
+                out.append(options)
+    out.sort(key=lambda o: o[0][0])
+    return out
+
+
+def _hypothesis_options(
+    sol: GraphSolution,
+    links: Sequence[Link],
+    tried: set[frozenset[str]],
+    reach_m: float,
+    order: dict[str, int],
+) -> list[list[_Pose]]:
+    """For each pose a registered link between two groups may have (its answer and its
+    alternatives), the untried pairs of stations, one of each group, that pose brings within
+    ``reach_m``, nearest first; the poses by their nearest pair."""
+    group = {s: i for i, g in enumerate(sol.groups) for s in g}
+    eye = np.eye(4)
+    out = []
+    for e in links:
+        if e.T_target_source is None or e.verdict is None:
+            continue
+        gt, gs = group.get(e.target), group.get(e.source)
+        if gt is None or gs is None or gt == gs:
+            continue
+        ps = invert(sol.poses.get(e.source, eye))
+        for T in e.poses:
+            X = sol.poses.get(e.target, eye) @ T @ ps  # T_grouptarget_groupsource
+            options = _cross(sol, (gt, gs), X, tried, reach_m, order)
+            if options:
+                out.append(options)
+    out.sort(key=lambda o: (o[0][0], order[o[0][1]], order[o[0][2]]))
+    return out
+
+
 def hypothesis_pairs(
     sol: GraphSolution,
     links: Sequence[Link],
@@ -396,34 +578,11 @@ def hypothesis_pairs(
     alternatives), the untried pair of stations, one of each group, that pose brings nearest
     (within ``reach_m``): the link that would close a loop through the hypothesis and so
     confirm or refute it. Pairs by distance, nearest first; each once."""
-    group = {s: i for i, g in enumerate(sol.groups) for s in g}
-    eye = np.eye(4)
-    found: dict[frozenset[str], tuple[float, int, int, str, str]] = {}
-    free: dict[tuple[int, int], NDArray[np.bool_]] = {}  # untried pairs per pair of groups
-    # station positions per group, in its frame
-    at = [np.array([sol.poses.get(x, eye)[:3, 3] for x in g]) for g in sol.groups]
-    for e in links:
-        if e.T_target_source is None or e.verdict is None:
-            continue
-        gt, gs = group.get(e.target), group.get(e.source)
-        if gt is None or gs is None or gt == gs:
-            continue
-        A, B = sol.groups[gt], sol.groups[gs]
-        if (gt, gs) not in free:
-            free[gt, gs] = np.array([[frozenset((a, b)) not in tried for b in B] for a in A])
-        pa, pb = at[gt], at[gs]
-        ps = invert(sol.poses.get(e.source, eye))
-        for T in [e.T_target_source, *(x.T_target_source for x in e.alternatives)]:
-            X = sol.poses.get(e.target, eye) @ T @ ps  # T_grouptarget_groupsource
-            d = np.linalg.norm(pa[:, None, :] - (pb @ X[:3, :3].T + X[:3, 3])[None], axis=2)
-            near = np.argwhere(free[gt, gs] & (d <= reach_m))
-            hits = [(float(d[i, j]), order[A[i]], order[B[j]], A[i], B[j]) for i, j in near]
-            if hits:
-                best = min(hits)
-                k = frozenset(best[3:])
-                if k not in found or best < found[k]:
-                    found[k] = best
-    return [(a, b) for *_, a, b in sorted(found.values())]
+    out: dict[frozenset[str], tuple[str, str]] = {}
+    for options in _hypothesis_options(sol, links, tried, reach_m, order):
+        _, a, b, _ = options[0]
+        out.setdefault(frozenset((a, b)), (a, b))
+    return list(out.values())
 
 
 def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
@@ -432,11 +591,13 @@ def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:
 
 
 __all__ = [
+    "HYPOTHESIS_LOOKS",
     "MIN_PLACE_MATCHES",
     "Candidate",
     "HandLink",
     "all_pairs",
     "auto_pairs",
+    "chain_pairs",
     "hand_links",
     "hypothesis_pairs",
     "later_pairs",

@@ -611,19 +611,17 @@ def _link_rounds(
     sol = solve(found)
     auto = given.automatic and config.pairs == "auto"
     rounds = config.proximity_rounds if auto else 0
+    maps = None if judge is None else (judge, config.map_min_conflict, config.map_conflict_ratio)
     for r in range(rounds):
         tried = {frozenset((e.target, e.source)) for e in found}
         more = later_pairs(
-            stems,
-            sol,
-            found,
-            tried,
-            scores,
+            *(stems, sol, found, tried, scores),
             reach_m=config.proximity_m,
             place_candidates=config.place_candidates,
             # the budget left shared by the rounds left: a round's placements bring the
             # next round's loops
             budget=(max_links - len(found)) // (rounds - r),
+            judge=maps,
         )
         if not more:
             break

@@ -606,7 +606,6 @@ def test_later_pairs_give_every_unplaced_station_its_next_partner_first():
         frozenset(("a0", "c")): 7,
         frozenset(("a0", "b")): 9,
         frozenset(("a2", "b")): 5,
-        frozenset(("a2", "c")): 3,  # under MIN_PLACE_MATCHES: as in the first round, no link
     }
     kw = {"reach_m": 5.0, "place_candidates": 2}  # no pose of b's link brings a pair that near
     got = later_pairs(stems, sol, links, tried, scores, budget=3, **kw)
@@ -618,9 +617,6 @@ def test_later_pairs_give_every_unplaced_station_its_next_partner_first():
         frozenset(p) for p in [("a0", "b"), ("a0", "c"), ("a2", "b"), ("a1", "c")]
     }
     assert all(c.origin == "place" for c in got)
-    # c's third partner scores 3: no link, however much budget is left
-    got = later_pairs(stems, sol, links, tried, scores, budget=10, reach_m=5.0, place_candidates=3)
-    assert frozenset(("a2", "c")) not in {c.key for c in got} and len(got) == 4
 
 
 def _truthful_judge(P, seen_m=float("inf")):

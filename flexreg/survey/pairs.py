@@ -354,9 +354,9 @@ def later_pairs(
     of trusted answers between the groups brings within ``reach_m`` (:func:`chain_pairs`:
     the loop that would check them), then the pairs each hypothesis of a link between two
     groups brings within ``reach_m`` (:func:`hypothesis_pairs`: the loops that would test
-    it), then the unplaced stations' next ``place_candidates`` place-recognition partners
-    that score :data:`MIN_PLACE_MATCHES` (as in the first round), every station's first
-    before any station's second (a cut budget reaches every station).
+    it), then the unplaced stations' next ``place_candidates`` place-recognition partners,
+    every station's first before any station's second (a cut budget reaches every station):
+    whatever they score, as the last way left to an unplaced station.
 
     With the map's free-space check (``judge``: the judge, ``map_min_conflict`` and
     ``map_conflict_ratio``), a pair is proposed only where the stations would see each other
@@ -396,7 +396,7 @@ def later_pairs(
         [
             (o, sc)
             for o, sc in ranked_partners(s, stems, scores)
-            if frozenset((s, o)) not in tried and sc >= MIN_PLACE_MATCHES
+            if frozenset((s, o)) not in tried and sc > 0
         ][:place_candidates]
         for s in unplaced
     ]

@@ -377,20 +377,19 @@ def later_pairs(
                     near.append((d, a, b, invert(sol.poses[a]) @ sol.poses[b]))
     near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
     looks = _MapLooks(judge)
-    loops: list[tuple[str, str] | None] = [
-        (a, b) for _, a, b, T in near if looks.worth(a, b, T) == "seen"
-    ]
+    out: list[Candidate] = []
+    keys: set[frozenset[str]] = set()
     for options in [
+        *([x] for x in near),  # each near pair alone: the group's placement is given
         *chain_pairs(sol, links, tried, reach_m, order),
         *_hypothesis_options(sol, links, tried, reach_m, order),
     ]:
-        loops.append(looks.first_seen(options))
-    out = [
-        Candidate(*_ordered(a, b, order), "proximity", _score(scores, a, b))
-        for x in loops
-        if x is not None
-        for a, b in [x]
-    ]
+        if len(out) >= budget:  # the map looks no further than the budget reaches
+            break
+        pair = looks.first_seen(options)
+        if pair is not None and frozenset(pair) not in keys:
+            keys.add(frozenset(pair))
+            out.append(Candidate(*_ordered(*pair, order), "proximity", _score(scores, *pair)))
     unplaced = [s for g in sol.groups[1:] for s in g] if len(sol.groups[0]) > 1 else list(stems)
     extra = [
         [

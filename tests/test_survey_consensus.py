@@ -278,7 +278,8 @@ def test_two_answers_uncertain_only_for_their_overlap_that_agree_place_a_station
     place it (confidence ``uncertain``: the map then tests it at full resolution); one of
     them alone places nothing, nor do two 14 cm apart (one slid by a wall's thickness), nor
     two that agree but are also doubted for something their scans contradict (open space:
-    look-alike rooms alias such links alike)."""
+    look-alike rooms alias such links alike), unless full resolution clears both of open
+    space."""
     P = _poses(4)
     base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
     two = [_plain(P, "s2", "s3"), _plain(P, "s1", "s3")]
@@ -302,6 +303,16 @@ def test_two_answers_uncertain_only_for_their_overlap_that_agree_place_a_station
     assert "s3" not in sol.groups[0]
     doubted = [_plain(P, a, "s3", codes=("low_overlap", "free_space")) for a in ("s2", "s1")]
     assert not any(e.plain for e in doubted)
+    sol = solve_graph(sorted(P), [*base, *doubted], SurveyConfig(), reference="s0")
+    assert "s3" not in sol.groups[0]
+    # open space only the even sample finds, full resolution clearing each answer (stray
+    # returns among racks): as plain as a doorway's
+    for e in doubted:
+        e.open_clear = True
+    assert all(e.plain for e in doubted)
+    sol = solve_graph(sorted(P), [*base, *doubted], SurveyConfig(), reference="s0")
+    assert "s3" in sol.groups[0] and sol.confidence["s3"] == "uncertain"
+    doubted[0].open_clear = False  # one of them in open space at full resolution too
     sol = solve_graph(sorted(P), [*base, *doubted], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]
 

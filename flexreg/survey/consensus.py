@@ -26,8 +26,9 @@ of stations, the way PCM merges the maps of several robots.
    and no distinct placement of the same groups is as well supported; then everything is
    looked at again.
    Uncertain links confirm each other only when rough positions picked their poses (the
-   positions say which bay or room each means) or when nothing but their small overlap
-   doubts them (:attr:`~flexreg.survey.links.Link.plain`: two doorway links of different
+   positions say which bay or room each means) or when nothing but their small overlap, or
+   open space their even samples find and full resolution clears, doubts them
+   (:attr:`~flexreg.survey.links.Link.plain`: two doorway links of different
    pairs of scans, each finding one pose and nothing against it, that agree to the loop
    tolerance, or that reach one placement once fitted on all the overlap of the two
    groups: a doorway link may slide along a wall, :func:`_refit`; the map then tests what

@@ -291,15 +291,18 @@ class Link:
     @property
     def plain(self) -> bool:
         """Whether it is uncertain only because the scans share little (``low_overlap``: a
-        doorway's worth): its registration found no rival pose, no twin, nothing in open
-        space and no weak axis. Two such answers of different pairs of scans that agree
-        around a loop confirm each other (:mod:`flexreg.survey.consensus`), and the stations
-        they place are tested at full resolution like a lone link's
+        doorway's worth) or because its even sample puts points in open space that full
+        resolution clears (:attr:`open_clear`: stray returns among racks): its registration
+        found no rival pose, no twin, no weak axis and nothing in open space at full
+        resolution. Two such answers of different pairs of scans that agree around a loop
+        confirm each other (:mod:`flexreg.survey.consensus`), and the stations they place
+        are tested at full resolution like a lone link's
         (:func:`flexreg.survey.mapcheck.unconfirmed_pairs`)."""
+        fit = {"low_overlap"} | ({"free_space"} if self.open_clear else set())
         return (
             self.verdict == "uncertain"
             and bool(self.reasons)
-            and all(r.get("code") == "low_overlap" for r in self.reasons)
+            and all(r.get("code") in fit for r in self.reasons)
         )
 
     @property

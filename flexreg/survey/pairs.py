@@ -474,6 +474,18 @@ def _cross(
     return out
 
 
+def _between(group: dict[str, int], e: Link) -> tuple[int, int] | None:
+    """The groups of a link's target and source when they differ (else None)."""
+    gt, gs = group.get(e.target), group.get(e.source)
+    return None if gt is None or gs is None or gt == gs else (gt, gs)
+
+
+def _group_pose(sol: GraphSolution, e: Link, T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``T_grouptarget_groupsource`` of the groups' frames when ``e`` has pose ``T``."""
+    eye = np.eye(4)
+    return sol.poses.get(e.target, eye) @ T @ invert(sol.poses.get(e.source, eye))
+
+
 def chain_pairs(
     sol: GraphSolution,
     links: Sequence[Link],
@@ -491,27 +503,14 @@ def chain_pairs(
     frame: dict[int, NDArray[np.float64]] = {}  # T_tree_group of the groups chains reach
     tree: dict[int, int] = {}
     group = {s: i for i, g in enumerate(sol.groups) for s in g}
-    eye = np.eye(4)
-    edges = [
-        e
-        for e in links
-        if e.T_target_source is not None
-        and e.trusted
-        and e.loop_error_m is None
-        and group.get(e.target, -1) != group.get(e.source, -1)
-        and e.target in group
-        and e.source in group
-    ]
     adj: dict[int, list[tuple[int, NDArray[np.float64]]]] = {}
-    for e in edges:
-        gt, gs = group[e.target], group[e.source]
-        X = (
-            sol.poses.get(e.target, eye)
-            @ np.asarray(e.T_target_source)
-            @ invert(sol.poses.get(e.source, eye))
-        )  # T_gt_gs
-        adj.setdefault(gt, []).append((gs, X))
-        adj.setdefault(gs, []).append((gt, invert(X)))
+    for e in links:
+        ends = _between(group, e)
+        if ends is None or e.T_target_source is None or not e.trusted or e.loop_error_m is not None:
+            continue
+        X = _group_pose(sol, e, np.asarray(e.T_target_source))
+        adj.setdefault(ends[0], []).append((ends[1], X))
+        adj.setdefault(ends[1], []).append((ends[0], invert(X)))
     for root in sorted(adj):
         if root in frame:
             continue
@@ -548,18 +547,13 @@ def _hypothesis_options(
     alternatives), the untried pairs of stations, one of each group, that pose brings within
     ``reach_m``, nearest first; the poses by their nearest pair."""
     group = {s: i for i, g in enumerate(sol.groups) for s in g}
-    eye = np.eye(4)
     out = []
     for e in links:
-        if e.T_target_source is None or e.verdict is None:
+        ends = _between(group, e)
+        if ends is None or e.T_target_source is None or e.verdict is None:
             continue
-        gt, gs = group.get(e.target), group.get(e.source)
-        if gt is None or gs is None or gt == gs:
-            continue
-        ps = invert(sol.poses.get(e.source, eye))
         for T in e.poses:
-            X = sol.poses.get(e.target, eye) @ T @ ps  # T_grouptarget_groupsource
-            options = _cross(sol, (gt, gs), X, tried, reach_m, order)
+            options = _cross(sol, ends, _group_pose(sol, e, T), tried, reach_m, order)
             if options:
                 out.append(options)
     out.sort(key=lambda o: (o[0][0], order[o[0][1]], order[o[0][2]]))

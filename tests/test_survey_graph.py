@@ -566,14 +566,18 @@ def test_each_hypothesis_brings_the_pair_that_would_test_it():
     assert sol.group_of("b") != sol.group_of("a0")  # the uncertain link alone places nothing
     order = {s: i for i, s in enumerate(sorted(P))}
     tried = {frozenset((e.target, e.source)) for e in links}
+
     # the answer puts b 12.2 m from a0 and from a2 (a0 first in file order); the runner-up
     # puts it 7 m from a2: each pose's nearest untried pair, nearest first
-    got = hypothesis_pairs(sol, links, tried, 15.0, order)
-    assert got == [("a2", "b"), ("a0", "b")]
-    assert hypothesis_pairs(sol, links, tried, 10.0, order) == [("a2", "b")]
-    assert hypothesis_pairs(sol, links, tried | {frozenset(("a2", "b"))}, 15.0, order) == [
-        ("a0", "b")
-    ]
+    def nearest(reach_m, tried):
+        return [o[0][1:3] for o in hypothesis_pairs(sol, links, tried, reach_m, order)]
+
+    assert nearest(15.0, tried) == [("a2", "b"), ("a0", "b")]
+    assert nearest(10.0, tried) == [("a2", "b")]
+    # with a2 - b tried, the answer's next pair; the runner-up brings none other within reach
+    assert nearest(15.0, tried | {frozenset(("a2", "b"))}) == [("a0", "b")]
+    _, a, b, T = hypothesis_pairs(sol, links, tried, 15.0, order)[1][0]
+    np.testing.assert_allclose(T, invert(P[a]) @ P[b], atol=1e-9)  # the answer is right
     links[-1].verdict = None  # a failed registration's pose is no hypothesis
     assert hypothesis_pairs(sol, links, tried, 15.0, order) == []
 

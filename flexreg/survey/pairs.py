@@ -382,7 +382,7 @@ def later_pairs(
     for options in [
         *([x] for x in near),  # each near pair alone: the group's placement is given
         *chain_pairs(sol, links, tried, reach_m, order),
-        *_hypothesis_options(sol, links, tried, reach_m, order),
+        *hypothesis_pairs(sol, links, tried, reach_m, order),
     ]:
         if len(out) >= budget:  # the map looks no further than the budget reaches
             break
@@ -536,7 +536,7 @@ def chain_pairs(
     return out
 
 
-def _hypothesis_options(
+def hypothesis_pairs(
     sol: GraphSolution,
     links: Sequence[Link],
     tried: set[frozenset[str]],
@@ -545,7 +545,9 @@ def _hypothesis_options(
 ) -> list[list[_Pose]]:
     """For each pose a registered link between two groups may have (its answer and its
     alternatives), the untried pairs of stations, one of each group, that pose brings within
-    ``reach_m``, nearest first; the poses by their nearest pair."""
+    ``reach_m``, nearest first, with their relative poses there: each the link that would
+    close a loop through the hypothesis and so confirm or refute it. The poses by their
+    nearest pair."""
     group = {s: i for i, g in enumerate(sol.groups) for s in g}
     out = []
     for e in links:
@@ -558,24 +560,6 @@ def _hypothesis_options(
                 out.append(options)
     out.sort(key=lambda o: (o[0][0], order[o[0][1]], order[o[0][2]]))
     return out
-
-
-def hypothesis_pairs(
-    sol: GraphSolution,
-    links: Sequence[Link],
-    tried: set[frozenset[str]],
-    reach_m: float,
-    order: dict[str, int],
-) -> list[tuple[str, str]]:
-    """For each pose a registered link between two groups may have (its answer and its
-    alternatives), the untried pair of stations, one of each group, that pose brings nearest
-    (within ``reach_m``): the link that would close a loop through the hypothesis and so
-    confirm or refute it. Pairs by distance, nearest first; each once."""
-    out: dict[frozenset[str], tuple[str, str]] = {}
-    for options in _hypothesis_options(sol, links, tried, reach_m, order):
-        _, a, b, _ = options[0]
-        out.setdefault(frozenset((a, b)), (a, b))
-    return list(out.values())
 
 
 def _score(scores: dict[frozenset[str], int], a: str, b: str) -> float | None:

@@ -376,7 +376,6 @@ def later_pairs(
                 if d <= reach_m:
                     near.append((d, a, b, invert(sol.poses[a]) @ sol.poses[b]))
     near.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
-    looks = _MapLooks(judge)
     out: list[Candidate] = []
     keys: set[frozenset[str]] = set()
     for options in [
@@ -386,7 +385,7 @@ def later_pairs(
     ]:
         if len(out) >= budget:  # the map looks no further than the budget reaches
             break
-        pair = looks.first_seen(options)
+        pair = _first_seen(options, judge)
         if pair is not None and frozenset(pair) not in keys:
             keys.add(frozenset(pair))
             out.append(Candidate(*_ordered(*pair, order), "proximity", _score(scores, *pair)))
@@ -418,34 +417,23 @@ _Pose = tuple[float, str, str, "NDArray[np.float64]"]
 """A pair a pose suggests: distance (metres), stations ``a`` and ``b``, ``T_a_b``."""
 
 
-class _MapLooks:
-    """Whether a pair is worth registering at the pose that suggests it: ``seen`` (the map
-    finds the stations seeing each other there, or there is no map), ``unseen`` or
-    ``refuted``. Each pair and pose is looked at once (the judge remembers)."""
-
-    def __init__(self, judge: tuple[Judge, float, float] | None) -> None:
-        self.judge = judge
-
-    def worth(self, a: str, b: str, T_a_b: NDArray[np.float64]) -> str:
-        if self.judge is None:
-            return "seen"
-        said = self.judge[0](a, b, T_a_b)
-        if map_refutes(said, self.judge[1], self.judge[2]):
-            return "refuted"
-        return "seen" if map_sees(said) else "unseen"
-
-    def first_seen(self, options: list[_Pose]) -> tuple[str, str] | None:
-        """Of the pairs one placement of two groups brings near (nearest first), the first
-        the map finds seeing each other, looking at no more than :data:`HYPOTHESIS_LOOKS`;
-        None when the map refutes the placement at one of them first, or none of them sees
-        the other."""
-        for _, a, b, T in options[:HYPOTHESIS_LOOKS]:
-            said = self.worth(a, b, T)
-            if said == "refuted":
-                return None
-            if said == "seen":
-                return a, b
-        return None
+def _first_seen(
+    options: list[_Pose], judge: tuple[Judge, float, float] | None
+) -> tuple[str, str] | None:
+    """Of the pairs one placement brings near (nearest first), the first the map (``judge``:
+    the judge, ``map_min_conflict``, ``map_conflict_ratio``) finds seeing each other there,
+    looking at no more than :data:`HYPOTHESIS_LOOKS`; None when the map refutes the
+    placement at one of them first, or none of them sees the other. Without a map, the
+    nearest pair. The judge remembers each pair and pose it looked at."""
+    if judge is None:
+        return (options[0][1], options[0][2]) if options else None
+    for _, a, b, T in options[:HYPOTHESIS_LOOKS]:
+        said = judge[0](a, b, T)
+        if map_refutes(said, judge[1], judge[2]):
+            return None
+        if map_sees(said):
+            return a, b
+    return None
 
 
 def _cross(
@@ -460,16 +448,15 @@ def _cross(
     frames) brings within ``reach_m``, nearest first, with their relative poses."""
     eye = np.eye(4)
     A, B = sol.groups[groups[0]], sol.groups[groups[1]]
+    pa = np.array([sol.poses.get(a, eye)[:3, 3] for a in A])
+    pb = np.array([sol.poses.get(b, eye)[:3, 3] for b in B]) @ X[:3, :3].T + X[:3, 3]
+    d = np.linalg.norm(pa[:, None, :] - pb[None], axis=2)
     out: list[_Pose] = []
-    for a in A:
-        Pa = sol.poses.get(a, eye)
-        for b in B:
-            if frozenset((a, b)) in tried:
-                continue
-            T = invert(Pa) @ X @ sol.poses.get(b, eye)
-            d = float(np.linalg.norm(T[:3, 3]))
-            if d <= reach_m:
-                out.append((d, a, b, T))
+    for i, j in np.argwhere(d <= reach_m):
+        a, b = A[i], B[j]
+        if frozenset((a, b)) not in tried:
+            T = invert(sol.poses.get(a, eye)) @ X @ sol.poses.get(b, eye)
+            out.append((float(d[i, j]), a, b, T))
     out.sort(key=lambda t: (t[0], order[t[1]], order[t[2]]))
     return out
 

@@ -557,3 +557,34 @@ def test_a_runner_up_that_explains_almost_nothing_at_full_resolution_is_no_alter
     assert [a.support for a in kept] == [0.9, 0.7]
     assert np.allclose(kept[0].T_target_source, bay)
     assert len(alternatives_of(np.eye(4), ups, None, JudgeConfig())) == 3  # nothing measured
+
+
+def test_rough_positions_refute_a_station_placed_a_bay_off_by_links_aliased_alike():
+    """Four stations in a row held by confident links, and a fifth whose two doorway links
+    (uncertain only for their small overlap) both put it a bay (5.65 m) across from where it
+    stood, the way a station's own look-alike bay aliases all its links alike: they agree
+    around their loop, and without positions they place it. Rough positions of all five
+    (0.5 m off, sigma 1 m) refute that placement: the row's fit to its positions puts the
+    fifth 5 m from its own; the same links at the true pose place it."""
+    from flexreg.survey.positions import Position
+
+    P = {f"s{i}": make_transform(np.eye(3), [8.0 * i, 0.0, 0.0]) for i in range(4)}
+    P["s4"] = make_transform(np.eye(3), [12.0, 7.0, 0.0])
+    rng = np.random.default_rng(5)
+    pos = {}
+    for s, T in P.items():
+        turn = rng.uniform(0, 2 * np.pi)
+        off = 0.5 * np.array([np.cos(turn), np.sin(turn), 0.0])
+        pos[s] = Position(T[:3, 3] + off, False, np.radians(rng.choice([-10.0, 10.0])), 1.0)
+    row = [_link(P, f"s{i}", f"s{i + 1}") for i in range(3)] + [_link(P, "s0", "s2")]
+
+    def doorways(offset):
+        return [_plain(P, a, "s4", _moved(P, a, "s4", offset)) for a in ("s1", "s2")]
+
+    sol = solve_graph(sorted(P), [*row, *doorways([0.0, 5.65, 0.0])], SurveyConfig())
+    assert "s4" in sol.groups[0]  # aliased alike, the loop cannot tell
+    sol = solve_graph(sorted(P), [*row, *doorways([0.0, 5.65, 0.0])], SurveyConfig(), positions=pos)
+    assert "s4" not in sol.groups[0] and all(s in sol.groups[0] for s in ("s0", "s1", "s2"))
+    sol = solve_graph(sorted(P), [*row, *doorways([0.0, 0.0, 0.0])], SurveyConfig(), positions=pos)
+    assert "s4" in sol.groups[0]
+    np.testing.assert_allclose(sol.poses["s4"], invert(P[sol.reference]) @ P["s4"], atol=1e-6)

@@ -17,6 +17,7 @@ from flexreg.survey.positions import (
     read_positions_csv,
     sigmas_off,
     site_from_positions,
+    sited_by_groups,
 )
 
 STEMS = ["s0", "s1", "s2"]
@@ -182,3 +183,76 @@ def test_stored_poses_declared_rough_are_positions():
     assert stored_positions(stored, None) == {}
     (p,) = stored_positions(stored, 0.3).values()
     assert p.sigma_m == 0.3 and p.has_z and p.heading_rad == pytest.approx(math.radians(30))
+
+
+def _row(n, spacing, heading_off_deg, sigma=1.0):
+    """Stations ``s0..s{n-1}`` in a row along the site's x axis, ``spacing`` apart, facing
+    the site's x axis; positions exact, headings ``heading_off_deg`` off each."""
+    truth = {f"s{i}": _pose(i * spacing, 0.0) for i in range(n)}
+    pos = {
+        s: Position(T[:3, 3].copy(), False, math.radians(heading_off_deg), sigma)
+        for s, T in truth.items()
+    }
+    return truth, pos
+
+
+def test_a_group_carries_the_heading_a_far_bay_twin_is_refused_by():
+    """A station 17 m away along a hall of 5.65 m bays, headings 10 degrees off: from the
+    station's rough heading a pose one bay off (5.65 m across the line of sight) lies
+    within three of its sigma (the heading's error moves the station 17 m away by 3 m), so
+    the positions cannot tell it from the true pose. Five stations in a row whose
+    registrations hold them together carry their fitted heading (to about 2 degrees): the
+    bay is then refused and the true pose picked."""
+    truth, pos = _row(5, 8.0, 10.0)
+    pos["s5"] = Position(np.array([16.0, 17.0, 0.0]), False, math.radians(10.0), 1.0)
+    truth["s5"] = _pose(16.0, 17.0)
+    right = np.linalg.inv(truth["s2"]) @ truth["s5"]
+    twin = right @ _pose(5.65, 0.0)  # one bay along, across the line of sight
+    assert sigmas_off(twin, pos["s2"], pos["s5"]) < 3.0
+    assert choose([twin, right], pos["s2"], pos["s5"])[0] is None
+    row = [f"s{i}" for i in range(5)]
+    group = {s: np.linalg.inv(truth["s0"]) @ truth[s] for s in row}
+    sited = sited_by_groups(pos, [row, ["s5"]], group)
+    assert math.degrees(sited["s2"].heading_sigma_rad) < 3.0
+    assert abs(math.degrees(sited["s2"].heading_rad)) < 3.0  # the fit outweighs 10 degrees
+    assert sited["s5"] == pos["s5"]  # alone: as given
+    assert choose([twin, right], sited["s2"], sited["s5"]) == (1, "")
+    e = Link("s2", "s5", T_target_source=twin, verdict="uncertain")
+    e.reasons = [{"code": "ambiguous", "message": "bays"}]
+    e.alternatives = [Alternative(right, "twin", 0.95)]
+    assert apply_positions([e], pos) == 0 and e.alternatives  # both kept: cannot tell
+    assert apply_positions([e], sited) == 1
+    assert np.allclose(e.T_target_source, right) and e.vouched == "positions"
+    # decided again with the rough positions: the pick is undone, nothing refused
+    assert apply_positions([e], pos) == 0
+    assert np.allclose(e.T_target_source, twin) and not e.vouched and not e.refused
+    assert len(e.alternatives) == 1 and np.allclose(e.alternatives[0].T_target_source, right)
+
+
+def test_a_group_misplaced_against_its_positions_carries_nothing():
+    """A group whose solved poses put a station 5 m from its position (a wrong link, or a
+    wrong position) does not lend its fit to anyone."""
+    truth, pos = _row(3, 8.0, 0.0)
+    group = {s: np.linalg.inv(truth["s0"]) @ truth[s] for s in truth}
+    group["s2"] = group["s2"] @ _pose(5.0, 0.0)
+    assert sited_by_groups(pos, [list(truth)], group) == pos
+
+
+def test_poses_the_positions_refuse_are_no_hypotheses():
+    """Of a link's three poses, two agree with the positions (they cannot tell) and one, a
+    bay off across the line of sight, lies further than three sigma: it is dropped; a
+    link none of whose poses agrees is refused."""
+    pos = {
+        "s0": Position(np.zeros(3), False, 0.0, 0.3, math.radians(1.0)),
+        "s1": Position(np.array([8.0, 0.0, 0.0]), False, 0.0, 0.3, math.radians(1.0)),
+    }
+    e = Link("s0", "s1", T_target_source=_pose(8.0, 6.0), verdict="uncertain")
+    e.reasons = [{"code": "ambiguous", "message": "bays"}]
+    e.alternatives = [Alternative(_pose(8.0, 0.0), "twin", 0.9)]
+    e.alternatives.append(Alternative(_pose(8.3, 0.2), "runner_up", 0.8))
+    assert apply_positions([e], pos) == 0 and "cannot tell" in e.undecided
+    assert np.allclose(e.T_target_source, _pose(8.0, 0.0))
+    assert [a.kind for a in e.alternatives] == ["runner_up"]
+    far = Link("s0", "s1", T_target_source=_pose(13.65, 0.0), verdict="confident")
+    apply_positions([far], pos)
+    assert far.status == "rejected" and far.refused.startswith("the positions refuse")

@@ -60,7 +60,7 @@ thresholds decide.
 from __future__ import annotations
 
 import logging
-from collections.abc import Container, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +68,7 @@ import numpy as np
 from flexreg.core.transforms import invert
 from flexreg.survey.hypotheses import Cycle, Hypothesis, LoopTolerance
 from flexreg.survey.links import GroupFit, Judge, Matrix, loop_error, map_refutes, map_sees
+from flexreg.survey.positions import Position, refutes
 
 log = logging.getLogger(__name__)
 
@@ -204,16 +205,27 @@ def _fit(h: Hypothesis, place: Placement, X: Matrix, g2: str) -> tuple[float, fl
 
 
 def _sets(
-    place: Placement, g1: str, g2: str, items: list[Hypothesis], tol: LoopTolerance
+    place: Placement,
+    g1: str,
+    g2: str,
+    items: list[Hypothesis],
+    tol: LoopTolerance,
+    positions: Mapping[str, Position] | None = None,
 ) -> list[_Set]:
     """The consistent sets between groups ``g1`` and ``g2``, best first: one per hypothesis
     as its centre, with the best-fitting hypothesis of every other link that agrees with
-    the placement it proposes (the cycle through both and the groups' poses closes)."""
+    the placement it proposes (the cycle through both and the groups' poses closes); none
+    whose placement rough ``positions`` refute (:func:`~flexreg.survey.positions.refutes`)."""
     out = []
+    first = {s: place.pose[s] for s in place.members(g1)}
     for c in items:
         if c.refit is not None:
             continue  # all the overlap fits elsewhere: it places nothing itself
         X = _proposal(c, place, g1)
+        if positions and refutes(
+            positions, first, {s: X @ place.pose[s] for s in place.members(g2)}
+        ):
+            continue
         best: dict[int, tuple[float, Hypothesis]] = {id(c.link): (0.0, c)}
         for h in items:
             if h.link is c.link:
@@ -496,6 +508,7 @@ def merge_groups(
     judge: tuple[Judge, float, float, float] | None = None,
     broken: Sequence[Cycle] = (),
     fit: tuple[GroupFit, float] | None = None,
+    positions: Mapping[str, Position] | None = None,
 ) -> tuple[Placement, dict[int, Chosen]]:
     """Step 2: the groups, and what each link that merged groups was given (by link id).
 
@@ -523,6 +536,9 @@ def merge_groups(
         Where all the overlap of two groups fits, and how far apart (metres) two starts may
         be for it to bring them together: when nothing a loop confirms is left, plain answers
         are fitted on it (:func:`_refit`; with ``judge`` only).
+    positions : dict of str -> Position, optional
+        Rough positions: a placement of two groups they refute
+        (:func:`~flexreg.survey.positions.refutes`) is no hypothesis.
     """
     place = Placement({s: s for s in stems}, {s: np.eye(4) for s in stems})
     chosen: dict[int, Chosen] = {}
@@ -544,14 +560,14 @@ def merge_groups(
             if items and k not in memo:
                 for h in items:
                     h.refit = None
-                memo[k] = (_sets(place, *k, items, tol), {})
+                memo[k] = (_sets(place, *k, items, tol, positions), {})
         decide = (place, tol, ratios, judge)
         best = _best(memo, decide, False)  # what a loop confirms first
         if best is None and fit is not None and judge is not None:  # then slid doorway links
             for k in sorted(memo.keys() - refitted):
                 refitted.add(k)
                 if _refit(between[k], place, k, fit, judge[3], tol):
-                    memo[k] = (_sets(place, *k, between[k], tol), {})
+                    memo[k] = (_sets(place, *k, between[k], tol, positions), {})
             best = _best(memo, decide, False)
         best = best or _best(memo, decide, True)  # then lone trusted links
         if best is None:

@@ -28,7 +28,7 @@ information matrix. A wrong link must not place a station:
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -50,6 +50,7 @@ from flexreg.survey.links import (
     reached,
     walk,
 )
+from flexreg.survey.positions import Position
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +79,7 @@ def _choose(
     config: SurveyConfig,
     judge: Judge | None,
     fit: GroupFit | None = None,
+    positions: Mapping[str, Position] | None = None,
 ) -> Placement:
     """Steps 1-3 (:mod:`flexreg.survey.consensus`): the hypothesis of every pending link,
     the groups they make and their poses; links left out are rejected with why."""
@@ -97,6 +99,7 @@ def _choose(
         else None,
         broken,
         (fit, 2 * CAPTURE_VOXELS * config.refine_voxel_m) if fit is not None else None,
+        positions,
     )
     for e in pending:
         c = chosen.get(id(e))
@@ -463,6 +466,7 @@ def solve_graph(
     vetoes: Sequence[Veto] = (),
     judge: Judge | None = None,
     fit: GroupFit | None = None,
+    positions: Mapping[str, Position] | None = None,
 ) -> GraphSolution:
     """Steps 1-5 of this module: statuses of ``links`` (set in place), poses and groups.
 
@@ -491,6 +495,9 @@ def solve_graph(
         ``fit(target, source, X)``: where all the overlap of two groups of stations fits
         (:data:`~flexreg.survey.links.GroupFit`); with ``judge``, doorway links that slid
         along a wall are fitted on it (:func:`flexreg.survey.consensus.merge_groups`).
+    positions : dict of str -> Position, optional
+        Rough positions (:mod:`flexreg.survey.positions`): a placement of two groups they
+        refute (:func:`~flexreg.survey.positions.refutes`) joins nothing.
 
     Returns
     -------
@@ -503,7 +510,8 @@ def solve_graph(
     """
     config = config if config is not None else SurveyConfig()
     dropped: dict[int, str] = {}
-    sol = _solve_once(stations, links, config, reference, dropped, (judge, fit))
+    maps = (judge, fit, positions or {})
+    sol = _solve_once(stations, links, config, reference, dropped, maps)
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
         cuts = [worst] if worst is not None else _veto_cuts(sol, links, vetoes, config)
@@ -511,7 +519,7 @@ def solve_graph(
             break
         for e, why in cuts:
             dropped[id(e)] = why
-        sol = _solve_once(stations, links, config, reference, dropped, (judge, fit))
+        sol = _solve_once(stations, links, config, reference, dropped, maps)
     return sol
 
 
@@ -658,10 +666,10 @@ def _solve_once(
     config: SurveyConfig,
     reference: str | None,
     dropped: dict[int, str],
-    maps: tuple[Judge | None, GroupFit | None] = (None, None),
+    maps: tuple[Judge | None, GroupFit | None, Mapping[str, Position]] = (None, None, {}),
 ) -> GraphSolution:
-    """Steps 1-3 with the links of ``dropped`` rejected beforehand; ``maps``: the judge and
-    the group fit."""
+    """Steps 1-3 with the links of ``dropped`` rejected beforehand; ``maps``: the judge, the
+    group fit and the rough positions."""
     for e in links:
         e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
         e.loop_error_deg = e.loop_error_m = None

@@ -218,6 +218,8 @@ class Link:
     undecided: str = ""
     windowed: bool = False
     open_clear: bool | None = None
+    # the answer and alternatives as registered, before the first :meth:`take`
+    registered: tuple[Matrix, list[Alternative]] | None = field(default=None, repr=False)
 
     @property
     def overlap(self) -> float:
@@ -233,12 +235,20 @@ class Link:
     def take(self, alternative: Alternative, why: str) -> None:
         """Let one of its alternatives be the link's pose (something outside the pair picked
         it: a loop, the map, rough positions); the answer becomes an alternative."""
+        if self.registered is None:
+            self.registered = (np.asarray(self.T_target_source), list(self.alternatives))
         self.alternatives = [
             Alternative(np.asarray(self.T_target_source), "answer", 1.0),
             *(a for a in self.alternatives if a is not alternative),
         ]
         self.T_target_source = np.asarray(alternative.T_target_source, dtype=np.float64)
         self.picked = f"{why} picked its {alternative.kind.replace('_', '-')}, not its answer"
+
+    def untake(self) -> None:
+        """Its answer and alternatives as registered again (every :meth:`take` undone)."""
+        if self.registered is not None:
+            self.T_target_source, alternatives = self.registered
+            self.alternatives, self.registered, self.picked = list(alternatives), None, ""
 
     def agreeing_alternative(
         self, P_target: Matrix, P_source: Matrix, agrees: Callable[[tuple[float, float]], bool]

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,25 +22,30 @@ from numpy.typing import NDArray
 
 from flexreg.core.transforms import invert
 from flexreg.errors import InputError
-from flexreg.survey.links import Link
+from flexreg.survey.links import GraphSolution, Link
 
 Matrix = NDArray[np.float64]
 
 #: 1-sigma of a position whose ``sigma_m`` is empty, metres (a pace-and-sketch position).
 DEFAULT_SIGMA_M = 1.0
 #: How far, in standard deviations of what the positions predict, a link's translation may
-#: be from it and still agree with them.
+#: be from it and still agree with them; a pose further off is refused (:func:`sigmas_off`
+#: counts the position's and the heading's error: 10 degrees move a station 20 m away by
+#: 3.5 m).
 AGREE_SIGMAS = 3.0
-#: Beyond this many standard deviations from what the positions predict, every pose of a
-#: link is refused. Between it and :data:`AGREE_SIGMAS` the positions neither vouch nor
-#: refuse: a rough heading turns the predicted offset (10 degrees move a station 20 m away by
-#: 3.5 m), so they are not trusted to refuse what lies only a little beyond.
-REFUSE_SIGMAS = 6.0
 #: How far a link's turn about the vertical may be from the headings' difference and still
 #: agree, degrees: two rough headings are off by up to about 20 degrees together, while
 #: look-alike poses differ by a quarter or half turn (rooms, halls) or by a bay at the same
 #: heading (then the translation tells).
 AGREE_HEADING_DEG = 30.0
+#: 1-sigma of a rough heading, degrees (a compass, a sketch's arrow): a third of
+#: :data:`AGREE_HEADING_DEG`. Its error turns the offset it predicts to a station ``d`` away
+#: by ``d`` times it, a share of the sigma :func:`sigmas_off` measures in.
+HEADING_SIGMA_DEG = AGREE_HEADING_DEG / AGREE_SIGMAS
+#: Most times the positions decide the links again with what a solution's groups carry.
+DECIDE_ROUNDS = 3
+#: Who picked a link's alternative (:meth:`~flexreg.survey.links.Link.take`).
+PICKED_BY = "the rough positions"
 #: Columns of the file, in order (the first two required).
 COLUMNS = ("stem", "x", "y", "z", "heading_deg", "sigma_m")
 
@@ -58,12 +63,16 @@ class Position:
         The scanner's x axis from the site's x axis, about the site's z; None: unknown.
     sigma_m : float, metres
         1-sigma of the position.
+    heading_sigma_rad : float, radians
+        1-sigma of the heading: :data:`HEADING_SIGMA_DEG` as given, less once the solved
+        poses of a group of stations carry it (:func:`sited_by_groups`).
     """
 
     xyz: Matrix
     has_z: bool
     heading_rad: float | None
     sigma_m: float
+    heading_sigma_rad: float = math.radians(HEADING_SIGMA_DEG)
 
 
 def _number(path: Path, n: int, name: str, text: str) -> float | None:
@@ -137,44 +146,57 @@ def _wrap_deg(a: float) -> float:
 
 def sigmas_off(T: Matrix, target: Position, source: Position) -> float:
     """How far a link's ``T_target_source`` is from what two stations' rough positions
-    predict, in standard deviations of both positions: the source's position in the target's
-    frame (rotated by the target's heading; without one only the distance between them
-    counts); infinite when both headings are known and the link turns more than
-    :data:`AGREE_HEADING_DEG` from their difference. A heading's own error is not in the
-    sigma: a pose vouched for is one near what the positions predict as they stand.
+    predict, in standard deviations: the source's position in the target's frame (rotated
+    by the target's heading; without one only the distance between them counts), against
+    both positions' sigma and what the heading's sigma turns the offset by (both ways when
+    both stations have a heading: the one whose heading is known better measures);
+    infinite when both headings are known and the link turns more than
+    :data:`AGREE_HEADING_DEG` from their difference.
 
-    >>> a = Position(np.zeros(3), False, 0.0, 1.0)
-    >>> b = Position(np.array([6.0, 0.0, 0.0]), False, 0.0, 1.0)
+    >>> a = Position(np.zeros(3), False, 0.0, 1.0, 0.0)
+    >>> b = Position(np.array([6.0, 0.0, 0.0]), False, 0.0, 1.0, 0.0)
     >>> T = np.eye(4); T[0, 3] = 6.3
     >>> round(sigmas_off(T, a, b), 2)
     0.21
     >>> T[0, 3] = 12.2  # a bay further
     >>> round(sigmas_off(T, a, b), 2)
     4.38
+    >>> T[0, 3], T[1, 3] = 6.0, 1.5  # a heading off by 10 degrees turns it by a metre
+    >>> ten = math.radians(10.0)
+    >>> a, b = replace(a, heading_sigma_rad=ten), replace(b, heading_sigma_rad=ten)
+    >>> round(sigmas_off(T, a, b), 2)
+    0.85
     """
+    if target.heading_rad is not None and source.heading_rad is not None:
+        turn = _wrap_deg(_yaw(T) - (source.heading_rad - target.heading_rad))
+        if turn > AGREE_HEADING_DEG:
+            return math.inf
+        if source.heading_sigma_rad < target.heading_sigma_rad:
+            return _off(invert(np.asarray(T, dtype=np.float64)), source, target)
+    return _off(T, target, source)
+
+
+def _off(T: Matrix, target: Position, source: Position) -> float:
+    """:func:`sigmas_off` measured in the target's frame."""
     d = source.xyz - target.xyz
     t = np.asarray(T[:3, 3], dtype=np.float64)
+    sigma = math.hypot(target.sigma_m, source.sigma_m)
     if target.heading_rad is None:
         off = abs(float(np.linalg.norm(t[:2])) - float(np.linalg.norm(d[:2])))
     else:
         c, s = math.cos(target.heading_rad), math.sin(target.heading_rad)
         local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
         off = float(np.linalg.norm(t[:2] - local))
+        sigma = math.hypot(sigma, float(np.linalg.norm(d[:2])) * target.heading_sigma_rad)
     if target.has_z and source.has_z:
         off = math.hypot(off, float(t[2] - d[2]))
-    sigma = math.hypot(target.sigma_m, source.sigma_m)
-    if target.heading_rad is not None and source.heading_rad is not None:
-        turn = _wrap_deg(_yaw(T) - (source.heading_rad - target.heading_rad))
-        if turn > AGREE_HEADING_DEG:
-            return math.inf
     return off / sigma
 
 
 def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int | None, str]:
     """Which of a link's poses (its answer, then its alternatives) the positions pick: the
     one within :data:`AGREE_SIGMAS` when it is the only one; None with the reason otherwise
-    (the reason starts "the positions refuse" when every pose lies beyond
-    :data:`REFUSE_SIGMAS`).
+    (the reason starts "the positions refuse" when none is).
 
     >>> a = Position(np.zeros(3), False, 0.0, 1.0)
     >>> b = Position(np.array([6.0, 0.0, 0.0]), False, 0.0, 1.0)
@@ -190,44 +212,76 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
     if not near:
         best = min(off)
         what = "turns" if math.isinf(best) else f"lies {best:.1f} sigma"
-        if best > REFUSE_SIGMAS:
-            return None, f"the positions refuse every pose of the link (the nearest {what} off)"
-        return None, f"no pose of the link is near the positions (the nearest {what} off)"
+        return None, f"the positions refuse every pose of the link (the nearest {what} off)"
     return None, f"{len(near)} poses of the link agree with the positions: they cannot tell"
 
 
 def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int:
-    """Let rough positions decide each link between two stations that have one (in place),
-    among the poses the registration found fitting what both scans see (a confident answer,
-    or an answer uncertain only because it is ambiguous or the scans share little, or for
-    open space only the even sample finds where full resolution clears it, with its
-    alternatives, :attr:`~flexreg.survey.links.Link.fits_where_seen`; a link whose answer
-    contradicts its scans, in open space or along a weak axis, has none): the one
-    pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
-    Alternative`) they pick (:func:`choose`) becomes its transform and the link is vouched
-    for (``vouched="positions"``, the answer kept as an alternative when replaced); a link
-    all of whose poses lie beyond :data:`REFUSE_SIGMAS` is rejected, with the reason.
-    Returns how many links the positions vouched for."""
+    """Let rough positions decide each link between two stations that have one (in place).
+    A pose of the link (its answer or an alternative, :class:`~flexreg.survey.links.
+    Alternative`) further than :data:`AGREE_SIGMAS` from what they predict
+    (:func:`sigmas_off`, which counts the headings' error too) is no hypothesis of it: a
+    link none of whose poses is within is rejected, with the reason, and of one with
+    several within only those are kept. Among the poses the registration found fitting
+    what both scans see (a confident answer, or an answer uncertain only because it is
+    ambiguous or the scans share little, or for open space only the even sample finds
+    where full resolution clears it, with its alternatives,
+    :attr:`~flexreg.survey.links.Link.fits_where_seen`; a link whose answer contradicts its
+    scans, in open space or along a weak axis, has none), the one pose they pick
+    (:func:`choose`) becomes its transform and the link is vouched for
+    (``vouched="positions"``, the answer kept as an alternative when replaced). What an
+    earlier call decided is undone first. Returns how many links the positions vouched
+    for."""
     vouched = 0
     for e in links:
         if e.T_target_source is None or e.status == "failed" or e.vouched == "hand":
             continue
+        _undo(e)
         if e.target not in positions or e.source not in positions:
             continue
+        pt, ps = positions[e.target], positions[e.source]
+        i, why = choose(e.poses, pt, ps)
+        e.undecided = why
+        if why.startswith("the positions refuse"):
+            e.status, e.why, e.refused = "rejected", why, why
+            continue
+        if i is None:  # several agree: the others are no hypotheses of the link
+            _keep_near(e, pt, ps)
         if not e.fits_where_seen:  # its answer contradicts its scans (open space, an axis)
             e.undecided = "no pose of the link fits the scans, seeded by them or not"
             continue
-        i, why = choose(e.poses, positions[e.target], positions[e.source])
-        e.undecided = "" if i is not None else why
         if i is None:
-            if why.startswith("the positions refuse"):
-                e.status, e.why, e.refused = "rejected", why, why
             continue
         if i > 0:
-            e.take(e.alternatives[i - 1], "the rough positions")
+            e.take(e.alternatives[i - 1], PICKED_BY)
         e.vouched = "positions"
         vouched += 1
     return vouched
+
+
+def _keep_near(e: Link, target: Position, source: Position) -> None:
+    """Of link ``e``'s poses, those within :data:`AGREE_SIGMAS` of what the positions
+    predict (at least one; the first of them its transform)."""
+    near = [
+        a for a in e.alternatives if sigmas_off(a.T_target_source, target, source) <= AGREE_SIGMAS
+    ]
+    if sigmas_off(e.poses[0], target, source) > AGREE_SIGMAS:
+        e.take(near[0], PICKED_BY)
+        near = near[1:]
+    if len(near) < len(e.alternatives):
+        if e.registered is None:
+            e.registered = (np.asarray(e.T_target_source), list(e.alternatives))
+        e.alternatives = near
+
+
+def _undo(e: Link) -> None:
+    """What an earlier :func:`apply_positions` decided of link ``e`` undone: positions that
+    a group's poses have since carried decide again."""
+    if e.picked.startswith(PICKED_BY) or (e.registered is not None and not e.picked):
+        e.untake()  # what the positions picked or left out (a loop's pick stands)
+    if e.vouched == "positions":
+        e.vouched = ""
+    e.refused = ""
 
 
 def unsettled(links: list[Link], positions: Mapping[str, Position]) -> list[Link]:
@@ -287,6 +341,184 @@ def site_from_positions(
     return T
 
 
+@dataclass(frozen=True)
+class _GroupFit:
+    """A group's poses fitted to its stations' positions (:func:`site_from_positions`).
+
+    ``T``: ``T_site_group``; ``centre``: the stations' weighted centre in the group's frame;
+    ``var_centre`` (m^2) and ``var_turn`` (rad^2): the fit's variances, ``1 / sum(1 /
+    sigma^2)`` and ``1 / sum(r^2 / sigma^2)`` (``r``: each station's distance from the
+    centre)."""
+
+    T: Matrix
+    centre: Matrix
+    var_centre: float
+    var_turn: float
+
+    def sigma_at(self, xy: Matrix) -> float:
+        """1-sigma of where the fit puts a point of the group's frame, metres."""
+        r2 = float(np.sum((np.asarray(xy)[:2] - self.centre) ** 2))
+        return math.sqrt(self.var_centre + r2 * self.var_turn)
+
+
+def _group_fit(poses: Mapping[str, Matrix], positions: Mapping[str, Position]) -> _GroupFit | None:
+    """The fit of a group's poses (``T_group_station``) to its stations' positions; None
+    with fewer than two positions, or when the fit leaves a station further than
+    :data:`AGREE_SIGMAS` of its sigma from its position (a wrong position, or stations
+    misplaced)."""
+    common = [s for s in poses if s in positions]
+    if len(common) < 2:
+        return None
+    fit = site_from_positions({s: poses[s] for s in common}, positions)
+    assert fit is not None
+    for s in common:
+        off = np.linalg.norm((fit @ poses[s])[:2, 3] - positions[s].xyz[:2])
+        if off > AGREE_SIGMAS * positions[s].sigma_m:
+            return None
+    w = np.array([1.0 / positions[s].sigma_m ** 2 for s in common])
+    a = np.array([np.asarray(poses[s])[:2, 3] for s in common])
+    centre = (w @ a) / w.sum()
+    r2 = np.sum((a - centre) ** 2, axis=1)
+    return _GroupFit(fit, centre, 1.0 / float(w.sum()), 1.0 / max(float(w @ r2), 1e-12))
+
+
+def refutes(
+    positions: Mapping[str, Position],
+    first: Mapping[str, Matrix],
+    second: Mapping[str, Matrix],
+) -> bool:
+    """Whether the positions refute placing two groups of stations so (``T_g_station``,
+    both in the first group's frame): the fit of either group to its positions
+    (:func:`_group_fit`) puts a station of the other further than :data:`AGREE_SIGMAS`
+    from its position, in the sigma of both (the station's own, and the fit's where it
+    puts it). Two groups placed a bay apart in a hall of look-alike bays move every station
+    of one a bay from where its position says; a group of one station fits nothing.
+
+    Four stations in a row 8 m apart, and a fifth a bay (5.65 m) across from where its
+    position says:
+
+    >>> pos = {f"s{i}": Position(np.array([8.0 * i, 0.0, 0.0]), False, None, 1.0)
+    ...        for i in range(5)}
+    >>> at = {s: np.eye(4) for s in pos}
+    >>> for s, p in pos.items(): at[s][:3, 3] = p.xyz
+    >>> row = {s: at[s] for s in ("s0", "s1", "s2", "s3")}
+    >>> refutes(pos, row, {"s4": at["s4"]})
+    False
+    >>> at["s4"][1, 3] = 5.65
+    >>> refutes(pos, row, {"s4": at["s4"]})
+    True
+    """
+    for one, other in ((first, second), (second, first)):
+        fit = _group_fit(one, positions)
+        if fit is None:
+            continue
+        for s, P in other.items():
+            if s not in positions:
+                continue
+            xy = np.asarray(P)[:2, 3]
+            off = float(np.linalg.norm((fit.T @ P)[:2, 3] - positions[s].xyz[:2]))
+            if off > AGREE_SIGMAS * math.hypot(positions[s].sigma_m, fit.sigma_at(xy)):
+                return True
+    return False
+
+
+def sited_by_groups(
+    positions: Mapping[str, Position],
+    groups: Sequence[Sequence[str]],
+    poses: Mapping[str, Matrix],
+) -> dict[str, Position]:
+    """The positions each group of solved stations carries: a group's poses
+    (``T_group_station``) fitted to its stations' positions move as one
+    (:func:`_group_fit`), so the fit's heading is known to ``1 / sqrt(sum r^2 / sigma^2)``
+    (``r``: each station's distance from their weighted centre), combined with the mean of
+    its stations' own headings (:data:`HEADING_SIGMA_DEG` each, weighed by their
+    variance), and each station's fitted position to ``sqrt(1 / sum(1 / sigma^2) + r^2
+    var(heading))``: n stations that one registration holds together are where their n
+    positions say, to about ``sigma / sqrt(n)``. A group the fit finds misplaced keeps its
+    positions as they are.
+
+    Three stations in a row along the site's x axis, solved along their group's y axis:
+
+    >>> pos = {s: Position(np.array([x, 0.0, 0.0]), False, None, 1.0) for s, x in
+    ...        (("a", 0.0), ("b", 8.0), ("c", 16.0))}
+    >>> poses = {s: np.eye(4) for s in pos}
+    >>> for s, y in (("b", 8.0), ("c", 16.0)): poses[s][1, 3] = y
+    >>> a = sited_by_groups(pos, [["a", "b", "c"]], poses)["a"]
+    >>> round(math.degrees(a.heading_rad), 1), round(math.degrees(a.heading_sigma_rad), 1)
+    (-90.0, 5.1)
+    >>> bool(np.allclose(a.xyz[:2], 0.0)), round(a.sigma_m, 2)
+    (True, 0.91)
+    """
+    out = dict(positions)
+    for group in groups:
+        common = [s for s in group if s in positions and s in poses]
+        fit = _group_fit({s: poses[s] for s in common}, positions)
+        if fit is None:
+            continue
+        yaw, var = _yaw(fit.T), fit.var_turn
+        told = [s for s in common if positions[s].heading_rad is not None]
+        if told:  # the group's turn the stations' own headings say, on the circle
+            k = np.array([1.0 / positions[s].heading_sigma_rad ** 2 for s in told])
+            said = [
+                float(positions[s].heading_rad or 0.0) - _yaw(np.asarray(poses[s])) for s in told
+            ]
+            c = float(k @ np.cos(said)), float(k @ np.sin(said))
+            var_said = 1.0 / float(k.sum())
+            gap = math.atan2(c[1], c[0]) - yaw
+            gap = (gap + math.pi) % (2 * math.pi) - math.pi
+            yaw += gap * var / (var + var_said)
+            var = var * var_said / (var + var_said)
+        R = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+        shift = fit.T[:2, :2] @ fit.centre + fit.T[:2, 3] - R @ fit.centre
+        for s in common:
+            xy = np.asarray(poses[s])[:2, 3]
+            xyz = positions[s].xyz.copy()
+            xyz[:2] = R @ xy + shift
+            r2 = float(np.sum((xy - fit.centre) ** 2))
+            out[s] = replace(
+                positions[s],
+                xyz=xyz,
+                sigma_m=math.sqrt(fit.var_centre + r2 * var),
+                heading_rad=yaw + _yaw(np.asarray(poses[s])),
+                heading_sigma_rad=math.sqrt(var),
+            )
+    return out
+
+
+def decide_with_groups(
+    links: list[Link],
+    positions: Mapping[str, Position],
+    sol: GraphSolution,
+    solve: Callable[[list[Link]], GraphSolution],
+) -> tuple[GraphSolution, dict[str, Position]]:
+    """The positions decide the links again with what the solution's groups carry
+    (:func:`sited_by_groups`, :func:`apply_positions`), and the graph is solved again
+    (``solve``), until their decisions no longer change (at most :data:`DECIDE_ROUNDS`
+    times). Returns the last solution and the positions its groups carry."""
+
+    def decisions() -> list[tuple[str, str, int, tuple[float, ...]]]:
+        return [
+            (
+                e.vouched,
+                e.undecided,
+                len(e.alternatives),
+                tuple(np.round(e.T_target_source[:3, 3], 2)) if e.vouched else (),
+            )
+            for e in links
+            if e.T_target_source is not None
+        ]
+
+    sited = sited_by_groups(positions, sol.groups, sol.poses)
+    for _ in range(DECIDE_ROUNDS):
+        before = decisions()
+        apply_positions(links, sited)
+        if decisions() == before:
+            break
+        sol = solve(links)
+        sited = sited_by_groups(positions, sol.groups, sol.poses)
+    return sol, sited
+
+
 def stored_positions(stored: Mapping[str, Matrix], sigma_m: float | None) -> dict[str, Position]:
     """The poses the files store (``T_world_station``) as rough positions of sigma
     ``sigma_m`` (none when it is None: the stored poses are then not rough priors)."""
@@ -308,9 +540,10 @@ def predicted_T_target_source(target: Position, source: Position) -> Matrix:
 
 def window_of(target: Position, source: Position) -> tuple[float, float] | None:
     """How far the true ``T_target_source`` may be from what two rough positions predict
-    (:func:`predicted_T_target_source`): :data:`AGREE_SIGMAS` of both positions' sigma
-    (metres) and :data:`AGREE_HEADING_DEG` (radians), the bounds within which they agree
-    with a link (:func:`sigmas_off`). None when a heading is unknown: the predicted offset's
+    (:func:`predicted_T_target_source`): :data:`AGREE_SIGMAS` of the sigma
+    :func:`sigmas_off` measures in (metres; both positions' and what the target's heading
+    sigma turns the offset by) and :data:`AGREE_HEADING_DEG` (radians), the bounds within
+    which they agree with a link. None when a heading is unknown: the predicted offset's
     direction is then unknown too, and the link is only seeded.
 
     >>> a = Position(np.zeros(3), False, 0.0, 1.0)
@@ -320,9 +553,9 @@ def window_of(target: Position, source: Position) -> tuple[float, float] | None:
     """
     if target.heading_rad is None or source.heading_rad is None:
         return None
-    return AGREE_SIGMAS * math.hypot(target.sigma_m, source.sigma_m), math.radians(
-        AGREE_HEADING_DEG
-    )
+    d = float(np.linalg.norm(source.xyz[:2] - target.xyz[:2]))
+    sigma = math.hypot(target.sigma_m, source.sigma_m, d * target.heading_sigma_rad)
+    return AGREE_SIGMAS * sigma, math.radians(AGREE_HEADING_DEG)
 
 
 def near_pairs(
@@ -356,17 +589,22 @@ __all__ = [
     "AGREE_HEADING_DEG",
     "AGREE_SIGMAS",
     "COLUMNS",
+    "DECIDE_ROUNDS",
     "DEFAULT_SIGMA_M",
-    "REFUSE_SIGMAS",
+    "HEADING_SIGMA_DEG",
+    "PICKED_BY",
     "Position",
     "T_site_station",
     "apply_positions",
     "choose",
+    "decide_with_groups",
     "near_pairs",
     "predicted_T_target_source",
     "read_positions_csv",
+    "refutes",
     "sigmas_off",
     "site_from_positions",
+    "sited_by_groups",
     "stored_positions",
     "unsettled",
     "window_of",

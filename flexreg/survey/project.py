@@ -66,6 +66,7 @@ from flexreg.survey.positions import (
     AGREE_SIGMAS,
     Position,
     apply_positions,
+    decide_with_groups,
     near_pairs,
     predicted_T_target_source,
     read_positions_csv,
@@ -349,8 +350,8 @@ def _positioned(
     project's stems and at most how many), then every link they do not find confident near
     what they predict (:func:`~flexreg.survey.positions.unsettled`) is registered again:
     seeded with the pose the positions predict and bounded by their window
-    (:func:`~flexreg.survey.positions.window_of`), the new result replacing the old (a
-    re-run reuses both from the cache)."""
+    (:func:`~flexreg.survey.positions.window_of`), the new result replacing the old unless
+    it failed (a re-run reuses both from the cache)."""
     tried = {frozenset((e.target, e.source)) for e in found}
     stems, budget = new_pairs
     new = [
@@ -374,7 +375,7 @@ def _positioned(
             for e in redo
         ]
         again = _register(client, cands, stores[0], config, progress, stores[1], "positions")
-        by_id = {id(e): n for e, n in zip(redo, again, strict=True)}
+        by_id = {id(e): n for e, n in zip(redo, again, strict=True) if n.usable or not e.usable}
         found = [by_id.get(id(e), e) for e in found]
     apply_positions(found, priors)
     return found
@@ -528,32 +529,19 @@ def run_survey(
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
         found, sol, glances, judge = _link_rounds(
-            client,
-            stems,
-            (files, stored),
-            config,
-            (given, cands, scores, max_links),
-            reference,
-            progress,
-            timings,
-        )
+            client, stems, (files, stored), config, (given, cands, scores, max_links),
+            reference, progress, timings,
+        )  # fmt: skip
         timings["links"] = time.perf_counter() - t - timings.get("graph", 0.0)
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
         if config.map_check:
             t = time.perf_counter()
+            priors = given.positions or stored_positions(stored, config.stored_sigma_m)
             sol, looks = _map_check(
-                client,
-                stems,
-                found,
-                sol,
-                (files, glances),
-                config,
-                reference,
-                vetoes,
-                judge,
-                progress,
-            )
+                client, stems, found, sol, (files, glances), config, (reference, priors),
+                vetoes, judge, progress,
+            )  # fmt: skip
             timings["map_check"] = time.perf_counter() - t
         if judge is not None:
             judge.keep()  # the map's looks, for a re-run
@@ -591,12 +579,15 @@ def _link_rounds(
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
     """The links of the candidates and their graph, then the proximity rounds (``stores``:
     prepared files, stored poses; ``plan``: given, candidates, place scores, most links).
-    Rough positions (or rough stored poses) seed links and decide between their poses.
+    Rough positions (or rough stored poses) seed links and decide between their poses, and
+    again with what the groups solved carry (``near``: their headings, fitted positions).
     Returns links, solution, glances, the map's judge; solves' seconds: timings["graph"]."""
 
     def solve(found: list[Link]) -> GraphSolution:
         t = time.perf_counter()
-        sol = solve_graph(stems, found, config, reference=reference, judge=judge, fit=fit)
+        sol = solve_graph(
+            stems, found, config, reference=reference, judge=judge, fit=fit, positions=priors
+        )
         timings["graph"] = timings.get("graph", 0.0) + time.perf_counter() - t
         return sol
 
@@ -608,7 +599,7 @@ def _link_rounds(
     fit = judge.fit_groups if judge is not None else None
     budget = max_links - len(found) if given.automatic else 0  # a pairs CSV: its pairs only
     found = _positioned(client, found, stores, config, priors, progress, (stems, budget))
-    sol = solve(found)
+    sol, near = decide_with_groups(found, priors, solve(found), solve)
     auto = given.automatic and config.pairs == "auto"
     rounds = config.proximity_rounds if auto else 0
     maps = None if judge is None else (judge, config.map_min_conflict, config.map_conflict_ratio)
@@ -626,8 +617,8 @@ def _link_rounds(
         if not more:
             break
         found += _register(client, more, files, config, progress, stored)
-        found = _positioned(client, found, stores, config, priors, progress)
-        sol = solve(found)
+        found = _positioned(client, found, stores, config, near, progress)
+        sol, near = decide_with_groups(found, priors, solve(found), solve)
     return found, sol, glances, judge
 
 
@@ -698,15 +689,17 @@ def _map_check(
     sol: GraphSolution,
     stored: tuple[dict[str, str], dict[str, str]],
     config: SurveyConfig,
-    reference: str | None,
+    anchors: tuple[str | None, dict[str, Position]],
     vetoes: list[Veto],
     judge: PairJudge | None,
     progress: Progress,
 ) -> tuple[GraphSolution, list[PairLook]]:
     """Check every pair of placed stations (:mod:`flexreg.survey.mapcheck`), veto the
     conflicting ones and solve again, until no pair conflicts or ``map_rounds`` are used.
-    ``stored``: the prepared files and glances per station. Returns the solution and the
-    last round's pair scores (``vetoes`` grows in place)."""
+    ``stored``: the prepared files and glances per station; ``anchors``: the reference and
+    the rough positions. Returns the solution and the last round's pair scores (``vetoes``
+    grows in place)."""
+    reference, positions = anchors
     files, glances = stored
     looks: list[PairLook] = []
     rounds = config.map_rounds + 1
@@ -731,7 +724,8 @@ def _map_check(
         vetoes.extend(found)
         log.info("map check: %d pair(s) of placed stations contradict each other", len(found))
         sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge,
-                          fit=judge.fit_groups if judge is not None else None)  # fmt: skip
+                          fit=judge.fit_groups if judge is not None else None,
+                          positions=positions)  # fmt: skip
     return sol, looks
 
 

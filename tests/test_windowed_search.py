@@ -185,8 +185,10 @@ def _pos(x: float, y: float, heading: float | None = 0.0, sigma: float = 1.0) ->
 
 
 def test_the_window_of_two_positions_is_their_agreement_bounds():
+    """Three sigma of both positions and of what the target's heading error (10 degrees)
+    turns the 5 m offset by; the turn the headings agree within."""
     shift, turn = window_of(_pos(0, 0, sigma=0.3), _pos(5, 0, math.radians(40), sigma=0.4))
-    assert shift == pytest.approx(3 * 0.5)
+    assert shift == pytest.approx(3 * math.hypot(0.5, 5 * math.radians(10)))
     assert math.degrees(turn) == pytest.approx(30.0)
     assert window_of(_pos(0, 0, None), _pos(5, 0)) is None
 

@@ -22,8 +22,9 @@ of stations, the way PCM merges the maps of several robots.
    answer gives. A placement rough positions refute (either group's fit to its positions
    puts a station of the other beyond three sigma of its own,
    :func:`~flexreg.survey.positions.refutes`) is no hypothesis: all of a station's links
-   aliased alike a bay along agree around every loop, and only the positions tell. The best set of the whole project merges its groups when a
-   loop of confident answers confirms it (two of them in it, each trusted, confident inside
+   aliased alike a bay along agree around every loop, and only the positions tell. The
+   best set of the whole project merges its groups when a loop of confident answers
+   confirms it (two of them in it, each trusted, confident inside
    rough positions' windows, or an uncertain link's pose the positions picked, or a firm
    vote of a link's answer: a twin or runner-up closing a cycle is no independent route)
    and no distinct placement of the same groups is as well supported; then everything is

@@ -218,7 +218,7 @@ class Link:
     undecided: str = ""
     windowed: bool = False
     open_clear: bool | None = None
-    # the answer and alternatives as registered, before the first :meth:`take`
+    # the answer and alternatives as registered, before the first take or keep_only
     registered: tuple[Matrix, list[Alternative]] | None = field(default=None, repr=False)
 
     @property
@@ -235,8 +235,7 @@ class Link:
     def take(self, alternative: Alternative, why: str) -> None:
         """Let one of its alternatives be the link's pose (something outside the pair picked
         it: a loop, the map, rough positions); the answer becomes an alternative."""
-        if self.registered is None:
-            self.registered = (np.asarray(self.T_target_source), list(self.alternatives))
+        self._remember()
         self.alternatives = [
             Alternative(np.asarray(self.T_target_source), "answer", 1.0),
             *(a for a in self.alternatives if a is not alternative),
@@ -244,8 +243,20 @@ class Link:
         self.T_target_source = np.asarray(alternative.T_target_source, dtype=np.float64)
         self.picked = f"{why} picked its {alternative.kind.replace('_', '-')}, not its answer"
 
+    def keep_only(self, alternatives: list[Alternative]) -> None:
+        """Only these of its alternatives stay its hypotheses (:meth:`untake` brings the
+        others back)."""
+        if len(alternatives) < len(self.alternatives):
+            self._remember()
+            self.alternatives = list(alternatives)
+
+    def _remember(self) -> None:
+        if self.registered is None:
+            self.registered = (np.asarray(self.T_target_source), list(self.alternatives))
+
     def untake(self) -> None:
-        """Its answer and alternatives as registered again (every :meth:`take` undone)."""
+        """Its answer and alternatives as registered again (every :meth:`take` and
+        :meth:`keep_only` undone)."""
         if self.registered is not None:
             self.T_target_source, alternatives = self.registered
             self.alternatives, self.registered, self.picked = list(alternatives), None, ""

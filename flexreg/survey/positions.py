@@ -205,8 +205,18 @@ def choose(poses: list[Matrix], target: Position, source: Position) -> tuple[int
     >>> choose(poses, a, b)
     (1, '')
     """
+    return _pick(*_near(poses, target, source))
+
+
+def _near(poses: list[Matrix], target: Position, source: Position) -> tuple[list[int], list[float]]:
+    """Which of ``poses`` lie within :data:`AGREE_SIGMAS` (indices), and each one's
+    :func:`sigmas_off`."""
     off = [sigmas_off(T, target, source) for T in poses]
-    near = [i for i, x in enumerate(off) if x <= AGREE_SIGMAS]
+    return [i for i, x in enumerate(off) if x <= AGREE_SIGMAS], off
+
+
+def _pick(near: list[int], off: list[float]) -> tuple[int | None, str]:
+    """:func:`choose` from :func:`_near`'s answer."""
     if len(near) == 1:
         return near[0], ""
     if not near:
@@ -239,14 +249,14 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
         _undo(e)
         if e.target not in positions or e.source not in positions:
             continue
-        pt, ps = positions[e.target], positions[e.source]
-        i, why = choose(e.poses, pt, ps)
+        near, off = _near(e.poses, positions[e.target], positions[e.source])
+        i, why = _pick(near, off)
         e.undecided = why
-        if why.startswith("the positions refuse"):
+        if not near:
             e.status, e.why, e.refused = "rejected", why, why
             continue
         if i is None:  # several agree: the others are no hypotheses of the link
-            _keep_near(e, pt, ps)
+            _keep_near(e, near)
         if not e.fits_where_seen:  # its answer contradicts its scans (open space, an axis)
             e.undecided = "no pose of the link fits the scans, seeded by them or not"
             continue
@@ -259,19 +269,14 @@ def apply_positions(links: list[Link], positions: Mapping[str, Position]) -> int
     return vouched
 
 
-def _keep_near(e: Link, target: Position, source: Position) -> None:
-    """Of link ``e``'s poses, those within :data:`AGREE_SIGMAS` of what the positions
-    predict (at least one; the first of them its transform)."""
-    near = [
-        a for a in e.alternatives if sigmas_off(a.T_target_source, target, source) <= AGREE_SIGMAS
-    ]
-    if sigmas_off(e.poses[0], target, source) > AGREE_SIGMAS:
-        e.take(near[0], PICKED_BY)
-        near = near[1:]
-    if len(near) < len(e.alternatives):
-        if e.registered is None:
-            e.registered = (np.asarray(e.T_target_source), list(e.alternatives))
-        e.alternatives = near
+def _keep_near(e: Link, near: list[int]) -> None:
+    """Of link ``e``'s poses, those of indices ``near`` (:func:`_near`, at least one) stay
+    its hypotheses, the first its transform."""
+    keep = [e.alternatives[k - 1] for k in near if k > 0]
+    if near[0] > 0:
+        e.take(keep[0], PICKED_BY)
+        keep = keep[1:]
+    e.keep_only(keep)
 
 
 def _undo(e: Link) -> None:

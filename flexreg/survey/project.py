@@ -528,16 +528,17 @@ def run_survey(
         cands, scores = _candidates(stems, files, config, given, max_links)
         timings["pairs"] = time.perf_counter() - t
         t = time.perf_counter()
+        # rough positions, or rough stored poses: priors that decide between link poses
+        priors = given.positions or stored_positions(stored, config.stored_sigma_m)
         found, sol, glances, judge = _link_rounds(
             client, stems, (files, stored), config, (given, cands, scores, max_links),
-            reference, progress, timings,
+            (reference, priors), progress, timings,
         )  # fmt: skip
         timings["links"] = time.perf_counter() - t - timings.get("graph", 0.0)
         vetoes: list[Veto] = []
         looks: list[PairLook] = []
         if config.map_check:
             t = time.perf_counter()
-            priors = given.positions or stored_positions(stored, config.stored_sigma_m)
             sol, looks = _map_check(
                 client, stems, found, sol, (files, glances), config, (reference, priors),
                 vetoes, judge, progress,
@@ -573,13 +574,14 @@ def _link_rounds(
     stores: tuple[dict[str, str], dict[str, Any]],
     config: SurveyConfig,
     plan: tuple[_Given, list[Candidate], dict[frozenset[str], int], int],
-    reference: str | None,
+    anchors: tuple[str | None, dict[str, Position]],
     progress: Progress,
     timings: dict[str, float],
 ) -> tuple[list[Link], GraphSolution, dict[str, str], PairJudge | None]:
     """The links of the candidates and their graph, then the proximity rounds (``stores``:
-    prepared files, stored poses; ``plan``: given, candidates, place scores, most links).
-    Rough positions (or rough stored poses) seed links and decide between their poses, and
+    prepared files, stored poses; ``plan``: given, candidates, place scores, most links;
+    ``anchors``: the reference and the priors, rough positions or rough stored poses).
+    The priors seed links and decide between their poses, and
     again with what the groups solved carry (``near``: their headings, fitted positions).
     Returns links, solution, glances, the map's judge; solves' seconds: timings["graph"]."""
 
@@ -593,7 +595,7 @@ def _link_rounds(
 
     files, stored = stores
     given, cands, scores, max_links = plan
-    priors = given.positions or stored_positions(stored, config.stored_sigma_m)
+    reference, priors = anchors
     found = _register(client, cands, files, config, progress, stored)
     glances, judge = _glances(client, stems, files, config, progress)
     fit = judge.fit_groups if judge is not None else None

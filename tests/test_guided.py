@@ -29,7 +29,13 @@ from flexreg.stages.matching import descriptor_distances, match_guided
 from flexreg.stages.priors import upright_priors
 from flexreg.stages.projection import range_image
 from flexreg.stages.sampling import area_cell, area_sample, area_sample_image
-from flexreg.stages.verification import overlap_score, range_slack
+from flexreg.stages.verification import (
+    classify_points_at,
+    measured_image,
+    open_space_witnesses,
+    overlap_score,
+    range_slack,
+)
 from flexreg.synth import station_pair
 
 
@@ -273,6 +279,42 @@ def test_range_slack_wraps_on_full_turn(sphere_cam):
     r[:, 0] = 6.0
     s = range_slack(from_depth(r, sphere_cam))
     np.testing.assert_allclose(s[1:-1, -1], 1.0, atol=1e-5)
+
+
+def test_open_space_witnesses_hand_computed():
+    depth = np.array([[1.0, 1.0, 2.0, 1.0], [1.0, 1.5, np.nan, 1.0], [1.0, 1.0, 1.0, 1.0]])
+    img = from_depth(depth, PinholeCamera(10.0, 10.0, 1.5, 1.0, 4, 3), depth_kind="z")
+    w = open_space_witnesses(measured_image(img), img.wraps)
+    # measured, and each of its (existing) 4 neighbours measured: not beside the hole
+    expect = [[1, 1, 0, 1], [1, 0, 0, 0], [1, 1, 0, 1]]
+    np.testing.assert_array_equal(w, np.array(expect, dtype=bool))
+
+
+def test_open_space_witnesses_wrap_on_full_turn(sphere_cam):
+    r = np.full(sphere_cam.shape, 5.0)
+    r[:, 0] = np.nan
+    w = open_space_witnesses(measured_image(from_depth(r, sphere_cam)), True)
+    assert not w[:, 0].any() and not w[:, 1].any() and not w[:, -1].any()
+    assert w[:, 2:-1].all()
+
+
+def test_witnesses_judge_only_bounded_pixels(sphere_cam):
+    r = np.full(sphere_cam.shape, 5.0)
+    r[10, 30] = np.nan  # no return: its neighbours do not bound their footprints
+    target = from_depth(r, sphere_cam)
+    ref = measured_image(target)
+    # beside the hole and far from it: a point 2 m in front of what the target measured, and
+    # one on it
+    u, v = np.array([31.0, 20.0, 31.0, 20.0]), np.array([10.0, 20.0, 10.0, 20.0])
+    pts = sphere_cam.backproject(u, v, np.array([3.0, 3.0, 5.0, 5.0]))
+    tol = [(0.05, 0.0)]
+    ((ok, bad),) = classify_points_at(target, pts, np.eye(4), tol, ref=ref)
+    assert bad.tolist() == [True, True, False, False]
+    assert ok.tolist() == [False, False, True, True]
+    w = open_space_witnesses(ref, target.wraps)
+    ((ok, bad),) = classify_points_at(target, pts, np.eye(4), tol, ref=ref, witnesses=w)
+    assert bad.tolist() == [False, True, False, False]
+    assert ok.tolist() == [False, False, False, True]
 
 
 def test_overlap_point_just_before_the_seam(sphere_cam):

@@ -121,6 +121,10 @@ class Check:
         (:func:`~flexreg.stages.viewpoint.hidden_share`; None: a grid). A cloud not taken
         from one point (:func:`~flexreg.stages.viewpoint.one_viewpoint`) tells no open space:
         no sampled point conflicts with its view.
+    witnesses : (H, W) bool or None
+        The pixels whose footprint's range is bounded: :func:`check_masks` judges only the
+        points that fall on them (:func:`~flexreg.stages.verification.open_space_witnesses`;
+        None: every pixel). The map check sets them; a registration's own checks do not.
     """
 
     view: RangeImage
@@ -128,6 +132,7 @@ class Check:
     slack: NDArray[np.float32]
     sample: NDArray[np.float64]
     hidden: float | None = None
+    witnesses: NDArray[np.bool_] | None = None
 
     @property
     def free_space(self) -> bool:
@@ -221,7 +226,8 @@ def check_masks(
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """One direction of :func:`duel_masks`: which of the check's sample ``T`` puts on the
     view's surfaces (half an inlier threshold plus 0.2 %) and which in its free space
-    (:meth:`Tolerance.free`: 2.5 inlier thresholds plus 1 %); (N,) bool each."""
+    (:meth:`Tolerance.free`: 2.5 inlier thresholds plus 1 %); (N,) bool each. With the
+    check's ``witnesses``, points at other pixels are neither."""
     (explained, _), (_, free) = classify_points_at(
         check.view,
         check.sample,
@@ -229,6 +235,7 @@ def check_masks(
         [TOLERANCE.fine(threshold_m), TOLERANCE.free(threshold_m)],
         check.slack,
         check.measured,
+        check.witnesses,
     )
     return explained, free if check.free_space else np.zeros_like(free)
 

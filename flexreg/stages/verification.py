@@ -51,6 +51,39 @@ def range_slack(
     return out
 
 
+def open_space_witnesses(ref: NDArray[np.float32], wraps: bool = False) -> NDArray[np.bool_]:
+    """(H, W) bool: the pixels that can testify to what lies in their footprint (a surface, or
+    open space in front of what they measured): measured, and each of their 4 neighbours
+    measured too.
+
+    A pixel's range bounds the open space across its whole footprint only where its
+    neighbours bound how far the surface runs within it (:func:`range_slack`). Beside a pixel
+    with no return that bound is missing: the footprint may hold a surface the neighbouring
+    ray did not return from (one seen too obliquely, or too dark or far), running at any range
+    in front of this pixel's. A far wall seen along its length falls into one column of a
+    scan, the last one before its returns stop, and that column's centre ray may pass the wall
+    and measure the corner behind it: by the pixel's range, every point of the wall would
+    lie in open space.
+
+    Parameters
+    ----------
+    ref : (H, W) float32
+        :func:`measured_image` (NaN or 0 where nothing was measured).
+    wraps : bool
+        Whether the first and last columns are neighbours (a full panorama).
+    """
+    seen = np.isfinite(ref) & (ref > 0)
+    out = seen.copy()
+    out[1:] &= seen[:-1]
+    out[:-1] &= seen[1:]
+    out[:, 1:] &= seen[:, :-1]
+    out[:, :-1] &= seen[:, 1:]
+    if wraps:
+        out[:, 0] &= seen[:, -1]
+        out[:, -1] &= seen[:, 0]
+    return out
+
+
 def overlap_score(
     target: RangeImage,
     source: RangeImage,
@@ -157,21 +190,30 @@ def classify_points_at(
     tolerances: list[tuple[float, float]],
     slack: NDArray[np.float32] | None = None,
     ref: NDArray[np.float32] | None = None,
+    witnesses: NDArray[np.bool_] | None = None,
 ) -> list[tuple[NDArray[np.bool_], NDArray[np.bool_]]]:
     """:func:`classify_points` at several tolerances ``(tolerance_m, tolerance_rel)``, the
     points projected into the target's view once: ``(consistent, conflicting)`` per
-    tolerance, each exactly as :func:`classify_points` gives it."""
+    tolerance, each exactly as :func:`classify_points` gives it; with ``witnesses`` ((H, W)
+    bool, e.g. :func:`open_space_witnesses`), only points at those pixels are judged (the
+    rest are neither consistent nor conflicting)."""
     T = np.asarray(T_target_source, dtype=np.float64)
     if len(ps) == 0 or target.camera is None:
         return [classify_points(target, ps, T, m, rel, slack, ref)[1:] for m, rel in tolerances]
     q = ps @ T[:3, :3].T + T[:3, 3]
     inside, pix, d = _pixels(target, q)
     r, extra = _measured_at(target, inside, pix, len(q), slack, ref)
+    if witnesses is not None:
+        testifies = np.zeros(len(q), dtype=bool)
+        testifies[inside] = witnesses[pix]
     out = []
     for m, rel in tolerances:
         tol = m + rel * np.abs(d) + extra
         with np.errstate(invalid="ignore"):
-            out.append((np.abs(d - r) < tol, d < r - tol))
+            consistent, conflict = np.abs(d - r) < tol, d < r - tol
+        if witnesses is not None:
+            consistent, conflict = consistent & testifies, conflict & testifies
+        out.append((consistent, conflict))
     return out
 
 
@@ -425,6 +467,7 @@ __all__ = [
     "classify_points",
     "classify_points_at",
     "measured_image",
+    "open_space_witnesses",
     "overlap_score",
     "plane_information",
     "range_slack",

@@ -15,6 +15,14 @@ on the registration's dense check (each station's even sample in the other's vie
   in its free space (2.5 inlier thresholds plus 1 % of the range, as the verdict's free-space
   test).
 
+Both count only the points at pixels whose four neighbours measured too
+(:func:`~flexreg.stages.verification.open_space_witnesses`): beside a pixel with no return
+nothing bounds how far a surface runs within a pixel's footprint. Far-apart stations see each
+other's walls along their length: a wall 35-40 m off and a metre beside the line of sight
+falls into one column of the other scan, the last before its returns stop, whose centre ray
+passes the wall and measures the corner behind it; by that pixel the whole wall lay in open
+space (6 % of a station's sample at its true pose, in a 36-station building).
+
 A pair **conflicts** when, in either direction, at least ``map_min_conflict`` of the sample is
 in the other's free space and that is at least ``map_conflict_ratio`` times what the other
 explains there: more of what one station sees contradicts the other than agrees with it. Two
@@ -59,6 +67,7 @@ from flexreg.errors import InputError
 from flexreg.registration.check import TOLERANCE, Check, check_masks
 from flexreg.registration.fullres import full_pair_of, pose_masks
 from flexreg.stages.correspondences import derive_threshold
+from flexreg.stages.verification import open_space_witnesses
 from flexreg.survey.c2c import adjustment_cloud, fit_groups
 from flexreg.survey.config import COINCIDENT_EXPLAINED, COINCIDENT_M, SurveyConfig
 from flexreg.survey.links import Veto
@@ -79,7 +88,7 @@ JUDGE_VIEW_BYTES = 256 * 2**20
 
 #: bumped when a look's scores change (the dense check's tests, the glances): looks kept by
 #: older code are scored again
-LOOK_FORMAT = 1
+LOOK_FORMAT = 3
 #: the cache entry kind of the kept looks
 LOOKS_KIND = "map-looks"
 
@@ -226,12 +235,23 @@ def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
         raise InputError(path, f"unreadable station sample ({e})") from None
 
 
+def _witnesses(view: Any) -> NDArray[np.bool_]:
+    """The view's pixels that can testify to open space (:func:`open_space_witnesses`)."""
+    return open_space_witnesses(view.measured, view.image.wraps)
+
+
 def _shares(
-    view: Any, thr_a: float, sample: NDArray[np.float64], thr_b: float, T: Matrix
+    view: Any,
+    witnesses: NDArray[np.bool_],
+    thr_a: float,
+    sample: NDArray[np.float64],
+    thr_b: float,
+    T: Matrix,
 ) -> tuple[float, float, int]:
     """Explained and conflicting shares of ``sample`` (another station's, posed by ``T``)
-    in the view of a station, on the registration's dense check."""
-    check = Check(view.image, view.measured, view.slack, sample)
+    in the view of a station, on the registration's dense check; only the points at the
+    view's ``witnesses`` are judged."""
+    check = Check(view.image, view.measured, view.slack, sample, witnesses=witnesses)
     ok, bad = check_masks(check, np.asarray(T, dtype=np.float64), max(thr_a, thr_b))
     n = len(ok)
     return (float(ok.mean()) if n else 0.0, float(bad.mean()) if n else 0.0, n)
@@ -258,9 +278,10 @@ def look_from(
     if v.measured is None or v.slack is None:
         return []
     out: list[tuple[str, float, float, int]] = []
+    witnesses = _witnesses(v)
     for stem, g, T in others:
         sample, thr_b = _read_glance(g)
-        out.append((stem, *_shares(v, thr_a, sample, thr_b, T)))
+        out.append((stem, *_shares(v, witnesses, thr_a, sample, thr_b, T)))
     return out
 
 
@@ -379,7 +400,8 @@ class PairJudge:
     stations of the links between them would contradict each other at each placement
     (:mod:`flexreg.survey.consensus`).
     Views are loaded from the prepared files on first use, only what the check reads (the
-    camera, the measured ranges and their slack: 9 bytes a working pixel, not the view's
+    camera, the measured ranges, their slack and which pixels witness open space: 10 bytes a
+    working pixel, not the view's
     points and normals), and the most recently used kept within ``keep_bytes``; answers are
     remembered per pair and pose (to 1 mm / 1e-4 of the rotation), and kept for later runs
     by :meth:`keep` in the cache (:meth:`kept_path`: named by the dense check's tolerances and
@@ -395,7 +417,7 @@ class PairJudge:
         ``map_min_conflict`` and ``map_conflict_ratio``, as :meth:`PairLook.conflicts`.
     keep_bytes : int
         Memory for the views held at once (at least one is held): 256 MiB by default, all
-        of 50 stations of 1024 x 512, or 10 of the largest working images (2.5 Mpx).
+        of 45 stations of 1024 x 512, or 10 of the largest working images (2.5 Mpx).
     """
 
     def __init__(
@@ -407,7 +429,7 @@ class PairJudge:
     ) -> None:
         self.files, self.glances, self.config = files, glances, config
         self.keep_bytes = keep_bytes
-        self._views: dict[str, tuple[Any, NDArray[np.float64], float]] = {}
+        self._views: dict[str, tuple[Any, NDArray[np.float64], float, NDArray[np.bool_]]] = {}
         self._memo: dict[tuple[str, str, bytes], PairLook | None] = {}
         self._full: dict[tuple[str, str, bytes], tuple[float, float, int]] = {}
         self._fits: dict[bytes, Matrix | None] = {}
@@ -456,7 +478,7 @@ class PairJudge:
         except OSError as e:
             log.warning("%s: cannot keep the map's looks (%s)", path, e.strerror or e)
 
-    def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float] | None:
+    def _view(self, stem: str) -> tuple[Any, NDArray[np.float64], float, NDArray[np.bool_]] | None:
         if stem not in self.files or stem not in self.glances:
             return None
         if stem in self._views:
@@ -476,15 +498,15 @@ class PairJudge:
             polish_sample=None,
             refine_sample=None,
         )
-        self._views[stem] = (light, sample, thr)
+        self._views[stem] = (light, sample, thr, _witnesses(v))
         while len(self._views) > 1 and self._held() > self.keep_bytes:
             self._views.pop(next(iter(self._views)))  # the least recently used
         return self._views[stem]
 
     def _held(self) -> int:
         return sum(
-            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s.nbytes
-            for v, s, _ in self._views.values()
+            v.measured.nbytes + v.slack.nbytes + v.image.valid.nbytes + s.nbytes + w.nbytes
+            for v, s, _, w in self._views.values()
         )
 
     def look(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
@@ -501,8 +523,8 @@ class PairJudge:
                 look = PairLook(a, b, T, (kept[0], kept[1]), (kept[2], kept[3]),
                                 (int(kept[4]), int(kept[5])))  # fmt: skip
             elif (va := self._view(a)) is not None and (vb := self._view(b)) is not None:
-                ab = _shares(va[0], va[2], vb[1], vb[2], T)
-                ba = _shares(vb[0], vb[2], va[1], va[2], invert(T))
+                ab = _shares(va[0], va[3], va[2], vb[1], vb[2], T)
+                ba = _shares(vb[0], vb[3], vb[2], va[1], va[2], invert(T))
                 look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
                 log.debug("map judge %s <- %s: %s", a, b, look.describe())
                 if stored is not None:

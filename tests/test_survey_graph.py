@@ -320,14 +320,17 @@ def test_a_station_whose_pose_only_the_rough_positions_picked_says_so():
     """s0-s1-s2 a loop; s3 hangs on s2 by one uncertain link that fits two poses a bay apart,
     of which the rough positions picked the right one. A pose the positions picked needs a
     second registration around a loop: s3 stays unplaced, and neither its link nor the
-    station asks for the positions the surveyor already gave."""
+    station asks for the positions the surveyor already gave. The pair it names to align by
+    hand is the one whose pose the positions picked, not s1's, whose scans overlap more but
+    whose link is off."""
     P = {f"s{i}": make_transform(rotation_about_axis([0, 0, 1], 0.3 * i), [5.0 * i, 0, 0])
          for i in range(4)}  # fmt: skip
     links = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
     lone = _link(P, "s2", "s3", "uncertain")
     lone.alternatives = [Alternative(_bay(P, "s2", "s3", [6.0, 0, 0]), "twin", 0.9)]
     lone.vouched = "positions"
-    sol = solve_graph(sorted(P), [*links, lone], SurveyConfig(), reference="s0")
+    off = _link(P, "s1", "s3", "uncertain", overlap=0.8, T=_bay(P, "s1", "s3", [2.0, 0, 0]))
+    sol = solve_graph(sorted(P), [*links, lone, off], SurveyConfig(), reference="s0")
     assert "s3" not in sol.groups[0]
     assert lone.why == (
         "the rough positions pick one of the 2 poses it fits, and no loop confirms it "
@@ -338,8 +341,8 @@ def test_a_station_whose_pose_only_the_rough_positions_picked_says_so():
     assert "--positions" not in reason and "would pick one" not in reason, reason
     assert reason.endswith(
         "; the rough positions pick its links' poses, and no second registration confirms "
-        "one: --link s2 s3 T.txt (a transform from flexreg register s2 s3), or a scan "
-        "between it and s2"
+        "one: --link s2 s3 T.txt (the pose they picked is in poses.json's links; check it, or "
+        "align the pair in flexreg register s2 s3), or a scan between it and s2"
     ), reason
     _assert_plain(reason, link=False)
     _assert_plain(lone.why)

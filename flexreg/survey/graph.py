@@ -407,10 +407,17 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     n, alias = 1, other
     if many is not None:  # the link that fits most poses, and its station outside the group
         n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()
-    if any(_by_positions(e) for e in toward or mine):  # they decided; nothing confirms
+    sited = [e for e in toward or mine if _by_positions(e)]
+    if sited:  # they decided; nothing confirms: the pair whose pose they picked, to check
+        best = max(sited, key=lambda e: e.overlap)
+        other, side = (
+            (best.target, best.source) if best.target not in members else (best.source, best.target)
+        )
         return (
             f"{what}; the rough positions pick its links' poses, and no second registration "
-            f"confirms one: {hand}, or a scan between it and {other}"
+            f"confirms one: --link {other} {side} T.txt (the pose they picked is in poses.json's "
+            f"links; check it, or align the pair in flexreg register {other} {side}), or a scan "
+            f"between it and {other}"
         )
     said = next((e.undecided for e in toward if e.undecided), "")
     if said:

@@ -236,7 +236,8 @@ def _read_glance(path: str) -> tuple[NDArray[np.float64], float]:
 
 
 def _witnesses(view: Any) -> NDArray[np.bool_]:
-    """The view's pixels that can testify to open space (:func:`open_space_witnesses`)."""
+    """The view's pixels whose footprint its neighbours bound: the only ones the map
+    check judges points at (:func:`open_space_witnesses`)."""
     return open_space_witnesses(view.measured, view.image.wraps)
 
 
@@ -400,10 +401,10 @@ class PairJudge:
     stations of the links between them would contradict each other at each placement
     (:mod:`flexreg.survey.consensus`).
     Views are loaded from the prepared files on first use, only what the check reads (the
-    camera, the measured ranges, their slack and which pixels witness open space: 10 bytes a
-    working pixel, not the view's
-    points and normals), and the most recently used kept within ``keep_bytes``; answers are
-    remembered per pair and pose (to 1 mm / 1e-4 of the rotation), and kept for later runs
+    camera, the measured ranges, their slack and which pixels are judged: 10 bytes a working
+    pixel, not the view's points and normals), and the most recently used kept within
+    ``keep_bytes``; answers are remembered per pair and pose (to 1 mm / 1e-4 of the
+    rotation), and kept for later runs
     by :meth:`keep` in the cache (:meth:`kept_path`: named by the dense check's tolerances and
     :data:`LOOK_FORMAT`, each look by both stations' cache keys and the pose), so a re-run
     scores only the placements it has not seen; the full-resolution tests of lone placements

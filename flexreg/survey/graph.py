@@ -370,6 +370,11 @@ def _tally(links: list[Link]) -> str:
     return ", ".join(f"{n} {words}" for words, n in order)
 
 
+def _outward(e: Link, members: set[str]) -> tuple[str, str]:
+    """A link's two stations, the one outside ``members`` first."""
+    return (e.target, e.source) if e.target not in members else (e.source, e.target)
+
+
 def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[str]) -> str:
     """Why a station is not placed, and the one thing that would place it."""
     members = set(group)
@@ -381,10 +386,7 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
     side = next(iter(sorted(members & {x for e in toward for x in (e.target, e.source)})), stem)
     seen = [e for e in toward if e.usable and e.overlap > 0]
     if seen:  # the pair whose scans see most of each other: the one worth aligning by hand
-        best = max(seen, key=lambda e: e.overlap)
-        other, side = (
-            (best.target, best.source) if best.target in placed else (best.source, best.target)
-        )
+        other, side = _outward(max(seen, key=lambda e: e.overlap), members)
     hand = f"--link {other} {side} T.txt (a transform from flexreg register {other} {side})"
     rivals = [e for e in toward if e.why == CONTESTED]
     what = (
@@ -409,10 +411,7 @@ def _why_unplaced(stem: str, group: list[str], links: list[Link], placed: set[st
         n, alias = 1 + len(many.alternatives), ({many.target, many.source} - members).pop()
     sited = [e for e in toward or mine if _by_positions(e)]
     if sited:  # they decided; nothing confirms: the pair whose pose they picked, to check
-        best = max(sited, key=lambda e: e.overlap)
-        other, side = (
-            (best.target, best.source) if best.target not in members else (best.source, best.target)
-        )
+        other, side = _outward(max(sited, key=lambda e: e.overlap), members)
         return (
             f"{what}; the rough positions pick its links' poses, and no second registration "
             f"confirms one: --link {other} {side} T.txt (the pose they picked is in poses.json's "

@@ -381,6 +381,68 @@ def test_two_picked_poses_slid_alike_do_not_outrank_a_confident_link():
     assert all(e.status == "rejected" and e.loop_error_m > 0.1 for e in doors)
 
 
+class _Full:
+    """The map's full-resolution test knowing the truth: at the true relative pose none of
+    either scan in the other's open space and ``seen`` explained; anywhere else ``wrong`` in
+    open space (a pose a few degrees off puts walls where the other saw through)."""
+
+    def __init__(self, P, *, wrong=0.03, seen=0.2):
+        self.P, self.wrong, self.seen, self.asked = P, wrong, seen, 0
+
+    def __call__(self, a, b, T):
+        self.asked += 1
+        E = invert(invert(self.P[a]) @ self.P[b]) @ T
+        right = np.linalg.norm(E[:3, 3]) < 0.05 and np.trace(E[:3, :3]) > 3 - 1e-5
+        return (0.0 if right else self.wrong, self.seen, 100_000)
+
+
+def _blind(a, b, T):
+    """The sample's map check where stray returns at depth edges fill a tenth of every
+    sample at every pose: it sees the stations, refutes nothing and cannot tell."""
+    return (0.4, 0.1, 0.12)
+
+
+def test_a_pose_rough_positions_picked_alone_is_placed_where_full_resolution_confirms_it():
+    """s3 reached only by poses the rough positions picked, with no loop and no confident
+    registration: the right one (s1 <- s3), and one turned 10 degrees (s2 <- s3; the
+    positions' window allows 30), which the sample's map check cannot tell apart. The
+    full-resolution test of s3 against the placed stations its link does not join decides:
+    the right pose alone is placed (clean, and seen); with the turned one as well, the right
+    one where the test refutes the turned one's placement, and nothing where it refutes
+    neither or cannot see s3, or without the test."""
+    P = _poses(4)
+    base = [_link(P, "s0", "s1"), _link(P, "s1", "s2"), _link(P, "s0", "s2")]
+    turned = (
+        invert(P["s2"]) @ P["s3"] @ make_transform(rotation_about_axis([0, 0, 1], 0.17), [0, 0, 0])
+    )
+
+    def run(full, with_turned=True):
+        right = _picked(P, "s1", "s3")
+        found = [right]
+        if with_turned:
+            found.append(_picked(P, "s2", "s3"))
+            found[1].T_target_source = turned
+        sol = solve_graph(sorted(P), [*base, *found], SurveyConfig(), reference="s0",
+                          judge=_blind, full=full)  # fmt: skip
+        return sol, found
+
+    sol, (right,) = run(_Full(P), with_turned=False)
+    assert "s3" in sol.groups[0] and sol.confidence["s3"] == "uncertain"
+    assert right.status == "accepted" and right.map_joined
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    full = _Full(P)
+    sol, (right, wrong) = run(full)
+    assert "s3" in sol.groups[0] and full.asked >= 2
+    np.testing.assert_allclose(sol.poses["s3"], invert(P["s0"]) @ P["s3"], atol=1e-6)
+    assert right.status == "accepted" and wrong.status == "rejected"
+    assert wrong.loop_error_deg > 5
+    for unsure in (_Full(P, wrong=0.0), _Full(P, seen=0.001), None):
+        sol, _ = run(unsure)
+        assert "s3" not in sol.groups[0]
+    sol, _ = run(_Full(P, seen=0.001), with_turned=False)
+    assert "s3" not in sol.groups[0]
+
+
 def test_a_loop_of_windowed_links_outranks_a_lone_confident_link_a_bay_off():
     """s3 placed by two links confident inside rough positions' windows that agree around
     the loop (right), and by one confident on its own but a bay (6 m) off: the placement the

@@ -335,7 +335,8 @@ def test_a_station_whose_pose_only_the_rough_positions_picked_says_so():
     assert lone.why == (
         "the rough positions pick one of the 2 poses it fits, and no loop confirms it "
         "(positions tell a bay or a room apart, not the centimetres: a pose found within them "
-        "may be slid)"
+        "may be slid), nor does the map at full resolution (it must see the station clean from "
+        "its placed neighbours and refute every other pose the positions picked)"
     )
     reason = sol.reasons["s3"]
     assert "--positions" not in reason and "would pick one" not in reason, reason

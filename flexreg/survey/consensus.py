@@ -49,8 +49,13 @@ of stations, the way PCM merges the maps of several robots.
    other without contradiction, every other contradicting decisively more. Once no such
    merge is left, a lone trusted answer (or the surveyor's word) places its stations
    unchecked unless the map check refutes it; one that a cycle of trusted answers
-   contradicts, only where the map sees the groups at ease, and when nothing else is left
-   the map may name the wrong link of such a cycle (:func:`_blame`).
+   contradicts, only where the map sees the groups at ease. A pose the rough positions
+   picked alone places what it joins where the map's full-resolution test confirms it:
+   the groups' nearest stations see each other there with nothing in open space, and every
+   other distinct placement such a pose proposes puts their points where the others saw
+   through (:func:`_sited`; the positions chose the bay, the test the turn their 30-degree
+   window leaves open). When nothing else is left the map may name the wrong link of a
+   cycle of trusted answers that does not close (:func:`_blame`).
 3. **Inside a group**, every other link keeps the hypothesis that agrees with the group's
    poses (a loop picks an alias pair's right pose), or is rejected with its loop error.
 
@@ -71,7 +76,15 @@ import numpy as np
 
 from flexreg.core.transforms import invert
 from flexreg.survey.hypotheses import Cycle, Hypothesis, LoopTolerance
-from flexreg.survey.links import GroupFit, Judge, Matrix, loop_error, map_refutes, map_sees
+from flexreg.survey.links import (
+    FullJudge,
+    GroupFit,
+    Judge,
+    Matrix,
+    loop_error,
+    map_refutes,
+    map_sees,
+)
 from flexreg.survey.positions import Position, refutes
 
 log = logging.getLogger(__name__)
@@ -378,12 +391,31 @@ def _decide(
     ratios: tuple[float, float],
     judge: tuple[Judge, float, float, float] | None,
     alone: bool,
+    full: tuple[FullJudge, float, float] | None = None,
 ) -> _Pick | None:
     """The set that merges two groups, or None. What chooses it (:attr:`_Pick.how`):
     ``"loop"``, a loop of trusted answers; ``"map"``, the map's check among distinct
     placements; ``"hand"``, the surveyor's word; ``"alone"``, one trusted answer no loop
-    checks. The last two only when ``alone`` (once no set a loop confirms is left) where a
-    cycle of trusted answers contradicts them."""
+    checks; ``"full"``, a pose the rough positions picked that the full-resolution test
+    confirms (:func:`_sited`, with ``full``). The last three only when ``alone`` (once no set
+    a loop confirms is left) where a cycle of trusted answers contradicts them."""
+    pick = _decide_sets(sets, place, g2, tol, ratios, judge, alone)
+    if pick is None and alone and judge is not None and full is not None:
+        return _sited(sets, place, g2, tol, judge[3], full)
+    return pick
+
+
+def _decide_sets(
+    sets: list[_Set],
+    place: Placement,
+    g2: str,
+    tol: LoopTolerance,
+    ratios: tuple[float, float],
+    judge: tuple[Judge, float, float, float] | None,
+    alone: bool,
+) -> _Pick | None:
+    """:func:`_decide` by loops, the map's sample check, the surveyor's word or a lone
+    trusted answer."""
     if not sets:  # every hypothesis between them refitted elsewhere
         return None
     rival_ratio, decisive = ratios
@@ -431,6 +463,73 @@ def _decide(
     if best is None:
         return None
     return _Pick(distinct[best], "map", min(x[0] for x in judged if x is not None))
+
+
+def _sited(
+    sets: list[_Set],
+    place: Placement,
+    g2: str,
+    tol: LoopTolerance,
+    radius_m: float,
+    full: tuple[FullJudge, float, float],
+) -> _Pick | None:
+    """The placement of two groups that a pose the rough positions picked proposes
+    (:attr:`Hypothesis.sited`, no trusted answer in its set), once nothing else merges them:
+    the positions chose the pose among the link's (none other of its poses lay within their
+    window), and the full-resolution test of the groups' nearest stations (``full``: the
+    test, ``judge.settle_open_share`` and ``map_min_conflict``) stands for the loop no
+    registration closes. It must find that placement clean (no pair puts the limit or more
+    of both stations' points in the other's open space, and one pair sees the other's at
+    least ``map_min_conflict`` explained) and refute every other such pose's distinct
+    placement. A pose a few degrees off (the positions' window allows 30) puts walls and
+    racks where the neighbours saw through; the sample's check cannot tell, for the stray
+    returns at depth edges it counts at every pose (docs/benchmarks.md)."""
+    distinct: list[_Set] = []
+    for s in sets:
+        if not s.centre.sited or s.rank[0]:
+            continue
+        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
+            distinct.append(s)
+    if len(distinct) > MAP_PLACEMENTS:
+        return None
+    clean: _Set | None = None
+    for s in distinct:  # tested until the answer is known
+        said = _at_full(s, place, g2, full, radius_m)
+        if said == "refuted":
+            continue
+        if said == "unseen" or clean is not None:
+            return None
+        clean = s
+    return _Pick(clean, "full") if clean is not None else None
+
+
+def _at_full(
+    s: _Set,
+    place: Placement,
+    g2: str,
+    full: tuple[FullJudge, float, float],
+    radius_m: float,
+) -> str:
+    """What the full-resolution test says of the :data:`MAP_PAIRS` nearest pairs of the two
+    groups' stations within ``radius_m`` where the set places the second (its own links'
+    pairs left out: their registrations fitted them), nearest first: ``"refuted"`` at the
+    first pair with the limit or more of both stations' points in the other's open space,
+    else ``"clean"`` when a pair sees the other's points explained at least
+    ``map_min_conflict``, else ``"unseen"``."""
+    test, limit, min_seen = full
+    c = s.centre.link
+    g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
+    own = {frozenset((h.link.target, h.link.source)) for h in s.members}
+    at, pairs = _nearest(place, s.X, (g1, g2), radius_m, own)
+    seen = False
+    for a, b in pairs:
+        said = test(a, b, invert(at[a]) @ at[b])
+        if said is None:
+            continue
+        if said[0] >= limit:
+            return "refuted"
+        seen = seen or said[1] >= min_seen
+    return "clean" if seen else "unseen"
 
 
 def _decisive(
@@ -482,17 +581,21 @@ def _blame(
 def _best(
     memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]],
     decide: tuple[
-        Placement, LoopTolerance, tuple[float, float], tuple[Judge, float, float, float] | None
+        Placement,
+        LoopTolerance,
+        tuple[float, float],
+        tuple[Judge, float, float, float] | None,
+        tuple[FullJudge, float, float] | None,
     ],
     alone: bool,
 ) -> tuple[tuple[float, ...], str, str, _Pick] | None:
     """The best merge of the project (:func:`_decide` per pair of groups, remembered in
     ``memo``); ``decide``: the placement, tolerance, ratios and judge."""
-    place, tol, ratios, judge = decide
+    place, tol, ratios, judge, full = decide
     best: tuple[tuple[float, ...], str, str, _Pick] | None = None
     for (g1, g2), (found, decided) in sorted(memo.items()):
         if alone not in decided:
-            decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone)
+            decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone, full)
         pick = decided[alone]
         if pick is None:
             continue
@@ -513,6 +616,7 @@ def merge_groups(
     broken: Sequence[Cycle] = (),
     fit: tuple[GroupFit, float] | None = None,
     positions: Mapping[str, Position] | None = None,
+    full: tuple[FullJudge, float, float] | None = None,
 ) -> tuple[Placement, dict[int, Chosen]]:
     """Step 2: the groups, and what each link that merged groups was given (by link id).
 
@@ -543,6 +647,10 @@ def merge_groups(
     positions : dict of str -> Position, optional
         Rough positions: a placement of two groups they refute
         (:func:`~flexreg.survey.positions.refutes`) is no hypothesis.
+    full : (FullJudge, float, float), optional
+        The map's full-resolution test, ``judge.settle_open_share`` and ``map_min_conflict``:
+        when nothing else is left, a pose the rough positions picked places what it joins
+        where the test confirms it (:func:`_sited`; with ``judge`` only).
     """
     place = Placement({s: s for s in stems}, {s: np.eye(4) for s in stems})
     chosen: dict[int, Chosen] = {}
@@ -565,7 +673,7 @@ def merge_groups(
                 for h in items:
                     h.refit = None
                 memo[k] = (_sets(place, *k, items, tol, positions), {})
-        decide = (place, tol, ratios, judge)
+        decide = (place, tol, ratios, judge, full)
         best = _best(memo, decide, False)  # what a loop confirms first
         if best is None and fit is not None and judge is not None:  # then slid doorway links
             for k in sorted(memo.keys() - refitted):

@@ -39,6 +39,7 @@ from flexreg.survey.config import MAP_DOUBT_MARGIN, PRUNE_THRESHOLD, SurveyConfi
 from flexreg.survey.consensus import Placement, merge_groups
 from flexreg.survey.hypotheses import Hypothesis, LoopTolerance, cycle_votes, hypotheses_of
 from flexreg.survey.links import (
+    FullJudge,
     GraphSolution,
     GroupFit,
     Judge,
@@ -80,6 +81,7 @@ def _choose(
     judge: Judge | None,
     fit: GroupFit | None = None,
     positions: Mapping[str, Position] | None = None,
+    full: FullJudge | None = None,
 ) -> Placement:
     """Steps 1-3 (:mod:`flexreg.survey.consensus`): the hypothesis of every pending link,
     the groups they make and their poses; links left out are rejected with why."""
@@ -100,6 +102,9 @@ def _choose(
         broken,
         (fit, 2 * CAPTURE_VOXELS * config.refine_voxel_m) if fit is not None else None,
         positions,
+        (full, config.registration.judge.settle_open_share, config.map_min_conflict)
+        if full is not None
+        else None,
     )
     for e in pending:
         c = chosen.get(id(e))
@@ -111,7 +116,7 @@ def _choose(
             if c.hypothesis.alternative is not None:
                 e.take(c.hypothesis.alternative, "the map" if c.how == "map" else "the loop")
             e.in_tree, e.confirmed_by_loop = c.centre, c.by_loop
-            e.map_joined = c.how == "map"
+            e.map_joined = c.how in ("map", "full")
             continue
         if place.root[e.target] != place.root[e.source]:
             _reject(e, _unconfirmed(e, hyps))
@@ -175,7 +180,9 @@ def _unconfirmed(e: Link, hyps: dict[frozenset[str], list[Hypothesis]]) -> str:
         )
         return (
             f"{how}, and no loop confirms it (positions tell a bay or a room apart, not the "
-            "centimetres: a pose found within them may be slid)"
+            "centimetres: a pose found within them may be slid), nor does the map at full "
+            "resolution (it must see the station clean from its placed neighbours and refute "
+            "every other pose the positions picked)"
         )
     if n > 1 and not e.trusted and e.fits:
         return (
@@ -473,6 +480,7 @@ def solve_graph(
     judge: Judge | None = None,
     fit: GroupFit | None = None,
     positions: Mapping[str, Position] | None = None,
+    full: FullJudge | None = None,
 ) -> GraphSolution:
     """Steps 1-5 of this module: statuses of ``links`` (set in place), poses and groups.
 
@@ -504,6 +512,11 @@ def solve_graph(
     positions : dict of str -> Position, optional
         Rough positions (:mod:`flexreg.survey.positions`): a placement of two groups they
         refute (:func:`~flexreg.survey.positions.refutes`) joins nothing.
+    full : callable, optional
+        ``full(a, b, T_a_b)``: the map's full-resolution test of two stations
+        (:data:`~flexreg.survey.links.FullJudge`); with ``judge``, a pose the rough
+        positions picked places what no other link does where it confirms it
+        (:func:`flexreg.survey.consensus.merge_groups`).
 
     Returns
     -------
@@ -516,7 +529,7 @@ def solve_graph(
     """
     config = config if config is not None else SurveyConfig()
     dropped: dict[int, str] = {}
-    maps = (judge, fit, positions or {})
+    maps = (judge, fit, positions or {}, full)
     sol = _solve_once(stations, links, config, reference, dropped, maps)
     for _ in range(len(links)):
         worst = _worst_residual(links, config)
@@ -672,10 +685,15 @@ def _solve_once(
     config: SurveyConfig,
     reference: str | None,
     dropped: dict[int, str],
-    maps: tuple[Judge | None, GroupFit | None, Mapping[str, Position]] = (None, None, {}),
+    maps: tuple[Judge | None, GroupFit | None, Mapping[str, Position], FullJudge | None] = (
+        None,
+        None,
+        {},
+        None,
+    ),
 ) -> GraphSolution:
     """Steps 1-3 with the links of ``dropped`` rejected beforehand; ``maps``: the judge, the
-    group fit and the rough positions."""
+    group fit, the rough positions and the full-resolution test."""
     for e in links:
         e.status, e.in_tree, e.confirmed_by_loop = "pending", False, False
         e.loop_error_deg = e.loop_error_m = None

@@ -156,8 +156,9 @@ class Link:
         Why the link is trusted beyond its verdict: ``"hand"`` (given by the surveyor,
         ``--link``), ``"positions"`` (the one of its poses the rough positions pick,
         :mod:`flexreg.survey.positions`); empty for none. A vouched link places stations
-        on its own where no loop reaches them (a hand link only: positions pick a pose, they
-        do not confirm its centimetres), and loops still check it.
+        on its own where no loop reaches them (a hand link; a pose the positions picked only
+        where the map's full-resolution test confirms it: positions pick a pose, they do
+        not confirm its centimetres), and loops still check it.
     picked : str
         What picked one of its alternatives over its answer (the answer is then among the
         alternatives), in words; empty when it keeps its answer.
@@ -512,6 +513,12 @@ lands on its surfaces or in its free space; the larger share of a station's samp
 other's free space; the smaller share of a station's sample on the other's surfaces — or
 None when the two hardly see each other there."""
 
+FullJudge = Callable[[str, str, Matrix], "tuple[float, float, int] | None"]
+"""Two stations at one relative pose at full resolution: ``full(a, b, T_a_b)`` gives the
+share of both stations' points in the other's open space, the share the other explains and
+how many points were tested (:func:`flexreg.survey.mapcheck.open_space_at_full`); None when
+it cannot tell."""
+
 GroupFit = Callable[[dict[str, Matrix], dict[str, Matrix], Matrix], "Matrix | None"]
 """Where all the overlap of two groups of stations fits: ``fit(target, source, X)``, each
 group given as its stations' poses in its own frame (``{stem: T_group_station}``) and ``X``
@@ -535,6 +542,7 @@ def map_sees(said: tuple[float, float, float] | None) -> bool:
 __all__ = [
     "MAX_ALTERNATIVES",
     "Alternative",
+    "FullJudge",
     "GraphSolution",
     "GroupFit",
     "Judge",

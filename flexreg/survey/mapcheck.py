@@ -559,6 +559,24 @@ class PairJudge:
             self._kept_looks()[stored] = np.asarray([*tested, 0, 0, 0], dtype=np.float64)
             self._new += 1
 
+    def at_full(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, int] | None:
+        """The full-resolution test of the pair at ``T_a_b`` (:func:`open_space_at_full`),
+        made here (in this process) when no run made it yet, and remembered; None when a
+        station has no prepared file or glance (:data:`~flexreg.survey.links.FullJudge`)."""
+        T = np.asarray(T_a_b, dtype=np.float64)
+        hit = self.recall_full(a, b, T)
+        if hit is not None:
+            return hit
+        if any(s not in self.files or s not in self.glances for s in (a, b)):
+            return None
+        tested = open_space_at_full(
+            (self.files[a], self.files[b]), (self.glances[a], self.glances[b]), T
+        )
+        log.debug("map judge %s <- %s at full resolution: %.4f open, %.4f seen", a, b,
+                  *tested[:2])  # fmt: skip
+        self.remember_full(a, b, T, tested)
+        return tested
+
     def _full_key(self, a: str, b: str, T_a_b: Matrix) -> tuple[Any, str | None]:
         pose = _pose_key(np.asarray(T_a_b, dtype=np.float64))
         stored = self._stored_key(a, b, pose)

@@ -588,8 +588,9 @@ def _link_rounds(
     def solve(found: list[Link]) -> GraphSolution:
         t = time.perf_counter()
         sol = solve_graph(
-            stems, found, config, reference=reference, judge=judge, fit=fit, positions=priors
-        )
+            stems, found, config, reference=reference, judge=judge, fit=fit, positions=priors,
+            full=judge.at_full if judge is not None else None,
+        )  # fmt: skip
         timings["graph"] = timings.get("graph", 0.0) + time.perf_counter() - t
         return sol
 
@@ -727,7 +728,8 @@ def _map_check(
         log.info("map check: %d pair(s) of placed stations contradict each other", len(found))
         sol = solve_graph(stems, links, config, reference=reference, vetoes=vetoes, judge=judge,
                           fit=judge.fit_groups if judge is not None else None,
-                          positions=positions)  # fmt: skip
+                          positions=positions,
+                          full=judge.at_full if judge is not None else None)  # fmt: skip
     return sol, looks
 
 

@@ -386,22 +386,26 @@ class _Pick:
     contradiction: float = 0.0
 
 
-def _decide(
-    sets: list[_Set],
-    place: Placement,
-    g2: str,
-    tol: LoopTolerance,
-    ratios: tuple[float, float],
-    judge: tuple[Judge, float, float, float] | None,
-    alone: bool,
-    full: tuple[FullJudge, float, float] | None = None,
-) -> _Pick | None:
+#: What decides a merge: the placement, the loop tolerance, the registration's ambiguity and
+#: decisive ratios, the map's check with its thresholds and radius, and its full-resolution
+#: test with the settle limit and the share that sees (:func:`merge_groups`).
+Decide = tuple[
+    Placement,
+    LoopTolerance,
+    tuple[float, float],
+    "tuple[Judge, float, float, float] | None",
+    "tuple[FullJudge, float, float] | None",
+]
+
+
+def _decide(sets: list[_Set], g2: str, decide: Decide, alone: bool) -> _Pick | None:
     """The set that merges two groups, or None. What chooses it (:attr:`_Pick.how`):
     ``"loop"``, a loop of trusted answers; ``"map"``, the map's check among distinct
     placements; ``"hand"``, the surveyor's word; ``"alone"``, one trusted answer no loop
     checks; ``"full"``, a pose the rough positions picked that the full-resolution test
     confirms (:func:`_sited`, with ``full``). The last three only when ``alone`` (once no set
     a loop confirms is left) where a cycle of trusted answers contradicts them."""
+    place, tol, ratios, judge, full = decide
     pick = _decide_sets(sets, place, g2, tol, ratios, judge, alone)
     if pick is None and alone and judge is not None and full is not None:
         return _sited(sets, place, g2, tol, judge[3], full)
@@ -583,22 +587,15 @@ def _blame(
 
 def _best(
     memo: dict[tuple[str, str], tuple[list[_Set], dict[bool, _Pick | None]]],
-    decide: tuple[
-        Placement,
-        LoopTolerance,
-        tuple[float, float],
-        tuple[Judge, float, float, float] | None,
-        tuple[FullJudge, float, float] | None,
-    ],
+    decide: Decide,
     alone: bool,
 ) -> tuple[tuple[float, ...], str, str, _Pick] | None:
     """The best merge of the project (:func:`_decide` per pair of groups, remembered in
-    ``memo``); ``decide``: the placement, tolerance, ratios and judge."""
-    place, tol, ratios, judge, full = decide
+    ``memo``); ``decide``: what decides (:data:`Decide`)."""
     best: tuple[tuple[float, ...], str, str, _Pick] | None = None
     for (g1, g2), (found, decided) in sorted(memo.items()):
         if alone not in decided:
-            decided[alone] = _decide(found, place, g2, tol, ratios, judge, alone, full)
+            decided[alone] = _decide(found, g2, decide, alone)
         pick = decided[alone]
         if pick is None:
             continue

@@ -481,9 +481,11 @@ def _sited(
     full: tuple[FullJudge, float, float],
 ) -> _Pick | None:
     """The placement of two groups that a pose the rough positions picked proposes
-    (:attr:`Hypothesis.sited`, no trusted answer in its set), once nothing else merges them:
-    the positions chose the pose among the link's (none other of its poses lay within their
-    window), and the full-resolution test of the groups' nearest stations (``full``: the
+    (:attr:`Hypothesis.sited`, no trusted answer in its set) of a link doubted only for its
+    look-alike poses (:attr:`~flexreg.survey.links.Link.aliased`: not a doorway link, which
+    may slide along a wall), once nothing else merges them: the positions chose the pose
+    among the link's (none other of its poses lay within their window), and the
+    full-resolution test of the groups' nearest stations (``full``: the
     test, ``judge.settle_open_share`` and ``map_min_conflict``) stands for the loop no
     registration closes. It must find that placement clean (no pair puts the limit or more
     of both stations' points in the other's open space, and one pair sees the other's at
@@ -493,7 +495,7 @@ def _sited(
     returns at depth edges it counts at every pose (docs/benchmarks.md)."""
     distinct: list[_Set] = []
     for s in sets:
-        if not s.centre.sited or s.rank[0]:
+        if not s.centre.sited or s.rank[0] or not s.centre.link.aliased:
             continue
         if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
             distinct.append(s)

@@ -299,6 +299,16 @@ class Link:
         return all(r.get("code") == "ambiguous" for r in self.reasons)
 
     @property
+    def aliased(self) -> bool:
+        """Whether all that doubts it is the look-alike poses that fit as well
+        (``ambiguous``; with open space only its even sample finds, where full resolution
+        clears the answer, :attr:`open_clear`): what rough positions settle, unlike a small
+        overlap (``low_overlap``: a doorway link may slide along a wall, which they cannot
+        tell) (:func:`flexreg.survey.consensus.merge_groups`)."""
+        fit = {"ambiguous"} | ({"free_space"} if self.open_clear else set())
+        return self.verdict == "uncertain" and all(r.get("code") in fit for r in self.reasons)
+
+    @property
     def fits_where_seen(self) -> bool:
         """Whether its poses fit what both scans see: it :attr:`fits`, or it is uncertain
         also (or only) because the scans share little (``low_overlap``: a doorway's worth),

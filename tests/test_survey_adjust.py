@@ -7,7 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexreg.survey.adjust import RADIUS_95, _accuracy, _two_edge_connected
+from flexreg.survey.adjust import (
+    RADIUS_95,
+    REF_SIGMA,
+    _accuracy,
+    _dense_covariances,
+    _two_edge_connected,
+    covariances,
+)
 from flexreg.survey.c2c import (
     CORRELATION_M,
     cloud_figures,
@@ -484,3 +491,54 @@ def test_two_groups_fit_on_all_their_overlap_through_a_doorway(tmp_path) -> None
         assert translation_error_m(X, B) < 0.005 and rotation_error_deg(X, B) < 0.05
     with pytest.raises(ValueError):
         fit_groups(target, [], B, 0.03)
+
+
+def _pose_graph(weights):
+    """A reference ``r`` and two stations ``a``, ``b`` 4 m apart along x, each pair measured
+    exactly with information ``w * I`` (``weights``: per pair), the reference held by the
+    final alignment's Gaussian prior."""
+    import gtsam
+
+    P = {"r": np.eye(4), "a": np.eye(4), "b": np.eye(4)}
+    P["a"][0, 3], P["b"][0, 3] = 4.0, 8.0
+    key = {"r": 0, "a": 1, "b": 2}
+    g, v = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    for s, T in P.items():
+        v.insert(key[s], gtsam.Pose3(T))
+    g.add(
+        gtsam.PriorFactorPose3(
+            0, gtsam.Pose3(P["r"]), gtsam.noiseModel.Isotropic.Sigma(6, REF_SIGMA)
+        )
+    )
+    for (t, s), w in weights.items():
+        rel = gtsam.Pose3(np.linalg.inv(P[t]) @ P[s])
+        g.add(
+            gtsam.BetweenFactorPose3(
+                key[t], key[s], rel, gtsam.noiseModel.Gaussian.Information(np.eye(6) * w)
+            )
+        )
+    return g, v, key
+
+
+def test_covariances_of_a_chain_hand_computed():
+    """r -> a -> b, no rotation between them: a's covariance is the r-a pair's (1 / w), b's
+    the sum of both pairs' (the reference's micron prior adds 1e-12); the dense inverse of the
+    information matrix gives what gtsam's marginals give."""
+    g, v, key = _pose_graph({("r", "a"): 1e4, ("a", "b"): 4e4})
+    cov = covariances(g, v, key, "r")
+    assert set(cov) == {"a", "b"}
+    np.testing.assert_allclose(np.diag(cov["a"])[:3], 1e-4, rtol=1e-6)
+    np.testing.assert_allclose(np.diag(cov["a"])[3:], 1e-4, rtol=1e-6)
+    np.testing.assert_allclose(np.diag(cov["b"])[:3], 1.25e-4, rtol=1e-6)
+    dense = _dense_covariances(g, v, key, "r")
+    for s in ("a", "b"):
+        np.testing.assert_allclose(dense[s], cov[s], rtol=1e-6, atol=1e-14)
+
+
+def test_dense_covariances_of_a_loop_match_the_marginals():
+    """A loop r-a-b-r of unequal weights: the dense path agrees with gtsam's marginals."""
+    g, v, key = _pose_graph({("r", "a"): 1e4, ("a", "b"): 3e5, ("r", "b"): 2e3})
+    marg, dense = covariances(g, v, key, "r"), _dense_covariances(g, v, key, "r")
+    for s in ("a", "b"):
+        np.testing.assert_allclose(dense[s], marg[s], rtol=1e-6, atol=1e-14)
+        assert np.linalg.eigvalsh(dense[s])[0] > 0

@@ -80,6 +80,10 @@ log = logging.getLogger(__name__)
 RADIUS_95 = float(np.sqrt(7.815))
 #: Huber kernel of the pose graph, in whitened units (95 % efficiency)
 HUBER_K = 1.345
+#: 1-sigma of the reference station's prior, radians and metres: the frame's anchor, a
+#: thousandth of the finest accuracy reported (a millimetre), so every station's covariance
+#: is its own against the reference
+REF_SIGMA = 1e-6
 STATUSES = ("verified", "placed", "outside_tolerance", "unplaced")
 
 
@@ -266,9 +270,12 @@ def _graph(
     v = gtsam.Values()
     for s in stems:
         v.insert(key[s], gtsam.Pose3(np.asarray(poses[s], np.float64)))
+    # the reference held to a micron and a microradian by a Gaussian prior: a constrained
+    # (infinitely precise) one makes the marginals' Cholesky factorisation fail as
+    # indeterminate for some orderings, and then no station's accuracy is known
     g.add(
         gtsam.PriorFactorPose3(
-            key[ref], gtsam.Pose3(poses[ref]), gtsam.noiseModel.Constrained.All(6)
+            key[ref], gtsam.Pose3(poses[ref]), gtsam.noiseModel.Isotropic.Sigma(6, REF_SIGMA)
         )
     )
     huber = gtsam.noiseModel.mEstimator.Huber.Create(HUBER_K)
@@ -329,6 +336,57 @@ def _optimise_robust(
             f"its cloud-to-cloud fit disagrees with the adjusted poses by {err * 1e3:.1f} mm, "
             f"over the {config.tolerance_mm:g} mm tolerance: left out"
         )
+
+
+def covariances(graph: Any, result: Any, key: dict[str, int], ref: str) -> dict[str, Matrix]:
+    """Each station's (6, 6) covariance against the reference (rotation in radians, then
+    translation in metres, in the station's frame) from the optimised pose graph: gtsam's
+    marginals, or where their sparse factorisation stops at an ill-conditioned pivot (it
+    then fails for the whole graph, "indeterminate linear system"), the inverse of the dense
+    information matrix of the same linearisation. A station that matrix does not fix (not
+    finite, not positive definite) has none.
+
+    Parameters
+    ----------
+    graph, result
+        The gtsam factor graph (the reference held by a Gaussian prior) and its solution.
+    key : dict of str -> int
+        Each station's variable.
+    ref : str
+        The reference station (no covariance of its own).
+    """
+    import gtsam
+
+    order = sorted(key, key=key.__getitem__)
+    try:
+        marg = gtsam.Marginals(graph, result)
+        return {s: np.asarray(marg.marginalCovariance(key[s])) for s in order if s != ref}
+    except (RuntimeError, IndexError):
+        log.info("final alignment: the marginals' factorisation failed; inverting the dense "
+                 "information matrix")  # fmt: skip
+    return _dense_covariances(graph, result, key, ref)
+
+
+def _dense_covariances(graph: Any, result: Any, key: dict[str, int], ref: str) -> dict[str, Matrix]:
+    """:func:`covariances` from the inverse of the dense information matrix."""
+    import gtsam
+
+    order = sorted(key, key=key.__getitem__)
+    ordering = gtsam.Ordering()
+    for s in order:
+        ordering.push_back(key[s])
+    H, _ = graph.linearize(result).hessian(ordering)
+    try:
+        inv = np.linalg.inv(np.asarray(H, dtype=np.float64))
+    except np.linalg.LinAlgError:
+        return {}
+    out: dict[str, Matrix] = {}
+    for i, s in enumerate(order):
+        c = inv[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]
+        c = 0.5 * (c + c.T)
+        if s != ref and np.all(np.isfinite(c)) and np.linalg.eigvalsh(c)[0] > 0:
+            out[s] = c
+    return out
 
 
 def _two_edge_connected(
@@ -536,14 +594,7 @@ def _finish(
     if adj.redundancy > 0:
         adj.variance_factor = chi2 / adj.redundancy
         factor = max(1.0, adj.variance_factor)
-    covs: dict[str, NDArray[np.float64]] = {}
-    try:
-        marg = gtsam.Marginals(graph, result)
-        for s in stems:
-            if s != ref and s in key:
-                covs[s] = factor * np.asarray(marg.marginalCovariance(key[s]))
-    except (RuntimeError, IndexError):  # an indeterminate system: a station no pair fixes
-        covs = {}
+    covs = {s: factor * c for s, c in covariances(graph, result, key, ref).items()}
     confirmed = _two_edge_connected(ref, edges, alone)
     touched = {s for p in used for s in (p.target, p.source)}
     for s in stems:
@@ -583,4 +634,4 @@ def _finish(
             adj.status[s] = "verified"
 
 
-__all__ = ["STATUSES", "Accuracy", "Adjustment", "Pair", "adjust"]
+__all__ = ["REF_SIGMA", "STATUSES", "Accuracy", "Adjustment", "Pair", "adjust", "covariances"]

@@ -303,15 +303,33 @@ def _contradiction(
     ``radius_m``, the worst contradiction and conflict and the best explained share of the
     judge's. The set's own links' pairs are no witnesses (their registrations fitted them,
     and their verdicts judged them already); None when the map cannot tell for any pair."""
-    c = s.centre.link
-    g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
-    own = {frozenset((h.link.target, h.link.source)) for h in s.members}
-    at, pairs = _nearest(place, s.X, (g1, g2), radius_m, own)
-    said = [judge(a, b, invert(at[a]) @ at[b]) for a, b in pairs]
+    said = [judge(a, b, T) for a, b, T in _judged_pairs(s, place, g2, radius_m)]
     seen = [x for x in said if x is not None]
     if not seen:
         return None
     return max(x[0] for x in seen), max(x[1] for x in seen), max(x[2] for x in seen)
+
+
+def _judged_pairs(
+    s: _Set, place: Placement, g2: str, radius_m: float
+) -> list[tuple[str, str, Matrix]]:
+    """The pairs of stations the map looks at where set ``s`` places group ``g2``: the
+    :data:`MAP_PAIRS` nearest (one of each group) within ``radius_m``, nearest first, but
+    the set's own links' pairs, each with its relative pose ``T_a_b``."""
+    c = s.centre.link
+    g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
+    own = {frozenset((h.link.target, h.link.source)) for h in s.members}
+    at, pairs = _nearest(place, s.X, (g1, g2), radius_m, own)
+    return [(a, b, invert(at[a]) @ at[b]) for a, b in pairs]
+
+
+def _distinct(sets: list[_Set], place: Placement, g2: str, tol: LoopTolerance) -> list[_Set]:
+    """Of ``sets`` (best supported first), the first of each distinct placement of ``g2``."""
+    out: list[_Set] = []
+    for s in sets:
+        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in out):
+            out.append(s)
+    return out
 
 
 def _nearest(
@@ -459,10 +477,7 @@ def _decide_sets(
         return _Pick(top, "hand" if vouched else "alone", said[0] if said else 0.0)
     if judge is None or rival is None:
         return None
-    distinct: list[_Set] = []  # the distinct placements, best supported first
-    for s in sets:
-        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
-            distinct.append(s)
+    distinct = _distinct(sets, place, g2, tol)
     if len(distinct) > MAP_PLACEMENTS:
         return None
     judged = [_contradiction(s, place, g2, judge[0], judge[3]) for s in distinct]
@@ -493,12 +508,8 @@ def _sited(
     placement. A pose a few degrees off (the positions' window allows 30) puts walls and
     racks where the neighbours saw through; the sample's check cannot tell, for the stray
     returns at depth edges it counts at every pose (docs/benchmarks.md)."""
-    distinct: list[_Set] = []
-    for s in sets:
-        if not s.centre.sited or s.rank[0] or not s.centre.link.aliased:
-            continue
-        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in distinct):
-            distinct.append(s)
+    picked = [s for s in sets if s.centre.sited and not s.rank[0] and s.centre.link.aliased]
+    distinct = _distinct(picked, place, g2, tol)
     if len(distinct) > MAP_PLACEMENTS:
         return None
     clean: _Set | None = None
@@ -526,13 +537,9 @@ def _at_full(
     else ``"clean"`` when a pair sees the other's points explained at least
     ``map_min_conflict``, else ``"unseen"``."""
     test, limit, min_seen = full
-    c = s.centre.link
-    g1 = place.root[c.target] if place.root[c.target] != g2 else place.root[c.source]
-    own = {frozenset((h.link.target, h.link.source)) for h in s.members}
-    at, pairs = _nearest(place, s.X, (g1, g2), radius_m, own)
     seen = False
-    for a, b in pairs[:FULL_PAIRS]:
-        said = test(a, b, invert(at[a]) @ at[b])
+    for a, b, T in _judged_pairs(s, place, g2, radius_m)[:FULL_PAIRS]:
+        said = test(a, b, T)
         if said is None:
             continue
         if said[0] >= limit:

@@ -298,6 +298,12 @@ class Link:
         of them well."""
         return all(r.get("code") == "ambiguous" for r in self.reasons)
 
+    def _doubted_only_for(self, *codes: str) -> bool:
+        """Whether every reason of its verdict is one of ``codes``, or open space only its
+        even sample finds where full resolution clears the answer (:attr:`open_clear`)."""
+        fit = set(codes) | ({"free_space"} if self.open_clear else set())
+        return all(r.get("code") in fit for r in self.reasons)
+
     @property
     def aliased(self) -> bool:
         """Whether all that doubts it is the look-alike poses that fit as well
@@ -305,8 +311,7 @@ class Link:
         clears the answer, :attr:`open_clear`): what rough positions settle, unlike a small
         overlap (``low_overlap``: a doorway link may slide along a wall, which they cannot
         tell) (:func:`flexreg.survey.consensus.merge_groups`)."""
-        fit = {"ambiguous"} | ({"free_space"} if self.open_clear else set())
-        return self.verdict == "uncertain" and all(r.get("code") in fit for r in self.reasons)
+        return self.verdict == "uncertain" and self._doubted_only_for("ambiguous")
 
     @property
     def fits_where_seen(self) -> bool:
@@ -317,8 +322,7 @@ class Link:
         not count where full resolution clears the answer (:attr:`open_clear`). Rough
         positions may pick the pose of such a link
         (:func:`flexreg.survey.positions.apply_positions`)."""
-        fit = {"ambiguous", "low_overlap"} | ({"free_space"} if self.open_clear else set())
-        return all(r.get("code") in fit for r in self.reasons)
+        return self._doubted_only_for("ambiguous", "low_overlap")
 
     @property
     def plain(self) -> bool:
@@ -330,12 +334,8 @@ class Link:
         confirm each other (:mod:`flexreg.survey.consensus`), and the stations they place
         are tested at full resolution like a lone link's
         (:func:`flexreg.survey.mapcheck.unconfirmed_pairs`)."""
-        fit = {"low_overlap"} | ({"free_space"} if self.open_clear else set())
-        return (
-            self.verdict == "uncertain"
-            and bool(self.reasons)
-            and all(r.get("code") in fit for r in self.reasons)
-        )
+        uncertain = self.verdict == "uncertain" and bool(self.reasons)
+        return uncertain and self._doubted_only_for("low_overlap")
 
     @property
     def usable(self) -> bool:

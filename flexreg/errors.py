@@ -42,6 +42,11 @@ class CalibrationError(RegistrationError):
     """The 2D-3D correspondences do not determine a trustworthy camera-lidar extrinsic."""
 
 
+class ClusterError(FlexregError):
+    """The local Dask cluster did not start (a full or unwritable disk for its workers'
+    directories, a port or process limit)."""
+
+
 class ConfigError(FlexregError, ValueError):
     """An invalid option or configuration value."""
 

@@ -169,3 +169,31 @@ def test_a_full_disk_while_preparing_is_one_line_exit_1(code, text, tmp_path, mo
     line = one_error_line(err)
     assert rc == 1 and text in line and ".partial" not in line, line
     assert not (out / "poses.json").exists()
+
+
+def test_a_local_cluster_that_does_not_start_is_one_line_exit_1_and_nothing_written(tmp_path):
+    """A full disk where the workers keep their files stopped the survey with Dask's
+    "Cluster failed to start" and a traceback. Here the workers' directory lies under a
+    regular file, which stops a real local cluster the same way, on any machine."""
+    import dask.config
+    from conftest import room_project
+
+    from flexreg.errors import ClusterError
+
+    project = room_project(tmp_path / "p", 2, width=128, height=64)
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    where = str(blocked / "workers")
+    with dask.config.set({"temporary-directory": where}):
+        with pytest.raises(ClusterError, match="did not start: NotADirectoryError") as e:
+            with dask_client(2, None):
+                pass
+        assert where in str(e.value) and "\n" not in str(e.value)
+        out = tmp_path / "out"
+        rc, _, err = run_cli(
+            ["survey", project / "station_00.ptx", project / "station_01.ptx", "--out", out,
+             "--workers", "2"]
+        )  # fmt: skip
+    line = one_error_line(err)
+    assert rc == 1 and "local Dask cluster of 2 worker(s) did not start" in line, line
+    assert not out.exists()

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from flexreg.errors import ConfigError, FlexregError, InputError
+from flexreg.errors import ClusterError, ConfigError, FlexregError, InputError
 from flexreg.registration.config import RegistrationConfig
 from flexreg.registration.evidence import Evidence
 from flexreg.registration.pipeline import Registration
@@ -218,6 +218,8 @@ def dask_client(
     ------
     ConfigError
         ``workers`` out of range (:func:`check_workers`), or the scheduler cannot be reached.
+    ClusterError
+        The local cluster did not start (:func:`_local_cluster`).
     """
     check_workers(workers, scheduler)
     dashboard = dashboard_address(dashboard)
@@ -262,21 +264,7 @@ def dask_client(
         handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
         try:
             with dask.config.set(_WORKER_ENVIRON):
-                cluster = LocalCluster(
-                    n_workers=n,
-                    # the scheduler, its web server and the workers: loopback only
-                    host="127.0.0.1",
-                    threads_per_worker=1,
-                    processes=True,
-                    # an unauthenticated web page: off unless asked for, and then on loopback
-                    # unless a host is named
-                    dashboard_address=dashboard,
-                    # the workers' own logs: a heartbeat that loses the scheduler while the
-                    # cluster closes (Ctrl-C) is logged as an error with a traceback; task
-                    # failures reach the survey through their futures, so only critical
-                    # worker logs are shown
-                    silence_logs=logging.CRITICAL,
-                )
+                cluster = _local_cluster(LocalCluster, n, dashboard)
         finally:
             if main:
                 signal.signal(signal.SIGINT, handler)
@@ -285,6 +273,46 @@ def dask_client(
     finally:  # also when the cluster does not start
         quiet.setLevel(level)
         loop_log.setLevel(loop_level)
+
+
+def _local_cluster(make: Any, n: int, dashboard: str | None) -> Any:
+    """``n`` local worker processes of one thread each, on loopback.
+
+    Raises
+    ------
+    ClusterError
+        The cluster did not start (Dask reports "Cluster failed to start" with the cause, e.g.
+        a full disk or an unwritable directory for the workers' files), in one line naming
+        the workers' directory.
+    """
+    import tempfile
+
+    import dask.config
+
+    try:
+        return make(
+            n_workers=n,
+            # the scheduler, its web server and the workers: loopback only
+            host="127.0.0.1",
+            threads_per_worker=1,
+            processes=True,
+            # an unauthenticated web page: off unless asked for, and then on loopback
+            # unless a host is named
+            dashboard_address=dashboard,
+            # the workers' own logs: a heartbeat that loses the scheduler while the
+            # cluster closes (Ctrl-C) is logged as an error with a traceback; task
+            # failures reach the survey through their futures, so only critical
+            # worker logs are shown
+            silence_logs=logging.CRITICAL,
+        )
+    except Exception as e:  # whatever stopped it, the user gets one line
+        cause = e.__cause__ or e
+        where = dask.config.get("temporary-directory", None) or tempfile.gettempdir()
+        raise ClusterError(
+            f"the local Dask cluster of {n} worker(s) did not start: "
+            f"{type(cause).__name__}: {' '.join(str(cause).split())} "
+            f"(the workers' files go to {where}; a full disk stops them)"
+        ) from None
 
 
 class OutcomeCounter:

@@ -501,6 +501,8 @@ def run_survey(
     ConfigError
         ``workers`` out of range, a bad ``dashboard`` or ``scheduler`` address (before any
         work), or a scheduler that cannot be reached.
+    ClusterError
+        The local Dask cluster did not start (a full disk, say); nothing written.
     RegistrationError
         Fewer than two readable stations.
     """

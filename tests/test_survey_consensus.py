@@ -658,3 +658,31 @@ def test_rough_positions_refute_a_station_placed_a_bay_off_by_links_aliased_alik
     sol = solve_graph(sorted(P), [*row, *doorways([0.0, 0.0, 0.0])], SurveyConfig(), positions=pos)
     assert "s4" in sol.groups[0]
     np.testing.assert_allclose(sol.poses["s4"], invert(P[sol.reference]) @ P["s4"], atol=1e-6)
+
+
+def test_the_loop_errors_of_every_hypothesis_at_once_are_each_ones_own():
+    """``_sets`` scores every hypothesis between two groups against each placement at once;
+    each error is the one :func:`loop_error` gives that hypothesis alone (the stations'
+    poses in their groups' frames, either station of a link in the second group)."""
+    from flexreg.survey.consensus import Placement, _fit, _Fits
+
+    rng = np.random.default_rng(7)
+
+    def pose():
+        return make_transform(
+            rotation_about_axis(rng.normal(size=3), rng.uniform(-np.pi, np.pi)),
+            rng.uniform(-20, 20, size=3),
+        )
+
+    stems = [f"s{i}" for i in range(6)]
+    root = {s: ("s0" if i < 3 else "s3") for i, s in enumerate(stems)}
+    place = Placement(root, {s: pose() for s in stems})
+    links = [_link(None, a, b, T=pose()) for a, b in [("s0", "s3"), ("s4", "s1"), ("s2", "s5")]]
+    hyps = [h for e in links for h in hypotheses_of(e)]
+    hyps[1].refit = pose()  # a refitted pose is scored by its fit
+    fits = _Fits(hyps, place, "s3")
+    for X in (pose(), np.eye(4), invert(place.pose["s3"]) @ place.pose["s0"]):
+        deg, m = fits(X)
+        for h, d, t in zip(hyps, deg, m, strict=True):
+            want = _fit(h, place, X, "s3")
+            assert abs(d - want[0]) < 1e-5 and abs(t - want[1]) < 1e-9

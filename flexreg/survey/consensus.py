@@ -224,6 +224,30 @@ def _fit(h: Hypothesis, place: Placement, X: Matrix, g2: str) -> tuple[float, fl
     return loop_error(T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source))
 
 
+class _Fits:
+    """:func:`_fit` of every hypothesis of ``items`` at once, for any placement ``X``
+    (``T_g1_g2``) of group ``g2``: each link joins the two groups, so its loop closes as
+    ``inv(P_target) X P_source`` (source in ``g2``) or ``inv(P_target) inv(X) P_source``
+    (target in ``g2``), with the stations' poses in their groups' frames."""
+
+    def __init__(self, items: Sequence[Hypothesis], place: Placement, g2: str) -> None:
+        T = [h.T if h.refit is None else h.refit for h in items]
+        self.T = np.stack(T) if T else np.zeros((0, 4, 4))
+        self.left = np.stack([invert(place.pose[h.link.target]) for h in items] or [np.eye(4)])
+        self.right = np.stack([place.pose[h.link.source] for h in items] or [np.eye(4)])
+        self.flip = np.asarray([place.root[h.link.target] == g2 for h in items], dtype=bool)
+
+    def __call__(self, X: Matrix) -> tuple[np.ndarray, np.ndarray]:
+        """Loop errors (degrees, metres), one per hypothesis, where ``X`` places ``g2``."""
+        if not len(self.T):
+            return np.zeros(0), np.zeros(0)
+        mid = np.where(self.flip[:, None, None], invert(X)[None], np.asarray(X)[None])
+        rel = self.left @ mid @ self.right
+        c = (np.einsum("nij,nij->n", self.T[:, :3, :3], rel[:, :3, :3]) - 1.0) / 2.0
+        deg = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+        return deg, np.linalg.norm(self.T[:, :3, 3] - rel[:, :3, 3], axis=1)
+
+
 def _sets(
     place: Placement,
     g1: str,
@@ -238,6 +262,7 @@ def _sets(
     whose placement rough ``positions`` refute (:func:`~flexreg.survey.positions.refutes`)."""
     out = []
     first = {s: place.pose[s] for s in place.members(g1)}
+    fits = _Fits(items, place, g2)
     for c in items:
         if c.refit is not None:
             continue  # all the overlap fits elsewhere: it places nothing itself
@@ -247,14 +272,15 @@ def _sets(
         ):
             continue
         best: dict[int, tuple[float, Hypothesis]] = {id(c.link): (0.0, c)}
-        for h in items:
+        deg, m = fits(X)
+        ok = (deg <= tol.max_deg) & (m <= tol.metres(4))
+        for i in np.flatnonzero(ok):
+            h = items[i]
             if h.link is c.link:
                 continue
-            err = _fit(h, place, X, g2)
-            if tol.agrees(err, 4):
-                score = err[1] + err[0] * 0.01
-                if id(h.link) not in best or score < best[id(h.link)][0]:
-                    best[id(h.link)] = (score, h)
+            score = float(m[i]) + float(deg[i]) * 0.01
+            if id(h.link) not in best or score < best[id(h.link)][0]:
+                best[id(h.link)] = (score, h)
         out.append(_Set(c, X, [h for _, h in best.values()]))
     out.sort(key=lambda s: (s.standing, s.rank[5]), reverse=True)
     return out
@@ -326,9 +352,13 @@ def _judged_pairs(
 def _distinct(sets: list[_Set], place: Placement, g2: str, tol: LoopTolerance) -> list[_Set]:
     """Of ``sets`` (best supported first), the first of each distinct placement of ``g2``."""
     out: list[_Set] = []
-    for s in sets:
-        if all(not tol.agrees(_fit(s.centre, place, f.X, g2), 4) for f in out):
+    fits = _Fits([s.centre for s in sets], place, g2)
+    seen = np.zeros(len(sets), dtype=bool)  # agrees with a placement kept already
+    for i, s in enumerate(sets):
+        if not seen[i]:
             out.append(s)
+            deg, m = fits(s.X)
+            seen |= (deg <= tol.max_deg) & (m <= tol.metres(4))
     return out
 
 

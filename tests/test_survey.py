@@ -84,7 +84,7 @@ def test_every_station_placed_confidently_exit_0(first, project):
     for stem, st in doc["stations"].items():
         assert st["status"] == "verified" and st["status_why"] is None
         if stem != doc["reference"]:
-            assert 0 < st["accuracy"]["radius95_mm"] < 10
+            assert 0 < st["accuracy"]["radius95_mm"] < 10 and st["accuracy"]["checked"] is True
     # accurate against the synthetic truth: within the survey's tolerance
     ev = evaluate(doc, json.loads((project / "gt.json").read_text()))
     assert len(ev["stations"]) == 3 and ev["wrong"] == []
@@ -423,3 +423,18 @@ def test_a_station_one_confident_link_fixes_is_placed_not_verified(first, projec
         in st["station_01"]["status_why"]
     )
     assert result.exit_status == 3
+    # their 1-sigma figures hold only if those links are right: said so wherever shown
+    from flexreg.survey.report_data import station_reasons
+
+    for stem in ("station_01", "station_02"):
+        acc = st[stem]["accuracy"]
+        assert acc["checked"] is False and acc["radius95_mm"] > 0
+        assert any("(unchecked: it holds if the links" in t for t in station_reasons(st[stem]))
+
+
+def test_the_console_marks_a_sigma_no_independent_route_checks():
+    from flexreg.cli.survey import _sigma
+
+    acc = {"sigma_mm": {"x": 1.02, "y": 1.1, "z": 0.77}, "checked": True}
+    assert _sigma(acc) == "1.0, 1.1, 0.8"
+    assert _sigma({**acc, "checked": False}) == "1.0, 1.1, 0.8 (unchecked)"

@@ -303,6 +303,13 @@ def _stored_note(check: dict[str, Any] | None) -> str:
     return f"stored pose disagrees by {check['rotation_deg']:.2f}° / {check['translation_m']:.3f} m"
 
 
+def _sigma(acc: dict[str, Any]) -> str:
+    """A station's 1-sigma figures, marked unchecked where no independent route checks the
+    links it rests on (they do not cover a wrong one)."""
+    text = ", ".join(f"{v:.1f}" for v in acc["sigma_mm"].values())
+    return text if acc.get("checked", True) else f"{text} (unchecked)"
+
+
 def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
     from rich.table import Table
 
@@ -321,7 +328,7 @@ def _summary(result: SurveyResult, doc: dict[str, Any]) -> None:
             st["status"].replace("_", " "),
             "-" if st["group"] is None else str(st["group"]),
             f"{st['degree']}/{st['links_attempted']}",
-            "-" if acc is None else ", ".join(f"{v:.1f}" for v in acc["sigma_mm"].values()),
+            "-" if acc is None else _sigma(acc),
             st["error"]
             or st.get("status_why")
             or st["reason"]

@@ -76,7 +76,11 @@ value does not exist (failed link, unplaced station)::
           "status_why": null,                # why not verified, in words
           "accuracy": {"sigma_deg": {"roll": 0.001, "pitch": 0.001, "yaw": 0.002},
                        "sigma_mm": {"x": 0.4, "y": 0.5, "z": 0.3},   # 1 sigma, reference axes
-                       "radius95_mm": 1.4, "rotation95_mm": 0.6},    # null: unknown
+                       "radius95_mm": 1.4, "rotation95_mm": 0.6,     # null: unknown
+                       "checked": true},             # false (status "placed"): nothing
+                                                     # but the links it rests on fixes
+                                                     # it, and the sigma does not cover
+                                                     # a wrong one
           "origin": null,                    # --origins: scanner position in the file, m
           "T_site_station": [[...]],         # the pose in the site frame (float64)
           "T_site_file": [[...]]             # the file's correction (stations/STEM.txt)

@@ -169,7 +169,12 @@ def _station(r: Any, st: Station, placed: set[str], check: dict[str, Any] | None
     acc = r.adjustment.accuracy.get(st.stem) if r.adjustment is not None else None
     setup["status"] = r.status(st.stem)
     setup["status_why"] = r.status_why(st.stem)
-    setup["accuracy"] = acc.to_dict() if acc is not None and st.stem in placed else None
+    setup["accuracy"] = (
+        # its sigma holds when its links are right: only an independent route checks that
+        {**acc.to_dict(), "checked": setup["status"] != "placed"}
+        if acc is not None and st.stem in placed
+        else None
+    )
     T_stored = r.stored.get(st.stem)
     stored = {
         "T_world_station_stored": None if T_stored is None else np.asarray(T_stored).tolist(),

@@ -147,6 +147,11 @@ def station_reasons(station: Mapping[str, Any]) -> list[str]:
             "1σ "
             + " / ".join(f"{k} {_float(v) or 0.0:.1f}" for k, v in acc["sigma_mm"].items())
             + " mm"
+            + (
+                ""
+                if acc.get("checked", True)
+                else " (unchecked: it holds if the links that alone place it are right)"
+            )
         )
     chk = station.get("stored_pose_check")
     if isinstance(chk, Mapping) and chk.get("agrees") is False:

@@ -106,6 +106,18 @@ def acceptance(state: Record) -> list[tuple[str, str, str]]:
             _met(not wrong if recs else None),
         )
     )
+    vouched = [
+        (r["project"]["name"], w) for r in recs for w in r["evaluation"].get("verified_outside", [])
+    ]
+    rows.append(
+        (
+            "no station `verified` outside the tolerance (what the survey vouches for; a "
+            "`placed` station's sigma says it is unchecked)",
+            str(len(vouched))
+            + (": " + ", ".join(f"{p} {s}" for p, s in vouched[:6]) if vouched else ""),
+            "measured" if recs else "not measured",
+        )
+    )
     fused = sum(r["evaluation"]["fused_groups"] for r in recs)
     two = [r for r in recs if r["set"] == "fusion"]
     rows.append(

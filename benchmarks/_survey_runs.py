@@ -542,6 +542,14 @@ def _summary(
             and r["trans_m"] > 0
             and r["station"] != doc.get("reference")
         ],
+        # what the survey vouches for: verified stations outside the tolerance (target none)
+        "verified_outside": [
+            r["station"]
+            for r in records
+            if r.get("status") == "verified"
+            and not r["success"]
+            and r["station"] != doc.get("reference")
+        ],
         "sigma_checked": sum(r.get("covered") is not None for r in records),
         "sigma_covered": sum(bool(r.get("covered")) for r in records),
         "median_rot_deg": float(np.median(rot)) if rot else None,

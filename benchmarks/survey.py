@@ -237,7 +237,8 @@ def run(args: argparse.Namespace, folder: Path) -> dict[str, Any]:
                 f"{ev['reachable']} reachable, "
                 f"{ev['groups']} groups, {ev['links_attempted']} links; statuses "
                 f"{ev.get('statuses')}, claimed within but outside "
-                f"{ev.get('claimed_within_but_outside')}, true error within 3 sigma "
+                f"{ev.get('claimed_within_but_outside')}, verified but outside "
+                f"{ev.get('verified_outside')}, true error within 3 sigma "
                 f"{ev.get('sigma_covered')}/{ev.get('sigma_checked')}"
                 if ev
                 else ", no poses.json"

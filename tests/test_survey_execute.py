@@ -144,6 +144,13 @@ def test_a_tasks_io_error_on_a_worker_is_one_line_naming_its_file(tmp_path):
             assert str(e.value).count("\n") == 0
 
 
+def _survey_two(project, out, workers):
+    """``flexreg survey`` of a project's first two stations: exit status and stderr."""
+    scans = [project / "station_00.ptx", project / "station_01.ptx"]
+    rc, _, err = run_cli(["survey", *scans, "--out", out, "--workers", str(workers)])
+    return rc, err
+
+
 @pytest.mark.parametrize(
     "code, text", [("ENOSPC", "No space left on device"), ("EROFS", "Read-only file system")]
 )
@@ -162,10 +169,7 @@ def test_a_full_disk_while_preparing_is_one_line_exit_1(code, text, tmp_path, mo
 
     monkeypatch.setattr(stations, "_atomic_bytes", full)
     out = tmp_path / "out"
-    rc, _, err = run_cli(
-        ["survey", project / "station_00.ptx", project / "station_01.ptx", "--out", out,
-         "--workers", "1"]
-    )  # fmt: skip
+    rc, err = _survey_two(project, out, 1)
     line = one_error_line(err)
     assert rc == 1 and text in line and ".partial" not in line, line
     assert not (out / "poses.json").exists()
@@ -190,10 +194,7 @@ def test_a_local_cluster_that_does_not_start_is_one_line_exit_1_and_nothing_writ
                 pass
         assert where in str(e.value) and "\n" not in str(e.value)
         out = tmp_path / "out"
-        rc, _, err = run_cli(
-            ["survey", project / "station_00.ptx", project / "station_01.ptx", "--out", out,
-             "--workers", "2"]
-        )  # fmt: skip
+        rc, err = _survey_two(project, out, 2)
     line = one_error_line(err)
     assert rc == 1 and "local Dask cluster of 2 worker(s) did not start" in line, line
     assert not out.exists()

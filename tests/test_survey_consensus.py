@@ -681,8 +681,11 @@ def test_the_loop_errors_of_every_hypothesis_at_once_are_each_ones_own():
     hyps = [h for e in links for h in hypotheses_of(e)]
     hyps[1].refit = pose()  # a refitted pose is scored by its fit
     fits = _Fits(hyps, place, "s3")
-    for X in (pose(), np.eye(4), invert(place.pose["s3"]) @ place.pose["s0"]):
-        deg, m = fits(X)
+    Xs = [pose(), np.eye(4), invert(place.pose["s3"]) @ place.pose["s0"]]
+    degs, ms = fits.many(np.stack(Xs))
+    assert degs.shape == ms.shape == (3, len(hyps))
+    for X, deg, m in zip(Xs, degs, ms, strict=True):
+        np.testing.assert_allclose(fits(X), (deg, m), rtol=0, atol=1e-9)
         for h, d, t in zip(hyps, deg, m, strict=True):
             want = _fit(h, place, X, "s3")
             assert abs(d - want[0]) < 1e-5 and abs(t - want[1]) < 1e-9

@@ -224,6 +224,10 @@ def _fit(h: Hypothesis, place: Placement, X: Matrix, g2: str) -> tuple[float, fl
     return loop_error(T, _placed(place, X, g2, h.link.target), _placed(place, X, g2, h.link.source))
 
 
+#: Placements :meth:`_Fits.many` scores at once.
+_FITS_BLOCK = 32
+
+
 class _Fits:
     """:func:`_fit` of every hypothesis of ``items`` at once, for any placement ``X``
     (``T_g1_g2``) of group ``g2``: each link joins the two groups, so its loop closes as
@@ -239,13 +243,24 @@ class _Fits:
 
     def __call__(self, X: Matrix) -> tuple[np.ndarray, np.ndarray]:
         """Loop errors (degrees, metres), one per hypothesis, where ``X`` places ``g2``."""
-        if not len(self.T):
-            return np.zeros(0), np.zeros(0)
-        mid = np.where(self.flip[:, None, None], invert(X)[None], np.asarray(X)[None])
-        rel = self.left @ mid @ self.right
-        c = (np.einsum("nij,nij->n", self.T[:, :3, :3], rel[:, :3, :3]) - 1.0) / 2.0
-        deg = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
-        return deg, np.linalg.norm(self.T[:, :3, 3] - rel[:, :3, 3], axis=1)
+        deg, m = self.many(np.asarray(X, dtype=np.float64)[None])
+        return deg[0], m[0]
+
+    def many(self, Xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Loop errors (degrees, metres), (K, N): of every hypothesis where each of ``Xs``
+        ((K, 4, 4) placements of ``g2``) places it."""
+        k, n = len(Xs), len(self.T)
+        deg, m = np.zeros((k, n)), np.zeros((k, n))
+        for i in range(0, k, _FITS_BLOCK):  # a few MB at a time
+            X = Xs[i : i + _FITS_BLOCK]
+            inv = np.stack([invert(x) for x in X])
+            mid = np.where(self.flip[None, :, None, None], inv[:, None], X[:, None])
+            rel = self.left[None] @ mid @ self.right[None]
+            c = (np.einsum("nij,knij->kn", self.T[:, :3, :3], rel[..., :3, :3]) - 1.0) / 2.0
+            gap = self.T[None, :, :3, 3] - rel[..., :3, 3]
+            deg[i : i + _FITS_BLOCK] = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+            m[i : i + _FITS_BLOCK] = np.linalg.norm(gap, axis=-1)
+        return deg, m
 
 
 def _sets(
@@ -262,17 +277,15 @@ def _sets(
     whose placement rough ``positions`` refute (:func:`~flexreg.survey.positions.refutes`)."""
     out = []
     first = {s: place.pose[s] for s in place.members(g1)}
-    fits = _Fits(items, place, g2)
-    for c in items:
-        if c.refit is not None:
-            continue  # all the overlap fits elsewhere: it places nothing itself
-        X = _proposal(c, place, g1)
+    centres = [c for c in items if c.refit is None]  # a refitted one places nothing itself
+    Xs = [_proposal(c, place, g1) for c in centres]
+    degs, ms = _Fits(items, place, g2).many(np.stack(Xs) if Xs else np.zeros((0, 4, 4)))
+    for c, X, deg, m in zip(centres, Xs, degs, ms, strict=True):
         if positions and refutes(
             positions, first, {s: X @ place.pose[s] for s in place.members(g2)}
         ):
             continue
         best: dict[int, tuple[float, Hypothesis]] = {id(c.link): (0.0, c)}
-        deg, m = fits(X)
         ok = (deg <= tol.max_deg) & (m <= tol.metres(4))
         for i in np.flatnonzero(ok):
             h = items[i]

@@ -94,6 +94,7 @@ class Hypothesis:
     blamed: bool = False
     rests: list[tuple[Hypothesis, ...]] = field(default_factory=list)  # of its firm votes
     refit: Matrix | None = None
+    _inverse: Matrix | None = field(default=None, init=False, repr=False)
 
     @property
     def vouched(self) -> bool:
@@ -129,7 +130,11 @@ class Hypothesis:
 
     def oriented(self, a: str) -> Matrix:
         """The pose as ``T_a_other`` (``a`` one of the link's stations)."""
-        return self.T if self.link.target == a else invert(self.T)
+        if self.link.target == a:
+            return self.T
+        if self._inverse is None:  # asked for in every cycle through it
+            self._inverse = invert(self.T)
+        return self._inverse
 
 
 def hypotheses_of(link: Link) -> list[Hypothesis]:

@@ -55,6 +55,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+from collections.abc import Callable
 from dataclasses import astuple, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -515,25 +516,44 @@ class PairJudge:
         T = np.asarray(T_a_b, dtype=np.float64)
         key = (a, b, _pose_key(T))
         if key not in self._memo:
-            stored = self._stored_key(a, b, key[2])
-            kept = self._kept_looks().get(stored) if stored is not None else None
-            if stored is not None:
-                self._used.add(stored)
-            look = None
-            if kept is not None:
-                look = PairLook(a, b, T, (kept[0], kept[1]), (kept[2], kept[3]),
-                                (int(kept[4]), int(kept[5])))  # fmt: skip
-            elif (va := self._view(a)) is not None and (vb := self._view(b)) is not None:
+            look = self.known(a, b, T)
+            if look is None and (va := self._view(a)) is not None and (vb := self._view(b)):
                 ab = _shares(va[0], va[3], va[2], vb[1], vb[2], T)
                 ba = _shares(vb[0], vb[3], vb[2], va[1], va[2], invert(T))
                 look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
                 log.debug("map judge %s <- %s: %s", a, b, look.describe())
-                if stored is not None:
-                    self._kept_looks()[stored] = np.asarray([*look.explained,
-                        *look.conflicting, *look.samples], dtype=np.float64)  # fmt: skip
-                    self._new += 1
+                self.remember(look)
             self._memo[key] = look
         return self._memo[key]
+
+    def known(self, a: str, b: str, T_a_b: Matrix) -> PairLook | None:
+        """The pair's look at ``T_a_b`` when this run or an earlier one (the kept looks)
+        scored it, else None (nothing is scored here)."""
+        T = np.asarray(T_a_b, dtype=np.float64)
+        key = (a, b, _pose_key(T))
+        if self._memo.get(key) is not None:
+            return self._memo[key]
+        stored = self._stored_key(a, b, key[2])
+        kept = self._kept_looks().get(stored) if stored is not None else None
+        if stored is None or kept is None:
+            return None
+        self._used.add(stored)
+        return PairLook(a, b, T, (kept[0], kept[1]), (kept[2], kept[3]),
+                        (int(kept[4]), int(kept[5])))  # fmt: skip
+
+    def remember(self, look: PairLook) -> None:
+        """Keep a look scored here or on a worker (:func:`look_from`, :func:`assemble`) for
+        this run and (:meth:`keep`) later ones."""
+        T = np.asarray(look.T_a_b, dtype=np.float64)
+        key = (look.a, look.b, _pose_key(T))
+        self._memo[key] = look
+        stored = self._stored_key(look.a, look.b, key[2])
+        if stored is not None:
+            self._used.add(stored)
+            self._kept_looks()[stored] = np.asarray(
+                [*look.explained, *look.conflicting, *look.samples], dtype=np.float64
+            )
+            self._new += 1
 
     def recall_full(self, a: str, b: str, T_a_b: Matrix) -> tuple[float, float, int] | None:
         """The full-resolution test of the pair at ``T_a_b`` (:func:`open_space_at_full`),
@@ -692,6 +712,47 @@ def plan_looks(
     return todo
 
 
+def pair_looks(
+    pairs: list[tuple[str, str]],
+    poses: dict[str, Matrix],
+    stored: tuple[dict[str, str], dict[str, str]],
+    judge: PairJudge | None,
+    run: Callable[[Callable[..., Any], list[tuple[Any, ...]]], list[Any]],
+) -> list[PairLook]:
+    """The map check's looks at every pair of placed stations, in ``pairs``' order: those
+    ``judge`` knows (scored this run or an earlier one at the same poses,
+    :meth:`PairJudge.known`) recalled, the rest scored by :func:`look_from` per viewing
+    station through ``run(fn, items)`` (on the workers) and kept with the judge's.
+
+    Parameters
+    ----------
+    pairs : list of (str, str)
+    poses : dict of str -> (4, 4) float64
+        ``T_group_station`` of the placed stations.
+    stored : (dict, dict)
+        The prepared file and the glance per station.
+    judge : PairJudge or None
+    run : callable
+        ``run(fn, items)``: ``[fn(*item) for item in items]``, in order.
+    """
+    files, glances = stored
+    known: dict[tuple[str, str], PairLook] = {}
+    for a, b in pairs:
+        hit = judge.known(a, b, invert(poses[a]) @ poses[b]) if judge is not None else None
+        if hit is not None:
+            known[(a, b)] = hit
+    rest = [p for p in pairs if p not in known]
+    todo = plan_looks(rest, poses, glances)
+    order = sorted(todo)
+    results = run(look_from, [(files[a], glances[a], todo[a]) for a in order])
+    seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
+    for look in assemble(rest, poses, seen):
+        known[(look.a, look.b)] = look
+        if judge is not None:
+            judge.remember(look)
+    return [known[p] for p in pairs if p in known]
+
+
 __all__ = [
     "LOOK_FORMAT",
     "PairJudge",
@@ -700,6 +761,7 @@ __all__ = [
     "glance_path",
     "look_from",
     "open_space_at_full",
+    "pair_looks",
     "pairs_to_check",
     "plan_looks",
     "refuted_at_full",

@@ -40,11 +40,9 @@ from flexreg.survey.links import Matrix
 from flexreg.survey.mapcheck import (
     PairJudge,
     PairLook,
-    assemble,
-    look_from,
     open_space_at_full,
+    pair_looks,
     pairs_to_check,
-    plan_looks,
     refuted_at_full,
     unconfirmed_pairs,
     write_glance,
@@ -705,21 +703,19 @@ def _map_check(
     the rough positions. Returns the solution and the last round's pair scores (``vetoes``
     grows in place)."""
     reference, positions = anchors
-    files, glances = stored
     looks: list[PairLook] = []
     rounds = config.map_rounds + 1
     for i in range(rounds):
         pairs = pairs_to_check(sol.groups, sol.poses, config.map_radius_m)
-        todo = plan_looks(pairs, sol.poses, glances)
-        order = sorted(todo)
-        results = run_tasks(
-            client,
-            look_from,
-            [(files[a], glances[a], todo[a]) for a in order],
-            on_result=OutcomeCounter("map check", len(order), progress),
+        looks = pair_looks(
+            pairs,
+            sol.poses,
+            stored,
+            judge,
+            lambda fn, items: run_tasks(
+                client, fn, items, on_result=OutcomeCounter("map check", len(items), progress)
+            ),
         )
-        seen = {a: {b: (x, c, n) for b, x, c, n in r} for a, r in zip(order, results, strict=True)}
-        looks = assemble(pairs, sol.poses, seen)
         bad = [p for p in looks if p.conflicts(config)]
         bad.sort(key=lambda p: -max(p.conflicting))
         found = [Veto(p.a, p.b, p.T_a_b, p.describe(config)) for p in bad]

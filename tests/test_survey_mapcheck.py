@@ -230,6 +230,26 @@ def test_a_station_placed_in_the_wrong_spot_contradicts_its_neighbour(tmp_path):
     third = PairJudge(files, glances, cfg)
     assert third.look("station_00", "station_01", T).explained == look.explained
     assert third._views != {}
+    # the map check scores on the workers only what no judge has scored at the same pose,
+    # and keeps it: a second round (or run) at the same poses recalls it
+    from flexreg.survey.mapcheck import pair_looks
+
+    calls = []
+
+    def run(fn, items):
+        calls.append(len(items))
+        return [fn(*item) for item in items]
+
+    T2 = make_transform(np.eye(3), [0.01, 0.0, 0.0]) @ T
+    poses, pair = {"station_00": np.eye(4), "station_01": T2}, [("station_00", "station_01")]
+    first = pair_looks(pair, poses, (files, glances), later, run)
+    again = pair_looks(pair, poses, (files, glances), later, run)
+    assert calls == [2, 0]  # each station's view once, then nothing
+    assert [(x.explained, x.conflicting, x.samples) for x in again] == [
+        (x.explained, x.conflicting, x.samples) for x in first]  # fmt: skip
+    own = PairJudge(files, glances, cfg).look("station_00", "station_01", T2)  # in process
+    assert own is not None and own.explained == first[0].explained
+    assert own.conflicting == first[0].conflicting
 
 
 def test_two_stations_placed_at_one_spot_must_see_the_same_scene():

@@ -226,7 +226,7 @@ def dask_client(
     if scheduler is None and (workers or default_workers()) == 1:
         yield None
         return
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if scheduler is not None:
         _probe_scheduler(scheduler)
@@ -264,7 +264,7 @@ def dask_client(
         handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
         try:
             with dask.config.set(_WORKER_ENVIRON):
-                cluster = _local_cluster(LocalCluster, n, dashboard)
+                cluster = _local_cluster(n, dashboard)
         finally:
             if main:
                 signal.signal(signal.SIGINT, handler)
@@ -275,7 +275,7 @@ def dask_client(
         loop_log.setLevel(loop_level)
 
 
-def _local_cluster(make: Any, n: int, dashboard: str | None) -> Any:
+def _local_cluster(n: int, dashboard: str | None) -> Any:
     """``n`` local worker processes of one thread each, on loopback.
 
     Raises
@@ -288,9 +288,10 @@ def _local_cluster(make: Any, n: int, dashboard: str | None) -> Any:
     import tempfile
 
     import dask.config
+    from distributed import LocalCluster
 
     try:
-        return make(
+        return LocalCluster(
             n_workers=n,
             # the scheduler, its web server and the workers: loopback only
             host="127.0.0.1",

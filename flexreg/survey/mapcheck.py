@@ -517,7 +517,8 @@ class PairJudge:
         key = (a, b, _pose_key(T))
         if key not in self._memo:
             look = self.known(a, b, T)
-            if look is None and (va := self._view(a)) is not None and (vb := self._view(b)):
+            va, vb = (None, None) if look is not None else (self._view(a), self._view(b))
+            if va is not None and vb is not None:
                 ab = _shares(va[0], va[3], va[2], vb[1], vb[2], T)
                 ba = _shares(vb[0], vb[3], vb[2], va[1], va[2], invert(T))
                 look = PairLook(a, b, T, (ab[0], ba[0]), (ab[1], ba[1]), (ab[2], ba[2]))
